@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Installs every Debian package Arbor needs to build, test and benchmark.
+# Safe to re-run: apt-get skips what is already there.
+set -euo pipefail
+
+packages=(
+  build-essential cmake pkg-config git clang-format
+  libeigen3-dev libsuitesparse-dev libboost-program-options-dev
+  liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless
+  libgtest-dev libgmock-dev libbenchmark-dev libspectra-dev
+  libceres-dev nlohmann-json3-dev
+  python3-matplotlib
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  exit 0
+fi
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
