@@ -1,0 +1,65 @@
+// Dense kernels of the clique elimination: a non-zeroing growable buffer and the partial
+// Cholesky factorisation of a clique's Hessian (Kaess et al. 2012 §3: a clique's conditional
+// and the factor it passes to its parent are one partial factorisation of its dense Hessian).
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <memory>
+#include <utility>
+
+namespace arbor::bayestree {
+
+// A growable array of doubles that, unlike std::vector, does not zero what it adds.
+class DoubleBuffer {
+ public:
+  DoubleBuffer() = default;
+  DoubleBuffer(const DoubleBuffer& o) : size_(o.size_), capacity_(o.size_) {
+    if (size_) {
+      data_.reset(new double[size_]);
+      std::copy(o.data_.get(), o.data_.get() + size_, data_.get());
+    }
+  }
+  DoubleBuffer& operator=(const DoubleBuffer& o) {
+    if (this != &o) *this = DoubleBuffer(o);
+    return *this;
+  }
+  DoubleBuffer(DoubleBuffer&&) noexcept = default;
+  DoubleBuffer& operator=(DoubleBuffer&&) noexcept = default;
+
+  /// Resizes without initialising; grows geometrically, never shrinks.
+  void resize(size_t size) {
+    if (size > capacity_) {
+      size_t capacity = std::max<size_t>(64, capacity_);
+      while (capacity < size) capacity *= 2;
+      data_.reset(new double[capacity]);
+      capacity_ = capacity;
+    }
+    size_ = size;
+  }
+  size_t size() const { return size_; }
+  size_t capacity() const { return capacity_; }
+  void swap(DoubleBuffer& o) noexcept {
+    data_.swap(o.data_);
+    std::swap(size_, o.size_);
+    std::swap(capacity_, o.capacity_);
+  }
+  double* data() { return data_.get(); }
+  const double* data() const { return data_.get(); }
+  double* begin() { return data_.get(); }
+  double* end() { return data_.get() + size_; }
+
+ private:
+  std::unique_ptr<double[]> data_;
+  size_t size_ = 0, capacity_ = 0;
+};
+
+/// Partial Cholesky of the lower triangle of the M×M column-major matrix A (leading dimension
+/// lda): factors the first F columns in place (L, and below it [Sᵀ; dᵀ] = A_(s,g)f L⁻ᵀ) and
+/// leaves the Schur complement in the trailing lower triangle. Returns false when a pivot p
+/// (= L_kk²) is not safely positive: p ≤ 1e-10·dg[k] or p ≤ 1e-14·max(dg), with dg the diagonal
+/// of A_ff before factorisation (the clique is then indeterminate). Small matrices use a simple
+/// left-looking loop, large ones Eigen's cache-blocked LLT, triangular solve and rank update.
+bool partialCholesky(double* A, int lda, int F, int M, const double* dg);
+
+}  // namespace arbor::bayestree

@@ -1,0 +1,983 @@
+#include "bayestree/incremental_smoother.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include "bayestree/dense_kernels.h"
+#include "bayestree/elimination_plan.h"
+#include "core/information.h"
+
+namespace arbor {
+namespace {
+
+using bayestree::DoubleBuffer;
+using bayestree::partialCholesky;
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+bool isFinitePose(const SE2& x) {
+  return std::isfinite(x.x()) && std::isfinite(x.y()) && std::isfinite(x.cos()) &&
+         std::isfinite(x.sin());
+}
+bool isFinitePose(const SE3& x) {
+  return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
+}
+
+void accumulate(UpdateStats* total, const UpdateStats& s) {
+  total->new_factors += s.new_factors;
+  total->new_variables += s.new_variables;
+  total->cliques_reeliminated += s.cliques_reeliminated;
+  total->variables_reeliminated += s.variables_reeliminated;
+  total->variables_relinearized += s.variables_relinearized;
+  total->indeterminate_cliques += s.indeterminate_cliques;
+  total->cliques_solved += s.cliques_solved;
+}
+
+}  // namespace
+
+template <class G>
+struct IncrementalSmoother<G>::Impl {
+  static constexpr int D = G::kDoF;
+  static constexpr int kTrans = G::kDim;  // the first kDim tangent entries are translational
+  using Mat = Eigen::Matrix<double, D, D>;
+  using Vec = Tangent;
+
+  // One whitened factor ‖A_i τ_i + A_j τ_j + r‖² in Hessian form: τᵀHτ − 2gᵀτ + rᵀr, g = −Aᵀr.
+  struct LinearFactor {
+    Mat Hii = Mat::Zero(), Hij = Mat::Zero(), Hjj = Mat::Zero();
+    Vec gi = Vec::Zero(), gj = Vec::Zero();
+  };
+
+  // A clique: the conditional ‖R x_f + S x_s − d‖² on its frontal variables given its separator,
+  // and the factor it passes to its parent (the Schur complement on the separator).
+  struct Clique {
+    using Map = Eigen::Map<Eigen::MatrixXd>;
+    using ConstMap = Eigen::Map<const Eigen::MatrixXd>;
+    using VecMap = Eigen::Map<Eigen::VectorXd>;
+    using ConstVecMap = Eigen::Map<const Eigen::VectorXd>;
+
+    std::vector<int> frontals;   // in elimination order
+    std::vector<int> separator;  // poses of the parent's frontals ∪ separator
+    int parent = -1;
+    std::vector<int> children;
+    // One allocation: [LS (N×F) | d (F) | cached H (Sn×Sn) | cached g (Sn)], column-major,
+    // F = nf·D, Sn = ns·D, N = F + Sn; LS = [L; Sᵀ] with R = Lᵀ (so R x_f + S x_s = d).
+    DoubleBuffer storage;
+    int F = 0, Sn = 0;
+    bool dirty = false;  // re-eliminated since the last back-substitution
+    bool in_use = false;
+    int removed_stamp = -1;
+
+    static size_t sizeFor(int F, int Sn) {
+      return static_cast<size_t>(F + Sn) * F + F + static_cast<size_t>(Sn) * Sn + Sn;
+    }
+    void allocate() {
+      F = static_cast<int>(frontals.size()) * D;
+      Sn = static_cast<int>(separator.size()) * D;
+      storage.resize(sizeFor(F, Sn));
+    }
+    double* lsPtr() { return storage.data(); }
+    double* dPtr() { return storage.data() + (F + Sn) * F; }
+    double* hPtr() { return dPtr() + F; }
+    double* gPtr() { return hPtr() + Sn * Sn; }
+    const double* lsPtr() const { return storage.data(); }
+    const double* dPtr() const { return storage.data() + (F + Sn) * F; }
+    const double* hPtr() const { return dPtr() + F; }
+    const double* gPtr() const { return hPtr() + Sn * Sn; }
+    ConstMap LS() const { return ConstMap(lsPtr(), F + Sn, F); }
+    Eigen::MatrixXd R() const {  // upper triangular
+      Eigen::MatrixXd L = LS().topRows(F).template triangularView<Eigen::Lower>();
+      return L.transpose();
+    }
+    Eigen::MatrixXd S() const { return LS().bottomRows(Sn).transpose(); }
+    ConstVecMap d() const { return ConstVecMap(dPtr(), F); }
+    ConstMap cachedH() const {  // lower triangle and full diagonal D×D blocks
+      return ConstMap(hPtr(), Sn, Sn);
+    }
+    ConstVecMap cachedG() const { return ConstVecMap(gPtr(), Sn); }
+  };
+
+  SmootherOptions opt;
+  std::vector<G> theta;
+  std::vector<char> fixed;
+  std::vector<Vec> delta;         // the step applied: Gauss–Newton or dogleg
+  std::vector<Vec> delta_newton;  // the Gauss–Newton solution of the Bayes tree
+  std::vector<Vec> delta_seen;    // Δ_newton as last propagated to the cliques below (Alg. 3)
+  std::vector<int> clique_of;     // pose → clique where it is frontal (−1: fixed / new)
+  std::vector<std::vector<int>> var_factors;
+  std::vector<Edge> edges;
+  std::vector<LinearFactor> lin;
+  std::vector<int> factor_stamp;
+  std::vector<Edge> queued;
+  std::vector<int> new_vars;
+  std::vector<Clique> cliques;
+  std::vector<int> free_cliques;
+  std::vector<int> roots;
+  int num_cliques = 0;
+  int update_count = 0;
+  int stamp = 0;
+  double dogleg_radius = 1.0;
+  // Scratch indexed by pose, always restored to −1 / 0 after use (no O(n) clearing).
+  std::vector<int> slot;
+  std::vector<char> mark, changed;
+  // Scratch buffers of the elimination and back-substitution (reused, no per-clique malloc).
+  DoubleBuffer h_buf;
+  std::vector<double> x_buf, xs_buf, diag_buf;
+  std::vector<int> child_slots, changed_scratch, stack_scratch;
+  std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
+  bayestree::RowList s_rows;
+  std::vector<int> s_by_need, s_by_capacity;
+  std::vector<DoubleBuffer> s_buffers;
+
+  explicit Impl(const SmootherOptions& o) : opt(o), dogleg_radius(o.dogleg_initial_radius) {
+    auto bad = [](const std::string& what, double v) {
+      throw std::invalid_argument("IncrementalSmoother: bad option " + what + " = " +
+                                  std::to_string(v));
+    };
+    if (!(o.relinearize_threshold_translation >= 0))
+      bad("relinearize_threshold_translation", o.relinearize_threshold_translation);
+    if (!(o.relinearize_threshold_rotation >= 0))
+      bad("relinearize_threshold_rotation", o.relinearize_threshold_rotation);
+    if (o.relinearize_skip < 1) bad("relinearize_skip", o.relinearize_skip);
+    if (!(o.wildfire_threshold >= 0)) bad("wildfire_threshold", o.wildfire_threshold);
+    if (!(o.dogleg_initial_radius > 0)) bad("dogleg_initial_radius", o.dogleg_initial_radius);
+    if (!(o.dogleg_min_radius > 0)) bad("dogleg_min_radius", o.dogleg_min_radius);
+    if (!(o.finalize_relative_tolerance >= 0))
+      bad("finalize_relative_tolerance", o.finalize_relative_tolerance);
+    if (o.finalize_max_iterations < 1) bad("finalize_max_iterations", o.finalize_max_iterations);
+  }
+
+  int numPoses() const { return static_cast<int>(theta.size()); }
+
+  int addPose(const G& x, bool is_fixed) {
+    if (!isFinitePose(x)) throw std::invalid_argument("IncrementalSmoother::addPose: not finite");
+    const int index = numPoses();
+    theta.push_back(x);
+    fixed.push_back(is_fixed);
+    delta.push_back(Vec::Zero());
+    delta_newton.push_back(Vec::Zero());
+    delta_seen.push_back(Vec::Zero());
+    clique_of.push_back(-1);
+    var_factors.emplace_back();
+    slot.push_back(-1);
+    mark.push_back(0);
+    changed.push_back(0);
+    if (!is_fixed) new_vars.push_back(index);
+    return index;
+  }
+
+  void addFactor(const Edge& e) {
+    const std::string where = "IncrementalSmoother::addFactor(" + std::to_string(e.i) + ", " +
+                              std::to_string(e.j) + "): ";
+    if (e.i < 0 || e.i >= numPoses() || e.j < 0 || e.j >= numPoses())
+      throw std::invalid_argument(where + "pose index out of range (" + std::to_string(numPoses()) +
+                                  " poses)");
+    if (e.i == e.j) throw std::invalid_argument(where + "self-loop");
+    if (!isFinitePose(e.measurement)) throw std::invalid_argument(where + "measurement not finite");
+    const std::string problem = informationProblem(e.information);
+    if (!problem.empty()) throw std::invalid_argument(where + "information matrix " + problem);
+    if (!e.sqrt_information_t.allFinite())
+      throw std::invalid_argument(where + "square-root information not finite");
+    queued.push_back(e);
+  }
+
+  void linearize(int f) {
+    const Edge& e = edges[f];
+    Mat Ai, Aj;
+    Vec r;
+    e.linearize(theta[e.i], theta[e.j], &Ai, &Aj, &r);
+    LinearFactor& L = lin[f];
+    L.Hii.noalias() = Ai.transpose() * Ai;
+    L.Hij.noalias() = Ai.transpose() * Aj;
+    L.Hjj.noalias() = Aj.transpose() * Aj;
+    L.gi.noalias() = -Ai.transpose() * r;
+    L.gj.noalias() = -Aj.transpose() * r;
+  }
+
+  bool exceedsThreshold(const Vec& dx) const {
+    return dx.template head<kTrans>().cwiseAbs().maxCoeff() >
+               opt.relinearize_threshold_translation ||
+           dx.template tail<D - kTrans>().cwiseAbs().maxCoeff() >
+               opt.relinearize_threshold_rotation;
+  }
+
+  int allocClique() {
+    ++num_cliques;
+    if (!free_cliques.empty()) {
+      const int id = free_cliques.back();
+      free_cliques.pop_back();
+      cliques[id].in_use = true;
+      cliques[id].removed_stamp = -1;
+      return id;
+    }
+    cliques.emplace_back();
+    cliques.back().in_use = true;
+    return static_cast<int>(cliques.size()) - 1;
+  }
+
+  void freeClique(int id) {
+    --num_cliques;
+    Clique& c = cliques[id];
+    c.frontals.clear();
+    c.separator.clear();
+    c.children.clear();
+    c.parent = -1;
+    c.dirty = false;
+    c.in_use = false;
+    free_cliques.push_back(id);
+  }
+
+  // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into h_buf
+  // ((N+1)×(N+1), column-major; g in row N).
+  void assemble(const Clique& c) {
+    const int nf = static_cast<int>(c.frontals.size());
+    const int ns = static_cast<int>(c.separator.size());
+    const int N = c.F + c.Sn;
+    for (int a = 0; a < nf; ++a) slot[c.frontals[a]] = a;
+    for (int b = 0; b < ns; ++b) slot[c.separator[b]] = nf + b;
+    const int lda = N + 1;
+    h_buf.resize(static_cast<size_t>(lda) * lda);
+    for (int j = 0; j < lda; ++j)  // only the lower triangle is used
+      std::fill(h_buf.data() + static_cast<size_t>(j) * lda + j, h_buf.data() + (j + 1) * lda, 0.0);
+    Eigen::Map<Eigen::MatrixXd> H(h_buf.data(), N + 1, N + 1);
+    // The factors whose first eliminated variable is a frontal of this clique.
+    for (int a = 0; a < nf; ++a) {
+      const int v = c.frontals[a];
+      for (int f : var_factors[v]) {
+        const Edge& e = edges[f];
+        const LinearFactor& L = lin[f];
+        const bool v_is_i = e.i == v;
+        const int o = v_is_i ? e.j : e.i;
+        if (fixed[o]) {  // unary on v
+          H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
+          H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
+          continue;
+        }
+        const int b = slot[o];
+        if (b <= a) continue;  // below (in a child's cached factor) or added from the other end
+        H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
+        H.template block<D, D>(b * D, b * D) += v_is_i ? L.Hjj : L.Hii;
+        if (v_is_i)
+          H.template block<D, D>(b * D, a * D) += L.Hij.transpose();  // H_ji
+        else
+          H.template block<D, D>(b * D, a * D) += L.Hij;
+        H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
+        H.row(N).template segment<D>(b * D) += (v_is_i ? L.gj : L.gi).transpose();
+      }
+    }
+    // The children's cached factors on their separators.
+    for (int ch : c.children) {
+      const Clique& k = cliques[ch];
+      const int m = static_cast<int>(k.separator.size());
+      child_slots.resize(m);
+      for (int p = 0; p < m; ++p) child_slots[p] = slot[k.separator[p]] * D;
+      const auto kH = k.cachedH();
+      const auto kg = k.cachedG();
+      // kH holds its lower triangle (and full diagonal blocks).
+      for (int q = 0; q < m; ++q) {
+        const int sq = child_slots[q];
+        H.row(N).template segment<D>(sq) += kg.template segment<D>(q * D).transpose();
+        for (int p = 0; p < m; ++p) {
+          const int sp = child_slots[p];
+          if (sp < sq) continue;
+          if (p >= q)
+            H.template block<D, D>(sp, sq) += kH.template block<D, D>(p * D, q * D);
+          else
+            H.template block<D, D>(sp, sq) += kH.template block<D, D>(q * D, p * D).transpose();
+        }
+      }
+    }
+    for (int v : c.frontals) slot[v] = -1;
+    for (int v : c.separator) slot[v] = -1;
+  }
+
+  // Dense Cholesky elimination of one clique (its children already eliminated): L = chol(H_ff),
+  // R = Lᵀ, S = R⁻ᵀH_fs, d = R⁻ᵀg_f, cached factor (H_ss − SᵀS, g_s − Sᵀd). Returns true when
+  // the frontal block was nearly singular and had to be damped (Levenberg-style).
+  bool eliminateClique(int id) {
+    Clique& c = cliques[id];
+    c.allocate();
+    const int F = c.F, Sn = c.Sn, N = F + Sn, lda = N + 1;
+    assemble(c);
+    double* A = h_buf.data();
+    diag_buf.resize(F);
+    for (int k = 0; k < F; ++k) diag_buf[k] = A[static_cast<size_t>(k) * lda + k];
+    bool damped = false;
+    if (!partialCholesky(A, lda, F, N + 1, diag_buf.data())) {
+      damped = true;
+      double max_diag = 0;
+      bool finite = true;
+      for (int k = 0; k < F; ++k) {
+        finite = finite && std::isfinite(diag_buf[k]);
+        if (std::isfinite(diag_buf[k])) max_diag = std::max(max_diag, diag_buf[k]);
+      }
+      const double floor = std::max(1e-9 * max_diag, 1e-9);
+      std::vector<double> base(F), damped_diag(F);
+      for (int k = 0; k < F; ++k)
+        base[k] = std::isfinite(diag_buf[k]) ? std::max(diag_buf[k], floor) : floor;
+      bool ok = false;
+      for (double lambda = 1e-6; lambda < 1e6 && !ok && finite; lambda *= 10) {
+        assemble(c);
+        for (int k = 0; k < F; ++k) {
+          A[static_cast<size_t>(k) * lda + k] += lambda * base[k];
+          damped_diag[k] = A[static_cast<size_t>(k) * lda + k];
+        }
+        ok = partialCholesky(A, lda, F, N + 1, damped_diag.data());
+      }
+      if (!ok) {  // not even damping helps (non-finite input): pin the frontals at zero
+        std::fill(c.storage.begin(), c.storage.end(), 0.0);
+        for (int k = 0; k < F; ++k) c.lsPtr()[static_cast<size_t>(k) * N + k] = std::sqrt(floor);
+        c.dirty = true;
+        return true;
+      }
+    }
+    // Copy out: LS = first F columns (rows 0..N−1), d = row N of them, the Schur complement.
+    double* LS = c.lsPtr();
+    for (int k = 0; k < F; ++k) {
+      const double* col = A + static_cast<size_t>(k) * lda;
+      double* out = LS + static_cast<size_t>(k) * N;
+      for (int i = 0; i < k; ++i) out[i] = 0.0;
+      std::copy(col + k, col + N, out + k);
+      c.dPtr()[k] = col[N];
+    }
+    double* cH = c.hPtr();
+    double* cg = c.gPtr();
+    for (int q = 0; q < Sn; ++q) {  // the lower triangle, then the diagonal blocks made full
+      const double* col = A + static_cast<size_t>(F + q) * lda + F;
+      std::copy(col + q, col + Sn, cH + static_cast<size_t>(q) * Sn + q);
+      cg[q] = col[Sn];
+    }
+    for (int b = 0; b < Sn; b += D)
+      for (int q = b; q < b + D; ++q)
+        for (int p = b; p < q; ++p)
+          cH[static_cast<size_t>(q) * Sn + p] = cH[static_cast<size_t>(p) * Sn + q];
+    c.dirty = true;
+    return damped;
+  }
+
+  // Kaess 2012 Alg. 1 lines 5–7: order the removed top (CCOLAMD, `constrained` variables last),
+  // eliminate it into new cliques and re-attach the orphaned subtrees.
+  void eliminateTop(const std::vector<int>& top, const std::vector<int>& orphans, bool constrain,
+                    UpdateStats* st) {
+    const int n = static_cast<int>(top.size());
+    if (n == 0) return;
+    for (int a = 0; a < n; ++a) slot[top[a]] = a;
+    bayestree::RowList& rows = s_rows;
+    rows.clear();
+    // Factors with both ends in the top (a unary factor adds no structure).
+    for (int a = 0; a < n; ++a) {
+      const int v = top[a];
+      for (int f : var_factors[v]) {
+        const int o = edges[f].i == v ? edges[f].j : edges[f].i;
+        if (fixed[o]) continue;
+        const int b = slot[o];
+        if (b > a) {
+          rows.add(a);
+          rows.add(b);
+          rows.endRow();
+        }
+      }
+    }
+    // Alg. 1 line 5: the orphans' cached factors join the factors of the top.
+    for (int oc : orphans) {
+      for (int v : cliques[oc].separator) rows.add(slot[v]);
+      rows.endRow();
+    }
+    // iSAM2 §5: constrained ordering, the variables of the new factors eliminated last.
+    std::vector<int>& group = s_group;
+    group.assign(n, 0);
+    if (constrain)
+      for (int a = 0; a < n; ++a) group[a] = mark[top[a]] ? 1 : 0;
+    bayestree::EliminationPlan plan =
+        bayestree::planElimination(n, rows, bayestree::constrainedColamd(n, rows, group));
+
+    const int m = static_cast<int>(plan.cliques.size());
+    std::vector<int>& ids = s_ids;
+    ids.resize(m);
+    for (int k = 0; k < m; ++k) ids[k] = allocClique();
+    for (int k = 0; k < m; ++k) {
+      const bayestree::SymbolicClique& sc = plan.cliques[k];
+      Clique& c = cliques[ids[k]];
+      c.frontals.clear();
+      c.separator.clear();
+      c.children.clear();
+      for (int a : sc.frontals) c.frontals.push_back(top[a]);
+      for (int a : sc.separator) c.separator.push_back(top[a]);
+      c.parent = sc.parent < 0 ? -1 : ids[sc.parent];
+      for (int v : c.frontals) clique_of[v] = ids[k];
+    }
+    // Recycled cliques keep their storage: hand the largest buffers to the largest new cliques
+    // (saves reallocating, and re-faulting, the big ones on every update).
+    if (m > 1) {
+      std::vector<int>& by_need = s_by_need;
+      std::vector<int>& by_capacity = s_by_capacity;
+      by_need.assign(ids.begin(), ids.end());
+      by_capacity.assign(ids.begin(), ids.end());
+      auto need = [&](int id) {
+        const Clique& c = cliques[id];
+        const int F = static_cast<int>(c.frontals.size()) * D;
+        return Clique::sizeFor(F, static_cast<int>(c.separator.size()) * D);
+      };
+      std::sort(by_need.begin(), by_need.end(), [&](int a, int b) { return need(a) > need(b); });
+      std::sort(by_capacity.begin(), by_capacity.end(), [&](int a, int b) {
+        return cliques[a].storage.capacity() > cliques[b].storage.capacity();
+      });
+      s_buffers.resize(m);
+      for (int k = 0; k < m; ++k) s_buffers[k].swap(cliques[by_capacity[k]].storage);
+      for (int k = 0; k < m; ++k) cliques[by_need[k]].storage.swap(s_buffers[k]);
+    }
+    for (int k = 0; k < m; ++k) {
+      const int parent = cliques[ids[k]].parent;
+      if (parent < 0)
+        roots.push_back(ids[k]);
+      else
+        cliques[parent].children.push_back(ids[k]);
+    }
+    // Alg. 1 line 7: each orphan hangs below the clique where the first eliminated variable of
+    // its separator is frontal.
+    for (int oc : orphans) {
+      int first = n;
+      for (int v : cliques[oc].separator) first = std::min(first, plan.position[slot[v]]);
+      const int parent = ids[plan.clique_of_variable[plan.order[first]]];
+      cliques[oc].parent = parent;
+      cliques[parent].children.push_back(oc);
+    }
+    for (int a = 0; a < n; ++a) slot[top[a]] = -1;
+    // Alg. 1 line 6: eliminate, children before parents.
+    for (int k = 0; k < m; ++k)
+      if (eliminateClique(ids[k])) ++st->indeterminate_cliques;
+    st->cliques_reeliminated += m;
+    st->variables_reeliminated += n;
+  }
+
+  // Kaess 2012 Alg. 3 (partial state update, "wildfire"): solve top-down from the roots,
+  // entering a clique only if it was re-eliminated or a separator variable changed by at least
+  // the threshold; returns the number of cliques solved.
+  int backSubstitute(bool full) {
+    std::vector<int>& changed_list = changed_scratch;
+    std::vector<int>& stack = stack_scratch;
+    changed_list.clear();
+    stack.assign(roots.begin(), roots.end());
+    int solved = 0;
+    while (!stack.empty()) {
+      const int id = stack.back();
+      stack.pop_back();
+      Clique& c = cliques[id];
+      bool recompute = full || c.dirty;
+      if (!recompute)
+        for (int v : c.separator)
+          if (changed[v]) {
+            recompute = true;
+            break;
+          }
+      if (!recompute) continue;
+      ++solved;
+      const int nf = static_cast<int>(c.frontals.size());
+      const int ns = static_cast<int>(c.separator.size());
+      const int F = c.F;
+      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s).
+      xs_buf.resize(c.Sn);
+      for (int b = 0; b < ns; ++b)
+        Eigen::Map<Vec>(xs_buf.data() + b * D) = delta_newton[c.separator[b]];
+      x_buf.resize(F);
+      double* x = x_buf.data();
+      {
+        const typename Clique::ConstMap LS = c.LS();
+        Eigen::Map<Eigen::VectorXd> xm(x, F);
+        xm = c.d();
+        if (c.Sn > 0)
+          xm.noalias() -= LS.bottomRows(c.Sn).transpose() *
+                          Eigen::Map<const Eigen::VectorXd>(xs_buf.data(), c.Sn);
+        LS.topRows(F).transpose().template triangularView<Eigen::Upper>().solveInPlace(xm);
+      }
+      // The new values are always taken. A variable is "changed" (the cliques below that hold
+      // it in their separator must be recomputed) when it moved by at least the threshold from
+      // the value they were last solved with (delta_seen), so small moves cannot accumulate.
+      for (int a = 0; a < nf; ++a) {
+        const int v = c.frontals[a];
+        const Eigen::Map<const Vec> xv(x + a * D);
+        if (full || (xv - delta_seen[v]).cwiseAbs().maxCoeff() >= opt.wildfire_threshold) {
+          delta_seen[v] = xv;
+          if (!changed[v]) {
+            changed[v] = 1;
+            changed_list.push_back(v);
+          }
+        }
+        delta_newton[v] = xv;
+        if (!opt.dogleg) delta[v] = xv;
+      }
+      // As GTSAM's optimizeWildfire: a recomputed clique's children are visited; each decides
+      // from its own separator whether it must be recomputed.
+      for (int ch : c.children) stack.push_back(ch);
+      c.dirty = false;
+    }
+    for (int v : changed_list) changed[v] = 0;
+    return solved;
+  }
+
+  // F at θ ⊞ x for every pose.
+  double objectiveAt(const std::vector<Vec>& x) const {
+    std::vector<G> poses(theta.size());
+    for (size_t v = 0; v < theta.size(); ++v)
+      poses[v] = fixed[v] ? theta[v] : theta[v].retract(x[v]);
+    double f = 0;
+    for (const Edge& e : edges) f += e.cost(poses[e.i], poses[e.j]);
+    return f;
+  }
+
+  // Σ over cliques of ‖R x_f + S x_s − d‖² (the linear model up to a constant).
+  double bayesNetError(const std::vector<Vec>* x) const {
+    double err = 0;
+    Eigen::VectorXd xf, xs, r;
+    for (const Clique& c : cliques) {
+      if (!c.in_use) continue;
+      if (!x) {
+        err += c.d().squaredNorm();
+        continue;
+      }
+      gatherVec(*x, c.frontals, &xf);
+      gatherVec(*x, c.separator, &xs);
+      r = -c.d();
+      r.noalias() += c.R().template triangularView<Eigen::Upper>() * xf;
+      if (xs.size() > 0) r.noalias() += c.S() * xs;
+      err += r.squaredNorm();
+    }
+    return err;
+  }
+
+  static void gatherVec(const std::vector<Vec>& x, const std::vector<int>& vars,
+                        Eigen::VectorXd* out) {
+    out->resize(static_cast<Eigen::Index>(vars.size()) * D);
+    for (size_t k = 0; k < vars.size(); ++k) out->template segment<D>(k * D) = x[vars[k]];
+  }
+
+  static double squaredNorm(const std::vector<Vec>& x) {
+    double s = 0;
+    for (const Vec& v : x) s += v.squaredNorm();
+    return s;
+  }
+
+  // Powell's dogleg on the Bayes tree (as GTSAM's ISAM2 with ISAM2DoglegParams): the Cauchy
+  // point from the gradient Aᵀb = Σ_cliques [Rᵀd; Sᵀd], blended with the Gauss–Newton step
+  // inside the trust region; the radius adapts with ρ = actual / predicted decrease of F.
+  void doglegStep() {
+    const int n = numPoses();
+    std::vector<Vec> grad(n, Vec::Zero());
+    Eigen::VectorXd gf, gs;
+    for (const Clique& c : cliques) {
+      if (!c.in_use) continue;
+      gf.noalias() = c.R().transpose() * c.d();
+      for (size_t a = 0; a < c.frontals.size(); ++a)
+        grad[c.frontals[a]] += gf.template segment<D>(a * D);
+      if (c.separator.empty()) continue;
+      gs.noalias() = c.S().transpose() * c.d();
+      for (size_t b = 0; b < c.separator.size(); ++b)
+        grad[c.separator[b]] += gs.template segment<D>(b * D);
+    }
+    const double gg = squaredNorm(grad);
+    // ‖A g‖² = Σ ‖R g_f + S g_s‖² (the Bayes net with d = 0).
+    double Agg = 0;
+    {
+      Eigen::VectorXd xf, xs, r;
+      for (const Clique& c : cliques) {
+        if (!c.in_use) continue;
+        gatherVec(grad, c.frontals, &xf);
+        gatherVec(grad, c.separator, &xs);
+        r.noalias() = c.R().template triangularView<Eigen::Upper>() * xf;
+        if (xs.size() > 0) r.noalias() += c.S() * xs;
+        Agg += r.squaredNorm();
+      }
+    }
+    std::vector<Vec> dx_u(n, Vec::Zero());
+    if (gg > 0 && Agg > 0)
+      for (int v = 0; v < n; ++v) dx_u[v] = (gg / Agg) * grad[v];
+    const double norm_n = std::sqrt(squaredNorm(delta_newton));
+    const double norm_u = std::sqrt(squaredNorm(dx_u));
+    const double F0 = objectiveAt(std::vector<Vec>(n, Vec::Zero()));
+    const double M0 = bayesNetError(nullptr);
+    std::vector<Vec> dx_d(n);
+    for (int attempt = 0; attempt < 60; ++attempt) {
+      const double radius = dogleg_radius;
+      double norm_d;
+      if (norm_n <= radius) {
+        dx_d = delta_newton;
+        norm_d = norm_n;
+      } else if (norm_u >= radius) {
+        for (int v = 0; v < n; ++v) dx_d[v] = (radius / norm_u) * dx_u[v];
+        norm_d = radius;
+      } else {  // the point on the segment dx_u → dx_n at distance radius
+        double a = 0, b = 0;
+        for (int v = 0; v < n; ++v) {
+          const Vec diff = delta_newton[v] - dx_u[v];
+          a += diff.squaredNorm();
+          b += dx_u[v].dot(diff);
+        }
+        const double cc = norm_u * norm_u - radius * radius;
+        const double tau = a > 0 ? (-b + std::sqrt(std::max(b * b - a * cc, 0.0))) / a : 0.0;
+        for (int v = 0; v < n; ++v) dx_d[v] = dx_u[v] + tau * (delta_newton[v] - dx_u[v]);
+        norm_d = radius;
+      }
+      const double predicted = M0 - bayesNetError(&dx_d);
+      const double F1 = objectiveAt(dx_d);
+      const double rho = predicted > 0 ? (F0 - F1) / predicted : (F1 <= F0 ? 1.0 : -1.0);
+      if (rho >= 0.75) {
+        dogleg_radius = std::max(radius, 3.0 * norm_d);
+      } else if (rho < 0.25) {
+        dogleg_radius = 0.5 * radius;
+      }
+      if (rho >= 0 || F1 <= F0) {
+        delta = dx_d;
+        return;
+      }
+      if (dogleg_radius < opt.dogleg_min_radius) break;
+    }
+    // No step decreases F: stay at the linearisation point.
+    dogleg_radius = std::max(dogleg_radius, opt.dogleg_min_radius);
+    for (Vec& v : delta) v.setZero();
+  }
+
+  // Kaess 2012 Alg. 1 (with Alg. 2 fluid relinearisation); `all` relinearises every variable
+  // and re-eliminates the whole tree.
+  UpdateStats update(bool all) {
+    const auto t0 = Clock::now();
+    UpdateStats st;
+    ++stamp;
+    std::vector<int>& touched = s_touched;  // variables of the new factors, new variables
+    touched.clear();
+    auto touch = [&](int v) {
+      if (!fixed[v] && !mark[v]) {
+        mark[v] = 1;
+        touched.push_back(v);
+      }
+    };
+    // Alg. 1 line 1: add the new variables and factors.
+    st.new_variables = static_cast<int>(new_vars.size());
+    for (int v : new_vars) touch(v);
+    new_vars.clear();
+    const int first_new = static_cast<int>(edges.size());
+    for (const Edge& e : queued) {
+      const int f = static_cast<int>(edges.size());
+      edges.push_back(e);
+      lin.emplace_back();
+      factor_stamp.push_back(-1);
+      var_factors[e.i].push_back(f);
+      var_factors[e.j].push_back(f);
+      touch(e.i);
+      touch(e.j);
+    }
+    st.new_factors = static_cast<int>(queued.size());
+    queued.clear();
+
+    // Alg. 2 lines 1–2: every relinearize_skip updates, relinearise the variables whose Δ
+    // exceeds β: θ ← θ ⊞ Δ.
+    std::vector<int>& relin = s_relin;
+    relin.clear();
+    const int n = numPoses();
+    if (all) {
+      for (int v = 0; v < n; ++v)
+        if (!fixed[v]) relin.push_back(v);
+    } else if (++update_count % opt.relinearize_skip == 0) {
+      for (int v = 0; v < n; ++v)
+        if (!fixed[v] && clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
+    }
+    for (int v : relin) {
+      theta[v] = theta[v].retract(delta[v]);
+      theta[v].normalize();
+      delta[v].setZero();
+      delta_newton[v].setZero();
+      delta_seen[v].setZero();
+    }
+    st.variables_relinearized = static_cast<int>(relin.size());
+    // Alg. 2 line 3: re-linearise the factors of the relinearised variables.
+    for (int v : relin)
+      for (int f : var_factors[v])
+        if (factor_stamp[f] != stamp) {
+          linearize(f);
+          factor_stamp[f] = stamp;
+        }
+    // Alg. 1 line 2: linearise the new factors.
+    for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
+      if (factor_stamp[f] != stamp) {
+        linearize(f);
+        factor_stamp[f] = stamp;
+      }
+
+    // Alg. 1 line 3 / Alg. 2 line 4: mark the cliques that contain a touched variable as
+    // frontal and, for relinearised variables, every clique that contains it at all (the
+    // subtree below its frontal clique where it appears in the separator).
+    std::vector<int>& marked = s_marked;
+    marked.clear();
+    for (int v : touched)
+      if (clique_of[v] >= 0) marked.push_back(clique_of[v]);
+    if (all) {
+      for (int c = 0; c < static_cast<int>(cliques.size()); ++c)
+        if (cliques[c].in_use) marked.push_back(c);
+    } else {
+      std::vector<int>& stack = stack_scratch;
+      stack.clear();
+      for (int v : relin) {
+        stack.push_back(clique_of[v]);
+        while (!stack.empty()) {
+          const int c = stack.back();
+          stack.pop_back();
+          marked.push_back(c);
+          for (int ch : cliques[c].children) {
+            const auto& sep = cliques[ch].separator;
+            if (std::find(sep.begin(), sep.end(), v) != sep.end()) stack.push_back(ch);
+          }
+        }
+      }
+    }
+    // Alg. 1 line 4: remove the top: the marked cliques and all their ancestors.
+    std::vector<int>& removed = s_removed;
+    removed.clear();
+    for (int c : marked)
+      while (c >= 0 && cliques[c].removed_stamp != stamp) {
+        cliques[c].removed_stamp = stamp;
+        removed.push_back(c);
+        c = cliques[c].parent;
+      }
+    std::vector<int>& top = s_top;
+    top.clear();
+    for (int v : touched)
+      if (clique_of[v] < 0) top.push_back(v);  // new variables
+    std::vector<int>& orphans = s_orphans;     // subtrees off the top keep their cached factors
+    orphans.clear();
+    for (int c : removed) {
+      for (int v : cliques[c].frontals) top.push_back(v);
+      for (int ch : cliques[c].children)
+        if (cliques[ch].removed_stamp != stamp) orphans.push_back(ch);
+    }
+    if (!removed.empty()) {
+      roots.erase(std::remove_if(roots.begin(), roots.end(),
+                                 [&](int r) { return cliques[r].removed_stamp == stamp; }),
+                  roots.end());
+      for (int c : removed) freeClique(c);
+    }
+    // Alg. 1 lines 5–7: re-order, re-eliminate the top, re-attach the orphans.
+    eliminateTop(top, orphans, !all, &st);
+    for (int v : touched) mark[v] = 0;
+    // Alg. 1 line 8 / Alg. 3: partial state update.
+    st.cliques_solved = backSubstitute(all || opt.full_backsubstitution);
+    if (opt.dogleg && !top.empty()) doglegStep();
+    st.time_s = secondsSince(t0);
+    return st;
+  }
+
+  UpdateStats relinearizeAll() {
+    const auto t0 = Clock::now();
+    UpdateStats total;
+    if (!queued.empty() || !new_vars.empty()) accumulate(&total, update(false));
+    double F_prev = objectiveAt(delta);
+    for (int it = 0; it < opt.finalize_max_iterations; ++it) {
+      accumulate(&total, update(true));
+      double F_new = objectiveAt(delta);
+      if (!opt.dogleg && F_new > F_prev) {
+        // Gauss–Newton overshoots: halve the step until F decreases (or give it up).
+        std::vector<Vec> step = delta_newton;
+        double scale = 1.0;
+        for (int k = 0; k < 10 && F_new > F_prev; ++k) {
+          scale *= 0.5;
+          for (size_t v = 0; v < step.size(); ++v) delta[v] = scale * step[v];
+          F_new = objectiveAt(delta);
+        }
+        if (F_new > F_prev) {
+          for (Vec& v : delta) v.setZero();
+          F_new = objectiveAt(delta);
+        }
+      }
+      const double change = std::abs(F_prev - F_new) / std::max(F_prev, 1e-300);
+      F_prev = F_new;
+      if (change < opt.finalize_relative_tolerance) break;
+    }
+    total.time_s = secondsSince(t0);
+    return total;
+  }
+
+  void checkInvariants() const {
+    auto fail = [](const std::string& what) {
+      throw std::logic_error("IncrementalSmoother invariant: " + what);
+    };
+    const int n = numPoses();
+    const int nc = static_cast<int>(cliques.size());
+    std::vector<int> frontal_count(n, 0);
+    int in_use = 0;
+    for (int id = 0; id < nc; ++id) {
+      const Clique& c = cliques[id];
+      if (!c.in_use) continue;
+      ++in_use;
+      const std::string name = "clique " + std::to_string(id);
+      if (c.frontals.empty()) fail(name + " has no frontal variable");
+      const int nf = static_cast<int>(c.frontals.size()), ns = static_cast<int>(c.separator.size());
+      if (c.F != nf * D || c.Sn != ns * D || c.storage.size() != Clique::sizeFor(c.F, c.Sn))
+        fail(name + " has matrices of the wrong size");
+      for (int v : c.frontals) {
+        if (v < 0 || v >= n || fixed[v]) fail(name + " has a bad frontal " + std::to_string(v));
+        ++frontal_count[v];
+        if (clique_of[v] != id) fail("clique_of[" + std::to_string(v) + "] is not " + name);
+        if (std::find(c.separator.begin(), c.separator.end(), v) != c.separator.end())
+          fail(name + ": variable " + std::to_string(v) + " both frontal and separator");
+      }
+      if (c.parent < 0) {
+        if (!c.separator.empty()) fail("root " + name + " has a non-empty separator");
+        if (std::find(roots.begin(), roots.end(), id) == roots.end())
+          fail(name + " has no parent but is not a root");
+      } else {
+        if (c.parent >= nc || !cliques[c.parent].in_use) fail(name + " has a dead parent");
+        const Clique& p = cliques[c.parent];
+        if (std::find(p.children.begin(), p.children.end(), id) == p.children.end())
+          fail(name + " is not among its parent's children");
+        // Running intersection: the separator lies in the parent's frontals ∪ separator.
+        for (int v : c.separator)
+          if (std::find(p.frontals.begin(), p.frontals.end(), v) == p.frontals.end() &&
+              std::find(p.separator.begin(), p.separator.end(), v) == p.separator.end())
+            fail(name + ": separator variable " + std::to_string(v) + " not in parent clique " +
+                 std::to_string(c.parent));
+        if (c.separator.empty()) fail(name + " has a parent but an empty separator");
+      }
+      for (int ch : c.children)
+        if (ch < 0 || ch >= nc || !cliques[ch].in_use || cliques[ch].parent != id)
+          fail(name + ": child " + std::to_string(ch) + " does not point back");
+      // Acyclic: the root is reached within nc steps.
+      int steps = 0;
+      for (int p = c.parent; p >= 0; p = cliques[p].parent)
+        if (++steps > nc) fail(name + " lies on a parent cycle");
+    }
+    if (in_use != num_cliques) fail("clique count mismatch");
+    for (int r : roots)
+      if (r < 0 || r >= nc || !cliques[r].in_use || cliques[r].parent != -1)
+        fail("root " + std::to_string(r) + " is not a live parentless clique");
+    for (int v = 0; v < n; ++v) {
+      const bool eliminated =
+          !fixed[v] && !mark[v] && std::find(new_vars.begin(), new_vars.end(), v) == new_vars.end();
+      if (fixed[v] && frontal_count[v] != 0)
+        fail("fixed pose " + std::to_string(v) + " is frontal");
+      if (eliminated && frontal_count[v] != 1)
+        fail("variable " + std::to_string(v) + " is frontal in " +
+             std::to_string(frontal_count[v]) + " cliques");
+    }
+    // Every factor lies within the clique of its first eliminated variable.
+    for (size_t f = 0; f < edges.size(); ++f) {
+      const int i = edges[f].i, j = edges[f].j;
+      if (fixed[i] || fixed[j]) continue;
+      auto contains = [&](int c, int v) {
+        const Clique& k = cliques[c];
+        return std::find(k.frontals.begin(), k.frontals.end(), v) != k.frontals.end() ||
+               std::find(k.separator.begin(), k.separator.end(), v) != k.separator.end();
+      };
+      if (!contains(clique_of[i], j) && !contains(clique_of[j], i))
+        fail("factor " + std::to_string(f) + " (" + std::to_string(i) + ", " + std::to_string(j) +
+             ") lies in no clique");
+    }
+  }
+};
+
+template <class G>
+IncrementalSmoother<G>::IncrementalSmoother(SmootherOptions options)
+    : impl_(std::make_unique<Impl>(options)) {}
+template <class G>
+IncrementalSmoother<G>::~IncrementalSmoother() = default;
+template <class G>
+IncrementalSmoother<G>::IncrementalSmoother(const IncrementalSmoother& other)
+    : impl_(std::make_unique<Impl>(*other.impl_)) {}
+template <class G>
+IncrementalSmoother<G>& IncrementalSmoother<G>::operator=(const IncrementalSmoother& other) {
+  if (this != &other) impl_ = std::make_unique<Impl>(*other.impl_);
+  return *this;
+}
+template <class G>
+IncrementalSmoother<G>::IncrementalSmoother(IncrementalSmoother&&) noexcept = default;
+template <class G>
+IncrementalSmoother<G>& IncrementalSmoother<G>::operator=(IncrementalSmoother&&) noexcept = default;
+
+template <class G>
+int IncrementalSmoother<G>::addFixedPose(const G& value) {
+  return impl_->addPose(value, true);
+}
+template <class G>
+int IncrementalSmoother<G>::addPose(const G& initial) {
+  return impl_->addPose(initial, false);
+}
+template <class G>
+void IncrementalSmoother<G>::addFactor(const Edge& edge) {
+  impl_->addFactor(edge);
+}
+template <class G>
+UpdateStats IncrementalSmoother<G>::update() {
+  return impl_->update(false);
+}
+template <class G>
+UpdateStats IncrementalSmoother<G>::relinearizeAll() {
+  return impl_->relinearizeAll();
+}
+template <class G>
+std::vector<G> IncrementalSmoother<G>::estimate() const {
+  std::vector<G> out(impl_->theta.size());
+  for (size_t v = 0; v < out.size(); ++v) out[v] = estimate(static_cast<int>(v));
+  return out;
+}
+template <class G>
+G IncrementalSmoother<G>::estimate(int index) const {
+  if (index < 0 || index >= impl_->numPoses())
+    throw std::out_of_range("IncrementalSmoother::estimate: index " + std::to_string(index) +
+                            " out of range");
+  if (impl_->fixed[index]) return impl_->theta[index];
+  return impl_->theta[index].retract(impl_->delta[index]);
+}
+template <class G>
+const std::vector<G>& IncrementalSmoother<G>::linearizationPoint() const {
+  return impl_->theta;
+}
+template <class G>
+const std::vector<typename G::Tangent>& IncrementalSmoother<G>::delta() const {
+  return impl_->delta;
+}
+template <class G>
+double IncrementalSmoother<G>::objective() const {
+  return impl_->objectiveAt(impl_->delta);
+}
+template <class G>
+void IncrementalSmoother<G>::checkInvariants() const {
+  impl_->checkInvariants();
+}
+template <class G>
+int IncrementalSmoother<G>::numCliques() const {
+  return impl_->num_cliques;
+}
+template <class G>
+int IncrementalSmoother<G>::numPoses() const {
+  return impl_->numPoses();
+}
+template <class G>
+int IncrementalSmoother<G>::numFactors() const {
+  return static_cast<int>(impl_->edges.size());
+}
+template <class G>
+bool IncrementalSmoother<G>::isFixed(int index) const {
+  return index >= 0 && index < impl_->numPoses() && impl_->fixed[index];
+}
+template <class G>
+const std::vector<RelativePoseEdge<G>>& IncrementalSmoother<G>::factors() const {
+  return impl_->edges;
+}
+template <class G>
+const SmootherOptions& IncrementalSmoother<G>::options() const {
+  return impl_->opt;
+}
+
+template class IncrementalSmoother<SE2>;
+template class IncrementalSmoother<SE3>;
+
+}  // namespace arbor

@@ -1,0 +1,111 @@
+// iSAM2: incremental smoothing and mapping on a Bayes tree (Kaess, Johannsson, Roberts, Ila,
+// Leonard, Dellaert, "iSAM2: Incremental smoothing and mapping using the Bayes tree", IJRR 2012).
+//
+// Variables are the non-fixed poses (dense indices); fixed (gauge) poses are constants, so an
+// edge to one is a unary factor on its other end. Linearised factors are kept in Hessian
+// (information) form and every clique is eliminated by a dense Cholesky factorisation of its
+// assembled Hessian: R = chol(H_ff)ᵀ, S = R⁻ᵀH_fs, d = R⁻ᵀg_f; the parent receives the Schur
+// complement (H_ss − SᵀS, g_s − Sᵀd) as the clique's cached factor.
+//
+// Not thread-safe: one thread owns a smoother (const methods may run concurrently with each
+// other, never with a non-const one).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "core/pose_graph.h"
+#include "core/relative_pose_factor.h"
+
+namespace arbor {
+
+struct SmootherOptions {
+  /// Fluid relinearisation thresholds β (Kaess 2012 Alg. 2) on |Δ|∞ of the translational and the
+  /// rotational part of a variable's tangent; GTSAM's default is 0.1 for both.
+  double relinearize_threshold_translation = 0.1;
+  double relinearize_threshold_rotation = 0.1;
+  int relinearize_skip = 10;  ///< check for relinearisation every this many updates
+  /// Wildfire threshold α of the partial state update (Kaess 2012 Alg. 3): a clique not
+  /// re-eliminated is re-solved only if a separator variable moved by at least this (|·|∞)
+  /// since the value the clique was last solved with.
+  double wildfire_threshold = 0.001;
+  bool full_backsubstitution = false;  ///< solve every clique on each update
+  /// Powell's dogleg instead of Gauss–Newton (as GTSAM's ISAM2DoglegParams). Each dogleg update
+  /// evaluates F and the gradient over the whole graph (O(n), as in GTSAM).
+  bool dogleg = false;
+  double dogleg_initial_radius = 1.0;  ///< initial trust-region radius Δ₀
+  double dogleg_min_radius = 1e-5;     ///< give up shrinking below this
+  /// relinearizeAll: stop when |F_old − F_new| / F_old falls below this, or after this many
+  /// iterations.
+  double finalize_relative_tolerance = 1e-6;
+  int finalize_max_iterations = 10;
+};
+
+struct UpdateStats {
+  int new_factors = 0;
+  int new_variables = 0;
+  int cliques_reeliminated = 0;    ///< cliques of the new top of the tree
+  int variables_reeliminated = 0;  ///< frontal variables of the new top
+  int variables_relinearized = 0;
+  int indeterminate_cliques = 0;  ///< nearly singular cliques that had to be damped
+  int cliques_solved = 0;         ///< cliques re-solved by back-substitution
+  double time_s = 0.0;
+};
+
+template <class G>
+class IncrementalSmoother {
+ public:
+  static constexpr int kDoF = G::kDoF;
+  using Tangent = typename G::Tangent;
+  using Edge = RelativePoseEdge<G>;
+
+  explicit IncrementalSmoother(SmootherOptions options = {});
+  ~IncrementalSmoother();
+  IncrementalSmoother(const IncrementalSmoother&);
+  IncrementalSmoother& operator=(const IncrementalSmoother&);
+  IncrementalSmoother(IncrementalSmoother&&) noexcept;
+  IncrementalSmoother& operator=(IncrementalSmoother&&) noexcept;
+
+  /// A pose held fixed at `value` (a gauge pose); returns its dense index.
+  int addFixedPose(const G& value);
+  /// A new variable with initial estimate `initial`; returns its dense index.
+  int addPose(const G& initial);
+  /// Queues a factor (dense indices of added poses) until update(). Throws
+  /// std::invalid_argument on a bad index, a self-loop or a non-finite measurement/information.
+  void addFactor(const Edge& edge);
+
+  /// Kaess 2012 Alg. 1: adds the queued factors and poses, relinearises, re-eliminates the
+  /// affected top of the Bayes tree and updates Δ. The estimate is current on return.
+  UpdateStats update();
+  /// Relinearises every variable, re-eliminates the whole tree and back-substitutes fully,
+  /// repeated until F changes by less than finalize_relative_tolerance (relative) or
+  /// finalize_max_iterations. Adds queued factors first. Returns the summed stats.
+  UpdateStats relinearizeAll();
+
+  std::vector<G> estimate() const;  ///< θ ⊞ Δ for every pose (O(n))
+  G estimate(int index) const;
+  const std::vector<G>& linearizationPoint() const;
+  const std::vector<Tangent>& delta() const;  ///< Δ per pose (zero for fixed poses)
+  double objective() const;                   ///< F = Σ eᵀΩe at estimate() (O(m))
+  /// Throws std::logic_error describing the first violated Bayes-tree invariant.
+  void checkInvariants() const;
+
+  int numCliques() const;
+  int numPoses() const;
+  int numFactors() const;  ///< factors added by update() (not the queued ones)
+  bool isFixed(int index) const;
+  const std::vector<Edge>& factors() const;
+  const SmootherOptions& options() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+using IncrementalSmoother2 = IncrementalSmoother<SE2>;
+using IncrementalSmoother3 = IncrementalSmoother<SE3>;
+
+extern template class IncrementalSmoother<SE2>;
+extern template class IncrementalSmoother<SE3>;
+
+}  // namespace arbor

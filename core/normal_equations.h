@@ -1,0 +1,137 @@
+// The Gauss–Newton normal equations H δ = −g of a pose graph, H = Σ AᵀA and g = Aᵀr summed
+// block by block over the whitened edge linearisations, with the block pattern, a
+// fill-reducing block ordering and the symbolic factorisation computed once (Dellaert & Kaess,
+// "Square Root SAM", IJRR 2006, §3–4). The numeric factorisation is BlockCholesky (fixed-size
+// blocks) up to ~2e9 flops and CHOLMOD's supernodal LLᵀ beyond.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/block_cholesky.h"
+#include "core/pose_graph.h"
+#include "core/sparse_cholesky.h"
+
+namespace arbor {
+
+/// Why the gauge leaves the problem singular, or "" when it does not: every connected component
+/// of the graph (poses linked by edges) must hold at least one gauge pose. Also checks the pose
+/// and gauge indices (throws std::invalid_argument when one is out of range).
+template <class G>
+std::string gaugeProblem(const PoseGraph<G>& graph);
+
+/// Which sparse Cholesky factors H.
+enum class CholeskyBackend {
+  kAuto,     ///< BlockCholesky below kBlockCholeskyMaxFlops per factorisation, else CHOLMOD
+  kBlock,    ///< BlockCholesky
+  kCholmod,  ///< CHOLMOD (supernodal or simplicial, its choice)
+};
+/// Where kAuto switches to CHOLMOD, whose supernodal BLAS-3 kernels win on large dense fronts
+/// (measured per factorisation: on par at 1e9 flops on torus3D and a 12³ grid, CHOLMOD 20%
+/// faster at 7e9 on a 16³ grid; BlockCholesky 2–3× faster below 1e8).
+inline constexpr double kBlockCholeskyMaxFlops = 2e9;
+
+/// Normal equations over the non-gauge poses (the variables) of one graph. The variables are
+/// numbered in a fill-reducing order; vectors over them (gradient, steps) have kDoF entries per
+/// variable in that order. The graph must outlive this object.
+template <class G>
+class NormalEquations {
+ public:
+  static constexpr int kDoF = G::kDoF;
+  using Block = Eigen::Matrix<double, kDoF, kDoF>;
+  using Vector = Eigen::Matrix<double, kDoF, 1>;
+
+  /// Computes the variables, the ordering, the pattern of H and its symbolic factorisation.
+  /// Throws std::invalid_argument on out-of-range pose or gauge indices.
+  explicit NormalEquations(const PoseGraph<G>& graph,
+                           CholeskyBackend backend = CholeskyBackend::kAuto);
+  ~NormalEquations();
+
+  /// Number of scalar unknowns (kDoF × non-gauge poses).
+  int dimension() const { return num_variables_ * kDoF; }
+  /// The backend in use (never kAuto).
+  CholeskyBackend backend() const { return backend_; }
+  /// Flops of one factorisation (from the symbolic analysis of the block pattern).
+  double factorizationFlops() const { return flops_; }
+  /// Scalar nonzeros of H's upper triangle and of the Cholesky factor.
+  double hessianNonzeros() const;
+  double factorNonzeros() const;
+
+  /// Linearises every edge at `poses` and assembles H and g; returns F = Σ‖r‖² there.
+  double linearize(const std::vector<G>& poses);
+
+  /// g = Aᵀr at the last linearisation (F's gradient is 2g).
+  const Eigen::VectorXd& gradient() const { return gradient_; }
+  /// diag(H) at the last linearisation.
+  const Eigen::VectorXd& hessianDiagonal() const { return hessian_diagonal_; }
+
+  /// Factors H + diag(damping) (no damping when null). False if not positive definite.
+  bool factorize(const Eigen::VectorXd* damping = nullptr);
+  /// Why the last factorisation failed (naming the pose), or "".
+  std::string factorizationFailure() const;
+  /// x = (H + diag(damping))⁻¹ b with the last successful factorisation.
+  void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x);
+
+  /// The linear model ‖r + A δ‖² at the last linearisation.
+  double modelCost(const Eigen::VectorXd& delta) const;
+  /// ‖A v‖² = vᵀ H v at the last linearisation.
+  double jacobianSquaredNorm(const Eigen::VectorXd& v) const;
+
+  /// out[k] = poses[k] ⊞ δ_k (gauge poses copied).
+  void retract(const std::vector<G>& poses, const Eigen::VectorXd& delta,
+               std::vector<G>* out) const;
+  /// δ per pose (zero for gauge poses), in pose order.
+  std::vector<typename G::Tangent> perPose(const Eigen::VectorXd& delta) const;
+
+ private:
+  // Where an edge's terms go: variable (block) indices, −1 for a gauge pose, and its
+  // off-diagonal block of H (−1 if none), stored below the diagonal: H(high, low).
+  struct EdgeSlot {
+    int var_i = -1;
+    int var_j = -1;
+    int off_diagonal = -1;
+    bool i_is_high = false;  // var_i > var_j: the block is A_iᵀA_j (else A_jᵀA_i)
+  };
+  struct EdgeLinearization {
+    Block A_i, A_j;
+    Vector r;
+  };
+  struct OffDiagonalBlock {
+    int high = 0, low = 0;  // the block H(high, low), high > low
+  };
+  using Blocks = std::vector<Block, Eigen::aligned_allocator<Block>>;
+
+  void setUpCholmod();
+  void loadCholmod(const Eigen::VectorXd* damping);
+  void loadBlocks(const Eigen::VectorXd* damping);
+
+  const PoseGraph<G>& graph_;
+  CholeskyBackend backend_ = CholeskyBackend::kBlock;
+  double flops_ = 0.0;
+  int num_variables_ = 0;
+  std::vector<int> var_of_pose_;  // −1 for gauge poses
+  std::vector<int> pose_of_var_;
+  std::vector<EdgeSlot> slots_;
+  std::vector<OffDiagonalBlock> off_diagonal_;
+  std::vector<EdgeLinearization> linearization_;
+  Blocks diagonal_blocks_;      // H(j, j)
+  Blocks off_diagonal_blocks_;  // H(row, col), one per OffDiagonalBlock
+  Eigen::VectorXd gradient_;
+  Eigen::VectorXd hessian_diagonal_;
+  int failed_column_ = -1;
+  // BlockCholesky: the position of each off-diagonal block of H in L.
+  std::unique_ptr<BlockCholesky<kDoF>> block_cholesky_;
+  std::vector<int> block_position_;
+  // CHOLMOD: H's upper triangle in compressed-column form. Off-diagonal block b sits in block
+  // column high as H(low, high) = H(high, low)ᵀ: its entry (r, c) is
+  // values_[col_ptr_[high·kDoF + c] + row_offset_[b] + r].
+  std::unique_ptr<SparseCholesky> cholmod_;
+  std::vector<int> col_ptr_;
+  std::vector<int> row_offset_;
+  std::vector<double> values_;
+};
+
+}  // namespace arbor

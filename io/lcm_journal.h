@@ -1,0 +1,70 @@
+// The journal of `arbor serve`: an LCM event log (the format lcm-logger writes and lcm-logplayer
+// plays, read and written with liblcm's lcm_eventlog API). Bytes only: what the events mean
+// (edge_t, journal_mark_t) is up to the caller.
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <vector>
+
+struct _lcm_eventlog_t;
+
+namespace arbor {
+
+struct LogEvent {
+  std::string channel;
+  std::int64_t timestamp = 0;  ///< µs since the epoch
+  std::vector<std::uint8_t> data;
+};
+
+struct EventLogContents {
+  std::vector<LogEvent> events;  ///< every complete event, in file order
+  std::int64_t valid_bytes = 0;  ///< file offset just after the last complete event
+  std::int64_t file_bytes = 0;   ///< > valid_bytes when the tail is torn (e.g. after kill -9)
+};
+
+/// Reads an LCM event log up to its first incomplete event. A missing file is empty.
+/// Throws std::runtime_error if the file exists but cannot be read.
+EventLogContents readEventLog(const std::string& path);
+
+struct EventLogWriterOptions {
+  /// fsync after every event (0), at most every this many ms (> 0; sync() / syncIfDue() cover
+  /// the tail), or never (< 0: the OS decides). Every event is fflush'ed to the kernel at once,
+  /// so a killed process loses nothing either way; fsync guards against power loss.
+  int fsync_interval_ms = 0;
+};
+
+/// Appends events to an LCM event log. Thread-safe (one mutex).
+class EventLogWriter {
+ public:
+  /// Opens `path` for appending (creating it); when `valid_bytes` ≥ 0 the file is first cut to
+  /// that length (drops a torn tail). Throws std::runtime_error if it cannot.
+  EventLogWriter(const std::string& path, std::int64_t valid_bytes,
+                 EventLogWriterOptions options = {});
+  ~EventLogWriter();
+  EventLogWriter(const EventLogWriter&) = delete;
+  EventLogWriter& operator=(const EventLogWriter&) = delete;
+
+  /// Writes one event and flushes it to the kernel; fsyncs per the policy. Throws
+  /// std::runtime_error on a write error.
+  void append(const std::string& channel, std::int64_t timestamp, const void* data, int size);
+  /// fsync now if anything was written since the last fsync.
+  void sync();
+  /// sync() if the fsync interval has passed since the last one.
+  void syncIfDue();
+  std::int64_t eventsWritten() const;
+  const std::string& path() const { return path_; }
+
+ private:
+  void syncLocked();
+  std::string path_;
+  EventLogWriterOptions options_;
+  _lcm_eventlog_t* log_ = nullptr;
+  mutable std::mutex mutex_;
+  std::int64_t written_ = 0;
+  bool dirty_ = false;
+  std::int64_t last_sync_us_ = 0;
+};
+
+}  // namespace arbor

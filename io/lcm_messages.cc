@@ -1,0 +1,298 @@
+#include "io/lcm_messages.h"
+
+#include <cmath>
+#include <exception>
+#include <sstream>
+
+#include <lcm/lcm_coretypes.h>
+
+#include "core/information.h"
+
+namespace arbor {
+namespace {
+
+// Byte offsets of the length fields that precede variable arrays/strings, after the 8-byte
+// hash (fixed by the field order of io/lcm/*.lcm; tests/lcm_messages_test.cc checks them).
+constexpr int kEdgeInformationSizeOffset = 8 + 5 * 8 + 1 + 3 * 8 + 4 * 8;  // 105
+constexpr int kEstimateNumPosesOffset = 8 + 4 * 8 + 1 + 1 + 4 + 8;         // 54
+constexpr int kEstimateBytesPerPose = 8 + 3 * 8 + 4 * 8;
+constexpr int kCommandPathLengthOffset = 8 + 8 + 1;             // 17
+constexpr int kStatusNumReasonsOffset = 8 + 9 * 8 + 4 + 4 + 8;  // 96
+constexpr int kMaxInformationSize = 64;
+
+bool readInt32(const void* data, int size, int offset, std::int32_t* value) {
+  if (offset + 4 > size) return false;
+  return __int32_t_decode_array(data, offset, size - offset, value, 1) == 4;
+}
+
+void setDetail(std::string* detail, const std::string& text) {
+  if (detail) *detail = text;
+}
+
+// Checks the variable-length fields of M before its generated decoder allocates from them.
+// Returns kNone, kTruncated (a length field lies beyond the end) or kMalformed.
+template <class M>
+MessageProblem precheck(const void*, int, std::string*) {
+  return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<edge_t>(const void* data, int size, std::string* detail) {
+  std::int32_t n = 0;
+  if (!readInt32(data, size, kEdgeInformationSizeOffset, &n)) {
+    setDetail(detail, std::to_string(size) + " bytes, an edge_t needs at least " +
+                          std::to_string(kEdgeInformationSizeOffset + 4));
+    return MessageProblem::kTruncated;
+  }
+  if (n < 0 || n > kMaxInformationSize) {
+    setDetail(detail, "information_size " + std::to_string(n) + " is out of range");
+    return MessageProblem::kMalformed;
+  }
+  return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<estimate_t>(const void* data, int size, std::string* detail) {
+  std::int32_t n = 0;
+  if (!readInt32(data, size, kEstimateNumPosesOffset, &n)) return MessageProblem::kTruncated;
+  if (n < 0 ||
+      static_cast<std::int64_t>(n) * kEstimateBytesPerPose > size - kEstimateNumPosesOffset - 4) {
+    setDetail(detail, "num_poses " + std::to_string(n) + " does not fit " + std::to_string(size) +
+                          " bytes");
+    return n < 0 ? MessageProblem::kMalformed : MessageProblem::kTruncated;
+  }
+  return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<command_t>(const void* data, int size, std::string* detail) {
+  std::int32_t n = 0;
+  if (!readInt32(data, size, kCommandPathLengthOffset, &n)) return MessageProblem::kTruncated;
+  if (n < 1) {
+    setDetail(detail, "path length " + std::to_string(n) + " (must count the NUL)");
+    return MessageProblem::kMalformed;
+  }
+  return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<status_t>(const void* data, int size, std::string* detail) {
+  std::int32_t n = 0;
+  if (!readInt32(data, size, kStatusNumReasonsOffset, &n)) return MessageProblem::kTruncated;
+  // Each reason takes at least 5 bytes (length + NUL) plus an 8-byte count.
+  if (n < 0 || static_cast<std::int64_t>(n) * 13 > size - kStatusNumReasonsOffset - 4) {
+    setDetail(detail, "num_reasons " + std::to_string(n) + " is out of range");
+    return n < 0 ? MessageProblem::kMalformed : MessageProblem::kTruncated;
+  }
+  return MessageProblem::kNone;
+}
+
+bool allFinite(const double* v, int n) {
+  for (int k = 0; k < n; ++k) {
+    if (!std::isfinite(v[k])) return false;
+  }
+  return true;
+}
+
+template <class G>
+EdgeDecoding toStreamEdge(const edge_t& m) {
+  constexpr int d = G::kDoF;
+  EdgeDecoding out;
+  StreamEdge<G> e;
+  e.utime = m.utime;
+  e.sender = m.sender;
+  e.seq = m.seq;
+  e.from = m.from_id;
+  e.to = m.to_id;
+  if constexpr (G::kDim == 2) {
+    if (m.translation[2] != 0 || m.rotation[1] != 0 || m.rotation[2] != 0 || m.rotation[3] != 0) {
+      out.problem = MessageProblem::kDim;
+      out.detail = "a 2D edge has nonzero translation[2] or rotation[1..3]";
+      return out;
+    }
+    e.z = SE2(m.translation[0], m.translation[1], m.rotation[0]);
+  } else {
+    const Eigen::Quaterniond q(m.rotation[0], m.rotation[1], m.rotation[2], m.rotation[3]);
+    const double norm = q.norm();
+    if (std::abs(norm - 1.0) > 1e-3) {
+      std::ostringstream os;
+      os << "quaternion norm " << norm << " is not 1";
+      out.problem = MessageProblem::kRotation;
+      out.detail = os.str();
+      return out;
+    }
+    e.z = SE3(q, Eigen::Vector3d(m.translation[0], m.translation[1], m.translation[2]));
+  }
+  int k = 0;
+  for (int r = 0; r < d; ++r) {
+    for (int c = r; c < d; ++c, ++k) e.omega(r, c) = e.omega(c, r) = m.information[k];
+  }
+  const std::string problem = informationProblem(e.omega);
+  if (!problem.empty()) {
+    out.problem = MessageProblem::kInformation;
+    out.detail = "information matrix " + problem;
+    return out;
+  }
+  out.edge = e;
+  return out;
+}
+
+}  // namespace
+
+const char* toString(MessageProblem problem) {
+  switch (problem) {
+    case MessageProblem::kNone:
+      return "ok";
+    case MessageProblem::kTruncated:
+      return "truncated";
+    case MessageProblem::kTrailingBytes:
+      return "trailing bytes";
+    case MessageProblem::kTypeHash:
+      return "type hash";
+    case MessageProblem::kMalformed:
+      return "malformed";
+    case MessageProblem::kDim:
+      return "dim";
+    case MessageProblem::kNotFinite:
+      return "not finite";
+    case MessageProblem::kRotation:
+      return "rotation";
+    case MessageProblem::kInformation:
+      return "information";
+    case MessageProblem::kSelfLoop:
+      return "self-loop";
+    case MessageProblem::kId:
+      return "id";
+    case MessageProblem::kSeq:
+      return "seq";
+  }
+  return "unknown";
+}
+
+template <class M>
+MessageProblem decodeMessage(const void* data, int size, M* out, std::string* detail) {
+  if (data == nullptr || size < 8) {
+    setDetail(detail, std::to_string(size) + " bytes, shorter than a type hash");
+    return MessageProblem::kTruncated;
+  }
+  std::int64_t hash = 0;
+  __int64_t_decode_array(data, 0, size, &hash, 1);
+  if (hash != M::getHash()) {
+    std::ostringstream os;
+    os << "type hash 0x" << std::hex << static_cast<std::uint64_t>(hash) << " is not "
+       << M::getTypeName() << "'s 0x" << static_cast<std::uint64_t>(M::getHash());
+    setDetail(detail, os.str());
+    return MessageProblem::kTypeHash;
+  }
+  const MessageProblem pre = precheck<M>(data, size, detail);
+  if (pre != MessageProblem::kNone) return pre;
+  int used = -1;
+  try {
+    used = out->decode(data, 0, size);
+  } catch (const std::exception& e) {
+    setDetail(detail, std::string("malformed: ") + e.what());
+    return MessageProblem::kMalformed;
+  }
+  if (used < 0) {
+    setDetail(detail, std::to_string(size) + " bytes end inside a " + M::getTypeName());
+    return MessageProblem::kTruncated;
+  }
+  if (used != size) {
+    setDetail(detail,
+              std::to_string(size - used) + " bytes after the end of a " + M::getTypeName());
+    return MessageProblem::kTrailingBytes;
+  }
+  return MessageProblem::kNone;
+}
+
+EdgeDecoding decodeEdge(const void* data, int size) {
+  EdgeDecoding out;
+  edge_t m;
+  out.problem = decodeMessage(data, size, &m, &out.detail);
+  if (!out.ok()) return out;
+  auto fail = [&](MessageProblem p, const std::string& what) {
+    out.problem = p;
+    out.detail = what;
+    return out;
+  };
+  if (m.dim != 2 && m.dim != 3)
+    return fail(MessageProblem::kDim, "dim " + std::to_string(m.dim) + " is not 2 or 3");
+  const int expected = m.dim == 2 ? 6 : 21;
+  if (m.information_size != expected) {
+    return fail(MessageProblem::kDim, "dim " + std::to_string(m.dim) + " needs " +
+                                          std::to_string(expected) + " information entries, got " +
+                                          std::to_string(m.information_size));
+  }
+  if (!allFinite(m.translation, 3))
+    return fail(MessageProblem::kNotFinite, "translation is not finite");
+  if (!allFinite(m.rotation, 4)) return fail(MessageProblem::kNotFinite, "rotation is not finite");
+  if (!allFinite(m.information.data(), m.information_size)) {
+    return fail(MessageProblem::kNotFinite, "information is not finite");
+  }
+  if (m.from_id < 0 || m.to_id < 0) {
+    return fail(MessageProblem::kId,
+                "negative pose id " + std::to_string(std::min(m.from_id, m.to_id)));
+  }
+  if (m.from_id == m.to_id) {
+    return fail(MessageProblem::kSelfLoop, "self-loop at pose " + std::to_string(m.from_id));
+  }
+  if (m.seq < 1) return fail(MessageProblem::kSeq, "seq " + std::to_string(m.seq) + " is not >= 1");
+  return m.dim == 2 ? toStreamEdge<SE2>(m) : toStreamEdge<SE3>(m);
+}
+
+void poseToFields(const SE2& pose, double translation[3], double rotation[4]) {
+  translation[0] = pose.x();
+  translation[1] = pose.y();
+  translation[2] = 0;
+  rotation[0] = pose.angle();
+  rotation[1] = rotation[2] = rotation[3] = 0;
+}
+
+void poseToFields(const SE3& pose, double translation[3], double rotation[4]) {
+  for (int k = 0; k < 3; ++k) translation[k] = pose.translation()[k];
+  const Eigen::Quaterniond& q = pose.quaternion();
+  rotation[0] = q.w();
+  rotation[1] = q.x();
+  rotation[2] = q.y();
+  rotation[3] = q.z();
+}
+
+template <>
+SE2 poseFromFields<SE2>(const double translation[3], const double rotation[4]) {
+  return SE2(translation[0], translation[1], rotation[0]);
+}
+
+template <>
+SE3 poseFromFields<SE3>(const double translation[3], const double rotation[4]) {
+  return SE3(Eigen::Quaterniond(rotation[0], rotation[1], rotation[2], rotation[3]),
+             Eigen::Vector3d(translation[0], translation[1], translation[2]));
+}
+
+template <class G>
+edge_t makeEdgeMessage(const StreamEdge<G>& edge) {
+  constexpr int d = G::kDoF;
+  edge_t m;
+  m.utime = edge.utime;
+  m.sender = edge.sender;
+  m.seq = edge.seq;
+  m.from_id = edge.from;
+  m.to_id = edge.to;
+  m.dim = G::kDim;
+  poseToFields(edge.z, m.translation, m.rotation);
+  m.information_size = d * (d + 1) / 2;
+  m.information.reserve(m.information_size);
+  for (int r = 0; r < d; ++r) {
+    for (int c = r; c < d; ++c) m.information.push_back(edge.omega(r, c));
+  }
+  return m;
+}
+
+template edge_t makeEdgeMessage(const StreamEdge<SE2>&);
+template edge_t makeEdgeMessage(const StreamEdge<SE3>&);
+template MessageProblem decodeMessage(const void*, int, estimate_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, status_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, command_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
+
+}  // namespace arbor

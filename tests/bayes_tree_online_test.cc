@@ -1,0 +1,147 @@
+// Tests of the online layer (bayestree/online_smoother.h): external ids, duplicate, pending
+// (dangling) and out-of-order edges, rejected input.
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "bayestree/online_smoother.h"
+
+namespace arbor {
+namespace {
+
+const Eigen::Matrix3d kI3 = Eigen::Matrix3d::Identity();
+
+TEST(OnlineSmoother, FirstPoseIsTheFixedGauge) {
+  OnlineSmootherOptions<SE2> o;
+  o.gauge = SE2(5, -1, 0.3);
+  OnlineSmoother<SE2> s(o);
+  EXPECT_EQ(s.addEdge(100, 101, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  s.update();
+  ASSERT_TRUE(s.hasPose(100));
+  ASSERT_TRUE(s.hasPose(101));
+  EXPECT_TRUE(s.smoother().isFixed(0));
+  EXPECT_NEAR(s.estimate(100).x(), 5, 1e-12);
+  const SE2 expected = o.gauge.compose(SE2(1, 0, 0));
+  EXPECT_NEAR(s.estimate(101).localCoordinates(expected).norm(), 0, 1e-9);
+  EXPECT_THROW(s.estimate(7), std::out_of_range);
+}
+
+TEST(OnlineSmoother, DuplicatesAreReportedNotAdded) {
+  OnlineSmoother<SE2> s;
+  EXPECT_EQ(s.addEdge(1, 2, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  s.update();
+  const EdgeResult dup = s.addEdge(1, 2, SE2(1, 0, 0), kI3);
+  EXPECT_EQ(dup.status, EdgeStatus::kDuplicate);
+  EXPECT_FALSE(dup.reason.empty());
+  // Same ids but another measurement or Ω: a genuine second measurement.
+  EXPECT_EQ(s.addEdge(1, 2, SE2(1.2, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  EXPECT_EQ(s.addEdge(1, 2, SE2(1, 0, 0), 2 * kI3).status, EdgeStatus::kAccepted);
+  s.update();
+  EXPECT_EQ(s.smoother().numFactors(), 3);
+  EXPECT_EQ(s.stats().edges_duplicate, 1);
+  EXPECT_EQ(s.stats().edges_accepted, 3);
+  // Weighted mean of 1 (w 1), 1.2 (w 1), 1 (w 2): 1.05.
+  EXPECT_NEAR(s.estimate(2).x(), 1.05, 1e-6);
+}
+
+TEST(OnlineSmoother, DanglingEdgesWaitUntilAnEndIsKnown) {
+  OnlineSmoother<SE2> s;
+  EXPECT_EQ(s.addEdge(0, 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  // 10–11 and 11–12: no end known.
+  EXPECT_EQ(s.addEdge(10, 11, SE2(1, 0, 0), kI3).status, EdgeStatus::kPending);
+  EXPECT_EQ(s.addEdge(12, 11, SE2(-1, 0, 0), kI3).status, EdgeStatus::kPending);
+  EXPECT_EQ(s.addEdge(12, 11, SE2(-1, 0, 0), kI3).status, EdgeStatus::kDuplicate);
+  EXPECT_EQ(s.stats().edges_pending, 2);
+  s.update();
+  EXPECT_FALSE(s.hasPose(10));
+  EXPECT_FALSE(s.hasPose(12));
+  // 1 → 10 makes 10 known, which releases 10–11, which releases 12–11.
+  EXPECT_EQ(s.addEdge(1, 10, SE2(1, 0, M_PI / 2), kI3).status, EdgeStatus::kAccepted);
+  EXPECT_EQ(s.stats().edges_pending, 0);
+  s.update();
+  s.smoother().checkInvariants();
+  ASSERT_TRUE(s.hasPose(12));
+  EXPECT_NEAR(s.estimate(10).x(), 2, 1e-9);
+  EXPECT_NEAR(s.estimate(11).y(), 1, 1e-9);
+  EXPECT_NEAR(s.estimate(12).y(), 2, 1e-9);
+  EXPECT_EQ(s.smoother().numFactors(), 4);
+  EXPECT_EQ(s.estimates().size(), 5u);
+}
+
+TEST(OnlineSmoother, LongPendingChainIsReleasedIteratively) {
+  OnlineSmoother<SE2> s;
+  const int N = 20000;
+  EXPECT_EQ(s.addEdge(0, 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  for (int k = N - 1; k >= 2; --k)
+    ASSERT_EQ(s.addEdge(k, k + 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kPending);
+  EXPECT_EQ(s.stats().edges_pending, N - 2);
+  EXPECT_EQ(s.addEdge(1, 2, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  EXPECT_EQ(s.stats().edges_pending, 0);
+  EXPECT_EQ(s.stats().poses, N + 1);
+  s.update();
+  EXPECT_NEAR(s.estimate(N).x(), N, 1e-6);
+}
+
+TEST(OnlineSmoother, RejectsBadEdges) {
+  OnlineSmoother<SE2> s;
+  EXPECT_EQ(s.addEdge(3, 3, SE2(), kI3).status, EdgeStatus::kRejected);
+  EXPECT_EQ(s.addEdge(3, 4, SE2(std::nan(""), 0, 0), kI3).status, EdgeStatus::kRejected);
+  Eigen::Matrix3d nan_info = kI3;
+  nan_info(1, 2) = std::nan("");
+  EXPECT_EQ(s.addEdge(3, 4, SE2(), nan_info).status, EdgeStatus::kRejected);
+  Eigen::Matrix3d indefinite = kI3;
+  indefinite(2, 2) = -1;
+  const EdgeResult r = s.addEdge(3, 4, SE2(), indefinite);
+  EXPECT_EQ(r.status, EdgeStatus::kRejected);
+  EXPECT_NE(r.reason.find("information"), std::string::npos) << r.reason;
+  EXPECT_EQ(s.stats().edges_rejected, 4);
+  EXPECT_EQ(s.stats().poses, 0);
+  EXPECT_EQ(s.addEdge(3, 4, SE2(), kI3).status, EdgeStatus::kAccepted);
+}
+
+// Exact measurements of a random 3D trajectory fed in a shuffled order (out of order, both
+// directions, many initially dangling): the estimate recovers the trajectory.
+TEST(OnlineSmoother, OutOfOrderExactEdgesRecoverTrajectory3D) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> n(0, 1);
+  const int N = 60;
+  std::vector<SE3> truth(N);
+  for (int k = 1; k < N; ++k) {
+    SE3::Tangent t;
+    t << 1 + 0.1 * n(rng), 0.2 * n(rng), 0.1 * n(rng), 0.1 * n(rng), 0.1 * n(rng), 0.3 * n(rng);
+    truth[k] = truth[k - 1].compose(SE3::Exp(t));
+  }
+  struct E {
+    int a, b;
+  };
+  std::vector<E> edges;
+  for (int k = 1; k < N; ++k) edges.push_back(k % 3 ? E{k - 1, k} : E{k, k - 1});
+  for (int k = 0; k + 7 < N; k += 5) edges.push_back({k + 7, k});
+  std::shuffle(edges.begin() + 1, edges.end(), rng);
+  OnlineSmoother<SE3> s;
+  int pending = 0;
+  for (const E& e : edges) {
+    const EdgeResult r = s.addEdge(1000 + e.a, 1000 + e.b, truth[e.a].between(truth[e.b]),
+                                   Eigen::Matrix<double, 6, 6>::Identity());
+    ASSERT_NE(r.status, EdgeStatus::kRejected) << r.reason;
+    ASSERT_NE(r.status, EdgeStatus::kDuplicate);
+    if (r.status == EdgeStatus::kPending) ++pending;
+    s.update();
+    s.smoother().checkInvariants();
+  }
+  EXPECT_GT(pending, 0);
+  EXPECT_EQ(s.stats().edges_pending, 0);
+  EXPECT_EQ(s.stats().poses, N);
+  const SE3 origin_inv = truth[edges[0].a].inverse();
+  for (int k = 0; k < N; ++k) {
+    const SE3 expected = origin_inv.compose(truth[k]);
+    EXPECT_LT(s.estimate(1000 + k).localCoordinates(expected).norm(), 1e-6) << k;
+  }
+  EXPECT_LT(s.smoother().objective(), 1e-10);
+}
+
+}  // namespace
+}  // namespace arbor

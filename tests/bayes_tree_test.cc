@@ -1,0 +1,434 @@
+// Tests of the iSAM2 smoother (bayestree/incremental_smoother.h): exactness against batch
+// Gauss–Newton, Bayes-tree invariants, convergence after finalize, indeterminate cliques.
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include "bayestree/incremental_smoother.h"
+#include "core/batch_solver.h"
+#include "core/pose_graph.h"
+
+#include <gtest/gtest.h>
+
+namespace arbor::testing {
+
+inline SE2 randomStep(std::mt19937& rng, const SE2*, double scale) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  return SE2(scale * (1.0 + 0.2 * n(rng)), scale * 0.3 * n(rng), 0.4 * n(rng));
+}
+inline SE3 randomStep(std::mt19937& rng, const SE3*, double scale) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  SE3::Tangent t;
+  t << scale * (1.0 + 0.2 * n(rng)), scale * 0.3 * n(rng), scale * 0.3 * n(rng), 0.3 * n(rng),
+      0.3 * n(rng), 0.3 * n(rng);
+  return SE3::Exp(t);
+}
+
+template <class G>
+G perturb(const G& x, std::mt19937& rng, double sigma_t, double sigma_r) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  typename G::Tangent t;
+  for (int k = 0; k < G::kDoF; ++k) t(k) = (k < G::kDim ? sigma_t : sigma_r) * n(rng);
+  return x.compose(G::Exp(t));
+}
+
+/// A random trajectory with odometry and loop closures; edges sorted so that an edge appears
+/// once both ends exist (ordered by max(i, j)), each with noisy measurement.
+template <class G>
+PoseGraph<G> randomGraph(int n, int loops, unsigned seed, double sigma_t = 0.05,
+                         double sigma_r = 0.02, std::vector<G>* truth_out = nullptr) {
+  std::mt19937 rng(seed);
+  std::vector<G> truth(n);
+  for (int k = 1; k < n; ++k)
+    truth[k] = truth[k - 1].compose(randomStep(rng, static_cast<const G*>(nullptr), 1.0));
+  PoseGraph<G> g;
+  using M = typename RelativePoseEdge<G>::Matrix;
+  M omega = M::Identity();
+  for (int k = 0; k < G::kDoF; ++k)
+    omega(k, k) = k < G::kDim ? 1.0 / (sigma_t * sigma_t) : 1.0 / (sigma_r * sigma_r);
+  std::vector<std::vector<RelativePoseEdge<G>>> by_max(n);
+  for (int k = 1; k < n; ++k)
+    by_max[k].push_back(RelativePoseEdge<G>::make(
+        k - 1, k, perturb(truth[k - 1].between(truth[k]), rng, sigma_t, sigma_r), omega));
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  for (int l = 0; l < loops; ++l) {
+    int i = pick(rng), j = pick(rng);
+    if (std::abs(i - j) < 2) continue;
+    if (l % 2) std::swap(i, j);  // both directions
+    by_max[std::max(i, j)].push_back(RelativePoseEdge<G>::make(
+        i, j, perturb(truth[i].between(truth[j]), rng, sigma_t, sigma_r), omega));
+  }
+  for (int k = 0; k < n; ++k) {
+    g.ids.push_back(k);
+    g.index[k] = k;
+    g.poses.push_back(truth[k]);
+    for (auto& e : by_max[k]) g.edges.push_back(e);
+  }
+  if (truth_out) *truth_out = truth;
+  return g;
+}
+
+/// A pose graph over the smoother's poses and factors (gauge: the smoother's fixed poses).
+template <class G>
+PoseGraph<G> graphOf(const IncrementalSmoother<G>& s) {
+  PoseGraph<G> g;
+  for (int k = 0; k < s.numPoses(); ++k) {
+    g.ids.push_back(k);
+    g.index[k] = k;
+    if (s.isFixed(k)) g.fixed.push_back(k);
+  }
+  g.poses = s.linearizationPoint();
+  g.edges = s.factors();
+  return g;
+}
+
+/// Dense reference: one Gauss–Newton step from `poses` (zero for gauge poses).
+template <class G>
+std::vector<typename G::Tangent> denseGaussNewtonStep(const PoseGraph<G>& g,
+                                                      const std::vector<G>& poses) {
+  constexpr int D = G::kDoF;
+  const int n = static_cast<int>(poses.size());
+  std::vector<int> col(n, -1);
+  std::vector<char> is_fixed(n, 0);
+  for (int f : g.gaugeIndices()) is_fixed[f] = 1;
+  int m = 0;
+  for (int k = 0; k < n; ++k)
+    if (!is_fixed[k]) col[k] = m++;
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(m * D, m * D);
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(m * D);
+  for (const auto& e : g.edges) {
+    typename RelativePoseEdge<G>::Matrix Ai, Aj;
+    typename RelativePoseEdge<G>::Vector r;
+    e.linearize(poses[e.i], poses[e.j], &Ai, &Aj, &r);
+    const int ci = col[e.i], cj = col[e.j];
+    if (ci >= 0) {
+      H.block<D, D>(ci * D, ci * D) += Ai.transpose() * Ai;
+      b.segment<D>(ci * D) -= Ai.transpose() * r;
+    }
+    if (cj >= 0) {
+      H.block<D, D>(cj * D, cj * D) += Aj.transpose() * Aj;
+      b.segment<D>(cj * D) -= Aj.transpose() * r;
+    }
+    if (ci >= 0 && cj >= 0) {
+      H.block<D, D>(ci * D, cj * D) += Ai.transpose() * Aj;
+      H.block<D, D>(cj * D, ci * D) += Aj.transpose() * Ai;
+    }
+  }
+  const Eigen::VectorXd x = H.ldlt().solve(b);
+  std::vector<typename G::Tangent> out(n, G::Tangent::Zero());
+  for (int k = 0; k < n; ++k)
+    if (col[k] >= 0) out[k] = x.segment<D>(col[k] * D);
+  return out;
+}
+
+/// Batch optimum by dense Gauss–Newton with step halving, from `start`.
+template <class G>
+std::vector<G> denseOptimum(const PoseGraph<G>& g, std::vector<G> x, int iterations = 50) {
+  double F = objective(g, x);
+  for (int it = 0; it < iterations; ++it) {
+    const auto step = denseGaussNewtonStep(g, x);
+    double scale = 1.0;
+    std::vector<G> trial(x.size());
+    double F_new = F;
+    for (int k = 0; k < 20; ++k, scale *= 0.5) {
+      for (size_t v = 0; v < x.size(); ++v) trial[v] = x[v].retract(scale * step[v]);
+      F_new = objective(g, trial);
+      if (F_new <= F) break;
+    }
+    if (!(F_new <= F)) break;
+    x = trial;
+    const double change = (F - F_new) / std::max(F, 1e-300);
+    F = F_new;
+    if (change < 1e-12) break;
+  }
+  return x;
+}
+
+}  // namespace arbor::testing
+
+namespace arbor {
+namespace {
+
+using testing::denseGaussNewtonStep;
+using testing::denseOptimum;
+using testing::graphOf;
+using testing::randomGraph;
+
+/// Feeds the graph's edges one by one (poses created from the current estimate of the known
+/// end), calling update() after each; `check(smoother, stats)` after every update.
+template <class G, class Check>
+void replay(const PoseGraph<G>& g, IncrementalSmoother<G>* s, Check check) {
+  s->addFixedPose(g.poses[0]);
+  for (const auto& e : g.edges) {
+    const int newest = std::max(e.i, e.j);
+    if (newest == s->numPoses()) {
+      const G initial = e.j == newest ? s->estimate(e.i).compose(e.measurement)
+                                      : s->estimate(e.j).compose(e.measurement.inverse());
+      ASSERT_EQ(s->addPose(initial), newest);
+    }
+    ASSERT_LT(newest, s->numPoses()) << "edges must come sorted by max(i, j)";
+    s->addFactor(e);
+    const UpdateStats st = s->update();
+    check(*s, st);
+  }
+}
+
+SmootherOptions exactOptions() {
+  SmootherOptions o;
+  o.relinearize_threshold_translation = 0;
+  o.relinearize_threshold_rotation = 0;
+  o.relinearize_skip = 1;
+  o.full_backsubstitution = true;
+  return o;
+}
+
+template <class G>
+void expectExactAfterEveryUpdate(int n, int loops, unsigned seed) {
+  const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
+  IncrementalSmoother<G> s(exactOptions());
+  int updates = 0;
+  replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
+    ++updates;
+    EXPECT_EQ(st.indeterminate_cliques, 0);
+    sm.checkInvariants();
+    // The reference: one batch Gauss–Newton step (core/batch_solver.h) from the same point;
+    // the dense one of this file must agree with it.
+    const auto ref = gaussNewtonStep(graphOf(sm), sm.linearizationPoint());
+    const auto dense = denseGaussNewtonStep(graphOf(sm), sm.linearizationPoint());
+    const auto est = sm.estimate();
+    for (int v = 0; v < sm.numPoses(); ++v) {
+      const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
+      ASSERT_LE((sm.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol)
+          << "update " << updates << " pose " << v;
+      ASSERT_LE((dense[v] - ref[v]).cwiseAbs().maxCoeff(), tol);
+      const G expected = sm.linearizationPoint()[v].retract(ref[v]);
+      ASSERT_LE(expected.localCoordinates(est[v]).cwiseAbs().maxCoeff(), tol);
+    }
+  });
+  EXPECT_EQ(updates, g.numEdges());
+}
+
+TEST(BayesTreeExactness, EqualsBatchGaussNewtonStep2D) {
+  for (unsigned seed = 1; seed <= 3; ++seed) expectExactAfterEveryUpdate<SE2>(60, 25, seed);
+}
+
+TEST(BayesTreeExactness, EqualsBatchGaussNewtonStep3D) {
+  for (unsigned seed = 11; seed <= 12; ++seed) expectExactAfterEveryUpdate<SE3>(40, 15, seed);
+}
+
+template <class G>
+void expectInvariantsAndLocality(int n, int loops, unsigned seed) {
+  const PoseGraph<G> g = randomGraph<G>(n, loops, seed);
+  IncrementalSmoother<G> s;
+  std::vector<int> reeliminated;
+  replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
+    sm.checkInvariants();
+    EXPECT_EQ(st.new_factors, 1);
+    EXPECT_EQ(st.indeterminate_cliques, 0);
+    EXPECT_GT(sm.numCliques(), 0);
+    reeliminated.push_back(st.variables_reeliminated);
+  });
+  // Constrained ordering keeps the newest variables at the root: most updates touch few.
+  std::nth_element(reeliminated.begin(), reeliminated.begin() + reeliminated.size() / 2,
+                   reeliminated.end());
+  EXPECT_LT(reeliminated[reeliminated.size() / 2], n / 10);
+}
+
+TEST(BayesTreeInvariants, HoldAfterEveryUpdate2D) { expectInvariantsAndLocality<SE2>(300, 60, 5); }
+TEST(BayesTreeInvariants, HoldAfterEveryUpdate3D) { expectInvariantsAndLocality<SE3>(150, 30, 6); }
+
+TEST(BayesTreeInvariants, DetectsViolationOfUnfinishedState) {
+  // A pose added but not yet updated is not in the tree; that is legal.
+  IncrementalSmoother<SE2> s;
+  s.addFixedPose(SE2());
+  s.addPose(SE2(1, 0, 0));
+  EXPECT_NO_THROW(s.checkInvariants());
+  EXPECT_EQ(s.numCliques(), 0);
+}
+
+template <class G>
+void expectFinalizeReachesOptimum(int n, int loops, unsigned seed, bool dogleg) {
+  std::vector<G> truth;
+  const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.15, 0.08, &truth);
+  SmootherOptions o;
+  o.dogleg = dogleg;
+  IncrementalSmoother<G> s(o);
+  replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats&) {
+    if (sm.numFactors() % 25 == 0) sm.checkInvariants();
+  });
+  const double F_before = s.objective();
+  s.relinearizeAll();
+  s.checkInvariants();
+  const double F_final = s.objective();
+  PoseGraph<G> gg = graphOf(s);
+  double F_opt = objective(gg, denseOptimum(gg, s.estimate()));
+  F_opt = std::min(F_opt, objective(gg, denseOptimum(gg, truth)));
+  BatchOptions lm;
+  lm.relative_tolerance = 1e-12;
+  lm.max_iterations = 200;
+  std::vector<G> batch = truth;
+  solveBatch(gg, &batch, lm);
+  F_opt = std::min(F_opt, objective(gg, batch));
+  EXPECT_LE(F_final, F_before * (1 + 1e-9));
+  EXPECT_LE(F_opt, F_final * (1 + 1e-9));
+  EXPECT_LE(F_final, 1.01 * F_opt) << "before finalize " << F_before;
+}
+
+TEST(BayesTreeFinalize, WithinOnePercentOfOptimum2D) {
+  for (unsigned seed = 21; seed <= 23; ++seed)
+    expectFinalizeReachesOptimum<SE2>(200, 60, seed, false);
+}
+TEST(BayesTreeFinalize, WithinOnePercentOfOptimum3D) {
+  for (unsigned seed = 31; seed <= 32; ++seed)
+    expectFinalizeReachesOptimum<SE3>(100, 30, seed, false);
+}
+TEST(BayesTreeFinalize, DoglegWithinOnePercentOfOptimum2D) {
+  expectFinalizeReachesOptimum<SE2>(200, 60, 41, true);
+}
+TEST(BayesTreeFinalize, DoglegWithinOnePercentOfOptimum3D) {
+  expectFinalizeReachesOptimum<SE3>(80, 20, 42, true);
+}
+
+TEST(BayesTreeDogleg, DoesNotIncreaseFOverTheLinearizationPoint) {
+  const PoseGraph<SE2> g = randomGraph<SE2>(80, 30, 43, 0.2, 0.1);
+  SmootherOptions o;
+  o.dogleg = true;
+  IncrementalSmoother<SE2> s(o);
+  replay(g, &s, [&](const IncrementalSmoother<SE2>& sm, const UpdateStats&) {
+    sm.checkInvariants();
+    PoseGraph<SE2> gg = graphOf(sm);
+    EXPECT_LE(sm.objective(), objective(gg, sm.linearizationPoint()) * (1 + 1e-12) + 1e-12);
+  });
+}
+
+TEST(BayesTreeWildfire, PartialUpdateCloseToFull) {
+  const PoseGraph<SE2> g = randomGraph<SE2>(150, 40, 51);
+  SmootherOptions partial, full;
+  full.full_backsubstitution = true;
+  IncrementalSmoother<SE2> a(partial), b(full);
+  int solved_partial = 0, solved_full = 0;
+  replay(g, &a, [&](const IncrementalSmoother<SE2>&, const UpdateStats& st) {
+    solved_partial += st.cliques_solved;
+  });
+  replay(g, &b, [&](const IncrementalSmoother<SE2>&, const UpdateStats& st) {
+    solved_full += st.cliques_solved;
+  });
+  EXPECT_LT(solved_partial, solved_full / 2);
+  // Same relinearisation decisions are not guaranteed, but the objective must be close.
+  EXPECT_NEAR(a.objective(), b.objective(), 0.05 * b.objective());
+}
+
+TEST(BayesTreeIndeterminate, UnconstrainedPoseIsDampedAndReported) {
+  IncrementalSmoother<SE2> s(exactOptions());
+  s.addFixedPose(SE2());
+  const int a = s.addPose(SE2(1, 0, 0));
+  const int b = s.addPose(SE2(2, 0, 0));  // no factor yet: singular
+  s.addFactor(Edge2::make(0, a, SE2(1, 0.1, 0.05), Eigen::Matrix3d::Identity()));
+  UpdateStats st;
+  ASSERT_NO_THROW(st = s.update());
+  EXPECT_GE(st.indeterminate_cliques, 1);
+  s.checkInvariants();
+  for (const SE2& x : s.estimate()) EXPECT_TRUE(std::isfinite(x.x()) && std::isfinite(x.angle()));
+  EXPECT_NEAR(s.estimate(a).y(), 0.1, 1e-9);
+  // Once constrained, the clique is re-eliminated without damping and the step is exact again.
+  s.addFactor(Edge2::make(a, b, SE2(1, 0, 0), Eigen::Matrix3d::Identity()));
+  ASSERT_NO_THROW(st = s.update());
+  EXPECT_EQ(st.indeterminate_cliques, 0);
+  s.checkInvariants();
+  const auto ref = denseGaussNewtonStep(graphOf(s), s.linearizationPoint());
+  for (int v = 0; v < s.numPoses(); ++v)
+    EXPECT_LE((s.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+TEST(BayesTreeIndeterminate, NearlySingularInformationDoesNotThrow3D) {
+  IncrementalSmoother<SE3> s;
+  s.addFixedPose(SE3());
+  const int a = s.addPose(SE3());
+  const int b = s.addPose(SE3());
+  Edge3::Matrix weak = Edge3::Matrix::Identity();
+  weak(5, 5) = 1e-20;  // the yaw of b is all but unobserved
+  s.addFactor(Edge3::make(0, a, SE3(), Edge3::Matrix::Identity()));
+  s.addFactor(Edge3::make(a, b, SE3(), weak));
+  UpdateStats st;
+  ASSERT_NO_THROW(st = s.update());
+  EXPECT_GE(st.indeterminate_cliques, 1);
+  s.checkInvariants();
+  ASSERT_NO_THROW(s.relinearizeAll());
+  for (const SE3& x : s.estimate()) EXPECT_TRUE(x.translation().allFinite());
+}
+
+TEST(BayesTreeApi, RejectsBadFactors) {
+  IncrementalSmoother<SE2> s;
+  s.addFixedPose(SE2());
+  s.addPose(SE2());
+  Edge2 e = Edge2::make(0, 1, SE2(), Eigen::Matrix3d::Identity());
+  e.j = 5;
+  EXPECT_THROW(s.addFactor(e), std::invalid_argument);
+  e.j = 0;
+  EXPECT_THROW(s.addFactor(e), std::invalid_argument);
+  e.j = 1;
+  e.information(0, 0) = std::nan("");
+  EXPECT_THROW(s.addFactor(e), std::invalid_argument);
+  EXPECT_THROW(s.estimate(7), std::out_of_range);
+  SmootherOptions bad;
+  bad.relinearize_skip = 0;
+  EXPECT_THROW(IncrementalSmoother<SE2>{bad}, std::invalid_argument);
+}
+
+TEST(BayesTreeApi, FactorBetweenFixedPosesOnlyCounts) {
+  IncrementalSmoother<SE2> s;
+  s.addFixedPose(SE2());
+  s.addFixedPose(SE2(1, 0, 0));
+  s.addFactor(Edge2::make(0, 1, SE2(1.5, 0, 0), Eigen::Matrix3d::Identity()));
+  s.update();
+  s.checkInvariants();
+  EXPECT_EQ(s.numCliques(), 0);
+  EXPECT_NEAR(s.objective(), 0.25, 1e-12);
+}
+
+}  // namespace
+}  // namespace arbor
+
+namespace arbor {
+namespace {
+
+TEST(BayesTreeApi, CopiesAreIndependentAndBehaveTheSame) {
+  const PoseGraph<SE3> g = testing::randomGraph<SE3>(40, 12, 61);
+  IncrementalSmoother<SE3> a;
+  a.addFixedPose(g.poses[0]);
+  const int half = g.numEdges() / 2;
+  for (int k = 0; k < g.numEdges(); ++k) {
+    const auto& e = g.edges[k];
+    const int newest = std::max(e.i, e.j);
+    if (newest == a.numPoses())
+      a.addPose(a.estimate(newest - 1).compose(g.poses[newest - 1].between(g.poses[newest])));
+    a.addFactor(e);
+    a.update();
+    if (k == half) break;
+  }
+  IncrementalSmoother<SE3> b = a;
+  b.checkInvariants();
+  for (IncrementalSmoother<SE3>* s : {&a, &b})
+    for (int k = half + 1; k < g.numEdges(); ++k) {
+      const auto& e = g.edges[k];
+      const int newest = std::max(e.i, e.j);
+      if (newest == s->numPoses())
+        s->addPose(s->estimate(newest - 1).compose(g.poses[newest - 1].between(g.poses[newest])));
+      s->addFactor(e);
+      s->update();
+    }
+  a.checkInvariants();
+  b.checkInvariants();
+  EXPECT_EQ(a.numCliques(), b.numCliques());
+  EXPECT_DOUBLE_EQ(a.objective(), b.objective());
+  IncrementalSmoother<SE3> c = std::move(b);
+  EXPECT_DOUBLE_EQ(c.objective(), a.objective());
+}
+
+}  // namespace
+}  // namespace arbor

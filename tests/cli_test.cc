@@ -1,0 +1,92 @@
+// The `arbor` command line as a user runs it: exit codes, one-line errors, JSON keys.
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+namespace {
+
+struct Result {
+  int status = -1;
+  std::string out;  // stdout and stderr together
+};
+
+Result run(const std::string& args) {
+  const std::string cmd = std::string(ARBOR_EXE) + " " + args + " 2>&1";
+  Result r;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.out.append(buf.data(), n);
+  const int status = pclose(pipe);
+  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string tempPath(const std::string& name) {
+  return (std::filesystem::temp_directory_path() /
+          ("arbor_cli_" + std::to_string(::getpid()) + "_" + name))
+      .string();
+}
+
+TEST(Cli, UnknownCommandAndBadArgumentsExitNonZeroWithOneLine) {
+  for (const std::string args :
+       {"nonsense", "batch", "batch /no/such/file.g2o", "batch x.g2o --solver newton",
+        "batch x.g2o --init magic", "batch x.g2o --max-iterations abc", "batch x.g2o --bogus"}) {
+    const Result r = run(args);
+    EXPECT_NE(r.status, 0) << args;
+    EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << args << ": " << r.out;
+  }
+}
+
+TEST(Cli, GenerateThenBatchJson) {
+  const std::string file = tempPath("m.g2o");
+  ASSERT_EQ(run("generate manhattan --poses 200 --grid 5 --seed 3 -o " + file).status, 0);
+  const std::string out_file = tempPath("m_out.g2o");
+  for (const std::string solver : {"gn", "lm", "dogleg"}) {
+    const Result r = run("batch " + file + " --json --init spanning-tree --solver " + solver +
+                         " --output " + out_file);
+    ASSERT_EQ(r.status, 0) << r.out;
+    const auto j = nlohmann::json::parse(r.out);
+    for (const char* key : {"nodes", "edges", "dim", "solver", "init", "F_initial", "F_final",
+                            "iterations", "termination", "time_s", "total_s"}) {
+      EXPECT_TRUE(j.contains(key)) << key;
+    }
+    EXPECT_EQ(j["nodes"], 200);
+    EXPECT_EQ(j["dim"], 2);
+    EXPECT_EQ(j["solver"], solver);
+    EXPECT_EQ(j["init"], "spanning-tree");
+    EXPECT_EQ(j["termination"], "converged");
+    EXPECT_LT(j["F_final"].get<double>(), j["F_initial"].get<double>());
+    // The written estimate, solved again from its own VERTEX lines, is already optimal.
+    const Result again = run("batch " + out_file + " --json --solver " + solver);
+    ASSERT_EQ(again.status, 0) << again.out;
+    const auto k = nlohmann::json::parse(again.out);
+    EXPECT_EQ(k["init"], "file");
+    EXPECT_NEAR(k["F_initial"].get<double>(), j["F_final"].get<double>(),
+                1e-9 * j["F_final"].get<double>());
+  }
+  std::filesystem::remove(file);
+  std::filesystem::remove(out_file);
+}
+
+TEST(Cli, MalformedFileNamesLine) {
+  const std::string file = tempPath("bad.g2o");
+  {
+    std::FILE* f = std::fopen(file.c_str(), "w");
+    std::fputs("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 zero 1 0 0 1 0 1\n", f);
+    std::fclose(f);
+  }
+  const Result r = run("batch " + file);
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.out.find(":3:"), std::string::npos) << r.out;
+  std::filesystem::remove(file);
+}
+
+}  // namespace

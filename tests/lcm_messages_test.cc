@@ -1,0 +1,269 @@
+// io/lcm_messages.h and io/lcm_journal.h: checked decoding of edge_t (every bad field,
+// truncated bytes, wrong type hash, random corruption) and the event-log journal.
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include "io/lcm_journal.h"
+#include "io/lcm_messages.h"
+
+namespace arbor {
+namespace {
+
+StreamEdge<SE2> sampleEdge2() {
+  StreamEdge<SE2> e;
+  e.utime = 123;
+  e.sender = 7;
+  e.seq = 42;
+  e.from = 3;
+  e.to = 4;
+  e.z = SE2(1.5, -0.25, 0.3);
+  e.omega << 50, 1, 2, 1, 40, 3, 2, 3, 900;
+  return e;
+}
+
+StreamEdge<SE3> sampleEdge3() {
+  StreamEdge<SE3> e;
+  e.sender = 1;
+  e.seq = 1;
+  e.from = 10;
+  e.to = 2;
+  e.z = SE3(Eigen::Quaterniond(0.9, 0.1, -0.3, 0.2).normalized(), Eigen::Vector3d(1, 2, 3));
+  e.omega = Eigen::Matrix<double, 6, 6>::Identity() * 100;
+  e.omega(0, 5) = e.omega(5, 0) = 5;
+  return e;
+}
+
+MessageProblem problemOf(const edge_t& m) {
+  const auto bytes = encodeMessage(m);
+  return decodeEdge(bytes.data(), static_cast<int>(bytes.size())).problem;
+}
+
+TEST(LcmMessages, Edge2RoundTrip) {
+  const StreamEdge<SE2> e = sampleEdge2();
+  const auto bytes = encodeMessage(makeEdgeMessage(e));
+  // The offset of information_size that the decoder pre-checks: 109 + 8 n bytes.
+  EXPECT_EQ(bytes.size(), 109u + 8u * 6u);
+  const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
+  ASSERT_TRUE(d.ok()) << d.detail;
+  const auto& got = std::get<StreamEdge<SE2>>(d.edge);
+  EXPECT_EQ(got.utime, 123);
+  EXPECT_EQ(got.sender, 7);
+  EXPECT_EQ(got.seq, 42);
+  EXPECT_EQ(got.from, 3);
+  EXPECT_EQ(got.to, 4);
+  EXPECT_NEAR(got.z.x(), 1.5, 0);
+  EXPECT_NEAR(got.z.angle(), 0.3, 1e-15);
+  EXPECT_EQ(got.omega, e.omega);
+}
+
+TEST(LcmMessages, Edge3RoundTrip) {
+  const StreamEdge<SE3> e = sampleEdge3();
+  const auto bytes = encodeMessage(makeEdgeMessage(e));
+  EXPECT_EQ(bytes.size(), 109u + 8u * 21u);
+  const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
+  ASSERT_TRUE(d.ok()) << d.detail;
+  const auto& got = std::get<StreamEdge<SE3>>(d.edge);
+  EXPECT_EQ(got.omega, e.omega);
+  EXPECT_LT((got.z.translation() - e.z.translation()).norm(), 1e-15);
+  EXPECT_NEAR(got.z.quaternion().angularDistance(e.z.quaternion()), 0, 1e-12);
+}
+
+TEST(LcmMessages, EveryTruncationIsRefused) {
+  const auto bytes = encodeMessage(makeEdgeMessage(sampleEdge3()));
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(n));
+    EXPECT_EQ(d.problem, MessageProblem::kTruncated) << n << " bytes: " << d.detail;
+  }
+  auto longer = bytes;
+  longer.push_back(0);
+  EXPECT_EQ(decodeEdge(longer.data(), static_cast<int>(longer.size())).problem,
+            MessageProblem::kTrailingBytes);
+}
+
+TEST(LcmMessages, WrongTypeHashIsRefused) {
+  estimate_t est;
+  est.num_poses = 0;
+  est.dim = 2;
+  const auto bytes = encodeMessage(est);
+  const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
+  EXPECT_EQ(d.problem, MessageProblem::kTypeHash);
+  EXPECT_NE(d.detail.find("edge_t"), std::string::npos) << d.detail;
+  auto edge = encodeMessage(makeEdgeMessage(sampleEdge2()));
+  edge[3] ^= 0x10;
+  EXPECT_EQ(decodeEdge(edge.data(), static_cast<int>(edge.size())).problem,
+            MessageProblem::kTypeHash);
+}
+
+TEST(LcmMessages, LengthFieldsAreCheckedBeforeAllocation) {
+  auto bytes = encodeMessage(makeEdgeMessage(sampleEdge2()));
+  // information_size (big-endian int32 at byte 105) set to 2^31-1, then to -1.
+  bytes[105] = 0x7f;
+  bytes[106] = bytes[107] = bytes[108] = 0xff;
+  EXPECT_EQ(decodeEdge(bytes.data(), static_cast<int>(bytes.size())).problem,
+            MessageProblem::kMalformed);
+  bytes[105] = 0xff;
+  EXPECT_EQ(decodeEdge(bytes.data(), static_cast<int>(bytes.size())).problem,
+            MessageProblem::kMalformed);
+
+  command_t c;
+  c.command = command_t::SNAPSHOT;
+  c.path = "x";
+  auto cb = encodeMessage(c);
+  command_t out;
+  ASSERT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &out), MessageProblem::kNone);
+  EXPECT_EQ(out.path, "x");
+  cb[17] = cb[18] = cb[19] = cb[20] = 0;  // path length 0 (must include the NUL)
+  EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &out),
+            MessageProblem::kMalformed);
+  cb[17] = 0x7f;  // huge
+  EXPECT_NE(decodeMessage(cb.data(), static_cast<int>(cb.size()), &out), MessageProblem::kNone);
+
+  estimate_t est;
+  est.dim = 2;
+  est.num_poses = 2;
+  est.ids = {1, 2};
+  est.translation.assign(2, std::vector<double>(3, 0.0));
+  est.rotation.assign(2, std::vector<double>(4, 0.0));
+  auto eb = encodeMessage(est);
+  EXPECT_EQ(eb.size(), 58u + 64u * 2u);
+  estimate_t back;
+  ASSERT_EQ(decodeMessage(eb.data(), static_cast<int>(eb.size()), &back), MessageProblem::kNone);
+  EXPECT_EQ(back.ids, est.ids);
+  eb[54] = 0x40;  // num_poses ≈ 2^30
+  EXPECT_EQ(decodeMessage(eb.data(), static_cast<int>(eb.size()), &back),
+            MessageProblem::kTruncated);
+
+  status_t s;
+  s.num_reasons = 1;
+  s.reason = {"nan"};
+  s.reason_count = {3};
+  auto sb = encodeMessage(s);
+  status_t sback;
+  ASSERT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &sback), MessageProblem::kNone);
+  EXPECT_EQ(sback.reason[0], "nan");
+  sb[96] = 0x7f;
+  EXPECT_NE(decodeMessage(sb.data(), static_cast<int>(sb.size()), &sback), MessageProblem::kNone);
+}
+
+TEST(LcmMessages, EachBadFieldHasItsReason) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const edge_t good2 = makeEdgeMessage(sampleEdge2());
+  const edge_t good3 = makeEdgeMessage(sampleEdge3());
+  EXPECT_EQ(problemOf(good2), MessageProblem::kNone);
+  EXPECT_EQ(problemOf(good3), MessageProblem::kNone);
+  auto check = [&](const edge_t& base, auto mutate, MessageProblem expected) {
+    edge_t m = base;
+    mutate(m);
+    EXPECT_EQ(problemOf(m), expected) << toString(expected);
+  };
+  check(
+      good2, [](edge_t& m) { m.dim = 4; }, MessageProblem::kDim);
+  check(
+      good2, [](edge_t& m) { m.dim = 3; }, MessageProblem::kDim);  // 6 entries for 3D
+  check(
+      good3, [](edge_t& m) { m.dim = 2; }, MessageProblem::kDim);
+  check(
+      good2, [](edge_t& m) { m.translation[2] = 1; }, MessageProblem::kDim);
+  check(
+      good2, [](edge_t& m) { m.rotation[1] = 0.5; }, MessageProblem::kDim);
+  check(
+      good2, [&](edge_t& m) { m.translation[0] = nan; }, MessageProblem::kNotFinite);
+  check(
+      good3, [&](edge_t& m) { m.rotation[2] = inf; }, MessageProblem::kNotFinite);
+  check(
+      good3, [&](edge_t& m) { m.information[4] = nan; }, MessageProblem::kNotFinite);
+  check(
+      good3,
+      [](edge_t& m) {
+        m.rotation[0] *= 0.5;
+        m.rotation[1] *= 0.5;
+        m.rotation[2] *= 0.5;
+        m.rotation[3] *= 0.5;
+      },
+      MessageProblem::kRotation);
+  check(
+      good2, [](edge_t& m) { m.information[0] = -1; }, MessageProblem::kInformation);
+  check(
+      good3, [](edge_t& m) { m.information[1] = 1000; }, MessageProblem::kInformation);
+  check(
+      good2, [](edge_t& m) { m.to_id = m.from_id; }, MessageProblem::kSelfLoop);
+  check(
+      good2, [](edge_t& m) { m.from_id = -1; }, MessageProblem::kId);
+  check(
+      good2, [](edge_t& m) { m.seq = 0; }, MessageProblem::kSeq);
+  check(
+      good2,
+      [](edge_t& m) {
+        m.information_size = 5;
+        m.information.resize(5);
+      },
+      MessageProblem::kDim);
+}
+
+TEST(LcmMessages, RandomCorruptionNeverThrows) {
+  const auto good = encodeMessage(makeEdgeMessage(sampleEdge3()));
+  std::mt19937 rng(5);
+  int accepted = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    auto bytes = good;
+    const int flips = 1 + static_cast<int>(rng() % 4);
+    for (int f = 0; f < flips; ++f) bytes[rng() % bytes.size()] = static_cast<uint8_t>(rng());
+    bytes.resize(bytes.size() - rng() % 3);
+    EdgeDecoding d;
+    ASSERT_NO_THROW(d = decodeEdge(bytes.data(), static_cast<int>(bytes.size())));
+    if (d.ok()) ++accepted;
+  }
+  EXPECT_LT(accepted, 3000);  // most corruptions are caught (flips of a value may still be valid)
+}
+
+TEST(LcmJournal, AppendReadAndTornTail) {
+  const std::string path = "/tmp/arbor_lcm_journal_test_" + std::to_string(getpid()) + ".lcmlog";
+  std::remove(path.c_str());
+  EXPECT_TRUE(readEventLog(path).events.empty());
+  {
+    EventLogWriter w(path, -1);
+    for (int k = 0; k < 5; ++k) {
+      const std::string payload(10 + k, static_cast<char>('a' + k));
+      w.append("CH" + std::to_string(k), 1000 + k, payload.data(),
+               static_cast<int>(payload.size()));
+    }
+    EXPECT_EQ(w.eventsWritten(), 5);
+  }
+  EventLogContents c = readEventLog(path);
+  ASSERT_EQ(c.events.size(), 5u);
+  EXPECT_EQ(c.events[3].channel, "CH3");
+  EXPECT_EQ(c.events[3].timestamp, 1003);
+  EXPECT_EQ(c.events[3].data.size(), 13u);
+  EXPECT_EQ(c.valid_bytes, c.file_bytes);
+
+  // A torn tail (half an event, as after kill -9 during a write) is ignored and cut on reopen.
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::app);
+    const char half[] = {'\xED', '\xA1', '\xDA', '\x01', 0, 0, 0};
+    out.write(half, sizeof half);
+  }
+  c = readEventLog(path);
+  ASSERT_EQ(c.events.size(), 5u);
+  EXPECT_LT(c.valid_bytes, c.file_bytes);
+  {
+    EventLogWriter w(path, c.valid_bytes, EventLogWriterOptions{50});
+    w.append("AFTER", 7, "xyz", 3);
+    w.sync();
+  }
+  c = readEventLog(path);
+  ASSERT_EQ(c.events.size(), 6u);
+  EXPECT_EQ(c.events[5].channel, "AFTER");
+  EXPECT_EQ(c.valid_bytes, c.file_bytes);
+  std::remove(path.c_str());
+}
+
+}  // namespace
+}  // namespace arbor

@@ -1,0 +1,461 @@
+// `arbor serve` and `arbor publish` as separate processes over tcpq:// through Debian's LCM hub
+// (java lcm.lcm.TCPService on loopback; never multicast): the served estimate equals `arbor
+// replay`'s, kill -9 and a restart from the journal lose nothing and reproduce the estimate
+// exactly, bad messages are counted while good ones are applied, and a burst of the largest
+// shared 2D dataset is fully applied. Every process a test starts is stopped, pass or fail.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <lcm/lcm-cpp.hpp>
+#include <nlohmann/json.hpp>
+
+#include "io/lcm_journal.h"
+#include "io/lcm_messages.h"
+#include "io/pose_graph_file.h"
+#include "shared_data.h"
+
+extern char** environ;
+
+namespace arbor {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A child process with stdout and stderr in files; killed (SIGKILL) and reaped on destruction.
+class Process {
+ public:
+  Process(const std::vector<std::string>& argv, const std::string& out, const std::string& err)
+      : out_(out), err_(err) {
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    std::vector<char*> args;
+    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    if (posix_spawnp(&pid_, args[0], &actions, nullptr, args.data(), environ) != 0) pid_ = -1;
+    posix_spawn_file_actions_destroy(&actions);
+  }
+  ~Process() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      int status;
+      waitpid(pid_, &status, 0);
+    }
+  }
+  bool started() const { return pid_ > 0; }
+  void signal(int sig) {
+    if (pid_ > 0) ::kill(pid_, sig);
+  }
+  /// Exit code after a normal exit, -signal if killed, -1000 on timeout (still running).
+  int wait(double timeout_s) {
+    const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+    while (pid_ > 0) {
+      int status = 0;
+      const pid_t r = waitpid(pid_, &status, WNOHANG);
+      if (r == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+      }
+      if (Clock::now() > end) return -1000;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return -1;
+  }
+  std::string out() const { return readFile(out_); }
+  std::string err() const { return readFile(err_); }
+
+ private:
+  pid_t pid_ = -1;
+  std::string out_, err_;
+};
+
+int freePort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = 0;
+  bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+  socklen_t len = sizeof addr;
+  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  close(fd);
+  return ntohs(addr.sin_port);
+}
+
+bool portOpen(int port) {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  const bool ok = connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+  close(fd);
+  return ok;
+}
+
+// Runs a command to completion; stdout only (stderr to a file beside it).
+struct RunResult {
+  int status = -1;
+  std::string out, err;
+};
+
+RunResult run(const std::vector<std::string>& argv, const std::string& stem,
+              double timeout_s = 60) {
+  Process p(argv, stem + ".out", stem + ".err");
+  RunResult r;
+  r.status = p.wait(timeout_s);
+  r.out = p.out();
+  r.err = p.err();
+  return r;
+}
+
+// Listens to the estimates of a channel prefix over tcpq (its own LCM handle thread).
+class EstimateListener {
+ public:
+  EstimateListener(const std::string& url, const std::string& prefix) : lcm_(url) {
+    sub_ = lcm_.subscribe(prefix + "ARBOR_ESTIMATE", &EstimateListener::onEstimate, this);
+    sub_->setQueueCapacity(0);
+    status_sub_ = lcm_.subscribe(prefix + "ARBOR_STATUS", &EstimateListener::onStatus, this);
+    thread_ = std::thread([this] {
+      while (!stop_) lcm_.handleTimeout(20);
+    });
+  }
+  ~EstimateListener() {
+    stop_ = true;
+    thread_.join();
+    lcm_.unsubscribe(sub_);
+    lcm_.unsubscribe(status_sub_);
+  }
+  /// A status message from the service: it is up and subscribed at the hub.
+  bool waitStatus(double timeout_s = 20) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return status_; });
+  }
+  bool good() { return lcm_.good(); }
+  /// The latest full estimate whose last_seq == seq, waiting up to timeout.
+  bool waitFull(std::int64_t seq, estimate_t* out, double timeout_s = 20) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] {
+      for (auto it = full_.rbegin(); it != full_.rend(); ++it) {
+        if (it->last_seq == seq) {
+          *out = *it;
+          return true;
+        }
+      }
+      return false;
+    });
+  }
+  void clear() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    full_.clear();
+  }
+  lcm::LCM& lcm() { return lcm_; }
+
+ private:
+  void onEstimate(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    estimate_t m;
+    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &m) != MessageProblem::kNone) {
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (m.full) full_.push_back(m);
+    cv_.notify_all();
+  }
+  void onStatus(const lcm::ReceiveBuffer*, const std::string&) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    status_ = true;
+    cv_.notify_all();
+  }
+  lcm::LCM lcm_;
+  lcm::Subscription* sub_ = nullptr;
+  lcm::Subscription* status_sub_ = nullptr;
+  bool status_ = false;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<estimate_t> full_;
+  volatile bool stop_ = false;
+  std::thread thread_;
+};
+
+class LcmProcess : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ =
+        new fs::path(fs::temp_directory_path() / ("arbor_lcm_process_" + std::to_string(getpid())));
+    fs::create_directories(*dir_);
+    port_ = freePort();
+    hub_ = new Process(
+        {"java", "-cp", "/usr/share/java/lcm.jar", "lcm.lcm.TCPService", std::to_string(port_)},
+        (*dir_ / "hub.out").string(), (*dir_ / "hub.err").string());
+    const auto end = Clock::now() + std::chrono::seconds(20);
+    while (hub_->started() && !portOpen(port_) && Clock::now() < end) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  }
+  static void TearDownTestSuite() {
+    delete hub_;  // SIGKILL + reap
+    hub_ = nullptr;
+    std::error_code ec;
+    fs::remove_all(*dir_, ec);
+    delete dir_;
+  }
+  void SetUp() override {
+    ASSERT_TRUE(hub_ && hub_->started() && portOpen(port_))
+        << "the LCM hub (java lcm.lcm.TCPService) did not start: "
+        << (hub_ ? hub_->err() : std::string());
+  }
+  static std::string url() { return "tcpq://127.0.0.1:" + std::to_string(port_); }
+  static std::string path(const std::string& name) { return (*dir_ / name).string(); }
+
+  // A generated 2D graph (deterministic), written once.
+  static std::string smallGraph() {
+    const std::string file = path("manhattan.g2o");
+    if (!fs::exists(file)) {
+      const RunResult r = run({ARBOR_EXE, "generate", "manhattan", "--poses", "400", "--grid", "5",
+                               "--seed", "2", "-o", file},
+                              path("generate"));
+      EXPECT_EQ(r.status, 0) << r.err;
+    }
+    return file;
+  }
+  static double replayF(const std::string& file) {
+    const RunResult r = run({ARBOR_EXE, "replay", file, "--json"}, path("replay"));
+    EXPECT_EQ(r.status, 0) << r.err;
+    return nlohmann::json::parse(r.out).at("F_final").get<double>();
+  }
+  std::vector<std::string> serveArgs(const std::string& prefix) const {
+    return {ARBOR_EXE, "serve",  "--lcm-url",       url(), "--channel-prefix",
+            prefix,    "--json", "--status-period", "0.2"};
+  }
+  RunResult publish(const std::string& file, const std::string& prefix,
+                    std::vector<std::string> extra = {}) {
+    std::vector<std::string> argv = {ARBOR_EXE,      "publish",          file,   "--lcm-url",
+                                     url(),          "--channel-prefix", prefix, "--wait",
+                                     "--wait-ready", "--timeout",        "30",   "--json"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return run(argv, path(prefix + "publish"));
+  }
+  static nlohmann::json stopServe(Process& serve, int signal = SIGTERM) {
+    serve.signal(signal);
+    const int status = serve.wait(30);
+    EXPECT_EQ(status, 0) << serve.err();
+    try {
+      return nlohmann::json::parse(serve.out());
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << "serve printed no JSON: " << serve.out() << serve.err();
+      return nlohmann::json::object();
+    }
+  }
+
+  static inline Process* hub_ = nullptr;
+  static inline int port_ = 0;
+  static inline fs::path* dir_ = nullptr;
+};
+
+int edgesOf(const std::string& file) {
+  return std::visit([](const auto& g) { return g.numEdges(); }, readPoseGraphFile(file));
+}
+
+TEST_F(LcmProcess, PublishIntoServeGivesReplaysEstimate) {
+  const std::string file = smallGraph();
+  const int edges = edgesOf(file);
+  const std::string out = path("served.g2o");
+  std::vector<std::string> args = serveArgs("P1_");
+  args.insert(args.end(), {"-o", out});
+  Process serve(args, path("serve1.out"), path("serve1.err"));
+  const RunResult pub = publish(file, "P1_");
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  const auto pj = nlohmann::json::parse(pub.out);
+  EXPECT_EQ(pj.at("acknowledged").get<int>(), edges);
+  const nlohmann::json j = stopServe(serve, SIGINT);
+  EXPECT_EQ(j.at("received").get<int>(), edges);
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  EXPECT_EQ(j.at("rejected").get<int>(), 0);
+  EXPECT_EQ(j.at("gaps").get<int>(), 0);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+  // The written estimate has every pose and edge and the same F.
+  const auto served = std::get<PoseGraph2>(readPoseGraphFile(out));
+  const auto original = std::get<PoseGraph2>(readPoseGraphFile(file));
+  EXPECT_EQ(served.numPoses(), original.numPoses());
+  EXPECT_EQ(served.numEdges(), original.numEdges());
+  EXPECT_NEAR(objective(original, served.poses), F, 1e-9 * F);
+}
+
+TEST_F(LcmProcess, KillNineAndRestartFromTheJournalLosesNothing) {
+  const std::string file = smallGraph();
+  const int edges = edgesOf(file);
+  const int half = edges / 2;
+  const std::string journal = path("journal");
+  EstimateListener listener(url(), "P2_");
+  ASSERT_TRUE(listener.good());
+  std::vector<std::string> args = serveArgs("P2_");
+  args.insert(args.end(), {"--journal", journal, "--publish", "full", "--fsync", "edge"});
+  estimate_t before, after;
+  {
+    Process serve(args, path("serve2a.out"), path("serve2a.err"));
+    const RunResult pub = publish(file, "P2_", {"--count", std::to_string(half), "--rate", "3000"});
+    ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+    ASSERT_TRUE(listener.waitFull(half, &before));
+    serve.signal(SIGKILL);
+    EXPECT_EQ(serve.wait(10), -SIGKILL);
+  }
+  listener.clear();
+  Process serve(args, path("serve2b.out"), path("serve2b.err"));
+  // On start the restarted service publishes the replayed estimate: exactly the one it had.
+  ASSERT_TRUE(listener.waitFull(half, &after)) << serve.err();
+  ASSERT_EQ(after.num_poses, before.num_poses);
+  EXPECT_EQ(after.ids, before.ids);
+  EXPECT_EQ(after.translation, before.translation);
+  EXPECT_EQ(after.rotation, before.rotation);
+  const RunResult pub = publish(file, "P2_", {"--skip", std::to_string(half)});
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  const nlohmann::json j = stopServe(serve);
+  EXPECT_EQ(j.at("journal_edges").get<int>(), half);
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  EXPECT_EQ(j.at("gaps").get<int>(), 0);
+  EXPECT_EQ(j.at("rejected").get<int>(), 0);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+}
+
+TEST_F(LcmProcess, KillNineMidStreamThenResumeAfterTheJournal) {
+  const std::string file = smallGraph();
+  const int edges = edgesOf(file);
+  const std::string journal = path("journal_mid");
+  std::vector<std::string> args = serveArgs("P5_");
+  args.insert(args.end(), {"--journal", journal, "--fsync", "never"});
+  {
+    Process serve(args, path("serve5a.out"), path("serve5a.err"));
+    std::thread publisher([&] {
+      // Streams everything at 1500/s (no --wait); the service dies under it.
+      const RunResult pub = run({ARBOR_EXE, "publish", file, "--lcm-url", url(), "--channel-prefix",
+                                 "P5_", "--wait-ready", "--rate", "1500"},
+                                path("P5_publish_a"));
+      EXPECT_EQ(pub.status, 0) << pub.err;
+    });
+    // Kill once about a third of the stream is in the journal.
+    const auto end = Clock::now() + std::chrono::seconds(20);
+    while (readEventLog(journal + "/journal.lcmlog").events.size() <
+               static_cast<size_t>(edges / 3) &&
+           Clock::now() < end) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    serve.signal(SIGKILL);
+    EXPECT_EQ(serve.wait(10), -SIGKILL);
+    publisher.join();
+  }
+  // What the journal holds is what was accepted: seq 1..K, in order, nothing lost or doubled.
+  const EventLogContents log = readEventLog(journal + "/journal.lcmlog");
+  std::int64_t accepted = 0;
+  for (const auto& ev : log.events) {
+    edge_t m;
+    if (decodeMessage(ev.data.data(), static_cast<int>(ev.data.size()), &m) !=
+        MessageProblem::kNone) {
+      continue;  // a mark
+    }
+    EXPECT_EQ(m.seq, accepted + 1);
+    ++accepted;
+  }
+  ASSERT_GT(accepted, 0);
+  ASSERT_LT(accepted, edges) << "the service was killed after the whole stream; kill earlier";
+  Process serve(args, path("serve5b.out"), path("serve5b.err"));
+  const RunResult pub = publish(file, "P5_", {"--skip", std::to_string(accepted)});
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  const nlohmann::json j = stopServe(serve);
+  EXPECT_LE(j.at("journal_edges").get<int>(), accepted);  // the rest were queued, not applied
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  EXPECT_EQ(j.at("gaps").get<int>(), 0);
+  EXPECT_EQ(j.at("rejected").get<int>(), 0);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+}
+
+TEST_F(LcmProcess, BadMessagesAreCountedWhileGoodTrafficIsApplied) {
+  const std::string file = smallGraph();
+  const int edges = edgesOf(file);
+  EstimateListener listener(url(), "P3_");
+  Process serve(serveArgs("P3_"), path("serve3.out"), path("serve3.err"));
+  ASSERT_TRUE(listener.waitStatus()) << serve.err();
+  lcm::LCM& bad = listener.lcm();
+  std::thread publisher([&] {
+    const RunResult pub = publish(file, "P3_", {"--rate", "2000"});
+    EXPECT_EQ(pub.status, 0) << pub.err;
+  });
+  StreamEdge<SE2> e;
+  e.sender = 9;
+  e.from = 0;
+  e.to = 1;
+  int sent = 0;
+  for (int k = 0; k < 40; ++k) {
+    e.seq = k + 1;
+    edge_t m = makeEdgeMessage(e);
+    if (k % 4 == 0) m.information[0] = -1;      // indefinite
+    if (k % 4 == 1) m.to_id = m.from_id;        // self-loop
+    if (k % 4 == 2) m.rotation[0] = 0.0 / 0.0;  // NaN
+    auto bytes = encodeMessage(m);
+    if (k % 4 == 3) bytes.resize(bytes.size() - 9);  // truncated
+    bad.publish("P3_ARBOR_EDGES", bytes.data(), static_cast<unsigned>(bytes.size()));
+    ++sent;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  publisher.join();
+  const nlohmann::json j = stopServe(serve);
+  EXPECT_EQ(j.at("rejected").get<int>(), sent);
+  EXPECT_EQ(j.at("rejected_by_reason").at("information").get<int>(), 10);
+  EXPECT_EQ(j.at("rejected_by_reason").at("self-loop").get<int>(), 10);
+  EXPECT_EQ(j.at("rejected_by_reason").at("not finite").get<int>(), 10);
+  EXPECT_EQ(j.at("rejected_by_reason").at("truncated").get<int>(), 10);
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+  EXPECT_NE(serve.err().find("rejected edge"), std::string::npos);
+}
+
+TEST_F(LcmProcess, BurstOfTheLargestShared2DDatasetIsFullyApplied) {
+  if (!testing::datasetPresent("M3500")) GTEST_SKIP() << testing::datasetPath("M3500") << " absent";
+  const std::string file = testing::datasetPath("M3500");
+  const int edges = edgesOf(file);
+  Process serve(serveArgs("P4_"), path("serve4.out"), path("serve4.err"));
+  const RunResult pub = publish(file, "P4_", {"--burst"});
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  const nlohmann::json j = stopServe(serve);
+  EXPECT_EQ(j.at("received").get<int>(), edges);
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  EXPECT_LT(j.at("updates").get<int>(), edges);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+}
+
+}  // namespace
+}  // namespace arbor

@@ -1,0 +1,155 @@
+#include "tools/bench/ceres_pose_graph.h"
+
+#include <chrono>
+
+#include <ceres/ceres.h>
+
+namespace arbor::bench {
+namespace {
+
+template <typename T>
+T wrap(const T& a) {
+  using std::atan2, std::cos, std::sin;
+  return atan2(sin(a), cos(a));
+}
+
+// 2D: parameters (x, y) and θ per pose.
+struct RelativePose2Cost {
+  RelativePose2Cost(const SE2& z, const Eigen::Matrix3d& sqrt_info_t)
+      : z_(z), sqrt_info_t_(sqrt_info_t) {}
+  template <typename T>
+  bool operator()(const T* ti, const T* thi, const T* tj, const T* thj, T* residual) const {
+    using std::cos, std::sin;
+    const T ci = cos(*thi), si = sin(*thi);
+    // m = xᵢ⁻¹xⱼ
+    const T dx = tj[0] - ti[0], dy = tj[1] - ti[1];
+    const T mx = ci * dx + si * dy, my = -si * dx + ci * dy;
+    // δ = z⁻¹ m
+    const double cz = z_.cos(), sz = z_.sin();
+    const T ex = cz * (mx - z_.x()) + sz * (my - z_.y());
+    const T ey = -sz * (mx - z_.x()) + cz * (my - z_.y());
+    const T eth = wrap(*thj - *thi - T(z_.angle()));
+    const T e[3] = {ex, ey, eth};
+    for (int r = 0; r < 3; ++r) {
+      residual[r] = T(0);
+      for (int c = 0; c < 3; ++c) residual[r] += sqrt_info_t_(r, c) * e[c];
+    }
+    return true;
+  }
+  SE2 z_;
+  Eigen::Matrix3d sqrt_info_t_;
+};
+
+// 3D: parameters t (3) and an Eigen quaternion (x, y, z, w) per pose.
+struct RelativePose3Cost {
+  RelativePose3Cost(const SE3& z, const Eigen::Matrix<double, 6, 6>& sqrt_info_t)
+      : z_(z), sqrt_info_t_(sqrt_info_t) {}
+  template <typename T>
+  bool operator()(const T* ti_p, const T* qi_p, const T* tj_p, const T* qj_p, T* residual) const {
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> ti(ti_p), tj(tj_p);
+    Eigen::Map<const Eigen::Quaternion<T>> qi(qi_p), qj(qj_p);
+    const Eigen::Quaternion<T> qi_inv = qi.conjugate();
+    const Eigen::Matrix<T, 3, 1> tm = qi_inv * (tj - ti);
+    const Eigen::Quaternion<T> qm = qi_inv * qj;
+    const Eigen::Quaternion<T> qz_inv = z_.quaternion().conjugate().template cast<T>();
+    const Eigen::Matrix<T, 3, 1> td = qz_inv * (tm - z_.translation().template cast<T>());
+    Eigen::Quaternion<T> qd = qz_inv * qm;
+    if (qd.w() < T(0)) qd.coeffs() = -qd.coeffs();
+    Eigen::Matrix<T, 6, 1> e;
+    e << td, T(2) * qd.vec();
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> r(residual);
+    r = sqrt_info_t_.template cast<T>() * e;
+    return true;
+  }
+  SE3 z_;
+  Eigen::Matrix<double, 6, 6> sqrt_info_t_;
+};
+
+ceres::Solver::Options paperOptions(int max_iterations, double function_tolerance) {
+  ceres::Solver::Options o;
+  o.minimizer_type = ceres::TRUST_REGION;
+  o.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  o.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  o.max_num_iterations = max_iterations;
+  o.function_tolerance = function_tolerance;
+  o.num_threads = 1;
+  o.logging_type = ceres::SILENT;
+  return o;
+}
+
+CeresResult toResult(const ceres::Solver::Summary& s) {
+  CeresResult r;
+  r.F_initial = 2.0 * s.initial_cost;
+  r.F_final = 2.0 * s.final_cost;
+  r.iterations = static_cast<int>(s.iterations.size()) - 1;
+  r.termination = ceres::TerminationTypeToString(s.termination_type);
+  r.time_s = s.total_time_in_seconds;
+  return r;
+}
+
+
+}  // namespace
+
+template <>
+CeresResult solveWithCeres(const PoseGraph<SE2>& graph, std::vector<SE2>* poses, int max_iterations,
+                           double function_tolerance) {
+  const int n = graph.numPoses();
+  std::vector<double> t(2 * n), th(n);
+  for (int k = 0; k < n; ++k) {
+    t[2 * k] = (*poses)[k].x();
+    t[2 * k + 1] = (*poses)[k].y();
+    th[k] = (*poses)[k].angle();
+  }
+  ceres::Problem problem;
+  for (const auto& e : graph.edges) {
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePose2Cost, 3, 2, 1, 2, 1>(
+        new RelativePose2Cost(e.measurement, e.sqrt_information_t));
+    problem.AddResidualBlock(cost, nullptr, &t[2 * e.i], &th[e.i], &t[2 * e.j], &th[e.j]);
+  }
+  for (int g : graph.gaugeIndices()) {
+    problem.SetParameterBlockConstant(&t[2 * g]);
+    problem.SetParameterBlockConstant(&th[g]);
+  }
+  ceres::Solver::Summary summary;
+  ceres::Solve(paperOptions(max_iterations, function_tolerance), &problem, &summary);
+  for (int k = 0; k < n; ++k) (*poses)[k] = SE2(t[2 * k], t[2 * k + 1], th[k]);
+  return toResult(summary);
+}
+
+template <>
+CeresResult solveWithCeres(const PoseGraph<SE3>& graph, std::vector<SE3>* poses, int max_iterations,
+                           double function_tolerance) {
+  const int n = graph.numPoses();
+  std::vector<double> t(3 * n), q(4 * n);
+  for (int k = 0; k < n; ++k) {
+    Eigen::Map<Eigen::Vector3d> tk(&t[3 * k]);
+    Eigen::Map<Eigen::Vector4d> qk(&q[4 * k]);
+    tk = (*poses)[k].translation();
+    qk = (*poses)[k].quaternion().coeffs();
+  }
+  ceres::Problem problem;
+  for (const auto& e : graph.edges) {
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePose3Cost, 6, 3, 4, 3, 4>(
+        new RelativePose3Cost(e.measurement, e.sqrt_information_t));
+    problem.AddResidualBlock(cost, nullptr, &t[3 * e.i], &q[4 * e.i], &t[3 * e.j], &q[4 * e.j]);
+  }
+  for (int k = 0; k < n; ++k) {
+    if (problem.HasParameterBlock(&q[4 * k])) {
+      problem.SetManifold(&q[4 * k], new ceres::EigenQuaternionManifold);
+    }
+  }
+  for (int g : graph.gaugeIndices()) {
+    problem.SetParameterBlockConstant(&t[3 * g]);
+    problem.SetParameterBlockConstant(&q[4 * g]);
+  }
+  ceres::Solver::Summary summary;
+  ceres::Solve(paperOptions(max_iterations, function_tolerance), &problem, &summary);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector4d c = Eigen::Map<Eigen::Vector4d>(&q[4 * k]);
+    (*poses)[k] = SE3(Eigen::Quaterniond(c(3), c(0), c(1), c(2)),
+                      Eigen::Map<Eigen::Vector3d>(&t[3 * k]));
+  }
+  return toResult(summary);
+}
+
+}  // namespace arbor::bench

@@ -1,0 +1,26 @@
+// The Ceres baseline of the benchmark (never linked into Arbor's libraries): the same
+// objective F = Σ eᵀΩe in our convention (δ = z⁻¹xᵢ⁻¹xⱼ, e = [t(δ); wrap θ(δ)] or
+// [t(δ); 2·vec q(δ)]), autodiff cost functions, solved with the paper's settings:
+// LEVENBERG_MARQUARDT, SPARSE_NORMAL_CHOLESKY, 100 iterations, function tolerance 1e-5, 1 thread.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/pose_graph.h"
+
+namespace arbor::bench {
+
+struct CeresResult {
+  double F_initial = 0;
+  double F_final = 0;  ///< 2 × Ceres' own cost (which is ½F)
+  int iterations = 0;
+  std::string termination;  ///< CONVERGENCE, NO_CONVERGENCE or FAILURE
+  double time_s = 0;        ///< Ceres' total time (problem set-up excluded)
+};
+
+template <class G>
+CeresResult solveWithCeres(const PoseGraph<G>& graph, std::vector<G>* poses, int max_iterations = 100,
+                           double function_tolerance = 1e-5);
+
+}  // namespace arbor::bench

@@ -1,0 +1,81 @@
+#include "tools/bench/shared_data.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace arbor::bench {
+
+namespace fs = std::filesystem;
+
+std::string sharedDirectory(const std::string& fallback) {
+  const char* env = std::getenv("ARBOR_SHARED_DIR");
+  return env && *env ? std::string(env) : fallback;
+}
+
+std::vector<std::string> sharedDatasets(const std::string& shared_dir) {
+  std::vector<std::string> files;
+  const fs::path dir = fs::path(shared_dir) / "datasets";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return files;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    if (entry.path().extension() == ".g2o") files.push_back(entry.path().string());
+  }
+  std::sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) {
+    return fs::file_size(a) < fs::file_size(b);
+  });
+  return files;
+}
+
+std::map<std::string, Reference> readOptimumTable(const std::string& shared_dir) {
+  std::map<std::string, Reference> table;
+  std::ifstream in(fs::path(shared_dir) / "reference" / "optimum.tsv");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line.rfind("dataset", 0) == 0) continue;
+    std::istringstream row(line);
+    std::string name, dim, f, certified, lm, replay;
+    if (!std::getline(row, name, '\t') || !std::getline(row, dim, '\t') ||
+        !std::getline(row, f, '\t') || !std::getline(row, certified, '\t') ||
+        !std::getline(row, lm, '\t') || !std::getline(row, replay, '\t')) {
+      continue;
+    }
+    Reference r;
+    r.F_star = std::strtod(f.c_str(), nullptr);
+    r.certified = certified == "yes";
+    r.lm_reaches = lm == "yes";
+    r.replay_target = replay == "yes";
+    table[name] = r;
+  }
+  return table;
+}
+
+std::map<std::pair<std::string, std::string>, Anchor> readAnchorTable(
+    const std::string& shared_dir) {
+  std::map<std::pair<std::string, std::string>, Anchor> table;
+  std::ifstream in(fs::path(shared_dir) / "reference" / "anchors.tsv");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line.rfind("dataset", 0) == 0) continue;
+    std::vector<std::string> f;
+    std::istringstream row(line);
+    for (std::string cell; std::getline(row, cell, '\t');) f.push_back(cell);
+    // dataset dim nodes edges run total_s p50 p90 p99 max iterations F peak_rss status
+    if (f.size() < 14) continue;
+    Anchor a;
+    a.total_s = std::strtod(f[5].c_str(), nullptr);
+    a.p50_ms = std::strtod(f[6].c_str(), nullptr);
+    a.p99_ms = std::strtod(f[8].c_str(), nullptr);
+    a.max_ms = std::strtod(f[9].c_str(), nullptr);
+    a.F = std::strtod(f[11].c_str(), nullptr);
+    a.status = f[13];
+    table[{f[0], f[4]}] = a;
+  }
+  return table;
+}
+
+std::string datasetName(const std::string& path) { return fs::path(path).stem().string(); }
+
+}  // namespace arbor::bench

@@ -1,0 +1,121 @@
+// arbor batch FILE: solve a pose graph in batch and print a summary (or one JSON object).
+#include <iomanip>
+#include <iostream>
+
+#include <nlohmann/json.hpp>
+
+#include "core/batch_solver.h"
+#include "core/initialization.h"
+#include "io/pose_graph_file.h"
+#include "tools/cli/cli_common.h"
+#include "tools/cli/commands.h"
+
+namespace arbor::cli {
+namespace {
+
+namespace po = boost::program_options;
+
+struct BatchRun {
+  std::string file;
+  BatchOptions solver;
+  std::string init;  // empty: "file" when the file has VERTEX lines, else "odometry"
+  std::string output;
+  bool json = false;
+  ReadOptions read;
+};
+
+template <class G>
+int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
+                   const Stopwatch& total) {
+  const InitMethod init = parseInitMethod(
+      run.init.empty() ? (graph.has_initial_estimate ? "file" : "odometry") : run.init);
+  std::vector<G> poses = initialize(graph, init);
+  const BatchSummary summary = solveBatch(graph, &poses, run.solver);
+  if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
+  const double total_s = total.seconds();
+
+  if (run.json) {
+    nlohmann::json j = {
+        {"file", run.file},
+        {"nodes", graph.numPoses()},
+        {"edges", graph.numEdges()},
+        {"dim", G::kDim},
+        {"solver", toString(run.solver.method)},
+        {"init", toString(init)},
+        {"F_initial", summary.F_initial},
+        {"F_final", summary.F_final},
+        {"iterations", summary.iterations},
+        {"termination", toString(summary.termination)},
+        {"time_s", summary.time_s},
+        {"total_s", total_s},
+        {"information_repaired", report.repaired},
+        {"information_isotropic", report.made_isotropic},
+    };
+    std::cout << j.dump() << "\n";
+  } else {
+    std::cout << std::setprecision(10);
+    std::cout << "file         " << run.file << " (" << G::kDim << "D, " << graph.numPoses()
+              << " poses, " << graph.numEdges() << " edges)\n";
+    if (report.repaired) std::cout << "information  " << report.repaired << " repaired\n";
+    if (report.made_isotropic) {
+      std::cout << "information  " << report.made_isotropic << " made isotropic\n";
+    }
+    std::cout << "init         " << toString(init) << "\n"
+              << "solver       " << toString(run.solver.method) << "\n"
+              << "F initial    " << summary.F_initial << "\n"
+              << "F final      " << summary.F_final << "\n"
+              << "iterations   " << summary.iterations << " (" << toString(summary.termination)
+              << (summary.message.empty() ? "" : ": " + summary.message) << ")\n"
+              << std::setprecision(4) << "time         " << summary.time_s << " s solve, "
+              << total_s << " s total\n";
+    if (!run.output.empty()) std::cout << "output       " << run.output << "\n";
+  }
+  return summary.termination == Termination::kDiverged ? 3 : 0;
+}
+
+}  // namespace
+
+int batchCommand(const std::vector<std::string>& args) {
+  Stopwatch total;
+  BatchRun run;
+  std::string solver = "lm", information = "refuse";
+  po::options_description options("arbor batch FILE [options]");
+  options.add_options()("help,h", "show this help")(
+      "file", po::value(&run.file)->required(), "g2o or TORO file")(
+      "solver", po::value(&solver)->default_value("lm"), "gn | lm | dogleg")(
+      "init", po::value(&run.init),
+      "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
+      "odometry)")("max-iterations", po::value(&run.solver.max_iterations)->default_value(100),
+                   "iteration limit")(
+      "rel-tol", po::value(&run.solver.relative_tolerance)->default_value(1e-5),
+      "stop when the relative decrease of F is below this")(
+      "information", po::value(&information)->default_value("refuse"),
+      "what to do with information matrices that are not positive definite: refuse | repair | "
+      "isotropic")("output,o", po::value(&run.output), "write the estimate as g2o")(
+      "json", po::bool_switch(&run.json), "print one JSON object")(
+      "verbose,v", po::bool_switch(&run.solver.verbose), "per-iteration log on stderr");
+  po::positional_options_description positional;
+  positional.add("file", 1);
+  for (const auto& a : args) {
+    if (a == "--help" || a == "-h") {
+      std::cout << options << "\n";
+      return 0;
+    }
+  }
+  parseArguments(args, options, positional);
+  try {
+    run.solver.method = parseBatchMethod(solver);
+    if (!run.init.empty()) parseInitMethod(run.init);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(e.what());
+  }
+  if (run.solver.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
+  if (!(run.solver.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
+  run.read.information = parseInformationPolicy(information);
+
+  ReadReport report;
+  AnyPoseGraph any = readPoseGraphFile(run.file, run.read, &report);
+  return std::visit([&](auto& graph) { return solveAndReport(run, graph, report, total); }, any);
+}
+
+}  // namespace arbor::cli

@@ -1,0 +1,44 @@
+#include "tools/cli/cli_common.h"
+
+#include <fstream>
+#include <sstream>
+
+namespace arbor::cli {
+
+namespace po = boost::program_options;
+
+po::variables_map parseArguments(const std::vector<std::string>& args,
+                                 const po::options_description& options,
+                                 const po::positional_options_description& positional) {
+  po::variables_map vm;
+  try {
+    po::store(po::command_line_parser(args).options(options).positional(positional).run(), vm);
+    po::notify(vm);
+  } catch (const po::error& e) {
+    throw UsageError(e.what());
+  }
+  return vm;
+}
+
+InformationPolicy parseInformationPolicy(const std::string& name) {
+  if (name == "refuse") return InformationPolicy::kRefuse;
+  if (name == "repair") return InformationPolicy::kRepair;
+  if (name == "isotropic") return InformationPolicy::kIsotropic;
+  throw UsageError("--information must be refuse, repair or isotropic, not '" + name + "'");
+}
+
+double peakRssMb() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      std::istringstream in(line.substr(6));
+      double kb = 0;
+      in >> kb;
+      return kb / 1024.0;
+    }
+  }
+  return 0.0;
+}
+
+}  // namespace arbor::cli

@@ -1,0 +1,17 @@
+// The `arbor` subcommands. Each takes its arguments (after the subcommand name) and returns
+// the process exit code; argument errors are thrown as UsageError.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace arbor::cli {
+
+int batchCommand(const std::vector<std::string>& args);
+int generateCommand(const std::vector<std::string>& args);
+int benchCommand(const std::vector<std::string>& args);
+int replayCommand(const std::vector<std::string>& args);
+int serveCommand(const std::vector<std::string>& args);
+int publishCommand(const std::vector<std::string>& args);
+
+}  // namespace arbor::cli

@@ -1,0 +1,30 @@
+// Per-update latency figures (percentiles of a sample of durations).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace arbor::cli {
+
+struct LatencySummary {
+  double p50 = 0, p90 = 0, p99 = 0, max = 0;  ///< milliseconds
+};
+
+/// Nearest-rank percentiles of `ms` (copied and sorted).
+inline LatencySummary summarizeLatency(std::vector<double> ms) {
+  LatencySummary s;
+  if (ms.empty()) return s;
+  std::sort(ms.begin(), ms.end());
+  auto pct = [&](double p) {
+    const size_t rank = static_cast<size_t>(std::ceil(p / 100.0 * ms.size()));
+    return ms[std::min(ms.size() - 1, rank == 0 ? 0 : rank - 1)];
+  };
+  s.p50 = pct(50);
+  s.p90 = pct(90);
+  s.p99 = pct(99);
+  s.max = ms.back();
+  return s;
+}
+
+}  // namespace arbor::cli

@@ -1,0 +1,150 @@
+// arbor replay FILE: feed a file's edges one at a time (in order of max(i, j), then file order)
+// to the incremental smoother, print per-update latency, final F, and F of batch LM started
+// from the incremental estimate.
+#include <iomanip>
+#include <iostream>
+
+#include <nlohmann/json.hpp>
+
+#include "io/pose_graph_file.h"
+#include "tools/cli/cli_common.h"
+#include "tools/cli/commands.h"
+#include "tools/cli/replay_runner.h"
+
+namespace arbor::cli {
+namespace {
+
+namespace po = boost::program_options;
+
+struct ReplayRun {
+  std::string file, output, latency_csv, step = "edge";
+  bool json = false, finalize = true;
+  SmootherOptions smoother;
+  ReadOptions read;
+};
+
+template <class G>
+int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clock) {
+  ReplaySettings settings;
+  settings.smoother = run.smoother;
+  settings.per_pose = run.step == "pose";
+  settings.finalize = run.finalize;
+  const ReplayResult<G> r = runReplay(graph, settings);
+  for (const auto& line : r.rejections) std::cerr << "arbor replay: " << line << "\n";
+  if (!run.output.empty()) writeG2oFile(run.output, graph, r.poses);
+  if (!run.latency_csv.empty()) writeLatencyCsv(run.latency_csv, r.rows);
+  const double gap = (r.F_final - r.batch.F_final) / r.batch.F_final;
+  const LatencySummary& lat = r.latency;
+
+  if (run.json) {
+    nlohmann::json j = {
+        {"file", run.file},
+        {"nodes", graph.numPoses()},
+        {"edges", graph.numEdges()},
+        {"dim", G::kDim},
+        {"step", run.step},
+        {"updates", static_cast<int>(r.rows.size())},
+        {"total_s", r.total_s},
+        {"update_s", r.update_s},
+        {"finalize_s", r.finalize_s},
+        {"latency_ms", {{"p50", lat.p50}, {"p90", lat.p90}, {"p99", lat.p99}, {"max", lat.max}}},
+        {"F_incremental", r.F_incremental},
+        {"F_final", r.F_final},
+        {"F_batch", r.batch.F_final},
+        {"batch_time_s", r.batch.time_s},
+        {"batch_iterations", r.batch.iterations},
+        {"relative_gap", gap},
+        {"relinearized_total", r.relinearized},
+        {"indeterminate_cliques", r.indeterminate},
+        {"duplicates", r.duplicates},
+        {"rejected", r.rejected},
+        {"pending", r.pending},
+        {"peak_rss_mb", peakRssMb()},
+        {"wall_s", total_clock.seconds()},
+    };
+    std::cout << j.dump() << "\n";
+    return 0;
+  }
+  std::cout << std::setprecision(10) << "file          " << run.file << " (" << G::kDim << "D, "
+            << graph.numPoses() << " poses, " << graph.numEdges() << " edges)\n"
+            << "updates       " << r.rows.size() << " (one per " << run.step << ")\n"
+            << std::setprecision(4) << "total         " << r.total_s << " s (updates "
+            << r.update_s << " s, final relinearisation " << r.finalize_s << " s)\n"
+            << "latency ms    p50 " << lat.p50 << "  p90 " << lat.p90 << "  p99 " << lat.p99
+            << "  max " << lat.max << "\n"
+            << std::setprecision(10) << "F incremental " << r.F_incremental
+            << " (before the final relinearisation)\n"
+            << "F final       " << r.F_final << "\n"
+            << "F batch LM    " << r.batch.F_final << " (" << r.batch.iterations
+            << " iterations from the incremental estimate, " << std::setprecision(4)
+            << r.batch.time_s << " s)\n"
+            << "gap           " << std::setprecision(3) << 100.0 * gap << " %\n"
+            << "relinearized  " << r.relinearized << " variables in total\n";
+  if (r.indeterminate) std::cout << "indeterminate " << r.indeterminate << " cliques damped\n";
+  if (r.duplicates || r.rejected || r.pending) {
+    std::cout << "input         " << r.duplicates << " duplicates, " << r.rejected
+              << " rejected, " << r.pending << " never connected\n";
+  }
+  std::cout << "peak RSS      " << peakRssMb() << " MiB\n";
+  return 0;
+}
+
+}  // namespace
+
+int replayCommand(const std::vector<std::string>& args) {
+  Stopwatch total;
+  ReplayRun run;
+  std::string information = "refuse";
+  double beta = -1;
+  bool no_finalize = false;
+  po::options_description options("arbor replay FILE [options]");
+  options.add_options()("help,h", "show this help")(
+      "file", po::value(&run.file)->required(), "g2o or TORO file")(
+      "step", po::value(&run.step)->default_value("edge"),
+      "edge: update after every edge; pose: once per new pose with all its edges")(
+      "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
+      "relinearize-threshold-translation",
+      po::value(&run.smoother.relinearize_threshold_translation), "β for translation")(
+      "relinearize-threshold-rotation", po::value(&run.smoother.relinearize_threshold_rotation),
+      "β for rotation")("relinearize-skip",
+                        po::value(&run.smoother.relinearize_skip)->default_value(10),
+                        "check relinearisation every K updates")(
+      "wildfire", po::value(&run.smoother.wildfire_threshold)->default_value(0.001),
+      "partial back-substitution threshold")(
+      "full-backsubstitution", po::bool_switch(&run.smoother.full_backsubstitution),
+      "solve every clique on each update")("dogleg", po::bool_switch(&run.smoother.dogleg),
+                                           "Powell's dogleg instead of Gauss-Newton")(
+      "no-finalize", po::bool_switch(&no_finalize),
+      "skip the final relinearise-all pass (report the raw incremental estimate)")(
+      "information", po::value(&information)->default_value("refuse"),
+      "refuse | repair | isotropic (information matrices that are not positive definite)")(
+      "output,o", po::value(&run.output), "write the final estimate as g2o")(
+      "latency-csv", po::value(&run.latency_csv), "one row per update")(
+      "json", po::bool_switch(&run.json), "print one JSON object");
+  po::positional_options_description positional;
+  positional.add("file", 1);
+  for (const auto& a : args) {
+    if (a == "--help" || a == "-h") {
+      std::cout << options << "\n";
+      return 0;
+    }
+  }
+  parseArguments(args, options, positional);
+  if (run.step != "edge" && run.step != "pose") {
+    throw UsageError("--step must be edge or pose, not '" + run.step + "'");
+  }
+  if (beta >= 0) {
+    run.smoother.relinearize_threshold_translation = beta;
+    run.smoother.relinearize_threshold_rotation = beta;
+  } else if (beta != -1) {
+    throw UsageError("--relinearize-threshold must be >= 0");
+  }
+  if (run.smoother.relinearize_skip < 1) throw UsageError("--relinearize-skip must be >= 1");
+  run.finalize = !no_finalize;
+  run.read.information = parseInformationPolicy(information);
+
+  AnyPoseGraph any = readPoseGraphFile(run.file, run.read);
+  return std::visit([&](auto& graph) { return replay(run, graph, total); }, any);
+}
+
+}  // namespace arbor::cli

@@ -1,0 +1,86 @@
+#include "tools/cli/replay_runner.h"
+
+#include <fstream>
+#include <iomanip>
+#include <numeric>
+#include <stdexcept>
+
+#include "bayestree/online_smoother.h"
+#include "tools/cli/cli_common.h"
+#include "tools/cli/replay_order.h"
+
+namespace arbor::cli {
+
+template <class G>
+ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings) {
+  OnlineSmootherOptions<G> options;
+  options.smoother = settings.smoother;
+  OnlineSmoother<G> smoother(options);
+  ReplayResult<G> result;
+  const std::vector<std::vector<int>> groups = replayGroups(graph, settings.per_pose);
+  result.rows.reserve(groups.size());
+  int fed = 0;
+  for (const auto& group : groups) {
+    for (int e : group) {
+      const auto& edge = graph.edges[e];
+      const Key from = graph.ids[edge.i], to = graph.ids[edge.j];
+      const EdgeResult r = smoother.addEdge(from, to, edge.measurement, edge.information);
+      if (r.status == EdgeStatus::kDuplicate) ++result.duplicates;
+      if (r.status == EdgeStatus::kRejected) {
+        ++result.rejected;
+        result.rejections.push_back("edge " + std::to_string(from) + " -> " + std::to_string(to) +
+                                    " rejected: " + r.reason);
+      }
+    }
+    fed += static_cast<int>(group.size());
+    Stopwatch clock;
+    const UpdateStats s = smoother.update();
+    const double ms = 1e3 * clock.seconds();
+    result.relinearized += s.variables_relinearized;
+    result.indeterminate += s.indeterminate_cliques;
+    result.rows.push_back({static_cast<int>(result.rows.size()) + 1, fed, ms,
+                           s.cliques_reeliminated, s.variables_relinearized});
+  }
+  result.F_incremental = smoother.smoother().objective();
+  Stopwatch finalize_clock;
+  if (settings.finalize) {
+    const UpdateStats s = smoother.finalize();
+    result.relinearized += s.variables_relinearized;
+    result.indeterminate += s.indeterminate_cliques;
+  }
+  result.finalize_s = finalize_clock.seconds();
+  result.pending = smoother.stats().edges_pending;
+
+  std::vector<double> ms;
+  for (const auto& r : result.rows) ms.push_back(r.latency_ms);
+  result.latency = summarizeLatency(ms);
+  result.update_s = std::accumulate(ms.begin(), ms.end(), 0.0) / 1e3;
+  result.total_s = result.update_s + result.finalize_s;
+
+  // The estimate in the graph's dense order (poses never reached keep their graph value).
+  result.poses = graph.poses;
+  for (const auto& [id, pose] : smoother.estimates()) result.poses[graph.index.at(id)] = pose;
+  result.F_final = objective(graph, result.poses);
+  if (settings.batch) {
+    result.batch_poses = result.poses;
+    result.batch = solveBatch(graph, &result.batch_poses);
+  }
+  return result;
+}
+
+void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows) {
+  std::ofstream csv(path);
+  if (!csv) throw std::runtime_error("cannot write " + path);
+  csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized\n";
+  csv << std::setprecision(6);
+  for (const auto& r : rows) {
+    csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << ","
+        << r.cliques_reeliminated << "," << r.variables_relinearized << "\n";
+  }
+  if (!csv) throw std::runtime_error("error writing " + path);
+}
+
+template ReplayResult<SE2> runReplay(const PoseGraph<SE2>&, const ReplaySettings&);
+template ReplayResult<SE3> runReplay(const PoseGraph<SE3>&, const ReplaySettings&);
+
+}  // namespace arbor::cli

@@ -1,0 +1,53 @@
+// Feeding a pose graph's edges to the incremental smoother one update at a time, as
+// `arbor replay` and `arbor bench replay` do: edges in order of max(i, j), then file order;
+// per-update latency; a final relinearise-all pass; batch LM from the incremental estimate.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "bayestree/incremental_smoother.h"
+#include "core/batch_solver.h"
+#include "core/pose_graph.h"
+#include "tools/cli/latency.h"
+
+namespace arbor::cli {
+
+struct ReplaySettings {
+  SmootherOptions smoother;
+  bool per_pose = false;  ///< one update per new pose (all its edges) instead of per edge
+  bool finalize = true;   ///< relinearise everything at the end
+  bool batch = true;      ///< run batch LM from the incremental estimate
+};
+
+struct UpdateRow {
+  int step = 0;
+  int edges_so_far = 0;
+  double latency_ms = 0;
+  int cliques_reeliminated = 0;
+  int variables_relinearized = 0;
+};
+
+template <class G>
+struct ReplayResult {
+  std::vector<UpdateRow> rows;
+  LatencySummary latency;
+  double total_s = 0;     ///< updates + final relinearisation
+  double update_s = 0;    ///< sum of update latencies
+  double finalize_s = 0;  ///< the final relinearise-all pass
+  double F_incremental = 0;  ///< before the final pass
+  double F_final = 0;
+  BatchSummary batch;     ///< LM from the final estimate (if settings.batch)
+  int relinearized = 0, indeterminate = 0, duplicates = 0, rejected = 0, pending = 0;
+  std::vector<std::string> rejections;  ///< one line per rejected edge
+  std::vector<G> poses;                 ///< the final estimate in the graph's dense order
+  std::vector<G> batch_poses;           ///< the batch LM estimate
+};
+
+template <class G>
+ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings);
+
+/// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized).
+void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows);
+
+}  // namespace arbor::cli

@@ -1,0 +1,180 @@
+// arbor serve: ingest edges published over LCM into the incremental smoother and publish the
+// estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
+#include <csignal>
+#include <iostream>
+#include <memory>
+
+#include <pthread.h>
+#include <sys/stat.h>
+
+#include <lcm/lcm-cpp.hpp>
+#include <nlohmann/json.hpp>
+
+#include "tools/cli/cli_common.h"
+#include "tools/cli/commands.h"
+#include "tools/serve/lcm_tuning.h"
+#include "tools/serve/serve_service.h"
+
+namespace arbor::cli {
+namespace {
+
+namespace po = boost::program_options;
+
+// The journal file inside --journal DIR (created if missing).
+std::string journalFile(const std::string& dir) {
+  if (::mkdir(dir.c_str(), 0755) != 0 && errno != EEXIST) {
+    throw std::runtime_error("cannot create journal directory " + dir);
+  }
+  struct stat st;
+  if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {
+    throw std::runtime_error("journal " + dir + " is not a directory");
+  }
+  return dir + "/journal.lcmlog";
+}
+
+// --fsync: update (once before each update), edge, N ms, never.
+void parseFsync(const std::string& text, serve::ServeOptions* options) {
+  options->fsync_before_update = text == "update";
+  options->fsync_interval_ms = -1;
+  if (text == "update" || text == "never") return;
+  if (text == "edge") {
+    options->fsync_interval_ms = 0;
+    return;
+  }
+  try {
+    size_t used = 0;
+    const int ms = std::stoi(text, &used);
+    if (used == text.size() && ms > 0) {
+      options->fsync_interval_ms = ms;
+      return;
+    }
+  } catch (const std::exception&) {
+  }
+  throw UsageError("--fsync must be update, edge, never or a number of ms > 0, not '" + text + "'");
+}
+
+int parsePublishMode(const std::string& text) {
+  if (text == "changed") return 0;
+  if (text == "full") return 1;
+  try {
+    size_t used = 0;
+    const int n = std::stoi(text, &used);
+    if (used == text.size() && n > 0) return n;
+  } catch (const std::exception&) {
+  }
+  throw UsageError("--publish must be changed, full or N > 0, not '" + text + "'");
+}
+
+}  // namespace
+
+int serveCommand(const std::vector<std::string>& args) {
+  std::string url, journal_dir, fsync = "update", publish = "changed", output;
+  double beta = -1;
+  bool json = false, no_refine = false;
+  serve::ServeOptions options;
+  po::options_description desc("arbor serve [options]");
+  desc.add_options()("help,h", "show this help")(
+      "lcm-url", po::value(&url), "LCM provider URL (default: LCM_DEFAULT_URL / LCM's default)")(
+      "channel-prefix", po::value(&options.channel_prefix),
+      "prefix of ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND")(
+      "journal", po::value(&journal_dir),
+      "directory of the journal (journal.lcmlog); replayed on start")(
+      "fsync", po::value(&fsync)->default_value("update"),
+      "journal fsync: update (before each update), edge, N (at most every N ms) or never")(
+      "publish", po::value(&publish)->default_value("changed"),
+      "estimates: changed (poses that changed), full, or N (full every N updates)")(
+      "dim", po::value(&options.dim)->default_value(0), "2 or 3 (0: the first edge's)")(
+      "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
+      "relinearize-skip", po::value(&options.smoother.relinearize_skip)->default_value(10),
+      "check relinearisation every K updates")(
+      "wildfire", po::value(&options.smoother.wildfire_threshold)->default_value(0.001),
+      "partial back-substitution threshold")(
+      "status-period", po::value(&options.status_period_s)->default_value(1.0),
+      "seconds between status messages")(
+      "no-refine", po::bool_switch(&no_refine),
+      "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
+      "output,o", po::value(&output), "on exit (and for SNAPSHOT), write the estimate as g2o")(
+      "json", po::bool_switch(&json), "on exit, print one JSON object");
+  for (const auto& a : args) {
+    if (a == "--help" || a == "-h") {
+      std::cout << desc << "\n";
+      return 0;
+    }
+  }
+  parseArguments(args, desc, po::positional_options_description());
+  if (beta >= 0) {
+    options.smoother.relinearize_threshold_translation = beta;
+    options.smoother.relinearize_threshold_rotation = beta;
+  } else if (beta != -1) {
+    throw UsageError("--relinearize-threshold must be >= 0");
+  }
+  if (options.smoother.relinearize_skip < 1) throw UsageError("--relinearize-skip must be >= 1");
+  if (options.dim != 0 && options.dim != 2 && options.dim != 3) {
+    throw UsageError("--dim must be 2 or 3");
+  }
+  if (!(options.status_period_s > 0)) throw UsageError("--status-period must be > 0");
+  parseFsync(fsync, &options);
+  options.full_every = parsePublishMode(publish);
+  options.refine_on_exit = !no_refine;
+  options.snapshot_path = output;
+  options.log = &std::cerr;
+  if (!journal_dir.empty()) options.journal_path = journalFile(journal_dir);
+
+  // Every thread (LCM's and ours) inherits this mask; only sigwait below sees the signals.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  // Two instances, one to receive and one to publish (see serve::Service); memq:// is private to
+  // an instance, so there one serves both.
+  lcm::LCM lcm(url);
+  std::unique_ptr<lcm::LCM> publisher;
+  if (url.rfind("memq://", 0) != 0) publisher = std::make_unique<lcm::LCM>(url);
+  if (!lcm.good() || (publisher && !publisher->good())) {
+    throw std::runtime_error("cannot open LCM at '" + (url.empty() ? "default" : url) + "'");
+  }
+  serve::tuneLcmTransport(lcm, url);
+  if (publisher) serve::tuneLcmTransport(*publisher, url);
+  serve::Service service(lcm, publisher ? *publisher : lcm, options);
+  service.start();
+  std::cerr << "arbor serve: listening on " << service.channels().edges << std::endl;
+  int signal = 0;
+  sigwait(&signals, &signal);
+  std::cerr << "arbor serve: " << (signal == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
+            << std::endl;
+  service.stop();
+  const serve::ServeSummary& s = service.summary();
+  if (!output.empty() && !service.writeG2o(output)) {
+    std::cerr << "arbor serve: no edge was applied; " << output << " not written\n";
+  }
+  if (json) {
+    nlohmann::json reasons = nlohmann::json::object();
+    for (const auto& [reason, count] : s.intake.rejected_by_reason) reasons[reason] = count;
+    if (s.smoother_rejected) reasons["smoother"] = s.smoother_rejected;
+    nlohmann::json j = {
+        {"received", s.intake.received},
+        {"accepted", s.intake.accepted},
+        {"applied", s.applied},
+        {"rejected", s.intake.rejected + s.smoother_rejected},
+        {"rejected_by_reason", reasons},
+        {"duplicates", s.intake.duplicates + s.smoother_duplicates},
+        {"gaps", s.intake.gaps},
+        {"updates", s.updates},
+        {"poses", s.poses},
+        {"pending", s.pending},
+        {"journal_edges", s.journal_edges},
+        {"journal_updates", s.journal_updates},
+        {"refinements", s.refinements},
+        {"F_final", s.F_final},
+        {"latency_ms", {{"p50", s.latency.p50}, {"p99", s.latency.p99}, {"max", s.latency.max}}},
+        {"transport_ms",
+         {{"p50", s.transport.p50}, {"p99", s.transport.p99}, {"max", s.transport.max}}},
+    };
+    std::cout << j.dump() << std::endl;
+  }
+  return 0;
+}
+
+}  // namespace arbor::cli

@@ -1,0 +1,69 @@
+// Synthetic pose graphs with known ground truth, deterministic by seed:
+//  - a 2D Manhattan world in the style of Olson's M3500 (unit steps on a grid, 90° turns,
+//    loop closures on revisits);
+//  - a 3D sphere in the style of Kümmerle's sphere2500 (rings of poses, closures to the ring below);
+//  - a 3D grid random walk in the style of the "Cube" dataset.
+// Measurements are the true relative poses perturbed by z = z_true · Exp(n), n ~ N(0, Ω⁻¹),
+// with diagonal Ω; the initial estimate is the noisy odometry chain.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/pose_graph.h"
+
+namespace arbor::sim {
+
+struct NoiseModel {
+  double sigma_translation = 0.05;  ///< metres, per axis
+  double sigma_rotation = 0.01;     ///< radians, per axis
+};
+
+struct ManhattanOptions {
+  int poses = 3500;
+  int grid = 10;                     ///< the world is grid × grid cells of unit size
+  double turn_probability = 0.3;     ///< chance of a ±90° turn at each step
+  double closure_probability = 0.6;  ///< chance of closing a loop on a revisited cell
+  int max_closures_per_pose = 2;
+  NoiseModel noise{0.05, 0.01};
+  std::uint64_t seed = 1;
+};
+
+struct SphereOptions {
+  int rings = 20;
+  int poses_per_ring = 50;
+  double radius = 10.0;
+  NoiseModel noise{0.05, 0.01};
+  std::uint64_t seed = 1;
+};
+
+struct GridOptions {
+  int poses = 1000;
+  int size = 6;                      ///< a size³ lattice of unit spacing
+  double closure_probability = 0.5;
+  int max_closures_per_pose = 2;
+  NoiseModel noise{0.05, 0.01};
+  std::uint64_t seed = 1;
+};
+
+/// A generated graph: `graph.poses` holds the noisy odometry initial estimate
+/// (has_initial_estimate = true); `truth` holds the ground truth.
+template <class Group>
+struct Simulation {
+  PoseGraph<Group> graph;
+  std::vector<Group> truth;
+};
+
+Simulation<SE2> manhattanWorld(const ManhattanOptions& options);
+Simulation<SE3> sphereWorld(const SphereOptions& options);
+Simulation<SE3> gridWorld(const GridOptions& options);
+
+/// Builds a graph from ground-truth poses and a list of (i, j) pairs: noisy measurements,
+/// noisy odometry initial estimate (chain of the edges (k−1, k), which must be present).
+template <class Group>
+Simulation<Group> simulate(const std::vector<Group>& truth,
+                           const std::vector<std::pair<int, int>>& pairs, const NoiseModel& noise,
+                           std::uint64_t seed);
+
+}  // namespace arbor::sim

@@ -1,0 +1,54 @@
+// arbor: an incremental pose-graph smoother. `arbor help` lists the subcommands.
+#include <iostream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "tools/cli/cli_common.h"
+#include "tools/cli/commands.h"
+
+namespace {
+
+using Command = int (*)(const std::vector<std::string>&);
+
+const std::map<std::string, std::pair<Command, const char*>>& commands() {
+  static const std::map<std::string, std::pair<Command, const char*>> table = {
+      {"batch", {arbor::cli::batchCommand, "solve a g2o/TORO file in batch (GN, LM, dogleg)"}},
+      {"bench", {arbor::cli::benchCommand, "benchmarks on the shared datasets (arbor bench --help)"}},
+      {"replay", {arbor::cli::replayCommand, "feed a file edge by edge to the incremental smoother"}},
+      {"generate", {arbor::cli::generateCommand, "write a synthetic pose graph (manhattan, sphere, grid)"}},
+      {"serve", {arbor::cli::serveCommand, "run the smoother as an LCM service (edges in, estimates out)"}},
+      {"publish", {arbor::cli::publishCommand, "stream a file's edges over LCM to arbor serve"}},
+  };
+  return table;
+}
+
+void printUsage(std::ostream& out) {
+  out << "usage: arbor <command> [options]   (arbor <command> --help for its options)\n";
+  for (const auto& [name, entry] : commands()) out << "  " << name << "\t" << entry.second << "\n";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::string(argv[1]) == "help" || std::string(argv[1]) == "--help") {
+    printUsage(argc < 2 ? std::cerr : std::cout);
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string name = argv[1];
+  const auto it = commands().find(name);
+  if (it == commands().end()) {
+    std::cerr << "arbor: unknown command '" << name << "' (try arbor help)\n";
+    return 2;
+  }
+  const std::vector<std::string> args(argv + 2, argv + argc);
+  try {
+    return it->second.first(args);
+  } catch (const arbor::cli::UsageError& e) {
+    std::cerr << "arbor " << name << ": " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "arbor " << name << ": error: " << e.what() << "\n";
+    return 1;
+  }
+}

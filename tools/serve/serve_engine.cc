@@ -1,0 +1,104 @@
+#include "tools/serve/serve_engine.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <vector>
+
+#include "io/pose_graph_file.h"
+
+namespace arbor::serve {
+namespace {
+
+template <class G>
+class EngineImpl final : public Engine {
+ public:
+  explicit EngineImpl(const SmootherOptions& options) : smoother_(makeOptions(options)) {}
+
+  int dim() const override { return G::kDim; }
+
+  EdgeResult add(const AnyStreamEdge& any) override {
+    const auto* e = std::get_if<StreamEdge<G>>(&any);
+    if (e == nullptr) {
+      return {EdgeStatus::kRejected, "edge of another dimension than the stream"};
+    }
+    return smoother_.addEdge(e->from, e->to, e->z, e->omega);
+  }
+
+  UpdateStats update() override { return smoother_.update(); }
+  UpdateStats refine() override { return smoother_.finalize(); }
+  double objective() const override { return smoother_.smoother().objective(); }
+  OnlineStats stats() const override { return smoother_.stats(); }
+
+  estimate_t estimate(bool full) override {
+    const std::vector<G> poses = smoother_.smoother().estimate();
+    const std::vector<Key>& ids = smoother_.ids();
+    estimate_t m;
+    m.dim = G::kDim;
+    m.full = full;
+    m.total_poses = static_cast<int32_t>(poses.size());
+    m.F = full ? objective() : std::numeric_limits<double>::quiet_NaN();
+    published_.resize(poses.size());
+    for (size_t k = 0; k < poses.size(); ++k) {
+      Fields f;
+      poseToFields(poses[k], f.data(), f.data() + 3);
+      if (!full && f == published_[k]) continue;
+      published_[k] = f;
+      m.ids.push_back(ids[k]);
+      m.translation.emplace_back(f.begin(), f.begin() + 3);
+      m.rotation.emplace_back(f.begin() + 3, f.end());
+    }
+    m.num_poses = static_cast<int32_t>(m.ids.size());
+    return m;
+  }
+
+  void writeG2o(const std::string& path) const override {
+    const std::vector<G> poses = smoother_.smoother().estimate();
+    const std::vector<Key>& ids = smoother_.ids();
+    PoseGraph<G> graph;
+    std::vector<int> order(ids.size());
+    for (size_t k = 0; k < ids.size(); ++k) order[k] = static_cast<int>(k);
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return ids[a] < ids[b]; });
+    std::vector<int> dense_to_graph(ids.size());
+    for (int g = 0; g < static_cast<int>(order.size()); ++g) {
+      dense_to_graph[order[g]] = g;
+      graph.ids.push_back(ids[order[g]]);
+      graph.index[ids[order[g]]] = g;
+      graph.poses.push_back(poses[order[g]]);
+    }
+    for (const auto& f : smoother_.smoother().factors()) {
+      auto e = f;
+      e.i = dense_to_graph[f.i];
+      e.j = dense_to_graph[f.j];
+      graph.edges.push_back(e);
+    }
+    for (int k = 0; k < static_cast<int>(ids.size()); ++k) {
+      if (smoother_.smoother().isFixed(k)) graph.fixed.push_back(dense_to_graph[k]);
+    }
+    std::sort(graph.fixed.begin(), graph.fixed.end());
+    graph.has_initial_estimate = true;
+    writeG2oFile(path, graph, graph.poses);
+  }
+
+ private:
+  using Fields = std::array<double, 7>;
+  static OnlineSmootherOptions<G> makeOptions(const SmootherOptions& s) {
+    OnlineSmootherOptions<G> o;
+    o.smoother = s;
+    return o;
+  }
+  OnlineSmoother<G> smoother_;
+  std::vector<Fields> published_;  ///< per dense index: the values last put in a message
+};
+
+}  // namespace
+
+std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options) {
+  if (dim == 2) return std::make_unique<EngineImpl<SE2>>(options);
+  if (dim == 3) return std::make_unique<EngineImpl<SE3>>(options);
+  throw std::invalid_argument("makeEngine: dim " + std::to_string(dim) + " is not 2 or 3");
+}
+
+}  // namespace arbor::serve

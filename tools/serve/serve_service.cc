@@ -1,0 +1,494 @@
+#include "tools/serve/serve_service.h"
+
+#include "tools/serve/lcm_tuning.h"
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+#include <sstream>
+#include <stdexcept>
+
+namespace arbor::serve {
+namespace {
+
+constexpr const char* kMarkChannel = "ARBOR_JOURNAL_MARK";
+
+double msSince(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+
+std::int64_t leadingHash(const std::vector<std::uint8_t>& data) {
+  std::int64_t h = 0;
+  for (size_t k = 0; k < 8 && k < data.size(); ++k) h = (h << 8) | data[k];
+  return data.size() < 8 ? 0 : h;
+}
+
+}  // namespace
+
+std::int64_t nowMicros() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+Channels Channels::withPrefix(const std::string& prefix) {
+  return {prefix + "ARBOR_EDGES", prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
+          prefix + "ARBOR_COMMAND"};
+}
+
+Service::Service(lcm::LCM& lcm, ServeOptions options) : Service(lcm, lcm, std::move(options)) {}
+
+Service::Service(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options)
+    : lcm_(receive),
+      publish_lcm_(publish),
+      options_(std::move(options)),
+      channels_(Channels::withPrefix(options_.channel_prefix)),
+      intake_(options_.dim) {
+  if (options_.dim != 0 && options_.dim != 2 && options_.dim != 3) {
+    throw std::invalid_argument("serve: dim " + std::to_string(options_.dim) + " is not 2 or 3");
+  }
+}
+
+Service::~Service() {
+  if (running_) {
+    try {
+      stop();
+    } catch (...) {
+    }
+  }
+}
+
+void Service::logLine(const std::string& line) {
+  if (options_.log == nullptr) return;
+  std::lock_guard<std::mutex> lock(log_mutex_);
+  *options_.log << "arbor serve: " << line << std::endl;
+}
+
+void Service::start() {
+  if (running_) throw std::logic_error("serve: start() twice");
+  if (!options_.journal_path.empty()) replayJournal();
+  if (engine_) publishEstimate(true);
+  last_status_ = std::chrono::steady_clock::now();
+  subscriptions_.push_back(lcm_.subscribe(channels_.edges, &Service::onEdge, this));
+  subscriptions_.push_back(lcm_.subscribe(channels_.command, &Service::onCommand, this));
+  for (auto* s : subscriptions_) s->setQueueCapacity(0);  // never drop: the queue is ours
+  receive_stop_ = false;
+  smoother_stop_ = false;
+  smoother_thread_ = std::thread(&Service::smootherLoop, this);
+  receive_thread_ = std::thread(&Service::receiveLoop, this);
+  running_ = true;
+}
+
+void Service::stop() {
+  if (!running_) return;
+  running_ = false;
+  receive_stop_ = true;
+  receive_thread_.join();
+  for (auto* s : subscriptions_) lcm_.unsubscribe(s);
+  subscriptions_.clear();
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    smoother_stop_ = true;
+  }
+  queue_cv_.notify_all();
+  smoother_thread_.join();
+
+  if (engine_ && options_.refine_on_exit) refine(false);
+  if (journal_) journal_->sync();
+  summary_ = ServeSummary();
+  if (engine_) {
+    publishEstimate(true);
+    summary_.final_estimate = engine_->estimate(true);
+    summary_.F_final = summary_.final_estimate.F;
+  }
+  publishStatus();
+  {
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    summary_.intake = intake_.counts();
+  }
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  summary_.applied = applied_;
+  summary_.updates = updates_;
+  summary_.poses = poses_;
+  summary_.pending = pending_;
+  summary_.smoother_rejected = smoother_rejected_;
+  summary_.smoother_duplicates = smoother_duplicates_;
+  summary_.journal_edges = journal_edges_;
+  summary_.journal_updates = journal_updates_;
+  summary_.refinements = refinements_;
+  summary_.latency = cli::summarizeLatency(latencies_ms_);
+  summary_.transport = cli::summarizeLatency(transport_ms_);
+}
+
+bool Service::writeG2o(const std::string& path) const {
+  if (running_) throw std::logic_error("serve: writeG2o() while running");
+  if (!engine_) return false;
+  engine_->writeG2o(path);
+  return true;
+}
+
+void Service::receiveLoop() {
+  bool failing = false;
+  while (!receive_stop_) {
+    armQuickAck(lcm_);
+    if (lcm_.handleTimeout(50) < 0) {
+      if (!failing) logLine("LCM receive failed (hub gone?); retrying");
+      failing = true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    } else if (failing) {
+      logLine("LCM receive works again");
+      failing = false;
+    }
+  }
+}
+
+void Service::onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  // Nothing may unwind through liblcm's C frames.
+  try {
+    receiveEdge(rbuf, channel);
+  } catch (const std::exception& e) {
+    logLine(std::string("error while receiving an edge: ") + e.what());
+  }
+}
+
+void Service::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  try {
+    receiveCommand(rbuf, channel);
+  } catch (const std::exception& e) {
+    logLine(std::string("error while receiving a command: ") + e.what());
+  }
+}
+
+void Service::receiveEdge(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  const auto received = std::chrono::steady_clock::now();
+  IntakeResult r;
+  {
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    r = intake_.admit(rbuf->data, static_cast<int>(rbuf->data_size));
+    if (r.verdict == Intake::kRejected) {
+      const int n = ++logged_by_reason_[r.reason];
+      if (n <= options_.log_limit_per_reason) {
+        std::ostringstream os;
+        os << "rejected edge";
+        if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
+        os << ": " << r.reason << ": " << r.detail;
+        if (n == options_.log_limit_per_reason) os << " (further '" << r.reason << "' not logged)";
+        logLine(os.str());
+      }
+      return;
+    }
+    if (r.verdict == Intake::kDuplicate) return;
+    if (r.skipped > 0) {
+      logLine("gap: sender " + std::to_string(r.sender) + " skipped " + std::to_string(r.skipped) +
+              " seq numbers before " + std::to_string(r.seq));
+    }
+    // Journal before it can be applied: an accepted edge is never lost.
+    if (journal_) {
+      try {
+        journal_->append(channels_.edges, nowMicros(), rbuf->data,
+                         static_cast<int>(rbuf->data_size));
+      } catch (const std::exception& e) {
+        intake_.revoke(r, "journal");
+        logLine(std::string("edge refused, the journal cannot take it: ") + e.what());
+        return;
+      }
+    }
+  }
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    const std::int64_t utime = std::visit([](const auto& e) { return e.utime; }, r.edge);
+    queue_.push_back({std::move(r.edge), r.sender, r.seq, received, (nowMicros() - utime) / 1e3});
+  }
+  queue_cv_.notify_one();
+}
+
+void Service::receiveCommand(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  command_t c;
+  std::string detail;
+  const MessageProblem p =
+      decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &c, &detail);
+  if (p != MessageProblem::kNone) {
+    logLine(std::string("rejected command: ") + toString(p) + ": " + detail);
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    commands_.push_back(c);
+  }
+  queue_cv_.notify_one();
+}
+
+void Service::smootherLoop() {
+  for (;;) {
+    std::vector<Queued> batch;
+    std::vector<command_t> commands;
+    bool stopping = false;
+    {
+      std::unique_lock<std::mutex> lock(queue_mutex_);
+      queue_cv_.wait_for(lock, std::chrono::milliseconds(100),
+                         [&] { return !queue_.empty() || !commands_.empty() || smoother_stop_; });
+      batch.swap(queue_);
+      commands.swap(commands_);
+      stopping = smoother_stop_;
+    }
+    try {
+      if (!batch.empty()) applyBatch(batch, false);
+      for (const auto& c : commands) handleCommand(c);
+      if (std::chrono::duration<double>(std::chrono::steady_clock::now() - last_status_).count() >=
+          options_.status_period_s) {
+        publishStatus();
+      }
+      if (journal_) journal_->syncIfDue();
+    } catch (const std::exception& e) {
+      logLine(std::string("error: ") + e.what());
+    }
+    if (stopping) {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (queue_.empty() && commands_.empty()) return;
+    }
+  }
+}
+
+void Service::ensureEngine(int dim) {
+  if (engine_) return;
+  engine_ = makeEngine(dim, options_.smoother);
+}
+
+void Service::writeMark(std::int8_t kind, int edges) {
+  if (!journal_) return;
+  journal_mark_t m;
+  m.utime = nowMicros();
+  m.kind = kind;
+  m.edges = edges;
+  m.update = updates_;
+  const auto bytes = encodeMessage(m);
+  journal_->append(kMarkChannel, m.utime, bytes.data(), static_cast<int>(bytes.size()));
+}
+
+void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
+  ensureEngine(batch.front().edge.index() == 0 ? 2 : 3);
+  if (!from_journal) {
+    writeMark(journal_mark_t::UPDATE, static_cast<int>(batch.size()));
+    // Group commit: every edge of the batch is on disk before any of it is applied.
+    if (journal_ && options_.fsync_before_update) journal_->sync();
+  }
+  std::int64_t rejected = 0, duplicates = 0;
+  for (const auto& q : batch) {
+    const EdgeResult r = engine_->add(q.edge);
+    if (r.status == EdgeStatus::kRejected) {
+      ++rejected;
+      if (!from_journal) {
+        logLine("smoother refused edge (sender " + std::to_string(q.sender) + " seq " +
+                std::to_string(q.seq) + "): " + r.reason);
+      }
+    } else if (r.status == EdgeStatus::kDuplicate) {
+      ++duplicates;
+    }
+  }
+  try {
+    engine_->update();
+  } catch (const std::exception& e) {
+    logLine(std::string("update failed: ") + e.what());
+  }
+  const OnlineStats stats = engine_->stats();
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    applied_ += static_cast<std::int64_t>(batch.size());
+    ++updates_;
+    poses_ = stats.poses;
+    pending_ = stats.edges_pending;
+    smoother_rejected_ += rejected;
+    smoother_duplicates_ += duplicates;
+    last_sender_ = batch.back().sender;
+    last_seq_ = batch.back().seq;
+    if (from_journal) {
+      journal_edges_ += static_cast<std::int64_t>(batch.size());
+      ++journal_updates_;
+    }
+  }
+  if (from_journal) return;
+  const bool full =
+      options_.full_every == 1 || (options_.full_every > 1 && updates_ % options_.full_every == 0);
+  publishEstimate(full);
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  for (const auto& q : batch) {
+    latencies_ms_.push_back(msSince(q.received));
+    transport_ms_.push_back(q.transport_ms);
+  }
+}
+
+void Service::refine(bool from_journal) {
+  if (!engine_) return;
+  if (!from_journal) writeMark(journal_mark_t::REFINE, 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  const double before = engine_->objective();
+  try {
+    engine_->refine();
+  } catch (const std::exception& e) {
+    logLine(std::string("refinement failed: ") + e.what());
+  }
+  const double after = engine_->objective();
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  ++refinements_;
+  refine_F_before_ = before;
+  refine_F_after_ = after;
+  refine_time_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  F_ = after;
+}
+
+void Service::handleCommand(const command_t& c) {
+  switch (c.command) {
+    case command_t::REFINE:
+      refine(false);
+      publishEstimate(true);
+      publishStatus();
+      break;
+    case command_t::PUBLISH_FULL:
+      publishEstimate(true);
+      break;
+    case command_t::SNAPSHOT: {
+      const std::string path = c.path.empty() ? options_.snapshot_path : c.path;
+      if (path.empty()) {
+        logLine("snapshot: no path in the command and no --output");
+      } else if (!engine_) {
+        logLine("snapshot: no estimate yet");
+      } else {
+        try {
+          engine_->writeG2o(path);
+          logLine("snapshot written to " + path);
+        } catch (const std::exception& e) {
+          logLine(std::string("snapshot failed: ") + e.what());
+        }
+      }
+      break;
+    }
+    case command_t::STATUS:
+      publishStatus();
+      break;
+    default:
+      logLine("unknown command " + std::to_string(c.command));
+  }
+}
+
+void Service::publishEstimate(bool full) {
+  if (!engine_) return;
+  estimate_t m = engine_->estimate(full);
+  m.utime = nowMicros();
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    m.last_sender = last_sender_;
+    m.last_seq = last_seq_;
+    m.update = updates_;
+    if (full) F_ = m.F;
+  }
+  const auto bytes = encodeMessage(m);
+  std::lock_guard<std::mutex> lock(publish_mutex_);
+  publish_lcm_.publish(channels_.estimate, bytes.data(), static_cast<unsigned>(bytes.size()));
+}
+
+status_t Service::status() const {
+  status_t s;
+  s.utime = nowMicros();
+  {
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    const IntakeCounts& c = intake_.counts();
+    s.received = c.received;
+    s.accepted = c.accepted;
+    s.rejected = c.rejected;
+    s.duplicates = c.duplicates;
+    s.gaps = c.gaps;
+    for (const auto& [reason, count] : c.rejected_by_reason) {
+      s.reason.push_back(reason);
+      s.reason_count.push_back(count);
+    }
+  }
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  s.applied = applied_;
+  s.rejected += smoother_rejected_;
+  if (smoother_rejected_ > 0) {
+    s.reason.push_back("smoother");
+    s.reason_count.push_back(smoother_rejected_);
+  }
+  s.duplicates += smoother_duplicates_;
+  s.pending = pending_;
+  s.updates = updates_;
+  s.queue_depth = static_cast<int32_t>(s.accepted - applied_);
+  s.poses = static_cast<int32_t>(poses_);
+  s.F = F_;
+  s.num_reasons = static_cast<int32_t>(s.reason.size());
+  const size_t n = latencies_ms_.size();
+  const size_t window = std::min(n, static_cast<size_t>(std::max(1, options_.latency_window)));
+  const cli::LatencySummary lat = cli::summarizeLatency(std::vector<double>(
+      latencies_ms_.end() - static_cast<std::ptrdiff_t>(window), latencies_ms_.end()));
+  s.latency_window = static_cast<int32_t>(window);
+  s.latency_p50_ms = lat.p50;
+  s.latency_p99_ms = lat.p99;
+  s.latency_max_ms = lat.max;
+  s.refinements = refinements_;
+  s.refine_F_before = refine_F_before_;
+  s.refine_F_after = refine_F_after_;
+  s.refine_time_s = refine_time_s_;
+  return s;
+}
+
+void Service::publishStatus() {
+  if (engine_) {
+    const double F = engine_->objective();
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    F_ = F;
+  }
+  const auto bytes = encodeMessage(status());
+  last_status_ = std::chrono::steady_clock::now();
+  std::lock_guard<std::mutex> lock(publish_mutex_);
+  publish_lcm_.publish(channels_.status, bytes.data(), static_cast<unsigned>(bytes.size()));
+}
+
+void Service::replayJournal() {
+  const EventLogContents log = readEventLog(options_.journal_path);
+  if (log.valid_bytes < log.file_bytes) {
+    logLine("journal " + options_.journal_path + ": dropping " +
+            std::to_string(log.file_bytes - log.valid_bytes) +
+            " bytes of an incomplete event at the end");
+  }
+  std::deque<Queued> unmarked;
+  const std::int64_t edge_hash = edge_t::getHash();
+  const std::int64_t mark_hash = journal_mark_t::getHash();
+  const auto now = std::chrono::steady_clock::now();
+  for (const LogEvent& event : log.events) {
+    const std::int64_t hash = leadingHash(event.data);
+    const int size = static_cast<int>(event.data.size());
+    if (hash == edge_hash) {
+      IntakeResult r = intake_.admit(event.data.data(), size);
+      if (r.verdict != Intake::kAccepted) {
+        logLine("journal: edge (sender " + std::to_string(r.sender) + " seq " +
+                std::to_string(r.seq) + ") skipped on replay: " + r.reason);
+        continue;
+      }
+      unmarked.push_back({std::move(r.edge), r.sender, r.seq, now});
+    } else if (hash == mark_hash) {
+      journal_mark_t m;
+      if (decodeMessage(event.data.data(), size, &m) != MessageProblem::kNone) continue;
+      if (m.kind == journal_mark_t::UPDATE) {
+        const size_t n = std::min(unmarked.size(), static_cast<size_t>(std::max(0, m.edges)));
+        if (n == 0) continue;
+        std::vector<Queued> batch(std::make_move_iterator(unmarked.begin()),
+                                  std::make_move_iterator(unmarked.begin() + n));
+        unmarked.erase(unmarked.begin(), unmarked.begin() + n);
+        applyBatch(batch, true);
+      } else if (m.kind == journal_mark_t::REFINE) {
+        refine(true);
+      }
+    }
+  }
+  journal_ = std::make_unique<EventLogWriter>(options_.journal_path, log.valid_bytes,
+                                              EventLogWriterOptions{options_.fsync_interval_ms});
+  // Accepted but not yet applied when the journal ended: the first update takes them.
+  queue_.assign(std::make_move_iterator(unmarked.begin()), std::make_move_iterator(unmarked.end()));
+  if (!log.events.empty()) {
+    logLine("journal " + options_.journal_path + ": replayed " + std::to_string(journal_edges_) +
+            " edges in " + std::to_string(journal_updates_) + " updates; " +
+            std::to_string(queue_.size()) + " edges to apply");
+  }
+}
+
+}  // namespace arbor::serve

@@ -1,0 +1,162 @@
+// `arbor serve` as a library: edges in over LCM, estimates and status out. One thread receives
+// and validates (EdgeIntake), journals each accepted edge and queues it; one thread runs the
+// smoother and, when it falls behind, takes every queued edge into a single update, so latency
+// stays bounded under bursts. With a journal (an LCM event log) every accepted edge is written
+// before it is applied, with marks of the update grouping; start() replays an existing journal
+// with the same grouping, so a restart after kill -9 reproduces the estimate exactly.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <ostream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <lcm/lcm-cpp.hpp>
+
+#include "io/lcm_journal.h"
+#include "io/lcm_messages.h"
+#include "tools/cli/latency.h"
+#include "tools/serve/edge_intake.h"
+#include "tools/serve/serve_engine.h"
+
+namespace arbor::serve {
+
+struct Channels {
+  std::string edges, estimate, status, command;
+  /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, each after `prefix`.
+  static Channels withPrefix(const std::string& prefix);
+};
+
+struct ServeOptions {
+  std::string channel_prefix;
+  std::string journal_path;         ///< "" = no journal
+  int fsync_interval_ms = -1;       ///< 0: fsync every edge; > 0: at most every N ms; < 0: never
+  bool fsync_before_update = true;  ///< fsync once before each update (covers its edges)
+  int full_every = 0;  ///< estimates: 0 changed poses only; 1 always full; N full every N
+  SmootherOptions smoother;
+  bool refine_on_exit = true;  ///< stop(): relinearise everything and iterate to convergence
+  int dim = 0;                 ///< 2 or 3 fixes the stream's dimension; 0: the first edge's
+  double status_period_s = 1.0;
+  int latency_window = 1000;      ///< status latency figures cover the last this many edges
+  std::string snapshot_path;      ///< where command SNAPSHOT with an empty path writes
+  std::ostream* log = nullptr;    ///< log lines (rejections, gaps, errors); nullptr: silent
+  int log_limit_per_reason = 20;  ///< log lines per rejection reason, then only counted
+};
+
+struct ServeSummary {
+  IntakeCounts intake;
+  std::int64_t applied = 0;  ///< edges taken into updates
+  std::int64_t updates = 0;
+  std::int64_t poses = 0;
+  std::int64_t pending = 0;
+  std::int64_t smoother_rejected = 0, smoother_duplicates = 0;
+  std::int64_t journal_edges = 0, journal_updates = 0;  ///< replayed from the journal at start
+  int refinements = 0;
+  double F_final = 0;
+  cli::LatencySummary latency;    ///< receipt → estimate published, every edge applied
+  cli::LatencySummary transport;  ///< edge utime → receipt (meaningful when clocks agree)
+  estimate_t final_estimate;      ///< full
+};
+
+class Service {
+ public:
+  /// `lcm` must outlive the service; it may be shared (memq:// in tests).
+  Service(lcm::LCM& lcm, ServeOptions options);
+  /// Receives on `receive` and publishes on `publish`. Over tcpq:// they should be two
+  /// instances: liblcm 1.3 delays what an instance receives (by up to its handle timeout) while
+  /// another thread publishes on it.
+  Service(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options);
+  ~Service();
+  Service(const Service&) = delete;
+  Service& operator=(const Service&) = delete;
+
+  /// Replays the journal (if any), publishes the replayed estimate, subscribes and starts the
+  /// receive and smoother threads. Throws std::runtime_error if the journal cannot be used.
+  void start();
+  /// Stops receiving, applies every queued edge in one last update, refines (option), flushes
+  /// the journal, publishes the final full estimate and status, joins the threads.
+  void stop();
+  /// Counters and figures so far (thread-safe).
+  status_t status() const;
+  /// After stop(): the whole run.
+  const ServeSummary& summary() const { return summary_; }
+  /// After stop(): writes the final estimate and the edges applied as g2o; false when there is
+  /// no estimate (no edge was applied). Throws FileError if it cannot be written.
+  bool writeG2o(const std::string& path) const;
+  const Channels& channels() const { return channels_; }
+
+ private:
+  struct Queued {
+    AnyStreamEdge edge;
+    std::int64_t sender = 0, seq = 0;
+    std::chrono::steady_clock::time_point received;
+    double transport_ms = 0;  ///< receipt − the edge's utime (wall clocks; same host: transport)
+  };
+
+  void onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  void onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  void receiveEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  void receiveCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  void receiveLoop();
+  void smootherLoop();
+  void replayJournal();
+  void applyBatch(std::vector<Queued>& batch, bool from_journal);
+  void refine(bool from_journal);
+  void handleCommand(const command_t& command);
+  void ensureEngine(int dim);
+  void publishEstimate(bool full);
+  void publishStatus();
+  void writeMark(std::int8_t kind, int edges);
+  void logLine(const std::string& line);
+
+  lcm::LCM& lcm_;          ///< receive (subscriptions, handle)
+  lcm::LCM& publish_lcm_;  ///< estimates and status
+  ServeOptions options_;
+  Channels channels_;
+  std::unique_ptr<EventLogWriter> journal_;
+
+  // Receive thread (and the journal replay before it starts); counts read under intake_mutex_.
+  mutable std::mutex intake_mutex_;
+  EdgeIntake intake_;
+  std::map<std::string, int> logged_by_reason_;
+
+  // Hand-over between the threads.
+  std::mutex queue_mutex_;
+  std::condition_variable queue_cv_;
+  std::vector<Queued> queue_;
+  std::vector<command_t> commands_;
+  bool smoother_stop_ = false;
+  std::atomic<bool> receive_stop_{false};
+
+  // Smoother thread; the figures status() reads are under state_mutex_.
+  std::unique_ptr<Engine> engine_;
+  mutable std::mutex state_mutex_;
+  std::int64_t applied_ = 0, updates_ = 0, poses_ = 0, pending_ = 0;
+  std::int64_t smoother_rejected_ = 0, smoother_duplicates_ = 0;
+  std::int64_t last_sender_ = 0, last_seq_ = 0;
+  std::int64_t journal_edges_ = 0, journal_updates_ = 0;
+  int refinements_ = 0;
+  double refine_F_before_ = 0, refine_F_after_ = 0, refine_time_s_ = 0;
+  double F_ = 0;
+  std::vector<double> latencies_ms_;  ///< every applied edge
+  std::vector<double> transport_ms_;  ///< every applied edge
+  std::chrono::steady_clock::time_point last_status_;
+
+  std::mutex log_mutex_;
+  std::mutex publish_mutex_;
+  std::vector<lcm::Subscription*> subscriptions_;
+  std::thread receive_thread_, smoother_thread_;
+  bool running_ = false;
+  ServeSummary summary_;
+};
+
+/// Microseconds since the epoch (message utime).
+std::int64_t nowMicros();
+
+}  // namespace arbor::serve
