@@ -475,41 +475,55 @@ struct IncrementalSmoother<G>::Impl {
       const int id = stack.back();
       stack.pop_back();
       Clique& c = cliques[id];
-      bool recompute = full || c.dirty;
-      if (!recompute)
-        for (int v : c.separator)
-          if (changed[v]) {
-            recompute = true;
-            break;
-          }
-      if (!recompute) continue;
+      // Recompute when re-eliminated, or when a separator variable changed.
+      bool sep_changed = full;
+      for (int k = 0; k < static_cast<int>(c.separator.size()) && !sep_changed; ++k)
+        sep_changed = changed[c.separator[k]] != 0;
+      if (!sep_changed && !c.dirty) continue;
       ++solved;
       const int nf = static_cast<int>(c.frontals.size());
       const int ns = static_cast<int>(c.separator.size());
-      const int F = c.F;
-      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s).
+      const int F = c.F, N = c.F + c.Sn;
+      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s): dot products down contiguous columns, with
+      // four partial sums to keep the adds independent.
       xs_buf.resize(c.Sn);
       for (int b = 0; b < ns; ++b)
         Eigen::Map<Vec>(xs_buf.data() + b * D) = delta_newton[c.separator[b]];
       x_buf.resize(F);
       double* x = x_buf.data();
-      {
-        const typename Clique::ConstMap LS = c.LS();
-        Eigen::Map<Eigen::VectorXd> xm(x, F);
-        xm = c.d();
-        if (c.Sn > 0)
-          xm.noalias() -= LS.bottomRows(c.Sn).transpose() *
-                          Eigen::Map<const Eigen::VectorXd>(xs_buf.data(), c.Sn);
-        LS.topRows(F).transpose().template triangularView<Eigen::Upper>().solveInPlace(xm);
+      const double* LS = c.lsPtr();
+      const double* d = c.dPtr();
+      const double* xs = xs_buf.data();
+      const int Sn = c.Sn;
+      for (int k = 0; k < F; ++k) {
+        const double* col = LS + static_cast<size_t>(k) * N + F;
+        double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+        int i = 0;
+        for (; i + 4 <= Sn; i += 4) {
+          s0 += col[i] * xs[i];
+          s1 += col[i + 1] * xs[i + 1];
+          s2 += col[i + 2] * xs[i + 2];
+          s3 += col[i + 3] * xs[i + 3];
+        }
+        for (; i < Sn; ++i) s0 += col[i] * xs[i];
+        x[k] = d[k] - ((s0 + s1) + (s2 + s3));
+      }
+      for (int k = F - 1; k >= 0; --k) {  // Lᵀ x = y, column k of L below the diagonal
+        const double* col = LS + static_cast<size_t>(k) * N;
+        double acc = x[k];
+        for (int i = k + 1; i < F; ++i) acc -= col[i] * x[i];
+        x[k] = acc / col[k];
       }
       // The new values are always taken. A variable is "changed" (the cliques below that hold
       // it in their separator must be recomputed) when it moved by at least the threshold from
       // the value they were last solved with (delta_seen), so small moves cannot accumulate.
+      bool frontal_changed = full;
       for (int a = 0; a < nf; ++a) {
         const int v = c.frontals[a];
         const Eigen::Map<const Vec> xv(x + a * D);
         if (full || (xv - delta_seen[v]).cwiseAbs().maxCoeff() >= opt.wildfire_threshold) {
           delta_seen[v] = xv;
+          frontal_changed = true;
           if (!changed[v]) {
             changed[v] = 1;
             changed_list.push_back(v);
@@ -518,9 +532,14 @@ struct IncrementalSmoother<G>::Impl {
         delta_newton[v] = xv;
         if (!opt.dogleg) delta[v] = xv;
       }
-      // As GTSAM's optimizeWildfire: a recomputed clique's children are visited; each decides
-      // from its own separator whether it must be recomputed.
-      for (int ch : c.children) stack.push_back(ch);
+      // A child's separator lies in this clique's frontals ∪ separator: it can only need
+      // recomputing if one of those changed (or if it was itself re-eliminated).
+      if (frontal_changed || sep_changed) {
+        for (int ch : c.children) stack.push_back(ch);
+      } else {
+        for (int ch : c.children)
+          if (cliques[ch].dirty) stack.push_back(ch);
+      }
       c.dirty = false;
     }
     for (int v : changed_list) changed[v] = 0;

@@ -103,7 +103,7 @@ class Minimizer {
       if (converged()) return;
     }
     restore(best);
-    finish(Termination::kMaxIterations, "");
+    finish(Termination::kMaxIterations, "iteration limit reached");
   }
 
   // Ceres' LevenbergMarquardtStrategy: (H + D/radius) δ = −g, D = diag(H) clamped.
@@ -145,7 +145,7 @@ class Minimizer {
         return;
       }
     }
-    finish(Termination::kMaxIterations, "");
+    finish(Termination::kMaxIterations, "iteration limit reached");
   }
 
   // Powell's dogleg in Ceres' scaled variables y = Dδ, D = sqrt(diag(H)) clamped; radius
@@ -203,7 +203,7 @@ class Minimizer {
         return;
       }
     }
-    finish(Termination::kMaxIterations, "");
+    finish(Termination::kMaxIterations, "iteration limit reached");
   }
 
   void finish(Termination termination, const std::string& message) {
@@ -252,25 +252,30 @@ class Minimizer {
 
   // Converged at the current linearisation point (zero objective or gradient)?
   bool converged() {
-    if (F_ == 0.0 || equations_.dimension() == 0 ||
-        equations_.gradient().cwiseAbs().maxCoeff() <= kGradientTolerance) {
-      finish(Termination::kConverged, F_ == 0.0 ? "zero objective" : "gradient below tolerance");
-      return true;
+    if (equations_.dimension() == 0) {
+      finish(Termination::kConverged, "no free poses");
+    } else if (F_ == 0.0) {
+      finish(Termination::kConverged, "zero objective");
+    } else if (equations_.gradient().cwiseAbs().maxCoeff() <= kGradientTolerance) {
+      finish(Termination::kConverged, "gradient below tolerance");
+    } else {
+      return false;
     }
-    return false;
+    return true;
   }
 
   bool tinyStep(const Eigen::VectorXd& delta) const {
     return delta.norm() <= kStepTolerance * (parameter_norm_ + kStepTolerance);
   }
 
-  // The Gauss–Newton step for dogleg, damped by μ·diag(H) (μ = 1e-8, ×10) if H is singular.
+  // The Gauss–Newton step for dogleg, damped by μ·diag(H) (μ = 1e-8 … 1e-2) if H is singular.
   bool gaussNewtonStep(Eigen::VectorXd* step) {
     if (!equations_.factorize()) {
       const Eigen::VectorXd diagonal =
           equations_.hessianDiagonal().cwiseMax(kMinDiagonal).cwiseMin(kMaxDiagonal);
       bool ok = false;
-      for (double mu = 1e-8; !ok && mu <= 1e-2; mu *= 10) {
+      double mu = 1e-8;
+      for (int attempt = 0; !ok && attempt < 7; ++attempt, mu *= 10) {
         const Eigen::VectorXd damping = mu * diagonal;
         ok = equations_.factorize(&damping);
       }

@@ -3,7 +3,8 @@
 #include <algorithm>
 #include <numeric>
 #include <stdexcept>
-#include <tuple>
+#include <string>
+#include <utility>
 
 namespace arbor {
 namespace {

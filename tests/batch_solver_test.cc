@@ -522,6 +522,16 @@ TEST(BatchSolver, NamesRoundTripAndBadInputIsRefused) {
   EXPECT_EQ(summary.termination, Termination::kConverged);
   EXPECT_EQ(summary.iterations, 0);
   EXPECT_LT(summary.F_final, 1e-20);
+  // Every pose fixed: nothing to solve, F as given.
+  PoseGraph2 all_fixed = s.graph;
+  all_fixed.fixed = {0, 1, 2, 3, 4};
+  std::vector<SE2> moved = s.truth;
+  moved[2] = SE2(1.0, 2.0, 0.3);
+  const BatchSummary fixed_summary = solveBatch(all_fixed, &moved);
+  EXPECT_EQ(fixed_summary.termination, Termination::kConverged);
+  EXPECT_EQ(fixed_summary.iterations, 0);
+  EXPECT_GT(fixed_summary.F_final, 0.0);
+  EXPECT_EQ(moved[2].x(), 1.0);
 }
 
 }  // namespace

@@ -75,7 +75,7 @@ TEST(Generator, CommittedDataMatchesGenerator) {
   };
   sim::ManhattanOptions m;
   m.poses = 1500;
-  m.grid = 8;
+  m.grid = 20;
   m.seed = 1;
   sim::SphereOptions sp;
   sp.rings = 10;

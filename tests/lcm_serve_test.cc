@@ -258,7 +258,9 @@ TEST(LcmServe, BurstIsFullyAppliedInFewerUpdatesAndMatchesReplay) {
   replay.finalize();
   const double F = replay.smoother().objective();
   EXPECT_NEAR(s.F_final, F, 1e-9 * F);
-  expectSamePoses(s.final_estimate, replay.estimates(), 1e-6);
+  // F agrees to 1e-9 relative; poses then agree to about the square root of that (flat
+  // directions of the objective).
+  expectSamePoses(s.final_estimate, replay.estimates(), 1e-4);
 }
 
 TEST(LcmServe, BadMessagesAreCountedWhileGoodOnesAreApplied) {

@@ -14,7 +14,7 @@ int generateCommand(const std::vector<std::string>& args) {
   std::string kind, output, truth_output;
   int poses = 0, rings = 0, per_ring = 0, size = 0, grid = 0;
   std::uint64_t seed = 1;
-  double sigma_t = 0.05, sigma_r = 0.01;
+  double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1;
   po::options_description options("arbor generate manhattan|sphere|grid [options]");
   options.add_options()("help,h", "show this help")("kind", po::value(&kind)->required(),
                                                      "manhattan | sphere | grid")(
@@ -26,6 +26,8 @@ int generateCommand(const std::vector<std::string>& args) {
       "size", po::value(&size), "grid: lattice size per axis (6)")(
       "rings", po::value(&rings), "sphere: number of rings (20)")(
       "per-ring", po::value(&per_ring), "sphere: poses per ring (50)")(
+      "closure-probability", po::value(&closure_probability),
+      "manhattan, grid: chance of a loop closure on a revisit (0.3 / 0.5)")(
       "sigma-t", po::value(&sigma_t)->default_value(0.05), "translation noise (m)")(
       "sigma-r", po::value(&sigma_r)->default_value(0.01), "rotation noise (rad)");
   po::positional_options_description positional;
@@ -38,6 +40,7 @@ int generateCommand(const std::vector<std::string>& args) {
   }
   parseArguments(args, options, positional);
   if (!(sigma_t > 0) || !(sigma_r > 0)) throw UsageError("noise sigmas must be positive");
+  if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1)) throw UsageError("--closure-probability must be in [0, 1]");
   const sim::NoiseModel noise{sigma_t, sigma_r};
 
   auto write = [&](const auto& simulation) {
@@ -52,6 +55,7 @@ int generateCommand(const std::vector<std::string>& args) {
     o.noise = noise;
     if (poses) o.poses = poses;
     if (grid) o.grid = grid;
+    if (closure_probability >= 0) o.closure_probability = closure_probability;
     if (o.poses < 2 || o.grid < 2) throw UsageError("--poses and --grid must be at least 2");
     write(sim::manhattanWorld(o));
   } else if (kind == "sphere") {
@@ -68,6 +72,7 @@ int generateCommand(const std::vector<std::string>& args) {
     o.noise = noise;
     if (poses) o.poses = poses;
     if (size) o.size = size;
+    if (closure_probability >= 0) o.closure_probability = closure_probability;
     if (o.poses < 2 || o.size < 2) throw UsageError("--poses and --size must be at least 2");
     write(sim::gridWorld(o));
   } else {

@@ -24,8 +24,8 @@ struct ManhattanOptions {
   int poses = 3500;
   int grid = 10;                     ///< the world is grid × grid cells of unit size
   double turn_probability = 0.3;     ///< chance of a ±90° turn at each step
-  double closure_probability = 0.6;  ///< chance of closing a loop on a revisited cell
-  int max_closures_per_pose = 2;
+  double closure_probability = 0.3;  ///< chance of closing a loop on a revisited cell
+  int max_closures_per_pose = 1;
   NoiseModel noise{0.05, 0.01};
   std::uint64_t seed = 1;
 };
