@@ -4,7 +4,14 @@
 //     table like the paper's Table II on stdout.
 //   arbor-bench replay [--shared DIR] [--only NAME,...] [--csv-dir DIR]
 //     edge-by-edge replay through the incremental smoother beside GTSAM iSAM2's figures.
+//   arbor-bench micro [--sizes=N,...] [--benchmark_* flags]
+//     the Google Benchmark microbenchmarks: runs `arbor-microbench` built beside this program.
+#include <unistd.h>
+
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <iostream>
 #include <set>
 #include <sstream>
@@ -203,19 +210,36 @@ int batch(const std::vector<std::string>& args, const std::string& default_share
   return 0;
 }
 
+/// Replaces this process by arbor-microbench (beside this executable) with `args`.
+int micro(const std::vector<std::string>& args) {
+  std::error_code ec;
+  const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  const std::string path =
+      (ec ? std::filesystem::path(".") : self.parent_path()) / "arbor-microbench";
+  std::vector<std::string> copy = args;
+  std::string name = "arbor-microbench";
+  std::vector<char*> argv = {name.data()};
+  for (auto& a : copy) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  execv(path.c_str(), argv.data());
+  throw std::runtime_error("cannot run " + path + ": " + std::strerror(errno));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout << "usage: arbor bench batch [--shared DIR] [--only NAMES] [--repeat N] [--no-ceres]\n"
-                 "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n";
+                 "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n"
+                 "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
   try {
     const std::vector<std::string> rest(args.begin() + 1, args.end());
     if (args[0] == "batch") return batch(rest, ARBOR_SHARED_DIR);
     if (args[0] == "replay") return replay(rest, ARBOR_SHARED_DIR);
+    if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";
     return 2;
   } catch (const std::exception& e) {

@@ -4,6 +4,11 @@
 
 #include <fstream>
 #include <string>
+#include <vector>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "tools/generator/graph_generator.h"
 
@@ -32,6 +37,17 @@ inline double procStatusMiB(const std::string& field) {
   return 0.0;
 }
 
+/// Bytes the allocator has handed out and not had back, in MiB (glibc's mallinfo2; 0 elsewhere).
+/// Unlike RSS, this excludes freed memory the allocator keeps.
+inline double heapInUseMiB() {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
+  const struct mallinfo2 m = mallinfo2();
+  return static_cast<double>(m.uordblks + m.hblkhd) / (1024.0 * 1024.0);
+#else
+  return 0.0;
+#endif
+}
+
 /// Resets the peak RSS (VmHWM) to the current RSS (Linux ≥ 4.0: "5" to /proc/self/clear_refs),
 /// so that a later VmHWM is the peak of what ran in between. False if the kernel refused.
 inline bool resetPeakRss() {
@@ -40,5 +56,9 @@ inline bool resetPeakRss() {
   clear.flush();
   return static_cast<bool>(clear);
 }
+
+/// Registers BM_UpdateAtSize/manhattan and BM_UpdateAtSize/sphere at these graph sizes (poses,
+/// at most 4000) (smoother_bench.cc).
+void registerUpdateAtSize(const std::vector<int>& sizes);
 
 }  // namespace arbor::micro

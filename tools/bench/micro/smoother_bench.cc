@@ -62,7 +62,8 @@ void addLatencyCounters(benchmark::State& state, UpdateLog log) {
 }
 
 /// Adds edge `e` of `graph` to the smoother (ids as keys).
-void feed(const PoseGraph<SE2>& graph, int e, OnlineSmoother<SE2>* smoother) {
+template <class G>
+void feed(const PoseGraph<G>& graph, int e, OnlineSmoother<G>* smoother) {
   const auto& edge = graph.edges[e];
   smoother->addEdge(graph.ids[edge.i], graph.ids[edge.j], edge.measurement, edge.information);
 }
@@ -72,7 +73,7 @@ void BM_ReplayManhattan(benchmark::State& state) {
   const auto s = micro::manhattanGraph(static_cast<int>(state.range(0)));
   const auto order = cli::replayGroups(s.graph, /*per_pose=*/false);
   UpdateLog log;
-  double F = 0, rss_end = 0;
+  double F = 0, rss_end = 0, heap_end = 0;
   const bool peak_reset = micro::resetPeakRss();
   const double rss_before = micro::procStatusMiB("VmRSS");
   for (auto _ : state) {
@@ -86,6 +87,7 @@ void BM_ReplayManhattan(benchmark::State& state) {
     }
     F = smoother.smoother().objective();
     rss_end = micro::procStatusMiB("VmRSS");
+    heap_end = micro::heapInUseMiB();
   }
   state.counters["poses"] = s.graph.numPoses();
   state.counters["edges"] = s.graph.numEdges();
@@ -94,28 +96,49 @@ void BM_ReplayManhattan(benchmark::State& state) {
   state.counters["peak_rss_MiB"] = micro::procStatusMiB("VmHWM");
   state.counters["peak_is_local"] = peak_reset;
   state.counters["rss_before_MiB"] = rss_before;
-  state.counters["rss_end_MiB"] = rss_end;  // with the smoother still alive
+  state.counters["rss_end_MiB"] = rss_end;    // with the smoother still alive
+  state.counters["heap_end_MiB"] = heap_end;  // allocated and not freed, smoother alive
   addLatencyCounters(state, log);
 }
 
-constexpr int kWindow = 100;  // updates timed at each size
+constexpr int kWindow = 100;        // updates timed at each size
+constexpr int kSeriesPoses = 4200;  // the trajectory the sizes are prefixes of (N + kWindow fit)
+
+// Two growing worlds: the Manhattan world revisits the same 10 × 10 cells, so it gets denser
+// as it grows; the sphere (rings of 50 poses, each closed to the ring below) keeps its
+// density, its separators staying about one ring wide.
+struct ManhattanSeries {
+  using Group = SE2;
+  static sim::Simulation<SE2> make() { return micro::manhattanGraph(kSeriesPoses); }
+};
+struct SphereSeries {
+  using Group = SE3;
+  static sim::Simulation<SE3> make() {
+    sim::SphereOptions o;
+    o.poses_per_ring = 50;
+    o.rings = kSeriesPoses / o.poses_per_ring;
+    return sim::sphereWorld(o);
+  }
+};
 
 // The update cost at a graph size N: the smoother is built (untimed) from the edges among the
-// first N poses of one 4200-pose trajectory, then each iteration feeds the next edge and runs
-// one update().
+// first N poses of one trajectory, then each iteration feeds the next edge and runs one update().
+template <class Series>
 void BM_UpdateAtSize(benchmark::State& state) {
+  using G = typename Series::Group;
   const int size = static_cast<int>(state.range(0));
-  const auto s = micro::manhattanGraph(4200);
+  const auto s = Series::make();
   const auto order = cli::replayGroups(s.graph, /*per_pose=*/false);
   auto last = [&](int e) { return std::max(s.graph.edges[e].i, s.graph.edges[e].j); };
   const auto setup_start = Clock::now();
-  OnlineSmoother<SE2> smoother;
+  OnlineSmoother<G> smoother;
   size_t next = 0;
   for (; next < order.size() && last(order[next][0]) < size; ++next) {
     feed(s.graph, order[next][0], &smoother);
     smoother.update();
   }
   state.counters["setup_s"] = millisecondsSince(setup_start) / 1e3;
+  const double heap_before = micro::heapInUseMiB();
   UpdateLog log;
   for (auto _ : state) {
     if (next >= order.size()) {
@@ -129,7 +152,10 @@ void BM_UpdateAtSize(benchmark::State& state) {
   }
   state.SetComplexityN(size);
   state.counters["poses"] = smoother.smoother().numPoses();
-  state.counters["rss_MiB"] = micro::procStatusMiB("VmRSS");  // with the smoother alive
+  // With the smoother alive: the resident set, the allocated heap, and its growth over the window.
+  state.counters["rss_MiB"] = micro::procStatusMiB("VmRSS");
+  state.counters["heap_MiB"] = micro::heapInUseMiB();
+  state.counters["heap_window_growth_MiB"] = micro::heapInUseMiB() - heap_before;
   addLatencyCounters(state, log);
 }
 
@@ -139,16 +165,20 @@ BENCHMARK(BM_ReplayManhattan)
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
-BENCHMARK(BM_UpdateAtSize)
-    ->ArgName("poses")
-    ->Arg(500)
-    ->Arg(1000)
-    ->Arg(2000)
-    ->Arg(4000)
-    ->Iterations(kWindow)
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime()
-    ->Complexity();
-
 }  // namespace
+
+namespace micro {
+
+void registerUpdateAtSize(const std::vector<int>& sizes) {
+  auto series = [&](const char* name, void (*function)(benchmark::State&)) {
+    benchmark::internal::Benchmark* b = benchmark::RegisterBenchmark(name, function);
+    b->ArgName("poses")->Iterations(kWindow)->Unit(benchmark::kMillisecond)->UseRealTime();
+    for (int n : sizes) b->Arg(n);
+    if (sizes.size() > 1) b->Complexity();
+  };
+  series("BM_UpdateAtSize/manhattan", BM_UpdateAtSize<ManhattanSeries>);
+  series("BM_UpdateAtSize/sphere", BM_UpdateAtSize<SphereSeries>);
+}
+
+}  // namespace micro
 }  // namespace arbor
