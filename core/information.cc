@@ -40,7 +40,8 @@ Eigen::MatrixXd nearestPositiveDefinite(const Eigen::MatrixXd& omega, double rel
   Eigen::VectorXd lambda = eig.eigenvalues();
   const double floor = std::max(relative_floor * lambda.cwiseAbs().maxCoeff(), 1e-12);
   lambda = lambda.cwiseMax(floor);
-  Eigen::MatrixXd result = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
+  Eigen::MatrixXd result =
+      eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
   return 0.5 * (result + result.transpose());
 }
 

@@ -12,8 +12,7 @@ double wrapAngle(double theta) {
   return a;
 }
 
-SE2::SE2(double x, double y, double theta)
-    : t_(x, y), c_(std::cos(theta)), s_(std::sin(theta)) {}
+SE2::SE2(double x, double y, double theta) : t_(x, y), c_(std::cos(theta)), s_(std::sin(theta)) {}
 
 SE2::SE2(const Eigen::Vector2d& t, double theta)
     : t_(t), c_(std::cos(theta)), s_(std::sin(theta)) {}

@@ -4,6 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
+bash scripts/check-format.sh
 build=${ARBOR_BUILD_DIR:-build-ci}
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DARBOR_WERROR=ON >/dev/null
 cmake --build "$build" -j "$(nproc)"

@@ -49,13 +49,7 @@ INSTANTIATE_TEST_SUITE_P(Shared, BatchOnDataset,
                                            "parking-garage", "M3500", "M3500a", "M3500b", "M3500c",
                                            "manhattan", "sphere_bignoise_vertex3", "torus3D",
                                            "cubicle"),
-                         [](const auto& info) {
-                           std::string s = info.param;
-                           for (char& c : s) {
-                             if (!isalnum(static_cast<unsigned char>(c))) c = '_';
-                           }
-                           return s;
-                         });
+                         [](const auto& info) { return testing::testName(info.param); });
 
 }  // namespace
 }  // namespace arbor

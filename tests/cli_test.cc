@@ -72,6 +72,18 @@ TEST(Cli, GenerateThenBatchJson) {
     EXPECT_NEAR(k["F_initial"].get<double>(), j["F_final"].get<double>(),
                 1e-9 * j["F_final"].get<double>());
   }
+  // The certifiable solver reports its rank, λ_min and certificate, and reaches LM's optimum.
+  const Result lm = run("batch " + file + " --json --init spanning-tree --solver lm");
+  const Result rtr = run("batch " + file + " --json --solver rtr");
+  ASSERT_EQ(rtr.status, 0) << rtr.out;
+  const auto r = nlohmann::json::parse(rtr.out);
+  EXPECT_EQ(r["solver"], "rtr");
+  EXPECT_EQ(r["certified"], true);
+  EXPECT_EQ(r["termination"], "certified");
+  EXPECT_GE(r["rank"].get<int>(), 5);
+  EXPECT_GT(r["lambda_min"].get<double>(), -1e-5);
+  const double F_lm = nlohmann::json::parse(lm.out)["F_final"].get<double>();
+  EXPECT_LE(r["F_final"].get<double>(), F_lm * (1 + 1e-6));
   std::filesystem::remove(file);
   std::filesystem::remove(out_file);
 }

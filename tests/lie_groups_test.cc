@@ -89,11 +89,16 @@ TYPED_TEST(LieGroupTest, ComposeInverseJacobians) {
     a.compose(b, &Ja, &Jb);
     a.inverse(&Jinv);
     a.between(b, &Jba, &Jbb);
-    EXPECT_LT((Ja - numericalJacobian<G>([&](const G& x) { return x.compose(b); }, a)).norm(), 1e-6);
-    EXPECT_LT((Jb - numericalJacobian<G>([&](const G& x) { return a.compose(x); }, b)).norm(), 1e-6);
-    EXPECT_LT((Jinv - numericalJacobian<G>([](const G& x) { return x.inverse(); }, a)).norm(), 1e-6);
-    EXPECT_LT((Jba - numericalJacobian<G>([&](const G& x) { return x.between(b); }, a)).norm(), 1e-6);
-    EXPECT_LT((Jbb - numericalJacobian<G>([&](const G& x) { return a.between(x); }, b)).norm(), 1e-6);
+    EXPECT_LT((Ja - numericalJacobian<G>([&](const G& x) { return x.compose(b); }, a)).norm(),
+              1e-6);
+    EXPECT_LT((Jb - numericalJacobian<G>([&](const G& x) { return a.compose(x); }, b)).norm(),
+              1e-6);
+    EXPECT_LT((Jinv - numericalJacobian<G>([](const G& x) { return x.inverse(); }, a)).norm(),
+              1e-6);
+    EXPECT_LT((Jba - numericalJacobian<G>([&](const G& x) { return x.between(b); }, a)).norm(),
+              1e-6);
+    EXPECT_LT((Jbb - numericalJacobian<G>([&](const G& x) { return a.between(x); }, b)).norm(),
+              1e-6);
   }
 }
 
@@ -133,10 +138,12 @@ TYPED_TEST(LieGroupTest, RelativePoseErrorJacobians) {
     for (int k = 0; k < G::kDoF; ++k) {
       typename G::Tangent d = G::Tangent::Zero();
       d(k) = h;
-      Ni.col(k) = (relativePoseError(z, xi.retract(d), xj) - relativePoseError(z, xi.retract(-d), xj)) /
-                  (2 * h);
-      Nj.col(k) = (relativePoseError(z, xi, xj.retract(d)) - relativePoseError(z, xi, xj.retract(-d))) /
-                  (2 * h);
+      Ni.col(k) =
+          (relativePoseError(z, xi.retract(d), xj) - relativePoseError(z, xi.retract(-d), xj)) /
+          (2 * h);
+      Nj.col(k) =
+          (relativePoseError(z, xi, xj.retract(d)) - relativePoseError(z, xi, xj.retract(-d))) /
+          (2 * h);
     }
     EXPECT_LT((Ji - Ni).norm(), 1e-5) << "trial " << trial;
     EXPECT_LT((Jj - Nj).norm(), 1e-5) << "trial " << trial;

@@ -2,6 +2,7 @@
 // the reference optima. Tests that need them GTEST_SKIP() with the path when they are absent.
 #pragma once
 
+#include <cctype>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +23,14 @@ inline std::string datasetPath(const std::string& name) {
 
 inline bool datasetPresent(const std::string& name) {
   return std::filesystem::exists(datasetPath(name));
+}
+
+/// A dataset name as a GoogleTest parameter name ("parking-garage" → "parking_garage").
+inline std::string testName(std::string name) {
+  for (char& c : name) {
+    if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+  }
+  return name;
 }
 
 struct OptimumRow {

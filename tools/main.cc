@@ -14,10 +14,14 @@ using Command = int (*)(const std::vector<std::string>&);
 const std::map<std::string, std::pair<Command, const char*>>& commands() {
   static const std::map<std::string, std::pair<Command, const char*>> table = {
       {"batch", {arbor::cli::batchCommand, "solve a g2o/TORO file in batch (GN, LM, dogleg)"}},
-      {"bench", {arbor::cli::benchCommand, "benchmarks on the shared datasets (arbor bench --help)"}},
-      {"replay", {arbor::cli::replayCommand, "feed a file edge by edge to the incremental smoother"}},
-      {"generate", {arbor::cli::generateCommand, "write a synthetic pose graph (manhattan, sphere, grid)"}},
-      {"serve", {arbor::cli::serveCommand, "run the smoother as an LCM service (edges in, estimates out)"}},
+      {"bench",
+       {arbor::cli::benchCommand, "benchmarks on the shared datasets (arbor bench --help)"}},
+      {"replay",
+       {arbor::cli::replayCommand, "feed a file edge by edge to the incremental smoother"}},
+      {"generate",
+       {arbor::cli::generateCommand, "write a synthetic pose graph (manhattan, sphere, grid)"}},
+      {"serve",
+       {arbor::cli::serveCommand, "run the smoother as an LCM service (edges in, estimates out)"}},
       {"publish", {arbor::cli::publishCommand, "stream a file's edges over LCM to arbor serve"}},
   };
   return table;

@@ -107,7 +107,8 @@ void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench
             << " | " << fmt("%.3f", l.p50) << " | " << fmt("%.3f", l.p99) << " | "
             << fmt("%.2f", l.max) << " | " << fmt("%.6e", r.F_final) << " | "
             << (ref ? fmt("%+.3f%%", 100.0 * (r.F_final - ref->F_star) / ref->F_star) : "—")
-            << " | " << fmt("%.3f", r.batch.time_s) << " | " << fmt("%.6e", r.batch.F_final) << " | ";
+            << " | " << fmt("%.3f", r.batch.time_s) << " | " << fmt("%.6e", r.batch.F_final)
+            << " | ";
   if (gtsam) {
     std::cout << fmt("%.3f", gtsam->total_s) << " | " << fmt("%.2f", gtsam->p99_ms) << " | "
               << fmt("%.6e", gtsam->F) << " | " << fmt("%.2f", r.total_s / gtsam->total_s) << " | "
@@ -124,8 +125,8 @@ int replay(const std::vector<std::string>& args, const std::string& default_shar
   po::options_description options("arbor bench replay [options]");
   options.add_options()("help,h", "show this help")(
       "shared", po::value(&shared)->default_value(bench::sharedDirectory(default_shared)),
-      "the shared folder (datasets/, reference/)")(
-      "only", po::value(&only), "comma-separated dataset names")(
+      "the shared folder (datasets/, reference/)")("only", po::value(&only),
+                                                   "comma-separated dataset names")(
       "csv-dir", po::value(&csv_dir), "write per-update latency CSVs (NAME.csv) here");
   po::variables_map vm;
   po::store(po::command_line_parser(args).options(options).run(), vm);
@@ -172,8 +173,8 @@ int batch(const std::vector<std::string>& args, const std::string& default_share
   po::options_description options("arbor bench batch [options]");
   options.add_options()("help,h", "show this help")(
       "shared", po::value(&shared)->default_value(bench::sharedDirectory(default_shared)),
-      "the shared folder (datasets/, reference/)")(
-      "only", po::value(&only), "comma-separated dataset names")(
+      "the shared folder (datasets/, reference/)")("only", po::value(&only),
+                                                   "comma-separated dataset names")(
       "repeat", po::value(&repeat)->default_value(1), "runs per solver; the fastest is reported")(
       "no-ceres", po::bool_switch(&no_ceres), "skip the Ceres baseline");
   po::variables_map vm;
@@ -230,9 +231,10 @@ int micro(const std::vector<std::string>& args) {
 int main(int argc, char** argv) {
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
-    std::cout << "usage: arbor bench batch [--shared DIR] [--only NAMES] [--repeat N] [--no-ceres]\n"
-                 "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n"
-                 "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
+    std::cout
+        << "usage: arbor bench batch [--shared DIR] [--only NAMES] [--repeat N] [--no-ceres]\n"
+           "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n"
+           "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
   try {

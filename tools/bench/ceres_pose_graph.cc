@@ -87,7 +87,6 @@ CeresResult toResult(const ceres::Solver::Summary& s) {
   return r;
 }
 
-
 }  // namespace
 
 template <>
@@ -146,8 +145,8 @@ CeresResult solveWithCeres(const PoseGraph<SE3>& graph, std::vector<SE3>* poses,
   ceres::Solve(paperOptions(max_iterations, function_tolerance), &problem, &summary);
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector4d c = Eigen::Map<Eigen::Vector4d>(&q[4 * k]);
-    (*poses)[k] = SE3(Eigen::Quaterniond(c(3), c(0), c(1), c(2)),
-                      Eigen::Map<Eigen::Vector3d>(&t[3 * k]));
+    (*poses)[k] =
+        SE3(Eigen::Quaterniond(c(3), c(0), c(1), c(2)), Eigen::Map<Eigen::Vector3d>(&t[3 * k]));
   }
   return toResult(summary);
 }

@@ -20,7 +20,7 @@ struct CeresResult {
 };
 
 template <class G>
-CeresResult solveWithCeres(const PoseGraph<G>& graph, std::vector<G>* poses, int max_iterations = 100,
-                           double function_tolerance = 1e-5);
+CeresResult solveWithCeres(const PoseGraph<G>& graph, std::vector<G>* poses,
+                           int max_iterations = 100, double function_tolerance = 1e-5);
 
 }  // namespace arbor::bench

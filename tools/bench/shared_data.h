@@ -31,7 +31,8 @@ struct Anchor {
 };
 
 /// DIR/reference/anchors.tsv keyed by (dataset, run), e.g. ("M3500", "isam2_edge").
-std::map<std::pair<std::string, std::string>, Anchor> readAnchorTable(const std::string& shared_dir);
+std::map<std::pair<std::string, std::string>, Anchor> readAnchorTable(
+    const std::string& shared_dir);
 
 /// "M3500" for ".../M3500.g2o".
 std::string datasetName(const std::string& path);

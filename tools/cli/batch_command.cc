@@ -6,6 +6,7 @@
 
 #include "core/batch_solver.h"
 #include "core/initialization.h"
+#include "core/riemannian_staircase.h"
 #include "io/pose_graph_file.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
@@ -18,11 +19,72 @@ namespace po = boost::program_options;
 struct BatchRun {
   std::string file;
   BatchOptions solver;
+  bool rtr = false;  // SE-Sync's Riemannian staircase with a certificate, then an LM polish
   std::string init;  // empty: "file" when the file has VERTEX lines, else "odometry"
   std::string output;
   bool json = false;
   ReadOptions read;
 };
+
+// arbor batch --solver rtr: the certifiable solver; it starts from its own chordal relaxation.
+template <class G>
+int solveRtrAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
+                      const Stopwatch& total) {
+  std::vector<G> poses = chordalInitialization(graph);
+  const double F_initial = objective(graph, poses);
+  RtrOptions options;
+  options.verbose = run.solver.verbose;
+  const RtrSummary s = solveRtr(graph, &poses, options);
+  if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
+  const std::string termination =
+      s.certified ? "certified" : (s.relaxation_solved ? "relaxation_not_exact" : "not_certified");
+  if (run.json) {
+    nlohmann::json j = {
+        {"file", run.file},
+        {"nodes", graph.numPoses()},
+        {"edges", graph.numEdges()},
+        {"dim", G::kDim},
+        {"solver", "rtr"},
+        {"init", "chordal"},
+        {"F_initial", F_initial},
+        {"F_final", s.F_final},
+        {"F_rounded", s.F_rounded},
+        {"sesync_objective", s.sesync_objective},
+        {"iterations", s.rtr_iterations},
+        {"termination", termination},
+        {"rank", s.rank},
+        {"lambda_min", s.lambda_min},
+        {"certified", s.certified},
+        {"time_s", s.time_s},
+        {"time_phases_s",
+         {{"problem", s.time_problem_s},
+          {"optimization", s.time_optimization_s},
+          {"certificate", s.time_certificate_s},
+          {"rounding", s.time_rounding_s},
+          {"polish", s.time_polish_s}}},
+        {"total_s", total.seconds()},
+        {"information_repaired", report.repaired},
+        {"information_isotropic", report.made_isotropic},
+    };
+    std::cout << j.dump() << "\n";
+    return 0;
+  }
+  std::cout << std::setprecision(10) << "file         " << run.file << " (" << G::kDim << "D, "
+            << graph.numPoses() << " poses, " << graph.numEdges() << " edges)\n"
+            << "solver       rtr (Riemannian staircase, SE-Sync relaxation, then LM polish)\n"
+            << "F chordal    " << F_initial << "\n"
+            << "relaxation   " << s.sesync_objective << " (rank " << s.rank << ", λ_min "
+            << s.lambda_min << ")\n"
+            << "F rounded    " << s.F_rounded << "\n"
+            << "F final      " << s.F_final << "\n"
+            << "certificate  " << termination << (s.message.empty() ? "" : ": " + s.message) << "\n"
+            << std::setprecision(4) << "time         " << s.time_s << " s (problem "
+            << s.time_problem_s << ", optimisation " << s.time_optimization_s << ", certificate "
+            << s.time_certificate_s << ", rounding " << s.time_rounding_s << ", polish "
+            << s.time_polish_s << "), " << total.seconds() << " s total\n";
+  if (!run.output.empty()) std::cout << "output       " << run.output << "\n";
+  return 0;
+}
 
 template <class G>
 int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
@@ -80,9 +142,9 @@ int batchCommand(const std::vector<std::string>& args) {
   BatchRun run;
   std::string solver = "lm", information = "refuse";
   po::options_description options("arbor batch FILE [options]");
-  options.add_options()("help,h", "show this help")(
-      "file", po::value(&run.file)->required(), "g2o or TORO file")(
-      "solver", po::value(&solver)->default_value("lm"), "gn | lm | dogleg")(
+  options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
+                                                    "g2o or TORO file")(
+      "solver", po::value(&solver)->default_value("lm"), "gn | lm | dogleg | rtr")(
       "init", po::value(&run.init),
       "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
       "odometry)")("max-iterations", po::value(&run.solver.max_iterations)->default_value(100),
@@ -104,7 +166,8 @@ int batchCommand(const std::vector<std::string>& args) {
   }
   parseArguments(args, options, positional);
   try {
-    run.solver.method = parseBatchMethod(solver);
+    run.rtr = solver == "rtr";
+    if (!run.rtr) run.solver.method = parseBatchMethod(solver);
     if (!run.init.empty()) parseInitMethod(run.init);
   } catch (const std::invalid_argument& e) {
     throw UsageError(e.what());
@@ -115,7 +178,12 @@ int batchCommand(const std::vector<std::string>& args) {
 
   ReadReport report;
   AnyPoseGraph any = readPoseGraphFile(run.file, run.read, &report);
-  return std::visit([&](auto& graph) { return solveAndReport(run, graph, report, total); }, any);
+  return std::visit(
+      [&](auto& graph) {
+        return run.rtr ? solveRtrAndReport(run, graph, report, total)
+                       : solveAndReport(run, graph, report, total);
+      },
+      any);
 }
 
 }  // namespace arbor::cli

@@ -21,7 +21,8 @@ class UsageError : public std::runtime_error {
 /// Parses `args` (without the subcommand name) against `options` and `positional`;
 /// throws UsageError on anything unknown, missing or malformed.
 boost::program_options::variables_map parseArguments(
-    const std::vector<std::string>& args, const boost::program_options::options_description& options,
+    const std::vector<std::string>& args,
+    const boost::program_options::options_description& options,
     const boost::program_options::positional_options_description& positional);
 
 InformationPolicy parseInformationPolicy(const std::string& name);

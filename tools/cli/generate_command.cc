@@ -17,15 +17,15 @@ int generateCommand(const std::vector<std::string>& args) {
   double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1;
   po::options_description options("arbor generate manhattan|sphere|grid [options]");
   options.add_options()("help,h", "show this help")("kind", po::value(&kind)->required(),
-                                                     "manhattan | sphere | grid")(
+                                                    "manhattan | sphere | grid")(
       "output,o", po::value(&output)->required(), "g2o file to write")(
       "truth", po::value(&truth_output), "also write the ground truth poses as g2o")(
       "seed", po::value(&seed)->default_value(1), "random seed")(
       "poses", po::value(&poses), "number of poses (manhattan: 3500, grid: 1000)")(
       "grid", po::value(&grid), "manhattan: world size in cells (10)")(
       "size", po::value(&size), "grid: lattice size per axis (6)")(
-      "rings", po::value(&rings), "sphere: number of rings (20)")(
-      "per-ring", po::value(&per_ring), "sphere: poses per ring (50)")(
+      "rings", po::value(&rings), "sphere: number of rings (20)")("per-ring", po::value(&per_ring),
+                                                                  "sphere: poses per ring (50)")(
       "closure-probability", po::value(&closure_probability),
       "manhattan, grid: chance of a loop closure on a revisit (0.3 / 0.5)")(
       "sigma-t", po::value(&sigma_t)->default_value(0.05), "translation noise (m)")(
@@ -40,7 +40,8 @@ int generateCommand(const std::vector<std::string>& args) {
   }
   parseArguments(args, options, positional);
   if (!(sigma_t > 0) || !(sigma_r > 0)) throw UsageError("noise sigmas must be positive");
-  if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1)) throw UsageError("--closure-probability must be in [0, 1]");
+  if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1))
+    throw UsageError("--closure-probability must be in [0, 1]");
   const sim::NoiseModel noise{sigma_t, sigma_r};
 
   auto write = [&](const auto& simulation) {

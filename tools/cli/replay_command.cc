@@ -3,10 +3,12 @@
 // from the incremental estimate.
 #include <iomanip>
 #include <iostream>
+#include <sstream>
 
 #include <nlohmann/json.hpp>
 
 #include "io/pose_graph_file.h"
+#include "tools/cli/batch_refinement.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
 #include "tools/cli/replay_runner.h"
@@ -17,11 +19,57 @@ namespace {
 namespace po = boost::program_options;
 
 struct ReplayRun {
-  std::string file, output, latency_csv, step = "edge";
-  bool json = false, finalize = true;
+  std::string file, output, latency_csv, step = "edge", batch;
+  bool json = false, finalize = true, reseed = false;
+  int batch_every = 0;
   SmootherOptions smoother;
   ReadOptions read;
 };
+
+nlohmann::json batchRunJson(const BatchRun& b) {
+  nlohmann::json j = {{"update", b.update},
+                      {"poses", b.poses},
+                      {"edges", b.edges},
+                      {"F_incremental", b.F_incremental},
+                      {"F_batch", b.F_batch},
+                      {"relative_gap", b.relative_gap},
+                      {"max_translation_diff", b.max_translation_diff},
+                      {"max_rotation_diff", b.max_rotation_diff},
+                      {"winner", b.winner},
+                      {"margin", b.margin},
+                      {"time_s", b.time_s},
+                      {"iterations", b.iterations},
+                      {"updates_during", b.updates_during},
+                      {"final", b.final_run},
+                      {"reseeded", b.reseeded},
+                      {"reseed_s", b.reseed_s}};
+  if (b.reseeded && !b.final_run) {
+    j["F_before_reseed"] = b.F_before_reseed;
+    j["F_after_reseed"] = b.F_after_reseed;
+  }
+  if (b.rank > 0) {
+    j["rank"] = b.rank;
+    j["lambda_min"] = b.lambda_min;
+    j["certified"] = b.certified;
+  }
+  return j;
+}
+
+std::string batchRunLine(const BatchRun& b) {
+  std::ostringstream out;
+  out << std::setprecision(8) << (b.final_run ? "final" : "update ")
+      << (b.final_run ? "" : std::to_string(b.update)) << ": " << b.poses << " poses, " << b.edges
+      << " edges, F inc " << b.F_incremental << " batch " << b.F_batch << std::setprecision(3)
+      << " (gap " << 100.0 * b.relative_gap << " %, " << b.winner << " by " << b.margin
+      << "), max diff " << b.max_translation_diff << " m / " << b.max_rotation_diff << " rad, "
+      << b.time_s << " s, " << b.updates_during << " updates meanwhile";
+  if (b.rank > 0) {
+    out << ", rank " << b.rank << " lambda_min " << b.lambda_min
+        << (b.certified ? " certified" : " not certified");
+  }
+  if (b.reseeded) out << ", reseeded (" << b.reseed_s << " s)";
+  return out.str();
+}
 
 template <class G>
 int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clock) {
@@ -29,7 +77,18 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   settings.smoother = run.smoother;
   settings.per_pose = run.step == "pose";
   settings.finalize = run.finalize;
-  const ReplayResult<G> r = runReplay(graph, settings);
+  LoopResult<G> loop_result;
+  const bool with_batches = !run.batch.empty();
+  if (with_batches) {
+    BatchLoopSettings loop;
+    loop.kind = parseBatchKind(run.batch);
+    loop.every = run.batch_every;
+    loop.reseed = run.reseed;
+    loop_result = runReplayWithBatches(graph, settings, loop);
+  } else {
+    loop_result.replay = runReplay(graph, settings);
+  }
+  const ReplayResult<G>& r = loop_result.replay;
   for (const auto& line : r.rejections) std::cerr << "arbor replay: " << line << "\n";
   if (!run.output.empty()) writeG2oFile(run.output, graph, r.poses);
   if (!run.latency_csv.empty()) writeLatencyCsv(run.latency_csv, r.rows);
@@ -62,28 +121,44 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"peak_rss_mb", peakRssMb()},
         {"wall_s", total_clock.seconds()},
     };
+    if (with_batches) {
+      j["batch"] = run.batch;
+      j["batch_every"] = run.batch_every;
+      j["reseed"] = run.reseed;
+      j["batches_skipped"] = loop_result.skipped;
+      j["reseeds"] = loop_result.reseeds;
+      j["reseed_s"] = loop_result.reseed_s;
+      j["batches"] = nlohmann::json::array();
+      for (const BatchRun& b : loop_result.batches) j["batches"].push_back(batchRunJson(b));
+    }
     std::cout << j.dump() << "\n";
     return 0;
   }
   std::cout << std::setprecision(10) << "file          " << run.file << " (" << G::kDim << "D, "
             << graph.numPoses() << " poses, " << graph.numEdges() << " edges)\n"
             << "updates       " << r.rows.size() << " (one per " << run.step << ")\n"
-            << std::setprecision(4) << "total         " << r.total_s << " s (updates "
-            << r.update_s << " s, final relinearisation " << r.finalize_s << " s)\n"
+            << std::setprecision(4) << "total         " << r.total_s << " s (updates " << r.update_s
+            << " s, final relinearisation " << r.finalize_s << " s)\n"
             << "latency ms    p50 " << lat.p50 << "  p90 " << lat.p90 << "  p99 " << lat.p99
             << "  max " << lat.max << "\n"
             << std::setprecision(10) << "F incremental " << r.F_incremental
             << " (before the final relinearisation)\n"
             << "F final       " << r.F_final << "\n"
-            << "F batch LM    " << r.batch.F_final << " (" << r.batch.iterations
-            << " iterations from the incremental estimate, " << std::setprecision(4)
-            << r.batch.time_s << " s)\n"
+            << (run.batch == "rtr" ? "F batch RTR   " : "F batch LM    ") << r.batch.F_final << " ("
+            << r.batch.iterations << " iterations from the incremental estimate, "
+            << std::setprecision(4) << r.batch.time_s << " s)\n"
             << "gap           " << std::setprecision(3) << 100.0 * gap << " %\n"
             << "relinearized  " << r.relinearized << " variables in total\n";
   if (r.indeterminate) std::cout << "indeterminate " << r.indeterminate << " cliques damped\n";
   if (r.duplicates || r.rejected || r.pending) {
-    std::cout << "input         " << r.duplicates << " duplicates, " << r.rejected
-              << " rejected, " << r.pending << " never connected\n";
+    std::cout << "input         " << r.duplicates << " duplicates, " << r.rejected << " rejected, "
+              << r.pending << " never connected\n";
+  }
+  if (with_batches) {
+    std::cout << "batch runs    " << loop_result.batches.size() << " (" << run.batch << ", "
+              << loop_result.skipped << " skipped, " << loop_result.reseeds << " reseeds, "
+              << std::setprecision(4) << loop_result.reseed_s << " s rebuilding)\n";
+    for (const BatchRun& b : loop_result.batches) std::cout << "  " << batchRunLine(b) << "\n";
   }
   std::cout << "peak RSS      " << peakRssMb() << " MiB\n";
   return 0;
@@ -98,8 +173,8 @@ int replayCommand(const std::vector<std::string>& args) {
   double beta = -1;
   bool no_finalize = false;
   po::options_description options("arbor replay FILE [options]");
-  options.add_options()("help,h", "show this help")(
-      "file", po::value(&run.file)->required(), "g2o or TORO file")(
+  options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
+                                                    "g2o or TORO file")(
       "step", po::value(&run.step)->default_value("edge"),
       "edge: update after every edge; pose: once per new pose with all its edges")(
       "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
@@ -110,17 +185,22 @@ int replayCommand(const std::vector<std::string>& args) {
                         po::value(&run.smoother.relinearize_skip)->default_value(10),
                         "check relinearisation every K updates")(
       "wildfire", po::value(&run.smoother.wildfire_threshold)->default_value(0.001),
-      "partial back-substitution threshold")(
-      "full-backsubstitution", po::bool_switch(&run.smoother.full_backsubstitution),
-      "solve every clique on each update")("dogleg", po::bool_switch(&run.smoother.dogleg),
-                                           "Powell's dogleg instead of Gauss-Newton")(
+      "partial back-substitution threshold")("full-backsubstitution",
+                                             po::bool_switch(&run.smoother.full_backsubstitution),
+                                             "solve every clique on each update")(
+      "dogleg", po::bool_switch(&run.smoother.dogleg), "Powell's dogleg instead of Gauss-Newton")(
       "no-finalize", po::bool_switch(&no_finalize),
       "skip the final relinearise-all pass (report the raw incremental estimate)")(
       "information", po::value(&information)->default_value("refuse"),
       "refuse | repair | isotropic (information matrices that are not positive definite)")(
       "output,o", po::value(&run.output), "write the final estimate as g2o")(
       "latency-csv", po::value(&run.latency_csv), "one row per update")(
-      "json", po::bool_switch(&run.json), "print one JSON object");
+      "json", po::bool_switch(&run.json), "print one JSON object")(
+      "batch", po::value(&run.batch), "lm | rtr: batch runs in the loop and after finalize")(
+      "batch-every", po::value(&run.batch_every)->default_value(0),
+      "a background batch run every N updates (needs --batch)")(
+      "reseed", po::bool_switch(&run.reseed),
+      "rebuild the smoother from a batch estimate with lower F");
   po::positional_options_description positional;
   positional.add("file", 1);
   for (const auto& a : args) {
@@ -141,6 +221,13 @@ int replayCommand(const std::vector<std::string>& args) {
   }
   if (run.smoother.relinearize_skip < 1) throw UsageError("--relinearize-skip must be >= 1");
   run.finalize = !no_finalize;
+  if (!run.batch.empty() && run.batch != "lm" && run.batch != "rtr") {
+    throw UsageError("--batch must be lm or rtr, not '" + run.batch + "'");
+  }
+  if (run.batch_every < 0) throw UsageError("--batch-every must be >= 0");
+  if (run.batch.empty() && (run.batch_every > 0 || run.reseed)) {
+    throw UsageError("--batch-every and --reseed need --batch lm|rtr");
+  }
   run.read.information = parseInformationPolicy(information);
 
   AnyPoseGraph any = readPoseGraphFile(run.file, run.read);

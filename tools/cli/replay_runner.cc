@@ -74,8 +74,8 @@ void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows
   csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized\n";
   csv << std::setprecision(6);
   for (const auto& r : rows) {
-    csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << ","
-        << r.cliques_reeliminated << "," << r.variables_relinearized << "\n";
+    csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << "," << r.cliques_reeliminated
+        << "," << r.variables_relinearized << "\n";
   }
   if (!csv) throw std::runtime_error("error writing " + path);
 }

@@ -32,12 +32,12 @@ template <class G>
 struct ReplayResult {
   std::vector<UpdateRow> rows;
   LatencySummary latency;
-  double total_s = 0;     ///< updates + final relinearisation
-  double update_s = 0;    ///< sum of update latencies
-  double finalize_s = 0;  ///< the final relinearise-all pass
+  double total_s = 0;        ///< updates + final relinearisation
+  double update_s = 0;       ///< sum of update latencies
+  double finalize_s = 0;     ///< the final relinearise-all pass
   double F_incremental = 0;  ///< before the final pass
   double F_final = 0;
-  BatchSummary batch;     ///< LM from the final estimate (if settings.batch)
+  BatchSummary batch;  ///< LM from the final estimate (if settings.batch)
   int relinearized = 0, indeterminate = 0, duplicates = 0, rejected = 0, pending = 0;
   std::vector<std::string> rejections;  ///< one line per rejected edge
   std::vector<G> poses;                 ///< the final estimate in the graph's dense order

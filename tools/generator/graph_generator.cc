@@ -121,9 +121,9 @@ Simulation<SE3> sphereWorld(const SphereOptions& o) {
       const double azimuth = 2.0 * M_PI * p / o.poses_per_ring;
       const Eigen::Quaterniond q = Eigen::AngleAxisd(azimuth, Eigen::Vector3d::UnitZ()) *
                                    Eigen::AngleAxisd(polar, Eigen::Vector3d::UnitY());
-      const Eigen::Vector3d t = o.radius * Eigen::Vector3d(std::sin(polar) * std::cos(azimuth),
-                                                           std::sin(polar) * std::sin(azimuth),
-                                                           std::cos(polar));
+      const Eigen::Vector3d t =
+          o.radius * Eigen::Vector3d(std::sin(polar) * std::cos(azimuth),
+                                     std::sin(polar) * std::sin(azimuth), std::cos(polar));
       const int k = static_cast<int>(truth.size());
       truth.emplace_back(q, t);
       if (k > 0) pairs.emplace_back(k - 1, k);
@@ -139,7 +139,8 @@ Simulation<SE3> gridWorld(const GridOptions& o) {
   std::vector<std::pair<int, int>> pairs;
   std::map<std::tuple<int, int, int>, std::vector<int>> visits;
   // Six axis directions; the pose's x axis points along the direction of travel.
-  static const int dir[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  static const int dir[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
   auto orientation = [](int d) {
     const Eigen::Vector3d to(dir[d][0], dir[d][1], dir[d][2]);
     return Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitX(), to);

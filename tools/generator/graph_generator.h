@@ -1,7 +1,8 @@
 // Synthetic pose graphs with known ground truth, deterministic by seed:
 //  - a 2D Manhattan world in the style of Olson's M3500 (unit steps on a grid, 90° turns,
 //    loop closures on revisits);
-//  - a 3D sphere in the style of Kümmerle's sphere2500 (rings of poses, closures to the ring below);
+//  - a 3D sphere in the style of Kümmerle's sphere2500 (rings of poses, closures to the ring
+//  below);
 //  - a 3D grid random walk in the style of the "Cube" dataset.
 // Measurements are the true relative poses perturbed by z = z_true · Exp(n), n ~ N(0, Ω⁻¹),
 // with diagonal Ω; the initial estimate is the noisy odometry chain.
@@ -40,7 +41,7 @@ struct SphereOptions {
 
 struct GridOptions {
   int poses = 1000;
-  int size = 6;                      ///< a size³ lattice of unit spacing
+  int size = 6;  ///< a size³ lattice of unit spacing
   double closure_probability = 0.5;
   int max_closures_per_pose = 2;
   NoiseModel noise{0.05, 0.01};

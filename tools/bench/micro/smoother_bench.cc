@@ -39,19 +39,24 @@ double mean(const std::vector<double>& v) {
 struct UpdateLog {
   std::vector<double> ms;
   std::vector<double> ms_relinearizing;  ///< updates that relinearised some variable
-  double cliques = 0;
+  double cliques = 0, variables = 0, solved = 0;
 
   void add(double latency_ms, const UpdateStats& u) {
     ms.push_back(latency_ms);
     if (u.variables_relinearized > 0) ms_relinearizing.push_back(latency_ms);
     cliques += u.cliques_reeliminated;
+    variables += u.variables_reeliminated;
+    solved += u.cliques_solved;
   }
 };
 
 void addLatencyCounters(benchmark::State& state, UpdateLog log) {
   std::vector<double>& ms = log.ms;
   state.counters["updates"] = static_cast<double>(ms.size());
-  state.counters["cliques_per_update"] = ms.empty() ? 0.0 : log.cliques / ms.size();
+  const double n = ms.empty() ? 1.0 : static_cast<double>(ms.size());
+  state.counters["cliques_per_update"] = log.cliques / n;  // re-eliminated
+  state.counters["vars_per_update"] = log.variables / n;   // re-eliminated
+  state.counters["solved_per_update"] = log.solved / n;    // back-substituted
   state.counters["relin_updates"] = static_cast<double>(log.ms_relinearizing.size());
   state.counters["relin_mean_ms"] = mean(log.ms_relinearizing);
   state.counters["mean_ms"] = mean(ms);
@@ -152,6 +157,7 @@ void BM_UpdateAtSize(benchmark::State& state) {
   }
   state.SetComplexityN(size);
   state.counters["poses"] = smoother.smoother().numPoses();
+  state.counters["cliques"] = smoother.smoother().numCliques();
   // With the smoother alive: the resident set, the allocated heap, and its growth over the window.
   state.counters["rss_MiB"] = micro::procStatusMiB("VmRSS");
   state.counters["heap_MiB"] = micro::heapInUseMiB();
