@@ -7,12 +7,11 @@
 #include <limits>
 #include <stdexcept>
 
-#include <omp.h>
-
 #include <Spectra/SymEigsSolver.h>
 #include <Eigen/Eigenvalues>
 
 #include "core/initialization.h"
+#include "core/serial_openmp.h"
 #include "core/stiefel_product.h"
 
 namespace arbor {
@@ -20,19 +19,6 @@ namespace arbor {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-// CHOLMOD's OpenMP loops oversubscribe a small shared machine; run them in this thread only
-// (as core/sparse_cholesky.cc does).
-class SerialOpenMP {
- public:
-  SerialOpenMP() : saved_(omp_get_max_active_levels()) { omp_set_max_active_levels(0); }
-  ~SerialOpenMP() { omp_set_max_active_levels(saved_); }
-  SerialOpenMP(const SerialOpenMP&) = delete;
-  SerialOpenMP& operator=(const SerialOpenMP&) = delete;
-
- private:
-  int saved_;
-};
 
 double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();

@@ -1,12 +1,13 @@
 #include "core/sparse_cholesky.h"
 
 #include <cholmod.h>
-#include <omp.h>
 
 #include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <utility>
+
+#include "core/serial_openmp.h"
 
 namespace arbor {
 namespace {
@@ -36,20 +37,6 @@ void checkPattern(const SymmetricPattern& p, const char* where) {
     throw std::invalid_argument(
         std::string(where) + ": inconsistent sparsity pattern (n = " + std::to_string(p.n) + ")");
 }
-
-// CHOLMOD 5 runs some loops of the supernodal factorisation with a hard-wired 4 OpenMP
-// threads; on a small shared machine that oversubscription costs about a third of the time.
-// This serialises them in the calling thread only (max-active-levels is a per-task ICV).
-class SerialOpenMP {
- public:
-  SerialOpenMP() : saved_(omp_get_max_active_levels()) { omp_set_max_active_levels(0); }
-  ~SerialOpenMP() { omp_set_max_active_levels(saved_); }
-  SerialOpenMP(const SerialOpenMP&) = delete;
-  SerialOpenMP& operator=(const SerialOpenMP&) = delete;
-
- private:
-  int saved_;
-};
 
 // Owns a cholmod_common set up quietly (no printing) for LLᵀ.
 struct Common {

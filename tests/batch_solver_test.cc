@@ -14,37 +14,14 @@
 #include "core/normal_equations.h"
 #include "core/pose_graph.h"
 #include "core/sparse_cholesky.h"
+#include "tests/random_graphs.h"
 
 namespace arbor {
 namespace {
 
-template <class G>
-typename G::Tangent randomTangent(std::mt19937_64& rng, double translation, double rotation) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  typename G::Tangent tau;
-  for (int k = 0; k < G::kDoF; ++k) tau(k) = n(rng) * (k < G::kDim ? translation : rotation);
-  return tau;
-}
-
-// A random information matrix: diagonal precisions (translation, rotation) plus a random
-// symmetric positive-semidefinite coupling, so Ω is dense and positive definite.
-template <class G>
-typename RelativePoseEdge<G>::Matrix randomInformation(std::mt19937_64& rng) {
-  using M = typename RelativePoseEdge<G>::Matrix;
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  M b;
-  for (int r = 0; r < G::kDoF; ++r)
-    for (int c = 0; c < G::kDoF; ++c) b(r, c) = u(rng);
-  M omega = 2.0 * b * b.transpose();
-  for (int k = 0; k < G::kDoF; ++k) omega(k, k) += k < G::kDim ? 20.0 : 200.0;
-  return omega;
-}
-
-template <class G>
-struct Synthetic {
-  PoseGraph<G> graph;
-  std::vector<G> truth;
-};
+using testing::randomInformation;
+using testing::randomTangent;
+using testing::Synthetic;
 
 // A random walk of n poses with odometry edges, `loops` random loop closures and one repeated
 // edge; measurements exact (noise 0) or perturbed by `noise` (translation; rotation 0.3×).

@@ -16,36 +16,14 @@
 #include "core/sesync_problem.h"
 #include "io/pose_graph_file.h"
 #include "shared_data.h"
+#include "tests/random_graphs.h"
 
 namespace arbor {
 namespace {
 
-template <class G>
-typename G::Tangent randomTangent(std::mt19937_64& rng, double translation, double rotation) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  typename G::Tangent tau;
-  for (int k = 0; k < G::kDoF; ++k) tau(k) = n(rng) * (k < G::kDim ? translation : rotation);
-  return tau;
-}
-
-// Dense, anisotropic, positive definite.
-template <class G>
-typename RelativePoseEdge<G>::Matrix randomInformation(std::mt19937_64& rng) {
-  using M = typename RelativePoseEdge<G>::Matrix;
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  M b;
-  for (int r = 0; r < G::kDoF; ++r)
-    for (int c = 0; c < G::kDoF; ++c) b(r, c) = u(rng);
-  M omega = 2.0 * b * b.transpose();
-  for (int k = 0; k < G::kDoF; ++k) omega(k, k) += k < G::kDim ? 20.0 : 200.0;
-  return omega;
-}
-
-template <class G>
-struct Synthetic {
-  PoseGraph<G> graph;
-  std::vector<G> truth;
-};
+using testing::randomInformation;
+using testing::randomTangent;
+using testing::Synthetic;
 
 template <class G>
 void addEdge(Synthetic<G>* s, int i, int j, const typename G::Tangent& noise,
