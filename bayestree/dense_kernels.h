@@ -37,6 +37,16 @@ class DoubleBuffer {
     }
     size_ = size;
   }
+  /// Resizes without initialising to exactly what is needed: reallocates when `size` exceeds
+  /// the capacity or is below half of it (a clique's storage is sized once per elimination, so
+  /// geometric growth and never shrinking would let recycled cliques hoard memory).
+  void fit(size_t size) {
+    if (size > capacity_ || size < capacity_ / 2) {
+      data_.reset(size ? new double[size] : nullptr);
+      capacity_ = size;
+    }
+    size_ = size;
+  }
   size_t size() const { return size_; }
   size_t capacity() const { return capacity_; }
   void swap(DoubleBuffer& o) noexcept {

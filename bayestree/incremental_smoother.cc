@@ -86,7 +86,7 @@ struct IncrementalSmoother<G>::Impl {
     void allocate() {
       F = static_cast<int>(frontals.size()) * D;
       Sn = static_cast<int>(separator.size()) * D;
-      storage.resize(sizeFor(F, Sn));
+      storage.fit(sizeFor(F, Sn));
     }
     double* lsPtr() { return storage.data(); }
     double* dPtr() { return storage.data() + (F + Sn) * F; }
@@ -160,6 +160,27 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
+
+  TreeMemory memory() const {
+    TreeMemory m;
+    double sep_sum = 0;
+    for (const Clique& c : cliques) {
+      m.clique_bytes_reserved += c.storage.capacity() * sizeof(double);
+      if (!c.in_use) {
+        ++m.free_cliques;
+        continue;
+      }
+      ++m.cliques;
+      m.clique_bytes += c.storage.size() * sizeof(double);
+      m.max_frontal_dim = std::max(m.max_frontal_dim, c.F);
+      m.max_separator_dim = std::max(m.max_separator_dim, c.Sn);
+      sep_sum += c.Sn;
+    }
+    if (m.cliques > 0) m.mean_separator_dim = sep_sum / m.cliques;
+    m.scratch_bytes = (h_buf.capacity() + x_buf.capacity() + xs_buf.capacity()) * sizeof(double);
+    for (const auto& b : s_buffers) m.scratch_bytes += b.capacity() * sizeof(double);
+    return m;
+  }
 
   int addPose(const G& x, bool is_fixed) {
     if (!isFinitePose(x)) throw std::invalid_argument("IncrementalSmoother::addPose: not finite");
@@ -484,36 +505,20 @@ struct IncrementalSmoother<G>::Impl {
       const int nf = static_cast<int>(c.frontals.size());
       const int ns = static_cast<int>(c.separator.size());
       const int F = c.F, N = c.F + c.Sn;
-      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s): dot products down contiguous columns, with
-      // four partial sums to keep the adds independent.
+      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s): a matrix-vector product and a triangular
+      // solve with the clique's stored [L; Sᵀ].
       xs_buf.resize(c.Sn);
       for (int b = 0; b < ns; ++b)
         Eigen::Map<Vec>(xs_buf.data() + b * D) = delta_newton[c.separator[b]];
       x_buf.resize(F);
       double* x = x_buf.data();
-      const double* LS = c.lsPtr();
-      const double* d = c.dPtr();
-      const double* xs = xs_buf.data();
-      const int Sn = c.Sn;
-      for (int k = 0; k < F; ++k) {
-        const double* col = LS + static_cast<size_t>(k) * N + F;
-        double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-        int i = 0;
-        for (; i + 4 <= Sn; i += 4) {
-          s0 += col[i] * xs[i];
-          s1 += col[i + 1] * xs[i + 1];
-          s2 += col[i + 2] * xs[i + 2];
-          s3 += col[i + 3] * xs[i + 3];
-        }
-        for (; i < Sn; ++i) s0 += col[i] * xs[i];
-        x[k] = d[k] - ((s0 + s1) + (s2 + s3));
-      }
-      for (int k = F - 1; k >= 0; --k) {  // Lᵀ x = y, column k of L below the diagonal
-        const double* col = LS + static_cast<size_t>(k) * N;
-        double acc = x[k];
-        for (int i = k + 1; i < F; ++i) acc -= col[i] * x[i];
-        x[k] = acc / col[k];
-      }
+      const typename Clique::ConstMap LS(c.lsPtr(), N, F);
+      Eigen::Map<Eigen::VectorXd> xv(x, F);
+      xv = c.d();
+      if (c.Sn > 0)
+        xv.noalias() -= LS.bottomRows(c.Sn).transpose() *
+                        Eigen::Map<const Eigen::VectorXd>(xs_buf.data(), c.Sn);
+      LS.topRows(F).template triangularView<Eigen::Lower>().transpose().solveInPlace(xv);
       // The new values are always taken. A variable is "changed" (the cliques below that hold
       // it in their separator must be recomputed) when it moved by at least the threshold from
       // the value they were last solved with (delta_seen), so small moves cannot accumulate.
@@ -787,6 +792,7 @@ struct IncrementalSmoother<G>::Impl {
     }
     // Alg. 1 lines 5–7: re-order, re-eliminate the top, re-attach the orphans.
     eliminateTop(top, orphans, !all, &st);
+    for (int c : free_cliques) cliques[c].storage.fit(0);  // those not recycled hold no memory
     for (int v : touched) mark[v] = 0;
     // Alg. 1 line 8 / Alg. 3: partial state update.
     st.cliques_solved = backSubstitute(all || opt.full_backsubstitution);
@@ -975,6 +981,11 @@ template <class G>
 int IncrementalSmoother<G>::numCliques() const {
   return impl_->num_cliques;
 }
+template <class G>
+TreeMemory IncrementalSmoother<G>::memory() const {
+  return impl_->memory();
+}
+
 template <class G>
 int IncrementalSmoother<G>::numPoses() const {
   return impl_->numPoses();

@@ -52,6 +52,16 @@ struct UpdateStats {
   double time_s = 0.0;
 };
 
+/// Memory held by the Bayes tree (bytes of double storage) and the shape of its cliques.
+struct TreeMemory {
+  size_t clique_bytes = 0;           ///< conditionals and cached factors in use
+  size_t clique_bytes_reserved = 0;  ///< allocated for them (≥ clique_bytes)
+  size_t scratch_bytes = 0;          ///< elimination scratch
+  int cliques = 0, free_cliques = 0;
+  int max_frontal_dim = 0, max_separator_dim = 0;
+  double mean_separator_dim = 0;
+};
+
 template <class G>
 class IncrementalSmoother {
  public:
@@ -91,6 +101,7 @@ class IncrementalSmoother {
   void checkInvariants() const;
 
   int numCliques() const;
+  TreeMemory memory() const;  ///< O(cliques)
   int numPoses() const;
   int numFactors() const;  ///< factors added by update() (not the queued ones)
   bool isFixed(int index) const;
