@@ -74,7 +74,7 @@ std::vector<SESyncMeasurement> sesyncMeasurements(const PoseGraph<G>& graph) {
     m.R = e.measurement.rotation();
     m.t = e.measurement.translation();
     m.tau = iso(0, 0);
-    m.kappa = 0.5 * iso(d, d);  // κ = ω / 2, see the header
+    m.kappa = d == 2 ? iso(d, d) : 0.5 * iso(d, d);  // SE-Sync's κ, see the header
     out.push_back(std::move(m));
     links.emplace_back(e.i, e.j);
   }

@@ -31,9 +31,11 @@ struct SESyncMeasurement {
 
 /// The measurements of a pose graph. Ω of each edge is replaced by isotropic precisions from
 /// isotropicInformation (core/information.h): τ = d / tr(Ω_tt⁻¹) and ω = r / tr(Ω_rr⁻¹), the
-/// precision on our rotational error θ (2D) or 2·vec q ≈ θ (3D). Since ‖R − R Exp(θ)‖²_F ≈ 2‖θ‖²,
-/// κ = ω / 2 makes κ‖·‖²_F ≈ ω‖θ‖² (our F to second order). In 3D this is exactly SE-Sync's
-/// reader (κ = 3 / (2 tr(Ω_rr⁻¹))); in 2D SE-Sync takes κ = Ω_θθ, twice ours. Self-loops are
+/// precision on our rotational error θ (2D) or 2·vec q ≈ θ (3D). κ is SE-Sync's reader's: in 3D
+/// κ = ω / 2 = 3 / (2 tr(Ω_rr⁻¹)), which makes κ‖R − R Exp(θ)‖²_F ≈ ω‖θ‖² (our F to second
+/// order, since ‖R − R Exp(θ)‖²_F ≈ 2‖θ‖²); in 2D κ = Ω_θθ = ω, twice that weight. (With ω / 2 in
+/// 2D the relaxation was not exact on M3500c and needed rank 6 on M3500b; with SE-Sync's κ it is
+/// exact on M3500c. The polish after rounding is in our F either way.) Self-loops are
 /// dropped (their cost does not depend on the poses). Throws std::invalid_argument if the
 /// graph is not connected (naming the first pose id not reached from the first pose).
 template <class G>

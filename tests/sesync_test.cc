@@ -120,10 +120,11 @@ void checkDataMatrices(std::uint64_t seed) {
   Eigen::MatrixXd T2 = T;
   for (int k = 0; k < T2.size(); ++k) T2.data()[k] += noise(rng);
   EXPECT_GT(sesyncCost(ms, R, T2, d), f);
-  // The isotropic weights: κ = ω/2 with ω = isotropicInformation's rotational precision.
+  // The isotropic weights, as SE-Sync's reader: with ω = isotropicInformation's rotational
+  // precision, κ = ω in 2D (Ω_θθ) and ω/2 = 3 / (2 tr(Ω_rr⁻¹)) in 3D.
   const Eigen::MatrixXd iso = isotropicInformation(s.graph.edges[0].information, d);
   EXPECT_DOUBLE_EQ(ms[0].tau, iso(0, 0));
-  EXPECT_DOUBLE_EQ(ms[0].kappa, 0.5 * iso(d, d));
+  EXPECT_DOUBLE_EQ(ms[0].kappa, d == 2 ? iso(d, d) : 0.5 * iso(d, d));
 }
 
 TEST(SESyncProblem, QuadraticFormMatchesDirectCost2D) { checkDataMatrices<SE2>(3); }
@@ -155,10 +156,12 @@ TEST(Rtr, RandomSyntheticGraphs) {
     const RtrSummary r2 = solveRtr(s2.graph, &p2);
     EXPECT_TRUE(r2.certified) << r2.message;
     EXPECT_GE(r2.lambda_min, -1e-5);
-    // LM started at the ground truth cannot end lower than the certified optimum.
+    // LM started at the ground truth cannot end lower than the certified optimum (up to the
+    // polish's stopping tolerance: SE-Sync's 2D κ weighs rotations twice as our F does, so the
+    // rounded point is a little farther from our F's minimum).
     std::vector<SE2> from_truth = s2.truth;
     solveBatch(s2.graph, &from_truth);
-    EXPECT_LE(r2.F_final, objective(s2.graph, from_truth) * (1 + 1e-6));
+    EXPECT_LE(r2.F_final, objective(s2.graph, from_truth) * (1 + 1e-5));
     EXPECT_NEAR(r2.F_final, objective(s2.graph, p2), 1e-9 * r2.F_final);
     EXPECT_LE(r2.F_final, r2.F_rounded * (1 + 1e-12));
 
