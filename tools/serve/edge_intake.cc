@@ -1,5 +1,8 @@
 #include "tools/serve/edge_intake.h"
 
+#include <algorithm>
+#include <stdexcept>
+
 namespace arbor::serve {
 namespace {
 
@@ -12,6 +15,42 @@ std::uint64_t fingerprint(const void* data, int size) {
 }
 
 }  // namespace
+
+EdgeIntake::EdgeIntake(int dim, std::int64_t window) : dim_(dim), window_(window) {
+  if (window < 1) {
+    throw std::invalid_argument("EdgeIntake: window " + std::to_string(window) + " is not >= 1");
+  }
+}
+
+std::size_t EdgeIntake::trackedSeqs(std::int64_t sender) const {
+  const auto it = senders_.find(sender);
+  return it == senders_.end() ? 0 : it->second.ring.size();
+}
+
+std::uint64_t* EdgeIntake::slot(Sender& s, std::int64_t seq, bool grow) const {
+  const auto index = static_cast<std::size_t>((seq - 1) % window_);
+  if (index >= s.ring.size()) {
+    if (!grow) return nullptr;
+    if (index >= s.ring.capacity()) {  // geometric growth, never past the window
+      s.ring.reserve(static_cast<std::size_t>(
+          std::min<std::int64_t>(window_, std::max(index + 1, 2 * s.ring.capacity()))));
+    }
+    s.ring.resize(index + 1, 0);
+  }
+  return &s.ring[index];
+}
+
+void EdgeIntake::advance(Sender& s, std::int64_t seq) const {
+  // The slots of s.highest + 1 .. seq held seq numbers now below the window: forget them.
+  if (seq - s.highest >= window_) {
+    std::fill(s.ring.begin(), s.ring.end(), 0);
+  } else {
+    for (std::int64_t q = s.highest + 1; q <= seq; ++q) {
+      if (std::uint64_t* e = slot(s, q, false)) *e = 0;
+    }
+  }
+  s.highest = seq;
+}
 
 IntakeResult EdgeIntake::reject(IntakeResult r, const std::string& reason,
                                 const std::string& detail) {
@@ -26,7 +65,9 @@ IntakeResult EdgeIntake::reject(IntakeResult r, const std::string& reason,
 void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason) {
   if (accepted.verdict != Intake::kAccepted) return;
   Sender& s = senders_[accepted.sender];
-  s.fingerprints.erase(accepted.seq);
+  if (accepted.seq > s.highest - window_) {
+    if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
+  }
   --counts_.accepted;
   ++counts_.gaps;  // its seq is missing now, until it is sent again
   ++counts_.rejected;
@@ -50,27 +91,33 @@ IntakeResult EdgeIntake::admit(const void* data, int size) {
                   "a " + std::to_string(dim) + "D edge on a " + std::to_string(dim_) + "D stream");
   }
   Sender& s = senders_[r.sender];
-  const std::uint64_t fp = fingerprint(data, size);
-  const auto seen = s.fingerprints.find(r.seq);
-  if (seen != s.fingerprints.end()) {
-    if (seen->second == fp) {
+  const std::uint64_t fp = std::max<std::uint64_t>(fingerprint(data, size), 1);  // 0: empty slot
+  if (r.seq <= s.highest - window_) {
+    return reject(std::move(r), "stale",
+                  "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
+                      " is " + std::to_string(window_) + " or more below its highest seq " +
+                      std::to_string(s.highest) + ": too old to tell a late edge from a repeat");
+  }
+  if (r.seq <= s.highest) {
+    const std::uint64_t* seen = slot(s, r.seq, false);
+    if (seen != nullptr && *seen == fp) {
       r.verdict = Intake::kDuplicate;
       r.reason = "duplicate";
       ++counts_.duplicates;
       return r;
     }
-    return reject(std::move(r), "seq reused",
-                  "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
-                      " was already received with other contents");
-  }
-  if (r.seq > s.highest) {
+    if (seen != nullptr && *seen != 0) {
+      return reject(std::move(r), "seq reused",
+                    "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
+                        " was already received with other contents");
+    }
+    --counts_.gaps;  // a late edge fills a gap reported before
+  } else {
     r.skipped = r.seq - s.highest - 1;
     counts_.gaps += r.skipped;
-    s.highest = r.seq;
-  } else {
-    --counts_.gaps;  // a late edge fills a gap reported before
+    advance(s, r.seq);
   }
-  s.fingerprints.emplace(r.seq, fp);
+  *slot(s, r.seq, true) = fp;
   if (dim_ == 0) dim_ = dim;
   r.verdict = Intake::kAccepted;
   r.edge = std::move(d.edge);

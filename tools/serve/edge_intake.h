@@ -1,12 +1,19 @@
 // The receive side of `arbor serve`: decodes and validates each edge_t, tracks every sender's
 // seq numbers (gaps, exact duplicates, reused seq numbers) and counts what it refused and why.
+// Memory is bounded: per sender only the last `window` seq numbers are remembered (the highest
+// seen and the W − 1 below it). A seq below that window is refused as "stale": it may be a late
+// edge or a repeat of one applied long ago, and we cannot tell, so we never apply it (a repeat
+// applied twice would silently count one measurement twice; a refused edge is counted and logged
+// and can be sent again under a new seq).
 // Not thread-safe: one thread (the receive thread, or the journal replay before it starts).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <string>
 #include <unordered_map>
+#include <vector>
 
 #include "io/lcm_messages.h"
 
@@ -15,7 +22,7 @@ namespace arbor::serve {
 enum class Intake {
   kAccepted,   ///< valid and new: to be journaled and applied
   kDuplicate,  ///< byte-for-byte repeat of an earlier (sender, seq): dropped
-  kRejected,   ///< invalid: dropped, counted under `reason`
+  kRejected,   ///< invalid, or "stale" (below the sender's window): dropped, counted under `reason`
 };
 
 struct IntakeResult {
@@ -38,8 +45,11 @@ struct IntakeCounts {
 
 class EdgeIntake {
  public:
+  static constexpr std::int64_t kDefaultWindow = 65536;
+
   /// `dim` 2 or 3 fixes the stream's dimension; 0 takes it from the first accepted edge.
-  explicit EdgeIntake(int dim = 0) : dim_(dim) {}
+  /// `window` (>= 1): how many of each sender's latest seq numbers are remembered exactly.
+  explicit EdgeIntake(int dim = 0, std::int64_t window = kDefaultWindow);
 
   IntakeResult admit(const void* data, int size);
   /// Takes back an accepted edge that could not be kept (the journal write failed): counted as
@@ -47,15 +57,23 @@ class EdgeIntake {
   void revoke(const IntakeResult& accepted, const std::string& reason);
   const IntakeCounts& counts() const { return counts_; }
   int dim() const { return dim_; }
+  std::int64_t window() const { return window_; }
+  /// Seq slots held for `sender` (0 if unknown): never more than window().
+  std::size_t trackedSeqs(std::int64_t sender) const;
 
  private:
   struct Sender {
     std::int64_t highest = 0;  ///< highest seq seen (seq numbers start at 1)
-    std::unordered_map<std::int64_t, std::uint64_t> fingerprints;  ///< seq → hash of the bytes
+    /// Ring over the window: slot (seq − 1) mod W holds the hash of seq's bytes, 0 = not
+    /// received. Grown on demand up to W slots.
+    std::vector<std::uint64_t> ring;
   };
   IntakeResult reject(IntakeResult r, const std::string& reason, const std::string& detail);
+  std::uint64_t* slot(Sender& s, std::int64_t seq, bool grow) const;
+  void advance(Sender& s, std::int64_t seq) const;
 
   int dim_;
+  std::int64_t window_;
   std::unordered_map<std::int64_t, Sender> senders_;
   IntakeCounts counts_;
 };
