@@ -20,6 +20,7 @@
 #include "bayestree/online_smoother.h"
 #include "io/lcm_messages.h"
 #include "io/pose_graph_file.h"
+#include "tests/lcm_test_support.h"
 #include "tools/cli/replay_order.h"
 #include "tools/generator/graph_generator.h"
 #include "tools/serve/serve_service.h"
@@ -29,97 +30,12 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-PoseGraph2 smallGraph() {
-  sim::ManhattanOptions o;
-  o.poses = 150;
-  o.grid = 4;
-  o.seed = 3;
-  return sim::manhattanWorld(o).graph;
-}
+using testing::Collector;
+using testing::edgeBytes;
+using testing::replayOrder;
+using testing::streamEdge;
 
-std::vector<int> replayOrder(const PoseGraph2& graph) {
-  std::vector<int> order;
-  for (const auto& g : cli::replayGroups(graph, false))
-    order.insert(order.end(), g.begin(), g.end());
-  return order;
-}
-
-StreamEdge<SE2> streamEdge(const PoseGraph2& graph, int e, std::int64_t seq,
-                           std::int64_t sender = 1) {
-  StreamEdge<SE2> s;
-  s.sender = sender;
-  s.seq = seq;
-  s.from = graph.ids[graph.edges[e].i];
-  s.to = graph.ids[graph.edges[e].j];
-  s.z = graph.edges[e].measurement;
-  s.omega = graph.edges[e].information;
-  return s;
-}
-
-std::vector<std::uint8_t> edgeBytes(const StreamEdge<SE2>& e) {
-  return encodeMessage(makeEdgeMessage(e));
-}
-
-// Receives estimates and status on the memq bus (dispatched by the service's receive thread).
-class Collector {
- public:
-  Collector(lcm::LCM& lcm, const Channels& ch) : lcm_(lcm) {
-    subs_.push_back(lcm.subscribe(ch.estimate, &Collector::onEstimate, this));
-    subs_.push_back(lcm.subscribe(ch.status, &Collector::onStatus, this));
-    for (auto* s : subs_) s->setQueueCapacity(0);
-  }
-  ~Collector() {
-    for (auto* s : subs_) lcm_.unsubscribe(s);
-  }
-  bool waitCovered(std::int64_t seq, double timeout_s = 10) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s),
-                        [&] { return last_seq_ >= seq; });
-  }
-  bool waitStatus(const std::function<bool(const status_t&)>& pred, double timeout_s = 10) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s),
-                        [&] { return have_status_ && pred(status_); });
-  }
-  std::vector<estimate_t> fullEstimates() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return full_;
-  }
-  int estimates() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return count_;
-  }
-
- private:
-  void onEstimate(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-    estimate_t m;
-    ASSERT_EQ(decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &m),
-              MessageProblem::kNone);
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++count_;
-    last_seq_ = std::max(last_seq_, m.last_seq);
-    if (m.full) full_.push_back(m);
-    cv_.notify_all();
-  }
-  void onStatus(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-    status_t s;
-    ASSERT_EQ(decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &s),
-              MessageProblem::kNone);
-    std::lock_guard<std::mutex> lock(mutex_);
-    status_ = s;
-    have_status_ = true;
-    cv_.notify_all();
-  }
-  lcm::LCM& lcm_;
-  std::vector<lcm::Subscription*> subs_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  std::int64_t last_seq_ = 0;
-  int count_ = 0;
-  std::vector<estimate_t> full_;
-  status_t status_;
-  bool have_status_ = false;
-};
+PoseGraph2 smallGraph() { return testing::manhattanGraph(150, 4, -1, 3); }  // default noise
 
 void expectSamePoses(const estimate_t& m, const std::map<Key, SE2>& expected, double tol) {
   ASSERT_EQ(m.num_poses, static_cast<int>(expected.size()));
@@ -134,11 +50,7 @@ void expectSamePoses(const estimate_t& m, const std::map<Key, SE2>& expected, do
 }
 
 std::string tempJournal(const std::string& name) {
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("arbor_lcm_serve_" + std::to_string(getpid()) + "_" + name))
-                               .string();
-  std::remove(path.c_str());
-  return path;
+  return testing::tempPath("arbor_lcm_serve", name);
 }
 
 TEST(EdgeIntake, SeqGapsDuplicatesReuseDimAndRevoke) {
@@ -180,6 +92,62 @@ TEST(EdgeIntake, SeqGapsDuplicatesReuseDimAndRevoke) {
   EXPECT_EQ(c.rejected, 3);
   EXPECT_EQ(c.rejected_by_reason.at("journal"), 1);
   EXPECT_EQ(c.gaps, 3);
+}
+
+TEST(EdgeIntake, WindowDropsDuplicatesExactlyAndRefusesStaleSeqs) {
+  const PoseGraph2 graph = smallGraph();
+  const std::int64_t w = 8;
+  EdgeIntake intake(0, w);
+  auto admit = [&](std::int64_t seq, int edge = 0) {
+    const auto b = edgeBytes(streamEdge(graph, edge, seq));
+    return intake.admit(b.data(), static_cast<int>(b.size()));
+  };
+  // Out of order within the window: each seq accepted once, then a duplicate.
+  for (std::int64_t seq : {5, 2, 4, 1, 3}) EXPECT_EQ(admit(seq).verdict, Intake::kAccepted) << seq;
+  for (std::int64_t seq = 1; seq <= 5; ++seq) EXPECT_EQ(admit(seq).verdict, Intake::kDuplicate);
+  EXPECT_EQ(intake.counts().gaps, 0);
+  // Jump to 20: the window is now 13..20.
+  EXPECT_EQ(admit(20).skipped, 14);
+  EXPECT_EQ(admit(13).verdict, Intake::kAccepted);  // the oldest seq in the window, late
+  EXPECT_EQ(admit(13).verdict, Intake::kDuplicate);
+  EXPECT_EQ(admit(13, 1).reason, "seq reused");
+  const IntakeResult below = admit(12);  // never received, but below the window
+  EXPECT_EQ(below.verdict, Intake::kRejected);
+  EXPECT_EQ(below.reason, "stale");
+  EXPECT_EQ(admit(3).reason, "stale");  // received long ago: not a duplicate we can prove
+  EXPECT_EQ(admit(20).verdict, Intake::kDuplicate);
+  const IntakeCounts& c = intake.counts();
+  EXPECT_EQ(c.accepted, 7);
+  EXPECT_EQ(c.duplicates, 7);
+  EXPECT_EQ(c.rejected_by_reason.at("stale"), 2);
+  EXPECT_EQ(c.gaps, 13);  // 6..19 skipped, 13 filled; 12 stays missing
+  EXPECT_THROW(EdgeIntake(0, 0), std::invalid_argument);
+}
+
+TEST(EdgeIntake, SeqTableStaysWithinTheWindow) {
+  const PoseGraph2 graph = smallGraph();
+  const std::int64_t w = 64;
+  EdgeIntake intake(0, w);
+  auto admit = [&](std::int64_t seq, std::int64_t sender = 1) {
+    const auto b = edgeBytes(streamEdge(graph, 0, seq, sender));
+    return intake.admit(b.data(), static_cast<int>(b.size()));
+  };
+  std::size_t most = 0;
+  for (std::int64_t seq = 1; seq <= 10 * w; ++seq) {
+    ASSERT_EQ(admit(seq).verdict, Intake::kAccepted) << seq;
+    most = std::max(most, intake.trackedSeqs(1));
+  }
+  EXPECT_LE(most, static_cast<std::size_t>(w));
+  EXPECT_EQ(admit(10 * w - w + 1).verdict, Intake::kDuplicate);  // oldest in the window
+  EXPECT_EQ(admit(10 * w - w).reason, "stale");
+  // The default window: a sender jumping far ahead holds at most that many slots.
+  EdgeIntake wide;
+  const auto first = edgeBytes(streamEdge(graph, 0, 1, 2));
+  const auto far = edgeBytes(streamEdge(graph, 0, 10 * EdgeIntake::kDefaultWindow, 2));
+  EXPECT_EQ(wide.admit(first.data(), static_cast<int>(first.size())).verdict, Intake::kAccepted);
+  EXPECT_EQ(wide.admit(far.data(), static_cast<int>(far.size())).verdict, Intake::kAccepted);
+  EXPECT_LE(wide.trackedSeqs(2), static_cast<std::size_t>(EdgeIntake::kDefaultWindow));
+  EXPECT_EQ(wide.admit(first.data(), static_cast<int>(first.size())).reason, "stale");
 }
 
 TEST(LcmServe, LockstepStreamEqualsReplayFeeding) {

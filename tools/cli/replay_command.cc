@@ -26,51 +26,6 @@ struct ReplayRun {
   ReadOptions read;
 };
 
-nlohmann::json batchRunJson(const BatchRun& b) {
-  nlohmann::json j = {{"update", b.update},
-                      {"poses", b.poses},
-                      {"edges", b.edges},
-                      {"F_incremental", b.F_incremental},
-                      {"F_batch", b.F_batch},
-                      {"relative_gap", b.relative_gap},
-                      {"max_translation_diff", b.max_translation_diff},
-                      {"max_rotation_diff", b.max_rotation_diff},
-                      {"winner", b.winner},
-                      {"margin", b.margin},
-                      {"time_s", b.time_s},
-                      {"iterations", b.iterations},
-                      {"updates_during", b.updates_during},
-                      {"final", b.final_run},
-                      {"reseeded", b.reseeded},
-                      {"reseed_s", b.reseed_s}};
-  if (b.reseeded && !b.final_run) {
-    j["F_before_reseed"] = b.F_before_reseed;
-    j["F_after_reseed"] = b.F_after_reseed;
-  }
-  if (b.rank > 0) {
-    j["rank"] = b.rank;
-    j["lambda_min"] = b.lambda_min;
-    j["certified"] = b.certified;
-  }
-  return j;
-}
-
-std::string batchRunLine(const BatchRun& b) {
-  std::ostringstream out;
-  out << std::setprecision(8) << (b.final_run ? "final" : "update ")
-      << (b.final_run ? "" : std::to_string(b.update)) << ": " << b.poses << " poses, " << b.edges
-      << " edges, F inc " << b.F_incremental << " batch " << b.F_batch << std::setprecision(3)
-      << " (gap " << 100.0 * b.relative_gap << " %, " << b.winner << " by " << b.margin
-      << "), max diff " << b.max_translation_diff << " m / " << b.max_rotation_diff << " rad, "
-      << b.time_s << " s, " << b.updates_during << " updates meanwhile";
-  if (b.rank > 0) {
-    out << ", rank " << b.rank << " lambda_min " << b.lambda_min
-        << (b.certified ? " certified" : " not certified");
-  }
-  if (b.reseeded) out << ", reseeded (" << b.reseed_s << " s)";
-  return out.str();
-}
-
 template <class G>
 int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clock) {
   ReplaySettings settings;

@@ -10,6 +10,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
+#include "tools/cli/batch_refinement.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
 #include "tools/serve/lcm_tuning.h"
@@ -68,7 +69,7 @@ int parsePublishMode(const std::string& text) {
 }  // namespace
 
 int serveCommand(const std::vector<std::string>& args) {
-  std::string url, journal_dir, fsync = "update", publish = "changed", output;
+  std::string url, journal_dir, fsync = "update", publish = "changed", output, batch;
   double beta = -1;
   bool json = false, no_refine = false;
   serve::ServeOptions options;
@@ -84,6 +85,8 @@ int serveCommand(const std::vector<std::string>& args) {
       "publish", po::value(&publish)->default_value("changed"),
       "estimates: changed (poses that changed), full, or N (full every N updates)")(
       "dim", po::value(&options.dim)->default_value(0), "2 or 3 (0: the first edge's)")(
+      "intake-window", po::value(&options.intake_window)->default_value(options.intake_window),
+      "seqs remembered per sender for duplicate detection (older ones are refused as stale)")(
       "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
       "relinearize-skip", po::value(&options.smoother.relinearize_skip)->default_value(10),
       "check relinearisation every K updates")(
@@ -94,7 +97,14 @@ int serveCommand(const std::vector<std::string>& args) {
       "no-refine", po::bool_switch(&no_refine),
       "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
       "output,o", po::value(&output), "on exit (and for SNAPSHOT), write the estimate as g2o")(
-      "json", po::bool_switch(&json), "on exit, print one JSON object");
+      "json", po::bool_switch(&json), "on exit, print one JSON object")(
+      "batch", po::value(&batch),
+      "lm | rtr: batch refinement in the background (every --batch-every updates and on "
+      "command BATCH; lm when absent)")(
+      "batch-every", po::value(&options.batch.every)->default_value(0),
+      "a background batch every N updates (needs --batch; 0: only on command BATCH)")(
+      "reseed", po::bool_switch(&options.batch.reseed),
+      "a batch estimate with lower F becomes the linearisation point (journaled)");
   for (const auto& a : args) {
     if (a == "--help" || a == "-h") {
       std::cout << desc << "\n";
@@ -113,6 +123,17 @@ int serveCommand(const std::vector<std::string>& args) {
     throw UsageError("--dim must be 2 or 3");
   }
   if (!(options.status_period_s > 0)) throw UsageError("--status-period must be > 0");
+  if (options.intake_window < 1) throw UsageError("--intake-window must be >= 1");
+  if (!batch.empty()) {
+    try {
+      options.batch.kind = parseBatchKind(batch);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(e.what());
+    }
+  }
+  if (options.batch.every < 0) throw UsageError("--batch-every must be >= 0");
+  if (batch.empty() && options.batch.every > 0)
+    throw UsageError("--batch-every needs --batch lm|rtr");
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
@@ -167,11 +188,16 @@ int serveCommand(const std::vector<std::string>& args) {
         {"journal_edges", s.journal_edges},
         {"journal_updates", s.journal_updates},
         {"refinements", s.refinements},
+        {"batches_skipped", s.batches_skipped},
+        {"reseeds", s.reseeds},
+        {"journal_reseeds", s.journal_reseeds},
         {"F_final", s.F_final},
         {"latency_ms", {{"p50", s.latency.p50}, {"p99", s.latency.p99}, {"max", s.latency.max}}},
         {"transport_ms",
          {{"p50", s.transport.p50}, {"p99", s.transport.p99}, {"max", s.transport.max}}},
     };
+    j["batches"] = nlohmann::json::array();
+    for (const auto& b : s.batches) j["batches"].push_back(batchRunJson(b));
     std::cout << j.dump() << std::endl;
   }
   return 0;

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <stdexcept>
 #include <vector>
 
@@ -15,7 +16,8 @@ namespace {
 template <class G>
 class EngineImpl final : public Engine {
  public:
-  explicit EngineImpl(const SmootherOptions& options) : smoother_(makeOptions(options)) {}
+  EngineImpl(const SmootherOptions& options, const refine::RefinerOptions& batch)
+      : smoother_(makeOptions(options)), refiner_(batch) {}
 
   int dim() const override { return G::kDim; }
 
@@ -33,13 +35,57 @@ class EngineImpl final : public Engine {
   OnlineStats stats() const override { return smoother_.stats(); }
 
   estimate_t estimate(bool full) override {
-    const std::vector<G> poses = smoother_.smoother().estimate();
+    estimate_t m = message(smoother_.smoother().estimate(), full);
+    m.F = full ? objective() : std::numeric_limits<double>::quiet_NaN();
+    return m;
+  }
+
+  const refine::RefinerOptions& batchOptions() const override { return refiner_.options(); }
+  bool startBatch(std::int64_t update) override { return refiner_.start(smoother_, update); }
+  void noteUpdate() override { refiner_.noteUpdate(); }
+  bool batchInFlight() const override { return refiner_.inFlight(); }
+  int batchesSkipped() const override { return refiner_.skipped(); }
+
+  std::optional<refine::BatchRun> collectBatch(bool wait, estimate_t* seed) override {
+    seed->num_poses = 0;
+    std::optional<refine::BatchOutcome<G>> done = refiner_.collect(wait);
+    if (!done) return std::nullopt;
+    if (refiner_.options().reseed && !done->best.empty()) {
+      const std::vector<G> point = smoother_.seedPoint(refine::seedValues(smoother_, *done));
+      const auto keep = published_;  // a seed message is not a published estimate
+      *seed = message(point, true);
+      published_ = keep;
+      seed->F = std::numeric_limits<double>::quiet_NaN();
+    }
+    return done->run;
+  }
+
+  ReseedResult reseed(const estimate_t& seed) override {
+    if (seed.dim != G::kDim) {
+      throw std::invalid_argument("reseed: a " + std::to_string(seed.dim) + "D estimate for a " +
+                                  std::to_string(G::kDim) + "D stream");
+    }
+    const size_t n = static_cast<size_t>(std::max(0, seed.num_poses));
+    if (seed.ids.size() != n || seed.translation.size() != n || seed.rotation.size() != n) {
+      throw std::invalid_argument("reseed: num_poses " + std::to_string(seed.num_poses) +
+                                  " does not match the arrays");
+    }
+    std::map<Key, G> values;
+    for (size_t k = 0; k < n; ++k) {
+      values[seed.ids[k]] = poseFromFields<G>(seed.translation[k].data(), seed.rotation[k].data());
+    }
+    return smoother_.reseed(values, /*only_if_lower=*/true);
+  }
+
+ private:
+  /// poses (dense order) as a message: all (`full`) or those whose fields changed since the
+  /// last message; remembers what it put in.
+  estimate_t message(const std::vector<G>& poses, bool full) {
     const std::vector<Key>& ids = smoother_.ids();
     estimate_t m;
     m.dim = G::kDim;
     m.full = full;
     m.total_poses = static_cast<int32_t>(poses.size());
-    m.F = full ? objective() : std::numeric_limits<double>::quiet_NaN();
     published_.resize(poses.size());
     for (size_t k = 0; k < poses.size(); ++k) {
       Fields f;
@@ -54,6 +100,7 @@ class EngineImpl final : public Engine {
     return m;
   }
 
+ public:
   void writeG2o(const std::string& path) const override {
     const std::vector<G> poses = smoother_.smoother().estimate();
     const std::vector<Key>& ids = smoother_.ids();
@@ -90,14 +137,16 @@ class EngineImpl final : public Engine {
     return o;
   }
   OnlineSmoother<G> smoother_;
+  refine::BatchRefiner<G> refiner_;
   std::vector<Fields> published_;  ///< per dense index: the values last put in a message
 };
 
 }  // namespace
 
-std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options) {
-  if (dim == 2) return std::make_unique<EngineImpl<SE2>>(options);
-  if (dim == 3) return std::make_unique<EngineImpl<SE3>>(options);
+std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options,
+                                   const refine::RefinerOptions& batch) {
+  if (dim == 2) return std::make_unique<EngineImpl<SE2>>(options, batch);
+  if (dim == 3) return std::make_unique<EngineImpl<SE3>>(options, batch);
   throw std::invalid_argument("makeEngine: dim " + std::to_string(dim) + " is not 2 or 3");
 }
 

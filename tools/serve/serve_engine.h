@@ -1,13 +1,18 @@
 // The smoother behind `arbor serve`: an OnlineSmoother of the stream's dimension, with the
 // estimate turned into estimate_t messages (every pose, or only those changed since the last
-// message) and written as g2o. Not thread-safe: the smoother thread owns it.
+// message) and written as g2o, and a refine::BatchRefiner beside it (batch runs on snapshots in
+// the background; reseeding goes through estimate_t values so that the journal can hold them).
+// Not thread-safe: the smoother thread owns it.
 #pragma once
 
+#include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "bayestree/online_smoother.h"
 #include "io/lcm_messages.h"
+#include "tools/refine/batch_refiner.h"
 
 namespace arbor::serve {
 
@@ -27,9 +32,30 @@ class Engine {
   virtual estimate_t estimate(bool full) = 0;
   /// Writes the estimate and the edges applied so far as g2o (the first pose is FIXed).
   virtual void writeG2o(const std::string& path) const = 0;
+
+  // Batch refinement (tools/refine/batch_refiner.h).
+  virtual const refine::RefinerOptions& batchOptions() const = 0;
+  /// Snapshots the smoother and starts a batch (solved at once when synchronous). False when
+  /// one is in flight (counted as skipped) or the snapshot is too small.
+  virtual bool startBatch(std::int64_t update) = 0;
+  virtual void noteUpdate() = 0;  ///< an update ran (counted for a running batch)
+  virtual bool batchInFlight() const = 0;
+  virtual int batchesSkipped() const = 0;
+  /// The batch in flight once finished (`wait`: waits for it); nullopt if none. With reseeding
+  /// and a winning batch estimate, *seed gets the complete new linearisation point (every pose,
+  /// a full estimate_t; else num_poses = 0) for the caller to journal and apply with reseed().
+  /// Rethrows a solver's exception.
+  virtual std::optional<refine::BatchRun> collectBatch(bool wait, estimate_t* seed) = 0;
+  /// Rebuilds the smoother with the poses of `seed` (read back from its fields, so a journaled
+  /// copy reproduces it bit for bit) as the linearisation point (OnlineSmoother::reseed).
+  /// Throws std::invalid_argument on another dim, ragged arrays or an unknown id.
+  /// The rebuild is kept only if it lowers F over everything the smoother holds.
+  virtual ReseedResult reseed(const estimate_t& seed) = 0;
 };
 
-/// An engine for 2D (SE2) or 3D (SE3) poses; throws std::invalid_argument for another dim.
-std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options);
+/// An engine for 2D (SE2) or 3D (SE3) poses; throws std::invalid_argument for another dim or
+/// batch.every < 0.
+std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options,
+                                   const refine::RefinerOptions& batch = {});
 
 }  // namespace arbor::serve

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -12,6 +13,7 @@ namespace arbor::serve {
 namespace {
 
 constexpr const char* kMarkChannel = "ARBOR_JOURNAL_MARK";
+constexpr const char* kReseedChannel = "ARBOR_JOURNAL_RESEED";
 
 double msSince(std::chrono::steady_clock::time_point t) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
@@ -43,9 +45,13 @@ Service::Service(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options)
       publish_lcm_(publish),
       options_(std::move(options)),
       channels_(Channels::withPrefix(options_.channel_prefix)),
-      intake_(options_.dim) {
+      intake_(options_.dim, options_.intake_window) {
   if (options_.dim != 0 && options_.dim != 2 && options_.dim != 3) {
     throw std::invalid_argument("serve: dim " + std::to_string(options_.dim) + " is not 2 or 3");
+  }
+  if (options_.batch.every < 0) {
+    throw std::invalid_argument("serve: batch every " + std::to_string(options_.batch.every) +
+                                " updates is < 0");
   }
 }
 
@@ -93,6 +99,7 @@ void Service::stop() {
   queue_cv_.notify_all();
   smoother_thread_.join();
 
+  pollBatch(true, false);  // a batch still running is waited for and applied (reseed) as usual
   if (engine_ && options_.refine_on_exit) refine(false);
   if (journal_) journal_->sync();
   summary_ = ServeSummary();
@@ -116,6 +123,10 @@ void Service::stop() {
   summary_.journal_edges = journal_edges_;
   summary_.journal_updates = journal_updates_;
   summary_.refinements = refinements_;
+  summary_.batches = batch_runs_;
+  summary_.batches_skipped = batches_skipped_;
+  summary_.reseeds = reseeds_;
+  summary_.journal_reseeds = journal_reseeds_;
   summary_.latency = cli::summarizeLatency(latencies_ms_);
   summary_.transport = cli::summarizeLatency(transport_ms_);
 }
@@ -234,6 +245,7 @@ void Service::smootherLoop() {
     try {
       if (!batch.empty()) applyBatch(batch, false);
       for (const auto& c : commands) handleCommand(c);
+      pollBatch(false, true);  // a background batch that finished while idle
       if (std::chrono::duration<double>(std::chrono::steady_clock::now() - last_status_).count() >=
           options_.status_period_s) {
         publishStatus();
@@ -251,7 +263,7 @@ void Service::smootherLoop() {
 
 void Service::ensureEngine(int dim) {
   if (engine_) return;
-  engine_ = makeEngine(dim, options_.smoother);
+  engine_ = makeEngine(dim, options_.smoother, options_.batch);
 }
 
 void Service::writeMark(std::int8_t kind, int edges) {
@@ -306,14 +318,109 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
       ++journal_updates_;
     }
   }
-  if (from_journal) return;
+  if (from_journal) return;  // reseeds come from the journal's own records
+  engine_->noteUpdate();
+  pollBatch(false, false);  // a finished batch's reseed goes into this update's estimate
   const bool full =
       options_.full_every == 1 || (options_.full_every > 1 && updates_ % options_.full_every == 0);
   publishEstimate(full);
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    for (const auto& q : batch) {
+      latencies_ms_.push_back(msSince(q.received));
+      transport_ms_.push_back(q.transport_ms);
+    }
+  }
+  const int every = options_.batch.every;
+  if (every > 0 && updates_ % every == 0) startBatch(false);
+}
+
+void Service::startBatch(bool on_command) {
+  if (!engine_) {
+    if (on_command) logLine("batch: no estimate yet");
+    return;
+  }
+  const bool busy = engine_->batchInFlight();
+  bool started = false;
+  try {
+    started = engine_->startBatch(updates_);
+  } catch (const std::exception& e) {
+    logLine(std::string("batch could not start: ") + e.what());
+  }
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    batches_skipped_ = engine_->batchesSkipped();
+  }
+  if (!started) {
+    if (on_command) logLine(busy ? "batch: one is still running" : "batch: too few poses yet");
+    return;
+  }
+  if (options_.batch.synchronous) pollBatch(true, true);
+}
+
+bool Service::pollBatch(bool wait, bool publish) {
+  if (!engine_ || !engine_->batchInFlight()) return false;
+  estimate_t seed;
+  std::optional<refine::BatchRun> run;
+  try {
+    run = engine_->collectBatch(wait, &seed);
+  } catch (const std::exception& e) {
+    logLine(std::string("batch failed: ") + e.what());
+    return false;
+  }
+  if (!run) return false;
+  if (seed.num_poses > 0) applyReseed(seed, false, &*run);
+  {
+    std::ostringstream os;
+    os << "batch " << refine::toString(options_.batch.kind) << " of update " << run->update << ": "
+       << run->poses << " poses, F incremental " << run->F_incremental << " batch " << run->F_batch
+       << ", " << run->winner << " wins by " << run->margin << " (" << run->time_s << " s, "
+       << run->updates_during << " updates meanwhile)" << (run->reseeded ? ", reseeded" : "");
+    logLine(os.str());
+  }
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    batch_runs_.push_back(*run);
+  }
+  if (run->reseeded && publish) publishEstimate(options_.full_every == 1);
+  publishStatus();
+  return true;
+}
+
+void Service::applyReseed(const estimate_t& seed, bool from_journal, refine::BatchRun* run) {
+  if (!from_journal && journal_) {
+    // Journaled before it is applied: a restart applies the same values at the same point.
+    estimate_t record = seed;
+    record.utime = nowMicros();
+    record.update = updates_;
+    try {
+      const auto bytes = encodeMessage(record);
+      journal_->append(kReseedChannel, record.utime, bytes.data(), static_cast<int>(bytes.size()));
+    } catch (const std::exception& e) {
+      logLine(std::string("reseed skipped, the journal cannot take it: ") + e.what());
+      return;
+    }
+  }
+  ReseedResult r;
+  try {
+    r = engine_->reseed(seed);  // kept only if it lowers F: the same decision on replay
+  } catch (const std::exception& e) {
+    logLine(std::string("reseed failed: ") + e.what());
+    return;
+  }
   std::lock_guard<std::mutex> lock(state_mutex_);
-  for (const auto& q : batch) {
-    latencies_ms_.push_back(msSince(q.received));
-    transport_ms_.push_back(q.transport_ms);
+  if (r.applied) {
+    ++reseeds_;
+    if (from_journal) ++journal_reseeds_;
+    F_ = r.F_rebuilt;
+  }
+  if (run) {
+    run->reseeded = r.applied;
+    run->reseed_rejected = !r.applied;
+    run->reseed_s = r.stats.time_s;
+    run->F_before_reseed = r.F_before;
+    run->F_after_reseed = r.F_rebuilt;
+    run->reseed_update = updates_;
   }
 }
 
@@ -364,6 +471,9 @@ void Service::handleCommand(const command_t& c) {
     }
     case command_t::STATUS:
       publishStatus();
+      break;
+    case command_t::BATCH:
+      startBatch(true);
       break;
     default:
       logLine("unknown command " + std::to_string(c.command));
@@ -428,6 +538,25 @@ status_t Service::status() const {
   s.refine_F_before = refine_F_before_;
   s.refine_F_after = refine_F_after_;
   s.refine_time_s = refine_time_s_;
+  const refine::BatchRun last = batch_runs_.empty() ? refine::BatchRun() : batch_runs_.back();
+  s.batches = static_cast<int32_t>(batch_runs_.size());
+  s.batches_skipped = batches_skipped_;
+  s.reseeds = reseeds_;
+  s.batch_update = last.update;
+  s.batch_poses = last.poses;
+  s.batch_F_incremental = last.F_incremental;
+  s.batch_F = last.F_batch;
+  s.batch_F_lm = last.F_lm;
+  s.batch_relative_gap = last.relative_gap;
+  s.batch_max_translation_diff = last.max_translation_diff;
+  s.batch_max_rotation_diff = last.max_rotation_diff;
+  s.batch_winner = last.winner;
+  s.batch_margin = last.margin;
+  s.batch_certified = last.certified;
+  s.batch_rank = last.rank;
+  s.batch_lambda_min = last.lambda_min;
+  s.batch_time_s = last.time_s;
+  s.batch_reseeded = last.reseeded;
   return s;
 }
 
@@ -453,6 +582,7 @@ void Service::replayJournal() {
   std::deque<Queued> unmarked;
   const std::int64_t edge_hash = edge_t::getHash();
   const std::int64_t mark_hash = journal_mark_t::getHash();
+  const std::int64_t reseed_hash = estimate_t::getHash();
   const auto now = std::chrono::steady_clock::now();
   for (const LogEvent& event : log.events) {
     const std::int64_t hash = leadingHash(event.data);
@@ -478,6 +608,13 @@ void Service::replayJournal() {
       } else if (m.kind == journal_mark_t::REFINE) {
         refine(true);
       }
+    } else if (hash == reseed_hash && event.channel == kReseedChannel) {
+      estimate_t seed;
+      if (decodeMessage(event.data.data(), size, &seed) != MessageProblem::kNone || !engine_) {
+        logLine("journal: a reseed record could not be used; skipped");
+        continue;
+      }
+      applyReseed(seed, true, nullptr);
     }
   }
   journal_ = std::make_unique<EventLogWriter>(options_.journal_path, log.valid_bytes,

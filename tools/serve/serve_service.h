@@ -4,6 +4,12 @@
 // stays bounded under bursts. With a journal (an LCM event log) every accepted edge is written
 // before it is applied, with marks of the update grouping; start() replays an existing journal
 // with the same grouping, so a restart after kill -9 reproduces the estimate exactly.
+//
+// Batch refinement (tools/refine/batch_refiner.h): every `batch.every` updates, or on command
+// BATCH, a snapshot is solved in the background while edges keep flowing; the smoother thread
+// polls for the result between updates. With `batch.reseed` a winning batch estimate becomes the
+// linearisation point; the complete new point is journaled (an estimate_t on
+// ARBOR_JOURNAL_RESEED) before it is applied, and replayed from there, so restarts stay exact.
 #pragma once
 
 #include <atomic>
@@ -43,8 +49,11 @@ struct ServeOptions {
   SmootherOptions smoother;
   bool refine_on_exit = true;  ///< stop(): relinearise everything and iterate to convergence
   int dim = 0;                 ///< 2 or 3 fixes the stream's dimension; 0: the first edge's
+  /// Seqs remembered per sender for exact duplicate detection; older ones are refused as stale.
+  std::int64_t intake_window = EdgeIntake::kDefaultWindow;
   double status_period_s = 1.0;
   int latency_window = 1000;      ///< status latency figures cover the last this many edges
+  refine::RefinerOptions batch;   ///< kind, every (0: only on command BATCH), reseed
   std::string snapshot_path;      ///< where command SNAPSHOT with an empty path writes
   std::ostream* log = nullptr;    ///< log lines (rejections, gaps, errors); nullptr: silent
   int log_limit_per_reason = 20;  ///< log lines per rejection reason, then only counted
@@ -59,6 +68,8 @@ struct ServeSummary {
   std::int64_t smoother_rejected = 0, smoother_duplicates = 0;
   std::int64_t journal_edges = 0, journal_updates = 0;  ///< replayed from the journal at start
   int refinements = 0;
+  int batches_skipped = 0, reseeds = 0, journal_reseeds = 0;
+  std::vector<refine::BatchRun> batches;  ///< every batch run completed, in order
   double F_final = 0;
   cli::LatencySummary latency;    ///< receipt → estimate published, every edge applied
   cli::LatencySummary transport;  ///< edge utime → receipt (meaningful when clocks agree)
@@ -109,6 +120,12 @@ class Service {
   void replayJournal();
   void applyBatch(std::vector<Queued>& batch, bool from_journal);
   void refine(bool from_journal);
+  /// Collects a finished batch (`wait`: the one in flight), journals and applies its reseed,
+  /// publishes a status (and with `publish` the estimate if it reseeded); returns whether a run
+  /// was collected.
+  bool pollBatch(bool wait, bool publish);
+  void startBatch(bool on_command);
+  void applyReseed(const estimate_t& seed, bool from_journal, refine::BatchRun* run);
   void handleCommand(const command_t& command);
   void ensureEngine(int dim);
   void publishEstimate(bool full);
@@ -144,6 +161,8 @@ class Service {
   std::int64_t journal_edges_ = 0, journal_updates_ = 0;
   int refinements_ = 0;
   double refine_F_before_ = 0, refine_F_after_ = 0, refine_time_s_ = 0;
+  std::vector<refine::BatchRun> batch_runs_;
+  int batches_skipped_ = 0, reseeds_ = 0, journal_reseeds_ = 0;
   double F_ = 0;
   std::vector<double> latencies_ms_;  ///< every applied edge
   std::vector<double> transport_ms_;  ///< every applied edge

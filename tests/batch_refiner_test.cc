@@ -1,0 +1,149 @@
+// tools/refine/batch_refiner.h: keep-best verdicts, the one-in-flight rule, skip counting,
+// synchronous and background runs on an OnlineSmoother's snapshot, reseeding from the winner.
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "tools/refine/batch_refiner.h"
+
+namespace arbor::refine {
+namespace {
+
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+TEST(PickWinner, LowestFWinsAndTheMarginIsToTheRunnerUp) {
+  Verdict v = pickWinner(10.0, 9.0, 8.5);
+  EXPECT_EQ(v.winner, "rtr");
+  EXPECT_DOUBLE_EQ(v.margin, 0.5);
+  EXPECT_DOUBLE_EQ(v.margin_relative, 0.5 / 8.5);
+  // SE-Sync's relaxation is isotropic: its polished answer can lose to plain LM.
+  v = pickWinner(10.0, 9.0, 42.0);
+  EXPECT_EQ(v.winner, "lm");
+  EXPECT_DOUBLE_EQ(v.margin, 1.0);
+  v = pickWinner(10.0, 9.5, kNaN);  // lm only
+  EXPECT_EQ(v.winner, "lm");
+  EXPECT_DOUBLE_EQ(v.margin, 0.5);
+  v = pickWinner(10.0, 10.5, 11.0);
+  EXPECT_EQ(v.winner, "incremental");
+  EXPECT_DOUBLE_EQ(v.margin, 0.5);
+  // Not better by more than 1e-9 relative: the incremental estimate stays (no rebuild).
+  v = pickWinner(10.0, 10.0 * (1 - 1e-12), kNaN);
+  EXPECT_EQ(v.winner, "incremental");
+  EXPECT_LT(v.margin, 1e-10);
+  v = pickWinner(10.0, 9.0, 9.0);  // tie between the batch solvers: RTR
+  EXPECT_EQ(v.winner, "rtr");
+  EXPECT_DOUBLE_EQ(v.margin, 0.0);
+}
+
+// A noisy 2D loop with closures, fed edge by edge.
+OnlineSmoother<SE2> noisySmoother(int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0, 0.1);
+  std::vector<SE2> truth(n);
+  for (int k = 1; k < n; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / 25));
+  auto z = [&](int a, int b) {
+    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
+  };
+  OnlineSmoother<SE2> s;
+  for (int k = 1; k < n; ++k) {
+    s.addEdge(k - 1, k, z(k - 1, k), Eigen::Matrix3d::Identity());
+    if (k >= 25) s.addEdge(k - 25, k, z(k - 25, k), Eigen::Matrix3d::Identity());
+    s.update();
+  }
+  return s;
+}
+
+TEST(BatchRefiner, OneInFlightSkipsAreCountedAndTheRunIsCollected) {
+  OnlineSmoother<SE2> s = noisySmoother(200, 1);
+  RefinerOptions o;
+  o.kind = BatchKind::kRtr;
+  o.every = 5;
+  BatchRefiner<SE2> refiner(o);
+  EXPECT_TRUE(refiner.due(10));
+  EXPECT_FALSE(refiner.due(11));
+  EXPECT_FALSE(refiner.due(0));
+  ASSERT_TRUE(refiner.start(s, 10));
+  EXPECT_TRUE(refiner.inFlight());
+  EXPECT_FALSE(refiner.start(s, 15));  // one in flight
+  EXPECT_EQ(refiner.skipped(), 1);
+  const auto done = refiner.collect(true);
+  ASSERT_TRUE(done.has_value());
+  EXPECT_FALSE(refiner.inFlight());
+  EXPECT_EQ(refiner.completed(), 1);
+  const BatchRun& run = done->run;
+  EXPECT_EQ(run.update, 10);
+  EXPECT_EQ(run.poses, 200);
+  EXPECT_GE(run.rank, 2);
+  EXPECT_TRUE(std::isfinite(run.F_rtr));
+  EXPECT_EQ(run.F_batch, run.F_rtr);
+  EXPECT_NEAR(run.F_incremental, s.smoother().objective(), 1e-9 * run.F_incremental);
+  EXPECT_EQ(pickWinner(run.F_incremental, run.F_lm, run.F_rtr).winner, run.winner);
+  EXPECT_EQ(done->best.empty(), run.winner == "incremental");
+  EXPECT_EQ(done->batch.size(), 200u);
+  EXPECT_FALSE(refiner.collect(true).has_value());  // nothing in flight
+}
+
+TEST(BatchRefiner, SynchronousReseedLandsOnTheWinner) {
+  OnlineSmoother<SE2> s = noisySmoother(150, 2);
+  RefinerOptions o;
+  o.kind = BatchKind::kLm;
+  o.every = 1;
+  o.reseed = true;
+  o.synchronous = true;
+  BatchRefiner<SE2> refiner(o);
+  const double before = s.smoother().objective();
+  const std::vector<BatchRun> runs = refiner.afterUpdate(s, 7);
+  ASSERT_EQ(runs.size(), 1u);
+  const BatchRun& run = runs[0];
+  EXPECT_EQ(run.update, 7);
+  ASSERT_EQ(run.winner, "lm") << "LM from a mid-stream incremental estimate should improve it";
+  EXPECT_TRUE(run.reseeded);
+  EXPECT_EQ(refiner.reseeds(), 1);
+  EXPECT_NEAR(run.F_before_reseed, before, 1e-12 * before);
+  EXPECT_LE(s.smoother().objective(), run.F_lm * (1 + 1e-9));
+  EXPECT_LT(s.smoother().objective(), before);
+}
+
+TEST(BatchRefiner, BackgroundRunsWhileUpdatesGoOn) {
+  OnlineSmoother<SE2> s = noisySmoother(300, 3);
+  RefinerOptions o;
+  o.kind = BatchKind::kRtr;
+  BatchRefiner<SE2> refiner(o);
+  ASSERT_TRUE(refiner.start(s, 1));
+  int during = 0;
+  while (refiner.running()) {  // the owner keeps updating meanwhile
+    s.addEdge(1000 + during, 1001 + during, SE2(1, 0, 0), Eigen::Matrix3d::Identity());
+    if (during == 0) s.addEdge(299, 1000, SE2(1, 0, 0), Eigen::Matrix3d::Identity());
+    s.update();
+    refiner.noteUpdate();
+    ++during;
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  const auto done = refiner.collect(false);
+  ASSERT_TRUE(done.has_value());
+  EXPECT_GT(during, 0);
+  // The last update may have ended after the solve did (then it is not counted).
+  EXPECT_LE(done->run.updates_during, during);
+  EXPECT_GE(done->run.updates_during, during - 1);
+  EXPECT_EQ(done->run.poses, 300);  // the snapshot, not the poses added meanwhile
+}
+
+TEST(BatchRefiner, RefusesBadOptionsAndTinySnapshots) {
+  RefinerOptions o;
+  o.every = -1;
+  EXPECT_THROW(BatchRefiner<SE2>{o}, std::invalid_argument);
+  EXPECT_THROW(parseBatchKind("gn"), std::invalid_argument);
+  BatchRefiner<SE2> refiner;
+  OnlineSmoother<SE2> empty;
+  EXPECT_FALSE(refiner.start(empty, 0));
+  EXPECT_EQ(refiner.skipped(), 0);
+  EXPECT_FALSE(refiner.inFlight());
+}
+
+}  // namespace
+}  // namespace arbor::refine

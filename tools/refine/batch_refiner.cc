@@ -1,0 +1,281 @@
+#include "tools/refine/batch_refiner.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <stdexcept>
+#include <thread>
+
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include "core/batch_solver.h"
+#include "core/riemannian_staircase.h"
+#include "core/serial_openmp.h"
+
+namespace arbor::refine {
+
+BatchKind parseBatchKind(const std::string& name) {
+  if (name == "lm") return BatchKind::kLm;
+  if (name == "rtr") return BatchKind::kRtr;
+  throw std::invalid_argument("--batch must be lm or rtr, not '" + name + "'");
+}
+
+std::string toString(BatchKind kind) { return kind == BatchKind::kLm ? "lm" : "rtr"; }
+
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+template <class G>
+double rotationAngle(const G& a, const G& b) {
+  const Eigen::Matrix<double, G::kDim, G::kDim> r = a.rotation().transpose() * b.rotation();
+  const double c = std::clamp((r.trace() - (G::kDim - 2)) / 2.0, -1.0, 1.0);
+  return std::acos(c);  // SO(2): tr = 2cosθ; SO(3): tr = 1 + 2cosθ
+}
+
+}  // namespace
+
+Verdict pickWinner(double F_incremental, double F_lm, double F_rtr) {
+  // Keep-best: the lowest F; a batch estimate must beat the incremental one by > 1e-9 relative
+  // (rebuilding for nothing costs an update's worth of latency); between LM and RTR the lower.
+  struct Candidate {
+    const char* name;
+    double F;
+  };
+  const Candidate candidates[] = {{"incremental", F_incremental}, {"lm", F_lm}, {"rtr", F_rtr}};
+  const Candidate* best = &candidates[0];
+  for (const Candidate& c : candidates) {
+    if (&c == &candidates[0] || !std::isfinite(c.F)) continue;
+    const bool beats_incremental = c.F < F_incremental - 1e-9 * std::abs(F_incremental);
+    if (beats_incremental && (best == &candidates[0] || c.F <= best->F)) best = &c;
+  }
+  double runner_up = std::numeric_limits<double>::infinity();
+  for (const Candidate& c : candidates) {
+    if (&c != best && std::isfinite(c.F)) runner_up = std::min(runner_up, c.F);
+  }
+  Verdict v;
+  v.winner = best->name;
+  v.margin = std::isfinite(runner_up) ? std::abs(runner_up - best->F) : 0.0;
+  v.margin_relative = v.margin / std::max(std::abs(best->F), 1e-300);
+  return v;
+}
+
+template <class G>
+BatchOutcome<G> solveSnapshot(BatchKind kind, const PoseGraph<G>& snapshot) {
+  BatchOutcome<G> out;
+  BatchRun& run = out.run;
+  const std::vector<G>& incremental = snapshot.poses;
+  run.poses = snapshot.numPoses();
+  run.edges = snapshot.numEdges();
+  run.F_incremental = objective(snapshot, incremental);
+
+  // Plain LM from the incremental estimate: the batch itself for lm, the keep-best rival of RTR.
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<G> lm = incremental;
+  const BatchSummary lm_summary = solveBatch(snapshot, &lm);
+  run.lm_time_s = secondsSince(t0);
+  run.F_lm = objective(snapshot, lm);
+
+  struct Candidate {
+    const char* name;
+    double F;
+    const std::vector<G>* poses;
+  };
+  std::vector<Candidate> candidates{{"incremental", run.F_incremental, &incremental},
+                                    {"lm", run.F_lm, &lm}};
+  std::vector<G> rtr;
+  if (kind == BatchKind::kRtr) {
+    t0 = std::chrono::steady_clock::now();
+    const RtrSummary s = solveRtr(snapshot, &rtr);
+    run.rtr_time_s = secondsSince(t0);
+    run.F_rtr = objective(snapshot, rtr);
+    run.rank = s.rank;
+    run.lambda_min = s.lambda_min;
+    run.certified = s.certified;
+    run.iterations = s.rtr_iterations;
+    candidates.push_back({"rtr", run.F_rtr, &rtr});
+    out.batch = rtr;
+  } else {
+    run.iterations = lm_summary.iterations;
+    out.batch = lm;
+  }
+  run.time_s = run.lm_time_s + run.rtr_time_s;
+  run.F_batch = objective(snapshot, out.batch);
+  run.relative_gap = (run.F_incremental - run.F_batch) / std::max(run.F_batch, 1e-300);
+
+  const Verdict verdict = pickWinner(run.F_incremental, run.F_lm, run.F_rtr);
+  run.winner = verdict.winner;
+  run.margin = verdict.margin;
+  run.margin_relative = verdict.margin_relative;
+  for (const Candidate& c : candidates) {
+    if (verdict.winner == c.name && c.poses != &incremental) out.best = *c.poses;
+  }
+  out.incremental = incremental;
+
+  const G inc0 = incremental[0].inverse(), bat0 = out.batch[0].inverse();
+  for (size_t k = 0; k < incremental.size(); ++k) {
+    const G a = inc0.compose(incremental[k]), b = bat0.compose(out.batch[k]);
+    run.max_translation_diff =
+        std::max(run.max_translation_diff, (a.translation() - b.translation()).norm());
+    run.max_rotation_diff = std::max(run.max_rotation_diff, rotationAngle(a, b));
+  }
+  return out;
+}
+
+template <class G>
+std::vector<G> seedValues(const OnlineSmoother<G>& smoother, const BatchOutcome<G>& outcome) {
+  const size_t n = outcome.best.size();
+  if (n != outcome.incremental.size() || n > static_cast<size_t>(smoother.stats().poses)) {
+    throw std::invalid_argument("seedValues: " + std::to_string(n) +
+                                " batch poses do not fit the snapshot or the smoother");
+  }
+  const std::vector<G> current = smoother.smoother().estimate();
+  std::vector<G> seed(n);
+  for (size_t k = 0; k < n; ++k) {  // the batch's correction, applied on the left
+    seed[k] = outcome.best[k].compose(outcome.incremental[k].inverse()).compose(current[k]);
+  }
+  return seed;
+}
+
+template <class G>
+struct BatchRefiner<G>::Flight {
+  PoseGraph<G> snapshot;
+  std::int64_t update = 0;
+  int updates_during = 0;
+  BatchOutcome<G> outcome;
+  std::exception_ptr error;
+  std::atomic<bool> done{false};
+  std::thread thread;
+
+  void solve(BatchKind kind) {
+    try {
+      outcome = solveSnapshot(kind, snapshot);
+    } catch (...) {
+      error = std::current_exception();
+    }
+    done.store(true);
+  }
+  ~Flight() {
+    if (thread.joinable()) thread.join();
+  }
+};
+
+template <class G>
+BatchRefiner<G>::BatchRefiner(RefinerOptions options) : options_(options) {
+  if (options_.every < 0) {
+    throw std::invalid_argument("--batch-every must be >= 0, not " +
+                                std::to_string(options_.every));
+  }
+}
+
+template <class G>
+BatchRefiner<G>::~BatchRefiner() = default;
+
+template <class G>
+bool BatchRefiner<G>::due(std::int64_t updates) const {
+  return options_.every > 0 && updates > 0 && updates % options_.every == 0;
+}
+
+template <class G>
+bool BatchRefiner<G>::inFlight() const {
+  return flight_ != nullptr;
+}
+
+template <class G>
+bool BatchRefiner<G>::running() const {
+  return flight_ && !flight_->done.load();
+}
+
+template <class G>
+bool BatchRefiner<G>::start(const OnlineSmoother<G>& smoother, std::int64_t update) {
+  if (flight_) {
+    ++skipped_;
+    return false;
+  }
+  PoseGraph<G> snapshot = smoother.snapshot();
+  if (snapshot.numPoses() < 2 || snapshot.numEdges() == 0) return false;
+  flight_ = std::make_unique<Flight>();
+  flight_->snapshot = std::move(snapshot);
+  flight_->update = update;
+  Flight* f = flight_.get();
+  const BatchKind kind = options_.kind;
+  if (options_.synchronous) {
+    f->solve(kind);
+  } else {
+    f->thread = std::thread([f, kind] {
+      // The smoother's latency comes first: this thread runs at a lower priority (Linux nice is
+      // per thread) and never fans out into OpenMP threads (Eigen, CHOLMOD).
+      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+      const SerialOpenMP serial;
+      f->solve(kind);
+    });
+  }
+  return true;
+}
+
+template <class G>
+void BatchRefiner<G>::noteUpdate() {
+  if (running()) ++flight_->updates_during;
+}
+
+template <class G>
+std::optional<BatchOutcome<G>> BatchRefiner<G>::collect(bool wait) {
+  if (!flight_ || (!wait && !flight_->done.load())) return std::nullopt;
+  if (flight_->thread.joinable()) flight_->thread.join();
+  std::unique_ptr<Flight> f = std::move(flight_);
+  if (f->error) std::rethrow_exception(f->error);
+  BatchOutcome<G> out = std::move(f->outcome);
+  out.run.update = f->update;
+  out.run.updates_during = f->updates_during;
+  ++completed_;
+  return out;
+}
+
+template <class G>
+bool BatchRefiner<G>::reseed(OnlineSmoother<G>& smoother, BatchOutcome<G>* outcome,
+                             std::int64_t update) {
+  if (!options_.reseed || outcome->best.empty()) return false;
+  BatchRun& run = outcome->run;
+  const ReseedResult r = smoother.reseed(seedValues(smoother, *outcome), /*only_if_lower=*/true);
+  run.reseeded = r.applied;
+  run.reseed_rejected = !r.applied;
+  run.reseed_s = r.stats.time_s;
+  run.reseed_update = update;
+  run.F_before_reseed = r.F_before;
+  run.F_after_reseed = r.F_rebuilt;
+  reseed_s_ += run.reseed_s;
+  if (r.applied) ++reseeds_;
+  return r.applied;
+}
+
+template <class G>
+std::vector<BatchRun> BatchRefiner<G>::afterUpdate(OnlineSmoother<G>& smoother,
+                                                   std::int64_t updates) {
+  std::vector<BatchRun> runs;
+  noteUpdate();
+  if (auto done = collect(false)) {
+    reseed(smoother, &*done, updates);
+    runs.push_back(done->run);
+  }
+  if (due(updates) && start(smoother, updates) && options_.synchronous) {
+    auto done = collect(true);
+    reseed(smoother, &*done, updates);
+    runs.push_back(done->run);
+  }
+  return runs;
+}
+
+template std::vector<SE2> seedValues(const OnlineSmoother<SE2>&, const BatchOutcome<SE2>&);
+template std::vector<SE3> seedValues(const OnlineSmoother<SE3>&, const BatchOutcome<SE3>&);
+template BatchOutcome<SE2> solveSnapshot(BatchKind, const PoseGraph<SE2>&);
+template BatchOutcome<SE3> solveSnapshot(BatchKind, const PoseGraph<SE3>&);
+template class BatchRefiner<SE2>;
+template class BatchRefiner<SE3>;
+
+}  // namespace arbor::refine
