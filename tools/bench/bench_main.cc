@@ -4,17 +4,21 @@
 //     table like the paper's Table II on stdout.
 //   arbor-bench replay [--shared DIR] [--only NAME,...] [--csv-dir DIR]
 //     edge-by-edge replay through the incremental smoother beside GTSAM iSAM2's figures.
+//   arbor-bench paper [--shared DIR] [--only NAME,...] [--out-dir DIR] [--markdown FILE] [--plots]
+//     every solver (replay, LM, GN, dogleg, RTR, Ceres) on every shared dataset with the settings
+//     of the paper's Table II; estimates, latency CSVs, results.tsv/json and a Markdown report.
 //   arbor-bench micro [--sizes=N,...] [--benchmark_* flags]
 //     the Google Benchmark microbenchmarks: runs `arbor-microbench` built beside this program.
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
-#include <set>
-#include <sstream>
 
 #include <boost/program_options.hpp>
 
@@ -22,6 +26,7 @@
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
 #include "tools/bench/ceres_pose_graph.h"
+#include "tools/bench/paper_runner.h"
 #include "tools/bench/shared_data.h"
 #include "tools/cli/replay_runner.h"
 
@@ -74,28 +79,6 @@ void benchBatch(const std::string& name, const PoseGraph<G>& graph, const bench:
   std::cout << std::endl;
 }
 
-// Reads a shared dataset; a file refused for indefinite information (cubicle) is read again
-// with Ω repaired, and `note` says so.
-AnyPoseGraph loadDataset(const std::string& file, std::string* note) {
-  ReadReport report;
-  try {
-    return readPoseGraphFile(file, ReadOptions{}, &report);
-  } catch (const FileError&) {
-    ReadOptions read;
-    read.information = InformationPolicy::kRepair;
-    AnyPoseGraph any = readPoseGraphFile(file, read, &report);
-    *note = " (Ω repaired: " + std::to_string(report.repaired) + ")";
-    return any;
-  }
-}
-
-std::set<std::string> splitNames(const std::string& only) {
-  std::set<std::string> wanted;
-  std::stringstream list(only);
-  for (std::string item; std::getline(list, item, ',');) wanted.insert(item);
-  return wanted;
-}
-
 template <class G>
 void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench::Reference* ref,
                  const bench::Anchor* gtsam, const std::string& csv_dir, const std::string& note) {
@@ -120,78 +103,76 @@ void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench
   std::cout << std::endl;
 }
 
-int replay(const std::vector<std::string>& args, const std::string& default_shared) {
-  std::string shared, only, csv_dir;
-  po::options_description options("arbor bench replay [options]");
+// The options every dataset benchmark takes (--help, --shared, --only), in this order; the
+// caller adds its own after them.
+struct DatasetOptions {
+  std::string shared, only;
+};
+
+po::options_description datasetOptions(const std::string& caption, DatasetOptions* data,
+                                       const std::string& default_shared) {
+  po::options_description options(caption);
   options.add_options()("help,h", "show this help")(
-      "shared", po::value(&shared)->default_value(bench::sharedDirectory(default_shared)),
-      "the shared folder (datasets/, reference/)")("only", po::value(&only),
-                                                   "comma-separated dataset names")(
-      "csv-dir", po::value(&csv_dir), "write per-update latency CSVs (NAME.csv) here");
+      "shared", po::value(&data->shared)->default_value(bench::sharedDirectory(default_shared)),
+      "the shared folder (datasets/, reference/)")("only", po::value(&data->only),
+                                                   "comma-separated dataset names");
+  return options;
+}
+
+// Parses `args` into the variables bound to `options`; false (after printing the help) on --help.
+bool parseOptions(const std::vector<std::string>& args, const po::options_description& options) {
   po::variables_map vm;
   po::store(po::command_line_parser(args).options(options).run(), vm);
   po::notify(vm);
   if (vm.count("help")) {
     std::cout << options << "\n";
-    return 0;
+    return false;
   }
-  const auto wanted = splitNames(only);
-  const auto files = bench::sharedDatasets(shared);
-  if (files.empty()) {
-    std::cerr << "arbor bench: no shared datasets at " << shared << "/datasets\n";
-    return 1;
-  }
-  const auto refs = bench::readOptimumTable(shared);
-  const auto anchors = bench::readAnchorTable(shared);
+  return true;
+}
+
+int replay(const std::vector<std::string>& args, const std::string& default_shared) {
+  DatasetOptions data;
+  std::string csv_dir;
+  po::options_description options =
+      datasetOptions("arbor bench replay [options]", &data, default_shared);
+  options.add_options()("csv-dir", po::value(&csv_dir),
+                        "write per-update latency CSVs (NAME.csv) here");
+  if (!parseOptions(args, options)) return 0;
+  const auto files = bench::selectDatasets(data.shared, data.only);
+  const auto refs = bench::readOptimumTable(data.shared);
+  const auto anchors = bench::readAnchorTable(data.shared);
   std::cout << "Edge-by-edge replay (GN, β = 0.1, skip 10, wildfire 0.001, final relinearise-all "
                "pass), then batch LM from its estimate. GTSAM: iSAM2 per edge from "
                "reference/anchors.tsv (update() only; its back-substitution is deferred).\n\n"
             << "| dataset | edges | total s | p50 ms | p99 ms | max ms | F_final | vs F* | LM s | "
                "LM F | GTSAM s | GTSAM p99 | GTSAM F | total/GTSAM | p99/GTSAM |\n"
             << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  for (const auto& file : files) {
-    const std::string name = bench::datasetName(file);
-    if (!wanted.empty() && !wanted.count(name)) continue;
-    std::string note;
-    AnyPoseGraph any = loadDataset(file, &note);
-    const auto ref = refs.find(name);
-    const auto gtsam = anchors.find({name, "isam2_edge"});
+  bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
+    const auto ref = refs.find(d.name);
+    const auto gtsam = anchors.find({d.name, "isam2_edge"});
     std::visit(
         [&](const auto& g) {
-          benchReplay(name, g, ref == refs.end() ? nullptr : &ref->second,
-                      gtsam == anchors.end() ? nullptr : &gtsam->second, csv_dir, note);
+          benchReplay(d.name, g, ref == refs.end() ? nullptr : &ref->second,
+                      gtsam == anchors.end() ? nullptr : &gtsam->second, csv_dir, d.note);
         },
-        any);
-  }
+        d.graph);
+  });
   return 0;
 }
 
 int batch(const std::vector<std::string>& args, const std::string& default_shared) {
-  std::string shared, only;
+  DatasetOptions data;
   int repeat = 1;
   bool no_ceres = false;
-  po::options_description options("arbor bench batch [options]");
-  options.add_options()("help,h", "show this help")(
-      "shared", po::value(&shared)->default_value(bench::sharedDirectory(default_shared)),
-      "the shared folder (datasets/, reference/)")("only", po::value(&only),
-                                                   "comma-separated dataset names")(
-      "repeat", po::value(&repeat)->default_value(1), "runs per solver; the fastest is reported")(
+  po::options_description options =
+      datasetOptions("arbor bench batch [options]", &data, default_shared);
+  options.add_options()("repeat", po::value(&repeat)->default_value(1),
+                        "runs per solver; the fastest is reported")(
       "no-ceres", po::bool_switch(&no_ceres), "skip the Ceres baseline");
-  po::variables_map vm;
-  po::store(po::command_line_parser(args).options(options).run(), vm);
-  po::notify(vm);
-  if (vm.count("help")) {
-    std::cout << options << "\n";
-    return 0;
-  }
-  const auto wanted = splitNames(only);
-
-  const auto files = bench::sharedDatasets(shared);
-  if (files.empty()) {
-    std::cerr << "arbor bench: no shared datasets at " << shared << "/datasets\n";
-    return 1;
-  }
-  const auto refs = bench::readOptimumTable(shared);
+  if (!parseOptions(args, options)) return 0;
+  const auto files = bench::selectDatasets(data.shared, data.only);
+  const auto refs = bench::readOptimumTable(data.shared);
   std::cout << "LM from a breadth-first spanning tree; Arbor vs Ceres "
                "(LEVENBERG_MARQUARDT, SPARSE_NORMAL_CHOLESKY, 100 it, ftol 1e-5, 1 thread). "
                "F = Σ eᵀΩe (the paper prints ½F). Fastest of "
@@ -199,14 +180,119 @@ int batch(const std::vector<std::string>& args, const std::string& default_share
             << "| dataset | dim | poses | edges | F* | Arbor s | it | Arbor F | term | Ceres s "
                "| it | Ceres F | term | Arbor/Ceres |\n"
             << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  for (const auto& file : files) {
-    const std::string name = bench::datasetName(file);
-    if (!wanted.empty() && !wanted.count(name)) continue;
-    std::string note;
-    AnyPoseGraph any = loadDataset(file, &note);
-    const auto it = refs.find(name);
+  bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
+    const auto it = refs.find(d.name);
     const bench::Reference* ref = it == refs.end() ? nullptr : &it->second;
-    std::visit([&](const auto& g) { benchBatch(name, g, ref, repeat, !no_ceres, note); }, any);
+    std::visit([&](const auto& g) { benchBatch(d.name, g, ref, repeat, !no_ceres, d.note); },
+               d.graph);
+  });
+  return 0;
+}
+
+// Ceres as an external solver of the paper runner, with the same iteration cap and tolerance.
+bench::ExternalSolver ceresSolver(const bench::PaperSettings& settings) {
+  auto solve = [settings](const auto& graph, auto* poses) {
+    const bench::CeresResult c =
+        bench::solveWithCeres(graph, poses, settings.max_iterations, settings.relative_tolerance);
+    bench::SolverRun run;
+    run.time_s = c.time_s;
+    run.iterations = c.iterations;
+    run.termination = c.termination == "CONVERGENCE"      ? "converged"
+                      : c.termination == "NO_CONVERGENCE" ? "max_iterations"
+                                                          : "failed";
+    if (run.termination == "failed") run.note = "Ceres: " + c.termination;
+    return run;
+  };
+  return {"ceres", solve, solve};
+}
+
+std::string shellQuoted(const std::string& path) {
+  std::string q = "'";
+  for (char c : path) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+// Runs `command` with its standard output sent to standard error (ours carries the Markdown).
+int runCommand(const std::string& command) {
+  std::cerr << "arbor bench paper: " << command << std::endl;
+  return std::system((command + " 1>&2").c_str());
+}
+
+int paper(const std::vector<std::string>& args, const std::string& default_shared) {
+  DatasetOptions data;
+  std::string out_dir, markdown, plot_dir;
+  bool plots = false, no_ceres = false, no_replay = false;
+  bench::PaperSettings settings;
+  po::options_description options =
+      datasetOptions("arbor bench paper [options]", &data, default_shared);
+  options.add_options()("out-dir", po::value(&out_dir)->default_value("bench-paper"),
+                        "write estimates/NAME/SOLVER.csv, latency/NAME.csv, results.tsv and "
+                        "results.json here")("markdown", po::value(&markdown),
+                                             "also write the Markdown tables to this file")(
+      "plots", po::bool_switch(&plots),
+      "draw the PNGs (tools/plots/plot_estimates.py, plot_latency.py; /usr/bin/python3 with "
+      "matplotlib)")("plot-dir", po::value(&plot_dir),
+                     "where the PNGs go (default: OUT_DIR/plots)")(
+      "max-iterations", po::value(&settings.max_iterations)->default_value(100),
+      "LM, GN, dogleg and Ceres iteration limit (the paper: 100)")(
+      "rel-tol", po::value(&settings.relative_tolerance)->default_value(1e-5, "1e-5"),
+      "LM, GN, dogleg and Ceres relative decrease of F to stop (the paper: 1e-5)")(
+      "no-ceres", po::bool_switch(&no_ceres), "skip the Ceres baseline")(
+      "no-replay", po::bool_switch(&no_replay), "skip the incremental replay");
+  if (!parseOptions(args, options)) return 0;
+  if (settings.max_iterations < 0) throw std::invalid_argument("--max-iterations must be >= 0");
+  if (!(settings.relative_tolerance >= 0)) throw std::invalid_argument("--rel-tol must be >= 0");
+  settings.out_dir = out_dir;
+  settings.replay = !no_replay;
+  std::filesystem::create_directories(out_dir);
+  std::vector<bench::ExternalSolver> external;
+  if (!no_ceres) external.push_back(ceresSolver(settings));
+
+  const auto refs = bench::readOptimumTable(data.shared);
+  std::vector<bench::DatasetReport> reports;
+  bench::forEachDataset(data.shared, data.only, [&](const bench::LoadedDataset& d) {
+    bench::DatasetReport report = std::visit(
+        [&](const auto& g) { return bench::runPaperBenchmark(d.name, g, settings, external); },
+        d.graph);
+    report.note = d.note;
+    const auto ref = refs.find(d.name);
+    if (ref != refs.end()) report.F_star = ref->second.F_star;
+    std::cerr << d.name << ":";
+    for (const auto& r : report.runs) {
+      std::cerr << " " << r.solver << " " << fmt("%.3f", r.time_s) << " s F " << fmt("%.7g", r.F)
+                << " " << r.termination << ";";
+    }
+    std::cerr << std::endl;
+    reports.push_back(std::move(report));
+  });
+  if (reports.empty())
+    throw std::runtime_error("no shared dataset is named in --only " + data.only);
+  bench::writeResultsTsv(out_dir + "/results.tsv", reports);
+  bench::writeResultsJson(out_dir + "/results.json", reports);
+  const std::string md = bench::paperMarkdown(reports);
+  std::cout << md;
+  if (!markdown.empty()) {
+    std::ofstream out(markdown);
+    out << md;
+    if (!out) throw std::runtime_error("cannot write " + markdown);
+  }
+  if (plots) {
+    if (plot_dir.empty()) plot_dir = out_dir + "/plots";
+    std::filesystem::create_directories(plot_dir);
+    const std::string plots_src = std::string(ARBOR_SOURCE_DIR) + "/tools/plots/";
+    int rc = runCommand("/usr/bin/python3 " + shellQuoted(plots_src + "plot_estimates.py") + " " +
+                        shellQuoted(out_dir) + " " + shellQuoted(plot_dir));
+    std::string csvs;
+    for (const auto& r : reports) {
+      if (!r.latency_file.empty()) csvs += " " + shellQuoted(r.latency_file);
+    }
+    if (rc == 0 && !csvs.empty()) {
+      rc = runCommand("/usr/bin/python3 " + shellQuoted(plots_src + "plot_latency.py") + " " +
+                      shellQuoted(plot_dir) + csvs);
+    }
+    if (rc != 0)
+      throw std::runtime_error("plotting failed (exit status " + std::to_string(rc) +
+                               "); needs /usr/bin/python3 with matplotlib");
   }
   return 0;
 }
@@ -234,6 +320,8 @@ int main(int argc, char** argv) {
     std::cout
         << "usage: arbor bench batch [--shared DIR] [--only NAMES] [--repeat N] [--no-ceres]\n"
            "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n"
+           "       arbor bench paper [--shared DIR] [--only NAMES] [--out-dir DIR] "
+           "[--markdown FILE] [--plots]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
@@ -241,6 +329,7 @@ int main(int argc, char** argv) {
     const std::vector<std::string> rest(args.begin() + 1, args.end());
     if (args[0] == "batch") return batch(rest, ARBOR_SHARED_DIR);
     if (args[0] == "replay") return replay(rest, ARBOR_SHARED_DIR);
+    if (args[0] == "paper") return paper(rest, ARBOR_SHARED_DIR);
     if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";
     return 2;

@@ -4,7 +4,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
+#include <stdexcept>
 
 namespace arbor::bench {
 
@@ -77,5 +79,45 @@ std::map<std::pair<std::string, std::string>, Anchor> readAnchorTable(
 }
 
 std::string datasetName(const std::string& path) { return fs::path(path).stem().string(); }
+
+std::vector<std::string> selectDatasets(const std::string& shared_dir, const std::string& only) {
+  std::vector<std::string> files = sharedDatasets(shared_dir);
+  if (files.empty()) throw std::runtime_error("no shared datasets at " + shared_dir + "/datasets");
+  std::set<std::string> wanted;
+  std::stringstream list(only);
+  for (std::string item; std::getline(list, item, ',');) wanted.insert(item);
+  if (wanted.empty()) return files;
+  std::vector<std::string> selected;
+  for (const auto& file : files) {
+    if (wanted.count(datasetName(file))) selected.push_back(file);
+  }
+  return selected;
+}
+
+LoadedDataset loadDataset(const std::string& file) {
+  LoadedDataset d{datasetName(file), file, PoseGraph2{}, 0, ""};
+  ReadReport report;
+  try {
+    d.graph = readPoseGraphFile(file, ReadOptions{}, &report);
+  } catch (const FileError&) {
+    ReadOptions read;
+    read.information = InformationPolicy::kRepair;
+    report = ReadReport{};
+    d.graph = readPoseGraphFile(file, read, &report);
+    d.repaired = report.repaired;
+    d.note = " (Ω repaired: " + std::to_string(report.repaired) + ")";
+  }
+  return d;
+}
+
+void forEachDataset(const std::vector<std::string>& files,
+                    const std::function<void(const LoadedDataset&)>& visit) {
+  for (const auto& file : files) visit(loadDataset(file));
+}
+
+void forEachDataset(const std::string& shared_dir, const std::string& only,
+                    const std::function<void(const LoadedDataset&)>& visit) {
+  forEachDataset(selectDatasets(shared_dir, only), visit);
+}
 
 }  // namespace arbor::bench

@@ -1,10 +1,13 @@
 // Locating the shared datasets (../shared beside the checkout) and their reference optima.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "io/pose_graph_file.h"
 
 namespace arbor::bench {
 
@@ -36,5 +39,31 @@ std::map<std::pair<std::string, std::string>, Anchor> readAnchorTable(
 
 /// "M3500" for ".../M3500.g2o".
 std::string datasetName(const std::string& path);
+
+/// The dataset files of sharedDatasets(shared_dir) whose name is in the comma-separated `only`
+/// (all if empty). Throws std::runtime_error("no shared datasets at DIR/datasets") if there are
+/// none at all (a filter matching nothing gives an empty list).
+std::vector<std::string> selectDatasets(const std::string& shared_dir, const std::string& only);
+
+/// A shared dataset as read for the benchmarks.
+struct LoadedDataset {
+  std::string name;  ///< datasetName(file)
+  std::string file;
+  AnyPoseGraph graph;
+  int repaired = 0;  ///< information matrices repaired (cubicle)
+  std::string note;  ///< " (Ω repaired: N)" when repaired, else empty
+};
+
+/// Reads a dataset; a file refused for indefinite information (cubicle) is read again with Ω
+/// repaired (as `arbor batch --information repair`), and `note` says so.
+LoadedDataset loadDataset(const std::string& file);
+
+/// Loads each of `files` in turn and calls visit(dataset).
+void forEachDataset(const std::vector<std::string>& files,
+                    const std::function<void(const LoadedDataset&)>& visit);
+
+/// forEachDataset(selectDatasets(shared_dir, only), visit).
+void forEachDataset(const std::string& shared_dir, const std::string& only,
+                    const std::function<void(const LoadedDataset&)>& visit);
 
 }  // namespace arbor::bench
