@@ -33,8 +33,9 @@ struct RtrOptions {
   double tcg_kappa = 0.1;          ///< tCG stops at ‖r‖ ≤ ‖r₀‖ min(‖r₀‖^θ, κ)
   double tcg_theta = 0.5;
   /// η: the certificate accepts λ_min(S) ≥ −η (S + ηI must factor, as SE-Sync's fast
-  /// verification; absolute).
-  double certificate_tolerance = 1e-5;
+  /// verification; absolute; 1e-4 as SE-Sync's min_eig_num_tol. With 1e-5, M3500b's rank-5
+  /// point, λ_min = −2.7e-5, which SE-Sync certifies, sent the staircase to rank 6).
+  double certificate_tolerance = 1e-4;
   /// Exactness: suboptimality_bound ≤ this × |f(Y)| (the SDP solution has rank d).
   double relative_gap_tolerance = 1e-4;
   /// L(G̃ρ) + λI by default; SE-Sync's C++ default (Schur form of

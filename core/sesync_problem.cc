@@ -282,7 +282,7 @@ bool SESyncProblem::verifyFullCertificate(const Eigen::MatrixXd& lambda_blocks, 
   }
   // Shift-invert Lanczos: the largest eigenvalue θ of (S + σI)⁻¹ gives λ_min(S) = 1/θ − σ.
   InverseOp op{&chol, S.rows()};
-  const Eigen::Index ncv = std::min<Eigen::Index>(psd ? 6 : 20, S.rows());
+  const Eigen::Index ncv = std::min<Eigen::Index>(20, S.rows());
   Spectra::SymEigsSolver<InverseOp> eigs(op, 1, ncv);
   eigs.init();
   eigs.compute(Spectra::SortRule::LargestAlge, 500, psd ? 1e-8 : 1e-6);

@@ -155,7 +155,7 @@ TEST(Rtr, RandomSyntheticGraphs) {
     std::vector<SE2> p2;
     const RtrSummary r2 = solveRtr(s2.graph, &p2);
     EXPECT_TRUE(r2.certified) << r2.message;
-    EXPECT_GE(r2.lambda_min, -1e-5);
+    EXPECT_GE(r2.lambda_min, -RtrOptions{}.certificate_tolerance);
     // LM started at the ground truth cannot end lower than the certified optimum (up to the
     // polish's stopping tolerance: SE-Sync's 2D κ weighs rotations twice as our F does, so the
     // rounded point is a little farther from our F's minimum).
@@ -228,7 +228,7 @@ TEST(Rtr, ClimbsTheStaircaseFromSaddles) {
   const RtrSummary summary = solveRtr(s.graph, &rtr);
   EXPECT_TRUE(summary.relaxation_solved) << summary.message;
   EXPECT_GT(summary.rank, 5);
-  EXPECT_GE(summary.lambda_min, -1e-5);
+  EXPECT_GE(summary.lambda_min, -RtrOptions{}.certificate_tolerance);
   // Not exact: the rounded point is measurably above the relaxation, so no certificate.
   EXPECT_GT(summary.suboptimality_bound, 1e-4 * summary.sesync_objective);
   EXPECT_FALSE(summary.certified);
