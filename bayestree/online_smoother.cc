@@ -138,18 +138,16 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
 
 template <class G>
 UpdateStats OnlineSmoother<G>::update() {
-  const UpdateStats s = smoother_.update();
-  queued_.clear();
-  poses_at_update_ = static_cast<int>(ids_.size());
-  ++stats_.updates;
-  stats_.total_update_time_s += s.time_s;
-  stats_.last_update = s;
-  return s;
+  return recordUpdate(smoother_.update());
 }
 
 template <class G>
 UpdateStats OnlineSmoother<G>::finalize() {
-  const UpdateStats s = smoother_.relinearizeAll();
+  return recordUpdate(smoother_.relinearizeAll());
+}
+
+template <class G>
+UpdateStats OnlineSmoother<G>::recordUpdate(const UpdateStats& s) {
   queued_.clear();
   poses_at_update_ = static_cast<int>(ids_.size());
   ++stats_.updates;

@@ -117,6 +117,8 @@ class OnlineSmoother {
   const std::vector<Key>& ids() const { return ids_; }
 
  private:
+  /// Bookkeeping after an update() or finalize() of the smoother.
+  UpdateStats recordUpdate(const UpdateStats& s);
   struct Measurement {
     Key from, to;
     G z;

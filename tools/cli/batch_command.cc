@@ -158,12 +158,7 @@ int batchCommand(const std::vector<std::string>& args) {
       "verbose,v", po::bool_switch(&run.solver.verbose), "per-iteration log on stderr");
   po::positional_options_description positional;
   positional.add("file", 1);
-  for (const auto& a : args) {
-    if (a == "--help" || a == "-h") {
-      std::cout << options << "\n";
-      return 0;
-    }
-  }
+  if (helpRequested(args, options)) return 0;
   parseArguments(args, options, positional);
   try {
     run.rtr = solver == "rtr";

@@ -1,11 +1,22 @@
 #include "tools/cli/cli_common.h"
 
 #include <fstream>
+#include <iostream>
 #include <sstream>
 
 namespace arbor::cli {
 
 namespace po = boost::program_options;
+
+bool helpRequested(const std::vector<std::string>& args, const po::options_description& options) {
+  for (const auto& a : args) {
+    if (a == "--help" || a == "-h") {
+      std::cout << options << "\n";
+      return true;
+    }
+  }
+  return false;
+}
 
 po::variables_map parseArguments(const std::vector<std::string>& args,
                                  const po::options_description& options,

@@ -25,6 +25,11 @@ boost::program_options::variables_map parseArguments(
     const boost::program_options::options_description& options,
     const boost::program_options::positional_options_description& positional);
 
+/// True (after printing `options` on stdout) when `args` holds --help or -h: the command then
+/// exits 0 without parsing the rest.
+bool helpRequested(const std::vector<std::string>& args,
+                   const boost::program_options::options_description& options);
+
 InformationPolicy parseInformationPolicy(const std::string& name);
 
 class Stopwatch {

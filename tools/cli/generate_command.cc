@@ -32,12 +32,7 @@ int generateCommand(const std::vector<std::string>& args) {
       "sigma-r", po::value(&sigma_r)->default_value(0.01), "rotation noise (rad)");
   po::positional_options_description positional;
   positional.add("kind", 1);
-  for (const auto& a : args) {
-    if (a == "--help" || a == "-h") {
-      std::cout << options << "\n";
-      return 0;
-    }
-  }
+  if (helpRequested(args, options)) return 0;
   parseArguments(args, options, positional);
   if (!(sigma_t > 0) || !(sigma_r > 0)) throw UsageError("noise sigmas must be positive");
   if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1))

@@ -238,12 +238,7 @@ int publishCommand(const std::vector<std::string>& args) {
       "json", po::bool_switch(&run.json), "print one JSON object");
   po::positional_options_description positional;
   positional.add("file", 1);
-  for (const auto& a : args) {
-    if (a == "--help" || a == "-h") {
-      std::cout << desc << "\n";
-      return 0;
-    }
-  }
+  if (helpRequested(args, desc)) return 0;
   const auto vm = parseArguments(args, desc, positional);
   if (burst && vm.count("rate")) throw UsageError("--rate and --burst exclude each other");
   if (vm.count("rate") && !(run.rate > 0)) throw UsageError("--rate must be > 0");

@@ -158,12 +158,7 @@ int replayCommand(const std::vector<std::string>& args) {
       "rebuild the smoother from a batch estimate with lower F");
   po::positional_options_description positional;
   positional.add("file", 1);
-  for (const auto& a : args) {
-    if (a == "--help" || a == "-h") {
-      std::cout << options << "\n";
-      return 0;
-    }
-  }
+  if (helpRequested(args, options)) return 0;
   parseArguments(args, options, positional);
   if (run.step != "edge" && run.step != "pose") {
     throw UsageError("--step must be edge or pose, not '" + run.step + "'");

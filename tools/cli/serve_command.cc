@@ -105,12 +105,7 @@ int serveCommand(const std::vector<std::string>& args) {
       "a background batch every N updates (needs --batch; 0: only on command BATCH)")(
       "reseed", po::bool_switch(&options.batch.reseed),
       "a batch estimate with lower F becomes the linearisation point (journaled)");
-  for (const auto& a : args) {
-    if (a == "--help" || a == "-h") {
-      std::cout << desc << "\n";
-      return 0;
-    }
-  }
+  if (helpRequested(args, desc)) return 0;
   parseArguments(args, desc, po::positional_options_description());
   if (beta >= 0) {
     options.smoother.relinearize_threshold_translation = beta;
