@@ -2,8 +2,20 @@
 
 #include <cmath>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Core>
+#include <algorithm>
+#include <cstddef>
+
+// LAPACK / BLAS (Fortran calling convention; the trailing arguments are the lengths of the
+// character arguments, as gfortran passes them).
+extern "C" {
+void dpotrf_(const char* uplo, const int* n, double* a, const int* lda, int* info, std::size_t);
+void dtrsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m,
+            const int* n, const double* alpha, const double* a, const int* lda, double* b,
+            const int* ldb, std::size_t, std::size_t, std::size_t, std::size_t);
+void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, const double* alpha,
+            const double* a, const int* lda, const double* beta, double* c, const int* ldc,
+            std::size_t, std::size_t);
+}
 
 namespace arbor::bayestree {
 namespace {
@@ -52,29 +64,34 @@ bool partialCholeskySmall(double* A, int lda, int F, int M, const double* dg) {
   return true;
 }
 
-// As partialCholeskySmall, with Eigen's cache-blocked LLT, triangular solve and rank update
-// (for large cliques): L = chol(A_ff); [Sᵀ; dᵀ] = A_(s,g)f L⁻ᵀ; A_(s,g)(s,g) −= [Sᵀ; dᵀ][S d].
+// As partialCholeskySmall, with LAPACK's Cholesky and BLAS's triangular solve and rank update
+// (for large cliques; OpenBLAS where installed): L = chol(A_ff) (dpotrf);
+// [Sᵀ; dᵀ] = A_(s,g)f L⁻ᵀ (dtrsm); A_(s,g)(s,g) −= [Sᵀ; dᵀ][S d] (dsyrk, lower triangle).
 bool partialCholeskyBlocked(double* A, int lda, int F, int M, const double* dg) {
-  Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>> full(A, M, M, Eigen::OuterStride<>(lda));
-  Eigen::Ref<Eigen::MatrixXd, 0, Eigen::OuterStride<>> Aff = full.topLeftCorner(F, F);
-  Eigen::LLT<Eigen::Ref<Eigen::MatrixXd, 0, Eigen::OuterStride<>>> llt(Aff);
-  if (llt.info() != Eigen::Success) return false;
+  int info = 0;
+  dpotrf_("L", &F, A, &lda, &info, 1);
+  if (info != 0) return false;
   double max_diag = 0;
   for (int k = 0; k < F; ++k) max_diag = std::max(max_diag, dg[k]);
   const double floor = kCliquePivot * max_diag;
   for (int k = 0; k < F; ++k) {
-    const double p = Aff(k, k) * Aff(k, k);
+    const double l = A[static_cast<size_t>(k) * lda + k];
+    const double p = l * l;
     if (!std::isfinite(p) || !(p > kRelativePivot * dg[k]) || !(p > floor)) return false;
   }
   const int rest = M - F;
   if (rest == 0) return true;
-  auto below = full.bottomLeftCorner(rest, F);
-  Aff.transpose().template triangularView<Eigen::Upper>().template solveInPlace<Eigen::OnTheRight>(
-      below);
-  full.bottomRightCorner(rest, rest)
-      .template selfadjointView<Eigen::Lower>()
-      .rankUpdate(below, -1.0);
-  return below.allFinite();
+  const double one = 1.0, minus_one = -1.0;
+  double* below = A + F;  // rows F..M−1 of the first F columns
+  dtrsm_("R", "L", "T", "N", &rest, &F, &one, A, &lda, below, &lda, 1, 1, 1, 1);
+  double* trailing = A + F + static_cast<size_t>(F) * lda;
+  dsyrk_("L", "N", &rest, &F, &minus_one, below, &lda, &one, trailing, &lda, 1, 1);
+  for (int k = 0; k < F; ++k) {
+    const double* col = below + static_cast<size_t>(k) * lda;
+    for (int i = 0; i < rest; ++i)
+      if (!std::isfinite(col[i])) return false;
+  }
+  return true;
 }
 
 // Cliques up to this order use the simple left-looking loop, larger ones the blocked kernels.

@@ -69,7 +69,7 @@ class DoubleBuffer {
 /// leaves the Schur complement in the trailing lower triangle. Returns false when a pivot p
 /// (= L_kk²) is not safely positive: p ≤ 1e-10·dg[k] or p ≤ 1e-14·max(dg), with dg the diagonal
 /// of A_ff before factorisation (the clique is then indeterminate). Small matrices use a simple
-/// left-looking loop, large ones Eigen's cache-blocked LLT, triangular solve and rank update.
+/// left-looking loop, large ones LAPACK/BLAS (dpotrf, dtrsm, dsyrk; OpenBLAS where installed).
 bool partialCholesky(double* A, int lda, int F, int M, const double* dg);
 
 }  // namespace arbor::bayestree
