@@ -130,6 +130,40 @@ TEST(LcmServeBatch, ReseedingInLockstepEndsNoWorse) {
   EXPECT_LE(with.F_final, without.F_final * (1 + 1e-6));
 }
 
+// Options of a first run that journals and reseeds (no refinement on exit: the restart must
+// reproduce the estimate of the last update).
+ServeOptions reseedingJournalOptions(const std::string& journal, refine::BatchKind kind,
+                                     int every) {
+  ServeOptions options;
+  options.refine_on_exit = false;
+  options.journal_path = journal;
+  options.fsync_before_update = false;
+  options.batch.kind = kind;
+  options.batch.every = every;
+  options.batch.reseed = true;
+  return options;
+}
+
+// Restarts a service from `journal` (no batches of its own: the reseeds come from the journal)
+// and expects the very estimate `before`, with `reseeds` reseeds replayed.
+void expectRestartReproduces(const std::string& journal, const estimate_t& before, int reseeds) {
+  lcm::LCM lcm("memq://");
+  ServeOptions options;
+  options.refine_on_exit = false;
+  options.journal_path = journal;
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  sendCommand(lcm, service, command_t::PUBLISH_FULL);
+  ASSERT_TRUE(collector.waitFull(1));
+  const estimate_t after = collector.fullEstimates().back();
+  service.stop();
+  EXPECT_EQ(service.summary().journal_reseeds, reseeds);
+  EXPECT_EQ(after.ids, before.ids);
+  EXPECT_EQ(after.translation, before.translation);  // bit for bit
+  EXPECT_EQ(after.rotation, before.rotation);
+}
+
 TEST(LcmServeBatch, JournalRestartAfterReseedsReproducesTheEstimate) {
   const PoseGraph2 graph = noisyGraph(300, 0.2, 11);
   const std::vector<int> order = replayOrder(graph);
@@ -139,13 +173,7 @@ TEST(LcmServeBatch, JournalRestartAfterReseedsReproducesTheEstimate) {
   int reseeds = 0;
   {
     lcm::LCM lcm("memq://");
-    ServeOptions options;
-    options.refine_on_exit = false;
-    options.journal_path = journal;
-    options.fsync_before_update = false;
-    options.batch.kind = refine::BatchKind::kRtr;
-    options.batch.every = 40;
-    options.batch.reseed = true;
+    ServeOptions options = reseedingJournalOptions(journal, refine::BatchKind::kRtr, 40);
     options.batch.synchronous = true;
     Service service(lcm, options);
     Collector collector(lcm, service.channels());
@@ -156,21 +184,7 @@ TEST(LcmServeBatch, JournalRestartAfterReseedsReproducesTheEstimate) {
     reseeds = service.summary().reseeds;
   }
   ASSERT_GT(reseeds, 0) << "no reseed happened: nothing to reproduce";
-  lcm::LCM lcm("memq://");
-  ServeOptions options;
-  options.refine_on_exit = false;
-  options.journal_path = journal;
-  Service service(lcm, options);  // no batches of its own: the reseeds come from the journal
-  Collector collector(lcm, service.channels());
-  service.start();
-  sendCommand(lcm, service, command_t::PUBLISH_FULL);
-  ASSERT_TRUE(collector.waitFull(1));
-  const estimate_t after = collector.fullEstimates().back();
-  EXPECT_EQ(after.ids, before.ids);
-  EXPECT_EQ(after.translation, before.translation);  // bit for bit
-  EXPECT_EQ(after.rotation, before.rotation);
-  service.stop();
-  EXPECT_EQ(service.summary().journal_reseeds, reseeds);
+  expectRestartReproduces(journal, before, reseeds);
   std::remove(journal.c_str());
 }
 
@@ -184,14 +198,7 @@ TEST(LcmServeBatch, JournalRestartAfterBackgroundReseedsReproducesTheEstimate) {
   ServeSummary first;
   {
     lcm::LCM lcm("memq://");
-    ServeOptions options;
-    options.refine_on_exit = false;
-    options.journal_path = journal;
-    options.fsync_before_update = false;
-    options.batch.kind = refine::BatchKind::kLm;
-    options.batch.every = 10;
-    options.batch.reseed = true;
-    Service service(lcm, options);
+    Service service(lcm, reseedingJournalOptions(journal, refine::BatchKind::kLm, 10));
     Collector collector(lcm, service.channels());
     service.start();
     for (size_t k = 0; k < order.size(); ++k) {
@@ -211,21 +218,7 @@ TEST(LcmServeBatch, JournalRestartAfterBackgroundReseedsReproducesTheEstimate) {
   for (const auto& b : first.batches) updates_during += b.updates_during;
   std::cout << first.batches.size() << " batches (" << updates_during << " updates meanwhile), "
             << first.reseeds << " reseeds, " << first.batches_skipped << " skipped\n";
-  lcm::LCM lcm("memq://");
-  ServeOptions options;
-  options.refine_on_exit = false;
-  options.journal_path = journal;
-  Service service(lcm, options);
-  Collector collector(lcm, service.channels());
-  service.start();
-  sendCommand(lcm, service, command_t::PUBLISH_FULL);
-  ASSERT_TRUE(collector.waitFull(1));
-  const estimate_t after = collector.fullEstimates().back();
-  service.stop();
-  EXPECT_EQ(service.summary().journal_reseeds, first.reseeds);
-  EXPECT_EQ(after.ids, before.ids);
-  EXPECT_EQ(after.translation, before.translation);  // bit for bit
-  EXPECT_EQ(after.rotation, before.rotation);
+  expectRestartReproduces(journal, before, first.reseeds);
   std::remove(journal.c_str());
 }
 

@@ -32,6 +32,7 @@ using Clock = std::chrono::steady_clock;
 
 using testing::Collector;
 using testing::edgeBytes;
+using testing::finalizedReplay;
 using testing::replayOrder;
 using testing::streamEdge;
 
@@ -185,13 +186,7 @@ TEST(LcmServe, LockstepStreamEqualsReplayFeeding) {
   EXPECT_EQ(collector.estimates(), static_cast<int>(order.size()));
 
   // And the same as replay of the file's own values (no LCM round trip), after finalize.
-  OnlineSmoother2 replay;
-  for (int e : order) {
-    const auto& edge = graph.edges[e];
-    replay.addEdge(graph.ids[edge.i], graph.ids[edge.j], edge.measurement, edge.information);
-    replay.update();
-  }
-  replay.finalize();
+  const OnlineSmoother2 replay = finalizedReplay(graph, order);
   reference.finalize();
   EXPECT_NEAR(reference.smoother().objective(), replay.smoother().objective(),
               1e-9 * replay.smoother().objective());
@@ -217,13 +212,7 @@ TEST(LcmServe, BurstIsFullyAppliedInFewerUpdatesAndMatchesReplay) {
   EXPECT_LT(s.updates, static_cast<std::int64_t>(order.size()));  // batched while behind
   EXPECT_EQ(s.final_estimate.num_poses, graph.numPoses());
 
-  OnlineSmoother2 replay;
-  for (int e : order) {
-    const auto& edge = graph.edges[e];
-    replay.addEdge(graph.ids[edge.i], graph.ids[edge.j], edge.measurement, edge.information);
-    replay.update();
-  }
-  replay.finalize();
+  const OnlineSmoother2 replay = finalizedReplay(graph, order);
   const double F = replay.smoother().objective();
   EXPECT_NEAR(s.F_final, F, 1e-9 * F);
   // F agrees to 1e-9 relative; poses then agree to about the square root of that (flat
@@ -463,13 +452,7 @@ TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
   EXPECT_EQ(s.applied, static_cast<std::int64_t>(order.size()));
   EXPECT_EQ(s.intake.gaps, 0);
   EXPECT_EQ(s.final_estimate.num_poses, graph.numPoses());
-  OnlineSmoother2 replay;
-  for (int e : order) {
-    const auto& edge = graph.edges[e];
-    replay.addEdge(graph.ids[edge.i], graph.ids[edge.j], edge.measurement, edge.information);
-    replay.update();
-  }
-  replay.finalize();
+  const OnlineSmoother2 replay = finalizedReplay(graph, order);
   EXPECT_NEAR(s.F_final, replay.smoother().objective(), 1e-9 * replay.smoother().objective());
   std::remove(journal.c_str());
 }

@@ -18,6 +18,7 @@
 
 #include <lcm/lcm-cpp.hpp>
 
+#include "bayestree/online_smoother.h"
 #include "io/lcm_messages.h"
 #include "tools/cli/replay_order.h"
 #include "tools/generator/graph_generator.h"
@@ -41,6 +42,19 @@ inline std::vector<int> replayOrder(const PoseGraph2& graph) {
   for (const auto& g : cli::replayGroups(graph, false))
     order.insert(order.end(), g.begin(), g.end());
   return order;
+}
+
+/// The graph's edges fed to an OnlineSmoother in `order`, one update per edge, then finalize():
+/// what `arbor replay` computes, without LCM in between.
+inline OnlineSmoother2 finalizedReplay(const PoseGraph2& graph, const std::vector<int>& order) {
+  OnlineSmoother2 replay;
+  for (int e : order) {
+    const auto& edge = graph.edges[e];
+    replay.addEdge(graph.ids[edge.i], graph.ids[edge.j], edge.measurement, edge.information);
+    replay.update();
+  }
+  replay.finalize();
+  return replay;
 }
 
 inline StreamEdge<SE2> streamEdge(const PoseGraph2& graph, int e, std::int64_t seq,
