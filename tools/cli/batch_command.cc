@@ -39,11 +39,8 @@ int solveRtrAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport
   const std::string termination =
       s.certified ? "certified" : (s.relaxation_solved ? "relaxation_not_exact" : "not_certified");
   if (run.json) {
-    nlohmann::json j = {
-        {"file", run.file},
-        {"nodes", graph.numPoses()},
-        {"edges", graph.numEdges()},
-        {"dim", G::kDim},
+    nlohmann::json j = graphJson(run.file, graph);
+    j.update({
         {"solver", "rtr"},
         {"init", "chordal"},
         {"F_initial", F_initial},
@@ -65,12 +62,11 @@ int solveRtrAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport
         {"total_s", total.seconds()},
         {"information_repaired", report.repaired},
         {"information_isotropic", report.made_isotropic},
-    };
+    });
     std::cout << j.dump() << "\n";
     return 0;
   }
-  std::cout << std::setprecision(10) << "file         " << run.file << " (" << G::kDim << "D, "
-            << graph.numPoses() << " poses, " << graph.numEdges() << " edges)\n"
+  std::cout << std::setprecision(10) << "file         " << graphLine(run.file, graph) << "\n"
             << "solver       rtr (Riemannian staircase, SE-Sync relaxation, then LM polish)\n"
             << "F chordal    " << F_initial << "\n"
             << "relaxation   " << s.sesync_objective << " (rank " << s.rank << ", λ_min "
@@ -97,11 +93,8 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
   const double total_s = total.seconds();
 
   if (run.json) {
-    nlohmann::json j = {
-        {"file", run.file},
-        {"nodes", graph.numPoses()},
-        {"edges", graph.numEdges()},
-        {"dim", G::kDim},
+    nlohmann::json j = graphJson(run.file, graph);
+    j.update({
         {"solver", toString(run.solver.method)},
         {"init", toString(init)},
         {"F_initial", summary.F_initial},
@@ -112,12 +105,11 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
         {"total_s", total_s},
         {"information_repaired", report.repaired},
         {"information_isotropic", report.made_isotropic},
-    };
+    });
     std::cout << j.dump() << "\n";
   } else {
     std::cout << std::setprecision(10);
-    std::cout << "file         " << run.file << " (" << G::kDim << "D, " << graph.numPoses()
-              << " poses, " << graph.numEdges() << " edges)\n";
+    std::cout << "file         " << graphLine(run.file, graph) << "\n";
     if (report.repaired) std::cout << "information  " << report.repaired << " repaired\n";
     if (report.made_isotropic) {
       std::cout << "information  " << report.made_isotropic << " made isotropic\n";

@@ -7,8 +7,10 @@
 #include <vector>
 
 #include <boost/program_options.hpp>
+#include <nlohmann/json.hpp>
 
 #include "core/information.h"
+#include "core/pose_graph.h"
 
 namespace arbor::cli {
 
@@ -31,6 +33,20 @@ bool helpRequested(const std::vector<std::string>& args,
                    const boost::program_options::options_description& options);
 
 InformationPolicy parseInformationPolicy(const std::string& name);
+
+/// The keys every command's --json shares about its input: file, nodes, edges, dim.
+template <class G>
+nlohmann::json graphJson(const std::string& file, const PoseGraph<G>& graph) {
+  return {
+      {"file", file}, {"nodes", graph.numPoses()}, {"edges", graph.numEdges()}, {"dim", G::kDim}};
+}
+
+/// "FILE (2D, N poses, M edges)": the first line of every command's text summary.
+template <class G>
+std::string graphLine(const std::string& file, const PoseGraph<G>& graph) {
+  return file + " (" + std::to_string(G::kDim) + "D, " + std::to_string(graph.numPoses()) +
+         " poses, " + std::to_string(graph.numEdges()) + " edges)";
+}
 
 class Stopwatch {
  public:

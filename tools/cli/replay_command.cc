@@ -51,11 +51,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   const LatencySummary& lat = r.latency;
 
   if (run.json) {
-    nlohmann::json j = {
-        {"file", run.file},
-        {"nodes", graph.numPoses()},
-        {"edges", graph.numEdges()},
-        {"dim", G::kDim},
+    nlohmann::json j = graphJson(run.file, graph);
+    j.update({
         {"step", run.step},
         {"updates", static_cast<int>(r.rows.size())},
         {"total_s", r.total_s},
@@ -75,7 +72,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"pending", r.pending},
         {"peak_rss_mb", peakRssMb()},
         {"wall_s", total_clock.seconds()},
-    };
+    });
     if (with_batches) {
       j["batch"] = run.batch;
       j["batch_every"] = run.batch_every;
@@ -89,8 +86,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     std::cout << j.dump() << "\n";
     return 0;
   }
-  std::cout << std::setprecision(10) << "file          " << run.file << " (" << G::kDim << "D, "
-            << graph.numPoses() << " poses, " << graph.numEdges() << " edges)\n"
+  std::cout << std::setprecision(10) << "file          " << graphLine(run.file, graph) << "\n"
             << "updates       " << r.rows.size() << " (one per " << run.step << ")\n"
             << std::setprecision(4) << "total         " << r.total_s << " s (updates " << r.update_s
             << " s, final relinearisation " << r.finalize_s << " s)\n"
