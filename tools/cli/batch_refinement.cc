@@ -1,13 +1,11 @@
 #include "tools/cli/batch_refinement.h"
 
 #include <iomanip>
-#include <numeric>
 #include <sstream>
 #include <stdexcept>
 
 #include "bayestree/online_smoother.h"
 #include "tools/cli/cli_common.h"
-#include "tools/cli/replay_order.h"
 
 namespace arbor::cli {
 
@@ -80,7 +78,6 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
   options.smoother = settings.smoother;
   OnlineSmoother<G> smoother(options);
   LoopResult<G> result;
-  ReplayResult<G>& r = result.replay;
 
   auto record = [&](const std::vector<BatchRun>& runs, UpdateRow* row) {
     for (const BatchRun& run : runs) {
@@ -88,61 +85,25 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
       result.batches.push_back(run);
     }
   };
-
-  const std::vector<std::vector<int>> groups = replayGroups(graph, settings.per_pose);
-  r.rows.reserve(groups.size());
-  int fed = 0;
-  for (const auto& group : groups) {
-    for (int e : group) {
-      const auto& edge = graph.edges[e];
-      const Key from = graph.ids[edge.i], to = graph.ids[edge.j];
-      const EdgeResult added = smoother.addEdge(from, to, edge.measurement, edge.information);
-      if (added.status == EdgeStatus::kDuplicate) ++r.duplicates;
-      if (added.status == EdgeStatus::kRejected) {
-        ++r.rejected;
-        r.rejections.push_back("edge " + std::to_string(from) + " -> " + std::to_string(to) +
-                               " rejected: " + added.reason);
-      }
-    }
-    fed += static_cast<int>(group.size());
-    Stopwatch clock;
-    const UpdateStats s = smoother.update();
-    const double ms = 1e3 * clock.seconds();
-    r.relinearized += s.variables_relinearized;
-    r.indeterminate += s.indeterminate_cliques;
-    r.rows.push_back({static_cast<int>(r.rows.size()) + 1, fed, ms, s.cliques_reeliminated,
-                      s.variables_relinearized});
-    // Collecting, reseeding and snapshotting happen between updates on this thread: their time
-    // is not in the update's latency except a reseed's rebuild, which is added to it.
-    record(refiner.afterUpdate(smoother, static_cast<std::int64_t>(r.rows.size())), &r.rows.back());
-  }
+  std::int64_t updates = 0;
+  ReplayHooks<G> hooks;
+  // Collecting, reseeding and snapshotting happen between updates on this thread: their time is
+  // not in the update's latency except a reseed's rebuild, which is added to it.
+  hooks.after_update = [&](OnlineSmoother<G>& sm, UpdateRow& row) {
+    record(refiner.afterUpdate(sm, ++updates), &row);
+  };
   // The batch still in flight at the end of the stream.
-  if (auto last = refiner.collect(true)) {
-    refiner.reseed(smoother, &*last, static_cast<std::int64_t>(r.rows.size()));
-    record({last->run}, nullptr);
-  }
+  hooks.after_stream = [&](OnlineSmoother<G>& sm) {
+    if (auto last = refiner.collect(true)) {
+      refiner.reseed(sm, &*last, updates);
+      record({last->run}, nullptr);
+    }
+  };
+  result.replay = replayInto(graph, settings, smoother, hooks);
+  ReplayResult<G>& r = result.replay;
   result.skipped = refiner.skipped();
   result.reseeds = refiner.reseeds();
   result.reseed_s = refiner.reseedSeconds();
-
-  r.F_incremental = smoother.smoother().objective();
-  Stopwatch finalize_clock;
-  if (settings.finalize) {
-    const UpdateStats s = smoother.finalize();
-    r.relinearized += s.variables_relinearized;
-    r.indeterminate += s.indeterminate_cliques;
-  }
-  r.finalize_s = finalize_clock.seconds();
-  r.pending = smoother.stats().edges_pending;
-  std::vector<double> ms;
-  for (const auto& row : r.rows) ms.push_back(row.latency_ms);
-  r.latency = summarizeLatency(ms);
-  r.update_s = std::accumulate(ms.begin(), ms.end(), 0.0) / 1e3;
-  r.total_s = r.update_s + r.finalize_s;
-  // The estimate in the graph's dense order (poses never reached keep their graph value).
-  r.poses = graph.poses;
-  for (const auto& [id, pose] : smoother.estimates()) r.poses[graph.index.at(id)] = pose;
-  r.F_final = objective(graph, r.poses);
 
   const PoseGraph<G> snapshot = smoother.snapshot();
   if (loop.final_run && snapshot.numPoses() > 1 && snapshot.numEdges() > 0) {

@@ -12,10 +12,8 @@
 namespace arbor::cli {
 
 template <class G>
-ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings) {
-  OnlineSmootherOptions<G> options;
-  options.smoother = settings.smoother;
-  OnlineSmoother<G> smoother(options);
+ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& settings,
+                           OnlineSmoother<G>& smoother, const ReplayHooks<G>& hooks) {
   ReplayResult<G> result;
   const std::vector<std::vector<int>> groups = replayGroups(graph, settings.per_pose);
   result.rows.reserve(groups.size());
@@ -40,7 +38,9 @@ ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& setti
     result.indeterminate += s.indeterminate_cliques;
     result.rows.push_back({static_cast<int>(result.rows.size()) + 1, fed, ms,
                            s.cliques_reeliminated, s.variables_relinearized});
+    if (hooks.after_update) hooks.after_update(smoother, result.rows.back());
   }
+  if (hooks.after_stream) hooks.after_stream(smoother);
   result.F_incremental = smoother.smoother().objective();
   Stopwatch finalize_clock;
   if (settings.finalize) {
@@ -61,6 +61,15 @@ ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& setti
   result.poses = graph.poses;
   for (const auto& [id, pose] : smoother.estimates()) result.poses[graph.index.at(id)] = pose;
   result.F_final = objective(graph, result.poses);
+  return result;
+}
+
+template <class G>
+ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings) {
+  OnlineSmootherOptions<G> options;
+  options.smoother = settings.smoother;
+  OnlineSmoother<G> smoother(options);
+  ReplayResult<G> result = replayInto(graph, settings, smoother);
   if (settings.batch) {
     result.batch_poses = result.poses;
     result.batch = solveBatch(graph, &result.batch_poses);
@@ -80,6 +89,10 @@ void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows
   if (!csv) throw std::runtime_error("error writing " + path);
 }
 
+template ReplayResult<SE2> replayInto(const PoseGraph<SE2>&, const ReplaySettings&,
+                                      OnlineSmoother<SE2>&, const ReplayHooks<SE2>&);
+template ReplayResult<SE3> replayInto(const PoseGraph<SE3>&, const ReplaySettings&,
+                                      OnlineSmoother<SE3>&, const ReplayHooks<SE3>&);
 template ReplayResult<SE2> runReplay(const PoseGraph<SE2>&, const ReplaySettings&);
 template ReplayResult<SE3> runReplay(const PoseGraph<SE3>&, const ReplaySettings&);
 

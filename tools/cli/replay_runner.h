@@ -3,10 +3,12 @@
 // per-update latency; a final relinearise-all pass; batch LM from the incremental estimate.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "bayestree/incremental_smoother.h"
+#include "bayestree/online_smoother.h"
 #include "core/batch_solver.h"
 #include "core/pose_graph.h"
 #include "tools/cli/latency.h"
@@ -46,6 +48,22 @@ struct ReplayResult {
 
 template <class G>
 ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings);
+
+/// What a replay runs between updates, on the replay thread (both optional).
+template <class G>
+struct ReplayHooks {
+  /// After each update, with the row just recorded (a hook may add to its latency).
+  std::function<void(OnlineSmoother<G>&, UpdateRow&)> after_update;
+  /// After the last update, before the final relinearise-all pass.
+  std::function<void(OnlineSmoother<G>&)> after_stream;
+};
+
+/// The replay of runReplay without its batch LM: feeds `graph` into `smoother` (one update per
+/// edge or per pose), runs the final pass (settings.finalize) and fills everything of the result
+/// but `batch` and `batch_poses`. `smoother` keeps the final state for the caller.
+template <class G>
+ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& settings,
+                           OnlineSmoother<G>& smoother, const ReplayHooks<G>& hooks = {});
 
 /// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized).
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows);
