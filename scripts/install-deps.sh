@@ -9,7 +9,7 @@ packages=(
   liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless
   libgtest-dev libgmock-dev libbenchmark-dev libspectra-dev
   libceres-dev nlohmann-json3-dev
-  libopenblas0-serial libopenblas-serial-dev
+  libopenblas0-pthread libopenblas-pthread-dev
   python3-matplotlib
 )
 
