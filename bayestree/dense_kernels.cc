@@ -104,4 +104,28 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg) {
                                 : partialCholeskyBlocked(A, lda, F, M, dg);
 }
 
+void partialCholeskyUpdate(double* L, int N, int F, double* d, double* W, int ldw, int k) {
+  for (int j = 0; j < F; ++j) {
+    double* Lj = L + static_cast<size_t>(j) * N;
+    for (int t = 0; t < k; ++t) {
+      double* w = W + static_cast<size_t>(t) * ldw;
+      const double wj = w[j];
+      if (wj == 0.0) continue;  // column j is unchanged by this vector
+      const double ljj = Lj[j];
+      const double r = std::sqrt(ljj * ljj + wj * wj);
+      const double c = r / ljj, s = wj / ljj, inv_c = ljj / r;
+      Lj[j] = r;
+      for (int i = j + 1; i < N; ++i) {
+        const double l = (Lj[i] + s * w[i]) * inv_c;
+        w[i] = c * w[i] - s * l;
+        Lj[i] = l;
+      }
+      const double dj = (d[j] + s * w[N]) * inv_c;
+      w[N] = c * w[N] - s * dj;
+      d[j] = dj;
+      w[j] = 0.0;
+    }
+  }
+}
+
 }  // namespace arbor::bayestree

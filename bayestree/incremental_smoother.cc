@@ -43,6 +43,7 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->variables_relinearized += s.variables_relinearized;
   total->indeterminate_cliques += s.indeterminate_cliques;
   total->cliques_solved += s.cliques_solved;
+  total->cliques_updated += s.cliques_updated;
 }
 
 }  // namespace
@@ -75,8 +76,12 @@ struct IncrementalSmoother<G>::Impl {
     // One allocation: [LS (N×F) | d (F) | cached H (Sn×Sn) | cached g (Sn)], column-major,
     // F = nf·D, Sn = ns·D, N = F + Sn; LS = [L; Sᵀ] with R = Lᵀ (so R x_f + S x_s = d).
     DoubleBuffer storage;
+    // Rank updates of the cached factor not yet applied: it is [H g] + P_s [P_sᵀ P_gᵀ], with
+    // P = [P_s; P_g] ((Sn+1)×K). Applied when the parent reads the cached factor (or K grows).
+    Eigen::MatrixXd pending;
     int F = 0, Sn = 0;
-    bool dirty = false;  // re-eliminated since the last back-substitution
+    bool dirty = false;   // re-eliminated since the last back-substitution
+    bool damped = false;  // the factor is of a damped (indeterminate) Hessian
     bool in_use = false;
     int removed_stamp = -1;
 
@@ -87,6 +92,7 @@ struct IncrementalSmoother<G>::Impl {
       F = static_cast<int>(frontals.size()) * D;
       Sn = static_cast<int>(separator.size()) * D;
       storage.fit(sizeFor(F, Sn));
+      pending.resize(0, 0);
     }
     double* lsPtr() { return storage.data(); }
     double* dPtr() { return storage.data() + (F + Sn) * F; }
@@ -133,7 +139,8 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> slot;
   std::vector<char> mark, changed;
   // Scratch buffers of the elimination and back-substitution (reused, no per-clique malloc).
-  DoubleBuffer h_buf;
+  DoubleBuffer h_buf, extend_buf;
+  Eigen::MatrixXd w_buf, w_parent_buf;
   std::vector<double> x_buf, xs_buf, diag_buf;
   std::vector<int> child_slots, changed_scratch, stack_scratch;
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
@@ -165,19 +172,21 @@ struct IncrementalSmoother<G>::Impl {
     TreeMemory m;
     double sep_sum = 0;
     for (const Clique& c : cliques) {
-      m.clique_bytes_reserved += c.storage.capacity() * sizeof(double);
+      m.clique_bytes_reserved += (c.storage.capacity() + c.pending.size()) * sizeof(double);
       if (!c.in_use) {
         ++m.free_cliques;
         continue;
       }
       ++m.cliques;
-      m.clique_bytes += c.storage.size() * sizeof(double);
+      m.clique_bytes += (c.storage.size() + c.pending.size()) * sizeof(double);
       m.max_frontal_dim = std::max(m.max_frontal_dim, c.F);
       m.max_separator_dim = std::max(m.max_separator_dim, c.Sn);
       sep_sum += c.Sn;
     }
     if (m.cliques > 0) m.mean_separator_dim = sep_sum / m.cliques;
-    m.scratch_bytes = (h_buf.capacity() + x_buf.capacity() + xs_buf.capacity()) * sizeof(double);
+    m.scratch_bytes = (h_buf.capacity() + extend_buf.capacity() + x_buf.capacity() +
+                       xs_buf.capacity() + w_buf.size() + w_parent_buf.size()) *
+                      sizeof(double);
     for (const auto& b : s_buffers) m.scratch_bytes += b.capacity() * sizeof(double);
     return m;
   }
@@ -256,13 +265,32 @@ struct IncrementalSmoother<G>::Impl {
     c.children.clear();
     c.parent = -1;
     c.dirty = false;
+    c.damped = false;
     c.in_use = false;
+    c.pending.resize(0, 0);
     free_cliques.push_back(id);
+  }
+
+  // Applies the clique's pending rank updates to its cached factor (lower triangle and full
+  // diagonal blocks, as eliminateClique stores it).
+  void applyPending(Clique& c) {
+    if (c.pending.cols() == 0) return;
+    const int Sn = c.Sn;
+    Eigen::Map<Eigen::MatrixXd> cH(c.hPtr(), Sn, Sn);
+    Eigen::Map<Eigen::VectorXd> cg(c.gPtr(), Sn);
+    const auto Ps = c.pending.topRows(Sn);
+    cH.template selfadjointView<Eigen::Lower>().rankUpdate(Ps);
+    cg.noalias() += Ps * c.pending.row(Sn).transpose();
+    for (int b = 0; b < Sn; b += D)
+      cH.template block<D, D>(b, b).template triangularView<Eigen::StrictlyUpper>() =
+          cH.template block<D, D>(b, b).transpose();
+    c.pending.resize(0, 0);
   }
 
   // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into h_buf
   // ((N+1)×(N+1), column-major; g in row N).
   void assemble(const Clique& c) {
+    for (int ch : c.children) applyPending(cliques[ch]);
     const int nf = static_cast<int>(c.frontals.size());
     const int ns = static_cast<int>(c.separator.size());
     const int N = c.F + c.Sn;
@@ -361,6 +389,7 @@ struct IncrementalSmoother<G>::Impl {
         std::fill(c.storage.begin(), c.storage.end(), 0.0);
         for (int k = 0; k < F; ++k) c.lsPtr()[static_cast<size_t>(k) * N + k] = std::sqrt(floor);
         c.dirty = true;
+        c.damped = true;
         return true;
       }
     }
@@ -385,6 +414,7 @@ struct IncrementalSmoother<G>::Impl {
         for (int p = b; p < q; ++p)
           cH[static_cast<size_t>(q) * Sn + p] = cH[static_cast<size_t>(p) * Sn + q];
     c.dirty = true;
+    c.damped = damped;
     return damped;
   }
 
@@ -481,6 +511,141 @@ struct IncrementalSmoother<G>::Impl {
       if (eliminateClique(ids[k])) ++st->indeterminate_cliques;
     st->cliques_reeliminated += m;
     st->variables_reeliminated += n;
+  }
+
+  // ---- Incremental factorisation of a factor between variables already in the tree ----
+  // A factor whose ends are frontal in cliques on one path to the root changes the Bayes tree's
+  // matrices only by a rank-D term: its whitened rows W (WWᵀ = [A r]ᵀ[A r]) are folded into the
+  // clique of its first eliminated end by a rank-D Cholesky update, and what is left of W passes
+  // on to the parent as the update of that clique's cached factor, up to the root (the
+  // incremental QR of iSAM, Kaess et al. 2008 §IV, applied clique by clique). Nothing is
+  // re-ordered or re-eliminated: O(D·N·F) per clique on the path instead of O(F·N²).
+
+  bool isAncestorOrSelf(int ancestor, int c) const {
+    for (; c >= 0; c = cliques[c].parent)
+      if (c == ancestor) return true;
+    return false;
+  }
+
+  // The clique of the first eliminated non-fixed end of factor f (−1 when the factor cannot be
+  // folded in: an end not yet in the tree, ends in different branches, or a damped clique on
+  // the way to the root).
+  int foldInClique(int f) const {
+    const Edge& e = edges[f];
+    int lower = -1, upper = -1;
+    for (int v : {e.i, e.j}) {
+      if (fixed[v]) continue;
+      if (clique_of[v] < 0) return -1;
+      (lower < 0 ? lower : upper) = v;
+    }
+    if (lower < 0) return -1;
+    int start = clique_of[lower];
+    if (upper >= 0 && !isAncestorOrSelf(clique_of[upper], start)) {
+      if (!isAncestorOrSelf(start, clique_of[upper])) return -1;
+      start = clique_of[upper];
+    }
+    for (int c = start; c >= 0; c = cliques[c].parent)
+      if (cliques[c].damped) return -1;
+    return start;
+  }
+
+  // Adds v to the separator of clique id. Its rows of [L; Sᵀ] and of the cached factor are
+  // zero: before the factor that needs it is folded in, v is not coupled to the frontals.
+  void extendSeparator(int id, int v) {
+    Clique& c = cliques[id];
+    applyPending(c);
+    const int F = c.F, Sn = c.Sn, N = F + Sn, Sn2 = Sn + D, N2 = N + D;
+    extend_buf.fit(Clique::sizeFor(F, Sn2));
+    double* out = extend_buf.data();
+    const double* in = c.lsPtr();
+    for (int k = 0; k < F; ++k) {
+      std::copy(in + static_cast<size_t>(k) * N, in + static_cast<size_t>(k + 1) * N,
+                out + static_cast<size_t>(k) * N2);
+      std::fill(out + static_cast<size_t>(k) * N2 + N, out + static_cast<size_t>(k + 1) * N2, 0.0);
+    }
+    out += static_cast<size_t>(N2) * F;
+    out = std::copy(c.dPtr(), c.dPtr() + F, out);
+    for (int q = 0; q < Sn2; ++q) {
+      if (q < Sn)
+        std::copy(c.hPtr() + static_cast<size_t>(q) * Sn,
+                  c.hPtr() + static_cast<size_t>(q + 1) * Sn, out);
+      std::fill(out + (q < Sn ? Sn : 0), out + Sn2, 0.0);
+      out += Sn2;
+    }
+    out = std::copy(c.gPtr(), c.gPtr() + Sn, out);
+    std::fill(out, out + D, 0.0);
+    c.storage.swap(extend_buf);
+    c.separator.push_back(v);
+    c.Sn = Sn2;
+  }
+
+  // Position (in variables) of v among the clique's frontals then separator; −1 if absent.
+  static int positionIn(const Clique& c, int v) {
+    const auto f = std::find(c.frontals.begin(), c.frontals.end(), v);
+    if (f != c.frontals.end()) return static_cast<int>(f - c.frontals.begin());
+    const auto s = std::find(c.separator.begin(), c.separator.end(), v);
+    if (s != c.separator.end())
+      return static_cast<int>(c.frontals.size() + (s - c.separator.begin()));
+    return -1;
+  }
+
+  // Folds factor f into the tree (foldInClique(f) ≥ 0); returns the cliques updated.
+  int foldIn(int f) {
+    const Edge& e = edges[f];
+    const int start = foldInClique(f);
+    // The later end joins the separators on the way up to its own clique (running intersection).
+    const int first = clique_of[e.i] == start && !fixed[e.i] ? e.i : e.j;
+    const int other = first == e.i ? e.j : e.i;
+    if (!fixed[other] && clique_of[other] != start)
+      for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
+        if (positionIn(cliques[c], other) >= 0) break;
+        extendSeparator(c, other);
+      }
+    // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
+    Mat Ai, Aj;
+    Vec r;
+    e.linearize(theta[e.i], theta[e.j], &Ai, &Aj, &r);
+    Eigen::MatrixXd& W = w_buf;
+    {
+      const Clique& c = cliques[start];
+      const int N = c.F + c.Sn;
+      W.setZero(N + 1, D);
+      if (!fixed[e.i]) W.middleRows(positionIn(c, e.i) * D, D) = Ai.transpose();
+      if (!fixed[e.j]) W.middleRows(positionIn(c, e.j) * D, D) = Aj.transpose();
+      W.row(N) = -r.transpose();
+    }
+    int updated = 0;
+    for (int id = start;;) {
+      Clique& c = cliques[id];
+      const int F = c.F, Sn = c.Sn, N = F + Sn;
+      bayestree::partialCholeskyUpdate(c.lsPtr(), N, F, c.dPtr(), W.data(),
+                                       static_cast<int>(W.rows()), D);
+      c.dirty = true;
+      ++updated;
+      if (c.parent < 0) break;  // what is left is the constant term
+      // The cached factor grows by VVᵀ, V = rows F..N of W (separator, then rhs): kept pending
+      // until the parent is re-eliminated, or until it would outgrow a quarter of the factor.
+      const auto V = W.bottomRows(Sn + 1);
+      const int K = static_cast<int>(c.pending.cols());
+      c.pending.conservativeResize(Sn + 1, K + D);
+      c.pending.rightCols(D) = V;
+      if (4 * (K + D) > Sn) applyPending(c);
+      // The parent's W: V scattered to the parent's rows.
+      const Clique& p = cliques[c.parent];
+      const int Np = p.F + p.Sn, nfp = static_cast<int>(p.frontals.size());
+      for (int a = 0; a < nfp; ++a) slot[p.frontals[a]] = a;
+      for (int b = 0; b < static_cast<int>(p.separator.size()); ++b) slot[p.separator[b]] = nfp + b;
+      Eigen::MatrixXd& Wp = w_parent_buf;
+      Wp.setZero(Np + 1, D);
+      for (int b = 0; b < static_cast<int>(c.separator.size()); ++b)
+        Wp.middleRows(slot[c.separator[b]] * D, D) = V.middleRows(b * D, D);
+      Wp.row(Np) = V.row(Sn);
+      for (int v : p.frontals) slot[v] = -1;
+      for (int v : p.separator) slot[v] = -1;
+      W.swap(Wp);
+      id = c.parent;
+    }
+    return updated;
   }
 
   // Kaess 2012 Alg. 3 (partial state update, "wildfire"): solve top-down from the roots,
@@ -737,6 +902,23 @@ struct IncrementalSmoother<G>::Impl {
         linearize(f);
         factor_stamp[f] = stamp;
       }
+
+    // Only factors between variables already in the tree, nothing relinearised: fold them in by
+    // rank updates along their paths to the root instead of re-eliminating the top.
+    if (!all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 && opt.rank_updates) {
+      bool foldable = true;
+      for (int f = first_new; f < static_cast<int>(edges.size()) && foldable; ++f)
+        foldable = foldInClique(f) >= 0;
+      if (foldable) {
+        for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
+          st.cliques_updated += foldIn(f);
+        for (int v : touched) mark[v] = 0;
+        st.cliques_solved = backSubstitute(opt.full_backsubstitution);
+        if (opt.dogleg) doglegStep();
+        st.time_s = secondsSince(t0);
+        return st;
+      }
+    }
 
     // Alg. 1 line 3 / Alg. 2 line 4: mark the cliques that contain a touched variable as
     // frontal and, for relinearised variables, every clique that contains it at all (the

@@ -30,6 +30,10 @@ struct SmootherOptions {
   /// since the value the clique was last solved with.
   double wildfire_threshold = 0.001;
   bool full_backsubstitution = false;  ///< solve every clique on each update
+  /// Fold an update made only of factors between variables already in the tree (nothing
+  /// relinearised) into the Bayes tree by rank updates along their paths to the root, instead
+  /// of re-eliminating those paths (false: always re-eliminate, as GTSAM's iSAM2).
+  bool rank_updates = true;
   /// Powell's dogleg instead of Gauss–Newton (as GTSAM's ISAM2DoglegParams). Each dogleg update
   /// evaluates F and the gradient over the whole graph (O(n), as in GTSAM).
   bool dogleg = false;
@@ -46,6 +50,8 @@ struct UpdateStats {
   int new_variables = 0;
   int cliques_reeliminated = 0;    ///< cliques of the new top of the tree
   int variables_reeliminated = 0;  ///< frontal variables of the new top
+  /// cliques given a rank update instead (new factors between variables already in the tree)
+  int cliques_updated = 0;
   int variables_relinearized = 0;
   int indeterminate_cliques = 0;  ///< nearly singular cliques that had to be damped
   int cliques_solved = 0;         ///< cliques re-solved by back-substitution

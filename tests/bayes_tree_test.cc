@@ -223,6 +223,44 @@ TEST(BayesTreeExactness, EqualsBatchGaussNewtonStep3D) {
   for (unsigned seed = 11; seed <= 12; ++seed) expectExactAfterEveryUpdate<SE3>(40, 15, seed);
 }
 
+// Without relinearisation a loop closure between poses already in the tree is folded in by
+// rank updates along its path (no re-elimination); the result must still be the batch
+// Gauss–Newton step from the same linearisation point, and the tree a valid Bayes tree.
+template <class G>
+void expectFoldInExact(int n, int loops, unsigned seed) {
+  const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
+  SmootherOptions o = exactOptions();
+  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
+  IncrementalSmoother<G> s(o);
+  int updates = 0, folded = 0;
+  replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
+    ++updates;
+    sm.checkInvariants();
+    if (st.cliques_updated > 0) {
+      ++folded;
+      EXPECT_EQ(st.cliques_reeliminated, 0);
+    }
+    const auto ref = gaussNewtonStep(graphOf(sm), sm.linearizationPoint());
+    for (int v = 0; v < sm.numPoses(); ++v) {
+      const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
+      ASSERT_LE((sm.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol)
+          << "update " << updates << " pose " << v << (st.cliques_updated ? " (folded in)" : "");
+    }
+  });
+  // Every loop closure (the edges beyond the odometry chain) joins two poses already in the
+  // tree, below its newest pose, which is frontal in the root.
+  EXPECT_EQ(folded, g.numEdges() - (n - 1));
+  EXPECT_GT(folded, loops / 2);
+}
+
+TEST(BayesTreeFoldIn, EqualsBatchGaussNewtonStep2D) {
+  for (unsigned seed = 21; seed <= 23; ++seed) expectFoldInExact<SE2>(80, 40, seed);
+}
+
+TEST(BayesTreeFoldIn, EqualsBatchGaussNewtonStep3D) {
+  for (unsigned seed = 31; seed <= 32; ++seed) expectFoldInExact<SE3>(50, 25, seed);
+}
+
 template <class G>
 void expectInvariantsAndLocality(int n, int loops, unsigned seed) {
   const PoseGraph<G> g = randomGraph<G>(n, loops, seed);

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <random>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -48,6 +49,46 @@ TEST(DenseKernels, PartialCholeskyLeavesTheSchurComplement) {
   std::mt19937_64 rng(5);
   for (const auto& [F, S] : std::vector<std::pair<int, int>>{{6, 12}, {30, 30}, {60, 200}}) {
     EXPECT_LT(schurError(randomSpd(F + S, rng), F), 1e-10) << "F " << F << " S " << S;
+  }
+}
+
+// partialCholeskyUpdate against factorising M + WWᵀ afresh: the same first F columns (and d),
+// and the update it passes on equal to the change of the Schur complement.
+TEST(DenseKernels, RankUpdateEqualsRefactorisation) {
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> normal(0, 1);
+  for (const auto& [F, S, k] :
+       std::vector<std::tuple<int, int, int>>{{6, 12, 6}, {30, 30, 3}, {60, 200, 6}, {12, 0, 6}}) {
+    const int N = F + S, M = N + 1;  // the last row is the right-hand side (d)
+    const Eigen::MatrixXd H = randomSpd(M, rng);
+    Eigen::MatrixXd W(M, k);
+    for (int i = 0; i < W.size(); ++i) W.data()[i] = normal(rng);
+    W.topRows(F / 2).setZero();  // as a factor that enters part-way down the clique
+    Eigen::VectorXd dg = H.diagonal().head(F);
+    Eigen::MatrixXd A = H;
+    ASSERT_TRUE(partialCholesky(A.data(), M, F, M, dg.data()));
+    Eigen::MatrixXd L = A.block(0, 0, N, F);  // as a clique stores it: [L; Sᵀ] and d apart
+    Eigen::VectorXd d = A.row(N).head(F).transpose();
+    Eigen::MatrixXd V = W;
+    partialCholeskyUpdate(L.data(), N, F, d.data(), V.data(), M, k);
+
+    Eigen::MatrixXd B = H + W * W.transpose();
+    Eigen::VectorXd dg2 = B.diagonal().head(F);
+    ASSERT_TRUE(partialCholesky(B.data(), M, F, M, dg2.data()));
+    const Eigen::MatrixXd L_ref = B.block(0, 0, N, F).triangularView<Eigen::Lower>();
+    const Eigen::MatrixXd L_got = L.triangularView<Eigen::Lower>();
+    EXPECT_LT((L_got - L_ref).cwiseAbs().maxCoeff(), 1e-10 * L_ref.cwiseAbs().maxCoeff())
+        << "F " << F << " S " << S;
+    EXPECT_LT((d - B.row(N).head(F).transpose()).cwiseAbs().maxCoeff(),
+              1e-10 * (1 + d.cwiseAbs().maxCoeff()));
+    // Schur(H + WWᵀ) − Schur(H) = VVᵀ on the trailing rows (separator and right-hand side).
+    const Eigen::MatrixXd change =
+        B.bottomRightCorner(S + 1, S + 1) - A.bottomRightCorner(S + 1, S + 1);
+    const Eigen::MatrixXd vvt = V.bottomRows(S + 1) * V.bottomRows(S + 1).transpose();
+    Eigen::MatrixXd diff = (change - vvt).triangularView<Eigen::Lower>();
+    diff(S, S) = 0;  // the right-hand side's own diagonal entry is not kept by partialCholesky
+    EXPECT_LT(diff.cwiseAbs().maxCoeff(), 1e-9 * (1 + vvt.cwiseAbs().maxCoeff()))
+        << "F " << F << " S " << S;
   }
 }
 

@@ -123,6 +123,7 @@ int replayCommand(const std::vector<std::string>& args) {
   std::string information = "refuse";
   double beta = -1;
   bool no_finalize = false;
+  bool no_rank_updates = false;
   po::options_description options("arbor replay FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -139,7 +140,10 @@ int replayCommand(const std::vector<std::string>& args) {
       "partial back-substitution threshold")("full-backsubstitution",
                                              po::bool_switch(&run.smoother.full_backsubstitution),
                                              "solve every clique on each update")(
-      "dogleg", po::bool_switch(&run.smoother.dogleg), "Powell's dogleg instead of Gauss-Newton")(
+      "no-rank-updates", po::bool_switch(&no_rank_updates),
+      "re-eliminate the path of every loop closure (as GTSAM's iSAM2) instead of folding it "
+      "in by rank updates")("dogleg", po::bool_switch(&run.smoother.dogleg),
+                            "Powell's dogleg instead of Gauss-Newton")(
       "no-finalize", po::bool_switch(&no_finalize),
       "skip the final relinearise-all pass (report the raw incremental estimate)")(
       "information", po::value(&information)->default_value("refuse"),
@@ -167,6 +171,7 @@ int replayCommand(const std::vector<std::string>& args) {
   }
   if (run.smoother.relinearize_skip < 1) throw UsageError("--relinearize-skip must be >= 1");
   run.finalize = !no_finalize;
+  run.smoother.rank_updates = !no_rank_updates;
   if (!run.batch.empty() && run.batch != "lm" && run.batch != "rtr") {
     throw UsageError("--batch must be lm or rtr, not '" + run.batch + "'");
   }

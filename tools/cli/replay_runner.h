@@ -28,6 +28,7 @@ struct UpdateRow {
   double latency_ms = 0;
   int cliques_reeliminated = 0;
   int variables_relinearized = 0;
+  int cliques_updated = 0;  ///< cliques given a rank update instead of re-eliminated
 };
 
 template <class G>
@@ -65,7 +66,8 @@ template <class G>
 ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& settings,
                            OnlineSmoother<G>& smoother, const ReplayHooks<G>& hooks = {});
 
-/// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized).
+/// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized,
+/// cliques_updated).
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows);
 
 }  // namespace arbor::cli
