@@ -104,9 +104,9 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg) {
                                 : partialCholeskyBlocked(A, lda, F, M, dg);
 }
 
-void partialCholeskyUpdate(double* L, int N, int F, double* d, double* W, int ldw, int k) {
+void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* W, int ldw, int k) {
   for (int j = 0; j < F; ++j) {
-    double* Lj = L + static_cast<size_t>(j) * N;
+    double* Lj = L + static_cast<size_t>(j) * ldl;
     for (int t = 0; t < k; ++t) {
       double* w = W + static_cast<size_t>(t) * ldw;
       const double wj = w[j];

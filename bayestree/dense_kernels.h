@@ -74,10 +74,10 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg);
 
 /// Rank-k update of a partial Cholesky factor (the rank-one update of Golub & Van Loan §6.5.4,
 /// applied column by column for k vectors at once). `L` (N×F, column-major, leading dimension
-/// N) and `d` (F) are the first F columns of the factor of an (N+1)×(N+1) matrix M, `d` being
+/// ldl ≥ N) and `d` (F) are the first F columns of the factor of an (N+1)×(N+1) matrix M, `d` being
 /// its last row; they become those of M + WWᵀ, with W (N+1)×k (leading dimension ldw, rows in
 /// the same order). On return rows F..N of W hold V with Schur(M + WWᵀ) = Schur(M) + VVᵀ (the
 /// update the factor passed on to the parent receives); rows 0..F−1 are destroyed.
-void partialCholeskyUpdate(double* L, int N, int F, double* d, double* W, int ldw, int k);
+void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* W, int ldw, int k);
 
 }  // namespace arbor::bayestree

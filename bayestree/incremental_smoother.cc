@@ -64,45 +64,50 @@ struct IncrementalSmoother<G>::Impl {
   // A clique: the conditional ‖R x_f + S x_s − d‖² on its frontal variables given its separator,
   // and the factor it passes to its parent (the Schur complement on the separator).
   struct Clique {
-    using Map = Eigen::Map<Eigen::MatrixXd>;
-    using ConstMap = Eigen::Map<const Eigen::MatrixXd>;
-    using VecMap = Eigen::Map<Eigen::VectorXd>;
+    using Map = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+    using ConstMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
     using ConstVecMap = Eigen::Map<const Eigen::VectorXd>;
 
     std::vector<int> frontals;   // in elimination order
     std::vector<int> separator;  // poses of the parent's frontals ∪ separator
     int parent = -1;
     std::vector<int> children;
-    // One allocation: [LS (N×F) | d (F) | cached H (Sn×Sn) | cached g (Sn)], column-major,
-    // F = nf·D, Sn = ns·D, N = F + Sn; LS = [L; Sᵀ] with R = Lᵀ (so R x_f + S x_s = d).
+    // One allocation: [LS (ld×F) | d (F) | cached H (ldh×ldh) | cached g (ldh)], column-major,
+    // F = nf·D, Sn = ns·D, N = F + Sn ≤ ld, Sn ≤ ldh (room for the separator to grow in place);
+    // LS = [L; Sᵀ] (rows 0..N−1) with R = Lᵀ (so R x_f + S x_s = d).
     DoubleBuffer storage;
     // Rank updates of the cached factor not yet applied: it is [H g] + P_s [P_sᵀ P_gᵀ], with
     // P = [P_s; P_g] ((Sn+1)×K). Applied when the parent reads the cached factor (or K grows).
     Eigen::MatrixXd pending;
-    int F = 0, Sn = 0;
-    bool dirty = false;   // re-eliminated since the last back-substitution
-    bool damped = false;  // the factor is of a damped (indeterminate) Hessian
+    int F = 0, Sn = 0, ld = 0, ldh = 0;
+    int eliminated_sn = 0;  // Sn when last eliminated (the separator grows by fold-ins)
+    bool dirty = false;     // re-eliminated since the last back-substitution
+    bool damped = false;    // the factor is of a damped (indeterminate) Hessian
     bool in_use = false;
     int removed_stamp = -1;
 
-    static size_t sizeFor(int F, int Sn) {
-      return static_cast<size_t>(F + Sn) * F + F + static_cast<size_t>(Sn) * Sn + Sn;
+    static size_t sizeFor(int F, int ld, int ldh) {
+      return static_cast<size_t>(ld) * F + F + static_cast<size_t>(ldh) * ldh + ldh;
     }
-    void allocate() {
+    void allocate() {  // exactly the room needed
       F = static_cast<int>(frontals.size()) * D;
       Sn = static_cast<int>(separator.size()) * D;
-      storage.fit(sizeFor(F, Sn));
+      ld = F + Sn;
+      ldh = Sn;
+      eliminated_sn = Sn;
+      storage.fit(sizeFor(F, ld, ldh));
       pending.resize(0, 0);
     }
     double* lsPtr() { return storage.data(); }
-    double* dPtr() { return storage.data() + (F + Sn) * F; }
+    double* dPtr() { return storage.data() + static_cast<size_t>(ld) * F; }
     double* hPtr() { return dPtr() + F; }
-    double* gPtr() { return hPtr() + Sn * Sn; }
+    double* gPtr() { return hPtr() + static_cast<size_t>(ldh) * ldh; }
     const double* lsPtr() const { return storage.data(); }
-    const double* dPtr() const { return storage.data() + (F + Sn) * F; }
+    const double* dPtr() const { return storage.data() + static_cast<size_t>(ld) * F; }
     const double* hPtr() const { return dPtr() + F; }
-    const double* gPtr() const { return hPtr() + Sn * Sn; }
-    ConstMap LS() const { return ConstMap(lsPtr(), F + Sn, F); }
+    const double* gPtr() const { return hPtr() + static_cast<size_t>(ldh) * ldh; }
+    ConstMap LS() const { return ConstMap(lsPtr(), F + Sn, F, Eigen::OuterStride<>(ld)); }
+    Map cachedHMutable() { return Map(hPtr(), Sn, Sn, Eigen::OuterStride<>(ldh)); }
     Eigen::MatrixXd R() const {  // upper triangular
       Eigen::MatrixXd L = LS().topRows(F).template triangularView<Eigen::Lower>();
       return L.transpose();
@@ -110,7 +115,7 @@ struct IncrementalSmoother<G>::Impl {
     Eigen::MatrixXd S() const { return LS().bottomRows(Sn).transpose(); }
     ConstVecMap d() const { return ConstVecMap(dPtr(), F); }
     ConstMap cachedH() const {  // lower triangle and full diagonal D×D blocks
-      return ConstMap(hPtr(), Sn, Sn);
+      return ConstMap(hPtr(), Sn, Sn, Eigen::OuterStride<>(ldh));
     }
     ConstVecMap cachedG() const { return ConstVecMap(gPtr(), Sn); }
   };
@@ -276,7 +281,7 @@ struct IncrementalSmoother<G>::Impl {
   void applyPending(Clique& c) {
     if (c.pending.cols() == 0) return;
     const int Sn = c.Sn;
-    Eigen::Map<Eigen::MatrixXd> cH(c.hPtr(), Sn, Sn);
+    auto cH = c.cachedHMutable();
     Eigen::Map<Eigen::VectorXd> cg(c.gPtr(), Sn);
     const auto Ps = c.pending.topRows(Sn);
     cH.template selfadjointView<Eigen::Lower>().rankUpdate(Ps);
@@ -387,7 +392,7 @@ struct IncrementalSmoother<G>::Impl {
       }
       if (!ok) {  // not even damping helps (non-finite input): pin the frontals at zero
         std::fill(c.storage.begin(), c.storage.end(), 0.0);
-        for (int k = 0; k < F; ++k) c.lsPtr()[static_cast<size_t>(k) * N + k] = std::sqrt(floor);
+        for (int k = 0; k < F; ++k) c.lsPtr()[static_cast<size_t>(k) * c.ld + k] = std::sqrt(floor);
         c.dirty = true;
         c.damped = true;
         return true;
@@ -397,7 +402,7 @@ struct IncrementalSmoother<G>::Impl {
     double* LS = c.lsPtr();
     for (int k = 0; k < F; ++k) {
       const double* col = A + static_cast<size_t>(k) * lda;
-      double* out = LS + static_cast<size_t>(k) * N;
+      double* out = LS + static_cast<size_t>(k) * c.ld;
       for (int i = 0; i < k; ++i) out[i] = 0.0;
       std::copy(col + k, col + N, out + k);
       c.dPtr()[k] = col[N];
@@ -406,13 +411,13 @@ struct IncrementalSmoother<G>::Impl {
     double* cg = c.gPtr();
     for (int q = 0; q < Sn; ++q) {  // the lower triangle, then the diagonal blocks made full
       const double* col = A + static_cast<size_t>(F + q) * lda + F;
-      std::copy(col + q, col + Sn, cH + static_cast<size_t>(q) * Sn + q);
+      std::copy(col + q, col + Sn, cH + static_cast<size_t>(q) * c.ldh + q);
       cg[q] = col[Sn];
     }
     for (int b = 0; b < Sn; b += D)
       for (int q = b; q < b + D; ++q)
         for (int p = b; p < q; ++p)
-          cH[static_cast<size_t>(q) * Sn + p] = cH[static_cast<size_t>(p) * Sn + q];
+          cH[static_cast<size_t>(q) * c.ldh + p] = cH[static_cast<size_t>(p) * c.ldh + q];
     c.dirty = true;
     c.damped = damped;
     return damped;
@@ -479,7 +484,8 @@ struct IncrementalSmoother<G>::Impl {
       auto need = [&](int id) {
         const Clique& c = cliques[id];
         const int F = static_cast<int>(c.frontals.size()) * D;
-        return Clique::sizeFor(F, static_cast<int>(c.separator.size()) * D);
+        const int Sn = static_cast<int>(c.separator.size()) * D;
+        return Clique::sizeFor(F, F + Sn, Sn);
       };
       std::sort(by_need.begin(), by_need.end(), [&](int a, int b) { return need(a) > need(b); });
       std::sort(by_capacity.begin(), by_capacity.end(), [&](int a, int b) {
@@ -546,37 +552,67 @@ struct IncrementalSmoother<G>::Impl {
     }
     for (int c = start; c >= 0; c = cliques[c].parent)
       if (cliques[c].damped) return -1;
+    // The later end joins the separators up to its own clique: refuse when that would grow one
+    // beyond its budget (fill that only a re-elimination, with a fresh ordering, keeps down).
+    const int first = clique_of[e.i] == start && !fixed[e.i] ? e.i : e.j;
+    const int other = first == e.i ? e.j : e.i;
+    if (!fixed[other])
+      for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
+        const Clique& k = cliques[c];
+        if (std::find(k.separator.begin(), k.separator.end(), other) != k.separator.end()) break;
+        if (k.Sn + D > separatorBudget(k)) return -1;
+      }
     return start;
   }
 
+  // How far fold-ins may grow a separator: twice its size at elimination plus four poses.
+  // Without a bound, cubicle's cached factors grew to 1.1 GB (GTSAM: 0.4); with it, replay
+  // times on the 3D sets were unchanged or better (docs/benchmarks.md).
+  static int separatorBudget(const Clique& k) { return 2 * k.eliminated_sn + 4 * D; }
+
   // Adds v to the separator of clique id. Its rows of [L; Sᵀ] and of the cached factor are
-  // zero: before the factor that needs it is folded in, v is not coupled to the frontals.
+  // zero: before the factor that needs it is folded in, v is not coupled to the frontals. The
+  // storage keeps room to grow (a quarter more), so most extensions copy nothing.
   void extendSeparator(int id, int v) {
     Clique& c = cliques[id];
-    applyPending(c);
-    const int F = c.F, Sn = c.Sn, N = F + Sn, Sn2 = Sn + D, N2 = N + D;
-    extend_buf.fit(Clique::sizeFor(F, Sn2));
-    double* out = extend_buf.data();
-    const double* in = c.lsPtr();
+    const int F = c.F, Sn = c.Sn, N = F + Sn;
+    if (c.ld < N + D || c.ldh < Sn + D) {
+      const int room = D * std::max(2, Sn / (4 * D));
+      const int ld = N + D + room, ldh = Sn + D + room;
+      extend_buf.fit(Clique::sizeFor(F, ld, ldh));
+      double* ls = extend_buf.data();
+      for (int k = 0; k < F; ++k)
+        std::copy(c.lsPtr() + static_cast<size_t>(k) * c.ld,
+                  c.lsPtr() + static_cast<size_t>(k) * c.ld + N, ls + static_cast<size_t>(k) * ld);
+      double* d = ls + static_cast<size_t>(ld) * F;
+      std::copy(c.dPtr(), c.dPtr() + F, d);
+      double* h = d + F;
+      for (int q = 0; q < Sn; ++q)
+        std::copy(c.hPtr() + static_cast<size_t>(q) * c.ldh,
+                  c.hPtr() + static_cast<size_t>(q) * c.ldh + Sn, h + static_cast<size_t>(q) * ldh);
+      std::copy(c.gPtr(), c.gPtr() + Sn, h + static_cast<size_t>(ldh) * ldh);
+      c.storage.swap(extend_buf);
+      c.ld = ld;
+      c.ldh = ldh;
+    }
     for (int k = 0; k < F; ++k) {
-      std::copy(in + static_cast<size_t>(k) * N, in + static_cast<size_t>(k + 1) * N,
-                out + static_cast<size_t>(k) * N2);
-      std::fill(out + static_cast<size_t>(k) * N2 + N, out + static_cast<size_t>(k + 1) * N2, 0.0);
+      double* col = c.lsPtr() + static_cast<size_t>(k) * c.ld;
+      std::fill(col + N, col + N + D, 0.0);
     }
-    out += static_cast<size_t>(N2) * F;
-    out = std::copy(c.dPtr(), c.dPtr() + F, out);
-    for (int q = 0; q < Sn2; ++q) {
-      if (q < Sn)
-        std::copy(c.hPtr() + static_cast<size_t>(q) * Sn,
-                  c.hPtr() + static_cast<size_t>(q + 1) * Sn, out);
-      std::fill(out + (q < Sn ? Sn : 0), out + Sn2, 0.0);
-      out += Sn2;
+    for (int q = 0; q < Sn + D; ++q) {
+      double* col = c.hPtr() + static_cast<size_t>(q) * c.ldh;
+      std::fill(col + (q < Sn ? Sn : 0), col + Sn + D, 0.0);
     }
-    out = std::copy(c.gPtr(), c.gPtr() + Sn, out);
-    std::fill(out, out + D, 0.0);
-    c.storage.swap(extend_buf);
+    std::fill(c.gPtr() + Sn, c.gPtr() + Sn + D, 0.0);
+    if (c.pending.cols() > 0) {  // zero rows for v, before the right-hand side's row
+      const int K = static_cast<int>(c.pending.cols());
+      Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(Sn + D + 1, K);
+      grown.topRows(Sn) = c.pending.topRows(Sn);
+      grown.row(Sn + D) = c.pending.row(Sn);
+      c.pending.swap(grown);
+    }
     c.separator.push_back(v);
-    c.Sn = Sn2;
+    c.Sn = Sn + D;
   }
 
   // Position (in variables) of v among the clique's frontals then separator; −1 if absent.
@@ -618,7 +654,7 @@ struct IncrementalSmoother<G>::Impl {
     for (int id = start;;) {
       Clique& c = cliques[id];
       const int F = c.F, Sn = c.Sn, N = F + Sn;
-      bayestree::partialCholeskyUpdate(c.lsPtr(), N, F, c.dPtr(), W.data(),
+      bayestree::partialCholeskyUpdate(c.lsPtr(), c.ld, N, F, c.dPtr(), W.data(),
                                        static_cast<int>(W.rows()), D);
       c.dirty = true;
       ++updated;
@@ -669,7 +705,7 @@ struct IncrementalSmoother<G>::Impl {
       ++solved;
       const int nf = static_cast<int>(c.frontals.size());
       const int ns = static_cast<int>(c.separator.size());
-      const int F = c.F, N = c.F + c.Sn;
+      const int F = c.F;
       // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s): a matrix-vector product and a triangular
       // solve with the clique's stored [L; Sᵀ].
       xs_buf.resize(c.Sn);
@@ -677,7 +713,7 @@ struct IncrementalSmoother<G>::Impl {
         Eigen::Map<Vec>(xs_buf.data() + b * D) = delta_newton[c.separator[b]];
       x_buf.resize(F);
       double* x = x_buf.data();
-      const typename Clique::ConstMap LS(c.lsPtr(), N, F);
+      const typename Clique::ConstMap LS = c.LS();
       Eigen::Map<Eigen::VectorXd> xv(x, F);
       xv = c.d();
       if (c.Sn > 0)
@@ -1028,7 +1064,8 @@ struct IncrementalSmoother<G>::Impl {
       const std::string name = "clique " + std::to_string(id);
       if (c.frontals.empty()) fail(name + " has no frontal variable");
       const int nf = static_cast<int>(c.frontals.size()), ns = static_cast<int>(c.separator.size());
-      if (c.F != nf * D || c.Sn != ns * D || c.storage.size() != Clique::sizeFor(c.F, c.Sn))
+      if (c.F != nf * D || c.Sn != ns * D || c.ld < c.F + c.Sn || c.ldh < c.Sn ||
+          c.storage.size() != Clique::sizeFor(c.F, c.ld, c.ldh))
         fail(name + " has matrices of the wrong size");
       for (int v : c.frontals) {
         if (v < 0 || v >= n || fixed[v]) fail(name + " has a bad frontal " + std::to_string(v));

@@ -248,9 +248,11 @@ void expectFoldInExact(int n, int loops, unsigned seed) {
     }
   });
   // Every loop closure (the edges beyond the odometry chain) joins two poses already in the
-  // tree, below its newest pose, which is frontal in the root.
-  EXPECT_EQ(folded, g.numEdges() - (n - 1));
-  EXPECT_GT(folded, loops / 2);
+  // tree, below its newest pose, which is frontal in the root; most are folded in, the others
+  // would grow a separator beyond its budget and are re-eliminated (both must be exact).
+  const int closures = g.numEdges() - (n - 1);
+  EXPECT_LE(folded, closures);
+  EXPECT_GT(folded, closures / 2);
 }
 
 TEST(BayesTreeFoldIn, EqualsBatchGaussNewtonStep2D) {

@@ -67,10 +67,14 @@ TEST(DenseKernels, RankUpdateEqualsRefactorisation) {
     Eigen::VectorXd dg = H.diagonal().head(F);
     Eigen::MatrixXd A = H;
     ASSERT_TRUE(partialCholesky(A.data(), M, F, M, dg.data()));
-    Eigen::MatrixXd L = A.block(0, 0, N, F);  // as a clique stores it: [L; Sᵀ] and d apart
+    // As a clique stores it: [L; Sᵀ] with room below (leading dimension N + 5), d apart.
+    Eigen::MatrixXd stored = Eigen::MatrixXd::Constant(N + 5, F, 7.0);
+    stored.topRows(N) = A.block(0, 0, N, F);
     Eigen::VectorXd d = A.row(N).head(F).transpose();
     Eigen::MatrixXd V = W;
-    partialCholeskyUpdate(L.data(), N, F, d.data(), V.data(), M, k);
+    partialCholeskyUpdate(stored.data(), N + 5, N, F, d.data(), V.data(), M, k);
+    EXPECT_TRUE((stored.bottomRows(5).array() == 7.0).all()) << "wrote below row N";
+    const Eigen::MatrixXd L = stored.topRows(N);
 
     Eigen::MatrixXd B = H + W * W.transpose();
     Eigen::VectorXd dg2 = B.diagonal().head(F);
