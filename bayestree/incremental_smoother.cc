@@ -146,7 +146,7 @@ struct IncrementalSmoother<G>::Impl {
   // Scratch buffers of the elimination and back-substitution (reused, no per-clique malloc).
   DoubleBuffer h_buf, extend_buf;
   Eigen::MatrixXd w_buf, w_parent_buf;
-  std::vector<double> x_buf, xs_buf, diag_buf;
+  std::vector<double> x_buf, diag_buf;
   std::vector<int> child_slots, changed_scratch, stack_scratch;
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
   bayestree::RowList s_rows;
@@ -189,8 +189,8 @@ struct IncrementalSmoother<G>::Impl {
       sep_sum += c.Sn;
     }
     if (m.cliques > 0) m.mean_separator_dim = sep_sum / m.cliques;
-    m.scratch_bytes = (h_buf.capacity() + extend_buf.capacity() + x_buf.capacity() +
-                       xs_buf.capacity() + w_buf.size() + w_parent_buf.size()) *
+    m.scratch_bytes = (h_buf.capacity() + extend_buf.capacity() + x_buf.capacity() + w_buf.size() +
+                       w_parent_buf.size()) *
                       sizeof(double);
     for (const auto& b : s_buffers) m.scratch_bytes += b.capacity() * sizeof(double);
     return m;
@@ -274,6 +274,24 @@ struct IncrementalSmoother<G>::Impl {
     c.in_use = false;
     c.pending.resize(0, 0);
     free_cliques.push_back(id);
+  }
+
+  // Separators up to this order take a fold-in's update of their cached factor at once.
+  static constexpr int kDirectUpdateOrder = 48;
+
+  // [H g] += V_s [V_sᵀ V_gᵀ] on the cached factor (lower triangle and full diagonal blocks),
+  // V = [V_s; V_g] with D columns: a plain loop, faster than a general product at small orders.
+  template <class Block>
+  void addOuterProduct(Clique* c, const Block& V) {
+    const int Sn = c->Sn;
+    double* h = c->hPtr();
+    double* g = c->gPtr();
+    for (int q = 0; q < Sn; ++q) {
+      Eigen::Matrix<double, 1, D> vq = V.row(q);
+      double* col = h + static_cast<size_t>(q) * c->ldh;
+      for (int p = q - q % D; p < Sn; ++p) col[p] += V.row(p).dot(vq);
+      g[q] += V.row(q).dot(V.row(Sn));
+    }
   }
 
   // Applies the clique's pending rank updates to its cached factor (lower triangle and full
@@ -663,9 +681,13 @@ struct IncrementalSmoother<G>::Impl {
       // until the parent is re-eliminated, or until it would outgrow a quarter of the factor.
       const auto V = W.bottomRows(Sn + 1);
       const int K = static_cast<int>(c.pending.cols());
-      c.pending.conservativeResize(Sn + 1, K + D);
-      c.pending.rightCols(D) = V;
-      if (4 * (K + D) > Sn) applyPending(c);
+      if (K == 0 && Sn <= kDirectUpdateOrder) {
+        addOuterProduct(&c, V);
+      } else {
+        c.pending.conservativeResize(Sn + 1, K + D);
+        c.pending.rightCols(D) = V;
+        if (4 * (K + D) > Sn) applyPending(c);
+      }
       // The parent's W: V scattered to the parent's rows.
       const Clique& p = cliques[c.parent];
       const int Np = p.F + p.Sn, nfp = static_cast<int>(p.frontals.size());
@@ -706,20 +728,22 @@ struct IncrementalSmoother<G>::Impl {
       const int nf = static_cast<int>(c.frontals.size());
       const int ns = static_cast<int>(c.separator.size());
       const int F = c.F;
-      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s): a matrix-vector product and a triangular
-      // solve with the clique's stored [L; Sᵀ].
-      xs_buf.resize(c.Sn);
-      for (int b = 0; b < ns; ++b)
-        Eigen::Map<Vec>(xs_buf.data() + b * D) = delta_newton[c.separator[b]];
-      x_buf.resize(F);
+      // x = R⁻¹ (d − S x_s) with the clique's stored columns [L; Sᵀ]: for z = [x; x_s], from
+      // the last frontal up, z_i = (d_i − L(i+1.., i)ᵀ z(i+1..)) / L_ii (one dot product per
+      // column, the separator's share and the triangular solve's together).
+      const int N = F + c.Sn;
+      x_buf.resize(N);
       double* x = x_buf.data();
-      const typename Clique::ConstMap LS = c.LS();
-      Eigen::Map<Eigen::VectorXd> xv(x, F);
-      xv = c.d();
-      if (c.Sn > 0)
-        xv.noalias() -= LS.bottomRows(c.Sn).transpose() *
-                        Eigen::Map<const Eigen::VectorXd>(xs_buf.data(), c.Sn);
-      LS.topRows(F).template triangularView<Eigen::Lower>().transpose().solveInPlace(xv);
+      for (int b = 0; b < ns; ++b) Eigen::Map<Vec>(x + F + b * D) = delta_newton[c.separator[b]];
+      const double* ls = c.lsPtr();
+      const double* dv = c.dPtr();
+      for (int i = F - 1; i >= 0; --i) {
+        const double* col = ls + static_cast<size_t>(i) * c.ld;
+        const int len = N - i - 1;
+        const double dot = Eigen::Map<const Eigen::VectorXd>(col + i + 1, len)
+                               .dot(Eigen::Map<const Eigen::VectorXd>(x + i + 1, len));
+        x[i] = (dv[i] - dot) / col[i];
+      }
       // The new values are always taken. A variable is "changed" (the cliques below that hold
       // it in their separator must be recomputed) when it moved by at least the threshold from
       // the value they were last solved with (delta_seen), so small moves cannot accumulate.
