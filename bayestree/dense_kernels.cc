@@ -104,26 +104,88 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg) {
                                 : partialCholeskyBlocked(A, lda, F, M, dg);
 }
 
+namespace {
+
+// Rows `begin`..`end`−1 of column `l` through K Givens-like rotations in turn (one sweep: each
+// row's entry passes the K vectors' rotations while it is in a register).
+template <int K>
+void rotateRows(double* l, double* const* w, const double* s, const double* inv_c, const double* c,
+                int begin, int end) {
+  double* wp[K];
+  double sa[K], ia[K], ca[K];
+  for (int a = 0; a < K; ++a) {
+    wp[a] = w[a];
+    sa[a] = s[a];
+    ia[a] = inv_c[a];
+    ca[a] = c[a];
+  }
+#pragma GCC ivdep
+  for (int i = begin; i < end; ++i) {
+    double li = l[i];
+    for (int a = 0; a < K; ++a) {
+      const double wi = wp[a][i];
+      li = (li + sa[a] * wi) * ia[a];
+      wp[a][i] = ca[a] * wi - sa[a] * li;
+    }
+    l[i] = li;
+  }
+}
+
+void rotateRowsAny(double* l, double* const* w, const double* s, const double* inv_c,
+                   const double* c, int count, int begin, int end) {
+  switch (count) {
+    case 1:
+      return rotateRows<1>(l, w, s, inv_c, c, begin, end);
+    case 2:
+      return rotateRows<2>(l, w, s, inv_c, c, begin, end);
+    case 3:
+      return rotateRows<3>(l, w, s, inv_c, c, begin, end);
+    case 6:
+      return rotateRows<6>(l, w, s, inv_c, c, begin, end);
+    default:
+      for (int a = 0; a < count; ++a) rotateRows<1>(l, w + a, s + a, inv_c + a, c + a, begin, end);
+  }
+}
+
+}  // namespace
+
 void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* W, int ldw, int k) {
-  for (int j = 0; j < F; ++j) {
-    double* Lj = L + static_cast<size_t>(j) * ldl;
-    for (int t = 0; t < k; ++t) {
-      double* w = W + static_cast<size_t>(t) * ldw;
-      const double wj = w[j];
-      if (wj == 0.0) continue;  // column j is unchanged by this vector
-      const double ljj = Lj[j];
-      const double r = std::sqrt(ljj * ljj + wj * wj);
-      const double c = r / ljj, s = wj / ljj, inv_c = ljj / r;
-      Lj[j] = r;
-      for (int i = j + 1; i < N; ++i) {
-        const double l = (Lj[i] + s * w[i]) * inv_c;
-        w[i] = c * w[i] - s * l;
-        Lj[i] = l;
+  constexpr int kMax = 16;
+  double* w[kMax];
+  double s[kMax], c[kMax], inv_c[kMax];
+  double* d_w[kMax];
+  for (int t0 = 0; t0 < k; t0 += kMax) {  // at most kMax vectors per sweep
+    const int kt = std::min(kMax, k - t0);
+    for (int j = 0; j < F; ++j) {
+      double* Lj = L + static_cast<size_t>(j) * ldl;
+      // The rotations of column j, in turn: those of vectors with a zero in row j are identities.
+      int count = 0;
+      double ljj = Lj[j];
+      for (int t = t0; t < t0 + kt; ++t) {
+        double* wt = W + static_cast<size_t>(t) * ldw;
+        const double wj = wt[j];
+        if (wj == 0.0) continue;
+        const double r = std::sqrt(ljj * ljj + wj * wj);
+        c[count] = r / ljj;
+        s[count] = wj / ljj;
+        inv_c[count] = ljj / r;
+        w[count] = wt;
+        ++count;
+        ljj = r;
+        wt[j] = 0.0;
       }
-      const double dj = (d[j] + s * w[N]) * inv_c;
-      w[N] = c * w[N] - s * dj;
+      if (count == 0) continue;
+      Lj[j] = ljj;
+      rotateRowsAny(Lj, w, s, inv_c, c, count, j + 1, N);
+      // The right-hand side's row (d, kept apart from L), rotated the same way.
+      for (int a = 0; a < count; ++a) d_w[a] = w[a] + N;
+      double dj = d[j];
+      for (int a = 0; a < count; ++a) {
+        const double wi = *d_w[a];
+        dj = (dj + s[a] * wi) * inv_c[a];
+        *d_w[a] = c[a] * wi - s[a] * dj;
+      }
       d[j] = dj;
-      w[j] = 0.0;
     }
   }
 }

@@ -78,7 +78,8 @@ struct IncrementalSmoother<G>::Impl {
     DoubleBuffer storage;
     // Rank updates of the cached factor not yet applied: it is [H g] + P_s [P_sᵀ P_gᵀ], with
     // P = [P_s; P_g] ((Sn+1)×K). Applied when the parent reads the cached factor (or K grows).
-    Eigen::MatrixXd pending;
+    Eigen::MatrixXd pending;  // its first pending_cols columns are in use
+    int pending_cols = 0;
     int F = 0, Sn = 0, ld = 0, ldh = 0;
     int eliminated_sn = 0;  // Sn when last eliminated (the separator grows by fold-ins)
     bool dirty = false;     // re-eliminated since the last back-substitution
@@ -97,6 +98,7 @@ struct IncrementalSmoother<G>::Impl {
       eliminated_sn = Sn;
       storage.fit(sizeFor(F, ld, ldh));
       pending.resize(0, 0);
+      pending_cols = 0;
     }
     double* lsPtr() { return storage.data(); }
     double* dPtr() { return storage.data() + static_cast<size_t>(ld) * F; }
@@ -273,6 +275,7 @@ struct IncrementalSmoother<G>::Impl {
     c.damped = false;
     c.in_use = false;
     c.pending.resize(0, 0);
+    c.pending_cols = 0;
     free_cliques.push_back(id);
   }
 
@@ -297,17 +300,19 @@ struct IncrementalSmoother<G>::Impl {
   // Applies the clique's pending rank updates to its cached factor (lower triangle and full
   // diagonal blocks, as eliminateClique stores it).
   void applyPending(Clique& c) {
-    if (c.pending.cols() == 0) return;
+    if (c.pending_cols == 0) return;
     const int Sn = c.Sn;
     auto cH = c.cachedHMutable();
     Eigen::Map<Eigen::VectorXd> cg(c.gPtr(), Sn);
-    const auto Ps = c.pending.topRows(Sn);
+    const auto P = c.pending.leftCols(c.pending_cols);
+    const auto Ps = P.topRows(Sn);
     cH.template selfadjointView<Eigen::Lower>().rankUpdate(Ps);
-    cg.noalias() += Ps * c.pending.row(Sn).transpose();
+    cg.noalias() += Ps * P.row(Sn).transpose();
     for (int b = 0; b < Sn; b += D)
       cH.template block<D, D>(b, b).template triangularView<Eigen::StrictlyUpper>() =
           cH.template block<D, D>(b, b).transpose();
     c.pending.resize(0, 0);
+    c.pending_cols = 0;
   }
 
   // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into h_buf
@@ -622,11 +627,11 @@ struct IncrementalSmoother<G>::Impl {
       std::fill(col + (q < Sn ? Sn : 0), col + Sn + D, 0.0);
     }
     std::fill(c.gPtr() + Sn, c.gPtr() + Sn + D, 0.0);
-    if (c.pending.cols() > 0) {  // zero rows for v, before the right-hand side's row
-      const int K = static_cast<int>(c.pending.cols());
-      Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(Sn + D + 1, K);
-      grown.topRows(Sn) = c.pending.topRows(Sn);
-      grown.row(Sn + D) = c.pending.row(Sn);
+    if (c.pending_cols > 0) {  // zero rows for v, before the right-hand side's row
+      const int K = c.pending_cols;
+      Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(Sn + D + 1, c.pending.cols());
+      grown.topLeftCorner(Sn, K) = c.pending.topLeftCorner(Sn, K);
+      grown.row(Sn + D).head(K) = c.pending.row(Sn).head(K);
       c.pending.swap(grown);
     }
     c.separator.push_back(v);
@@ -680,12 +685,17 @@ struct IncrementalSmoother<G>::Impl {
       // The cached factor grows by VVᵀ, V = rows F..N of W (separator, then rhs): kept pending
       // until the parent is re-eliminated, or until it would outgrow a quarter of the factor.
       const auto V = W.bottomRows(Sn + 1);
-      const int K = static_cast<int>(c.pending.cols());
+      const int K = c.pending_cols;
       if (K == 0 && Sn <= kDirectUpdateOrder) {
         addOuterProduct(&c, V);
       } else {
-        c.pending.conservativeResize(Sn + 1, K + D);
-        c.pending.rightCols(D) = V;
+        if (c.pending.cols() < K + D) {  // room up to where it is applied
+          Eigen::MatrixXd grown(Sn + 1, std::max(K + D, Sn / 4 + D));
+          grown.leftCols(K) = c.pending.leftCols(K);
+          c.pending.swap(grown);
+        }
+        c.pending.middleCols(K, D) = V;
+        c.pending_cols = K + D;
         if (4 * (K + D) > Sn) applyPending(c);
       }
       // The parent's W: V scattered to the parent's rows.
