@@ -738,21 +738,27 @@ struct IncrementalSmoother<G>::Impl {
       const int nf = static_cast<int>(c.frontals.size());
       const int ns = static_cast<int>(c.separator.size());
       const int F = c.F;
-      // x = R⁻¹ (d − S x_s) with the clique's stored columns [L; Sᵀ]: for z = [x; x_s], from
-      // the last frontal up, z_i = (d_i − L(i+1.., i)ᵀ z(i+1..)) / L_ii (one dot product per
-      // column, the separator's share and the triangular solve's together).
+      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s) with the clique's stored columns [L; Sᵀ]: the
+      // separator's share as one matrix-vector product, then the triangular solve from the last
+      // frontal up, z_i = (b_i − L(i+1..F, i)ᵀ x(i+1..F)) / L_ii, with z = [x; x_s] in one buffer.
       const int N = F + c.Sn;
-      x_buf.resize(N);
+      x_buf.resize(N + F);
       double* x = x_buf.data();
+      double* inv = x + N;
       for (int b = 0; b < ns; ++b) Eigen::Map<Vec>(x + F + b * D) = delta_newton[c.separator[b]];
+      const typename Clique::ConstMap LS = c.LS();
+      Eigen::Map<Eigen::VectorXd> xf(x, F);
+      xf = c.d();
+      if (c.Sn > 0)
+        xf.noalias() -=
+            LS.bottomRows(c.Sn).transpose() * Eigen::Map<const Eigen::VectorXd>(x + F, c.Sn);
       const double* ls = c.lsPtr();
-      const double* dv = c.dPtr();
+      for (int i = 0; i < F; ++i) inv[i] = 1.0 / ls[static_cast<size_t>(i) * c.ld + i];
       for (int i = F - 1; i >= 0; --i) {
         const double* col = ls + static_cast<size_t>(i) * c.ld;
-        const int len = N - i - 1;
-        const double dot = Eigen::Map<const Eigen::VectorXd>(col + i + 1, len)
-                               .dot(Eigen::Map<const Eigen::VectorXd>(x + i + 1, len));
-        x[i] = (dv[i] - dot) / col[i];
+        double dot = 0;
+        for (int r = i + 1; r < F; ++r) dot += col[r] * x[r];
+        x[i] = (x[i] - dot) * inv[i];
       }
       // The new values are always taken. A variable is "changed" (the cliques below that hold
       // it in their separator must be recomputed) when it moved by at least the threshold from
