@@ -86,6 +86,7 @@ struct IncrementalSmoother<G>::Impl {
     bool damped = false;    // the factor is of a damped (indeterminate) Hessian
     bool in_use = false;
     int removed_stamp = -1;
+    int path_stamp = -1;
 
     static size_t sizeFor(int F, int ld, int ldh) {
       return static_cast<size_t>(ld) * F + F + static_cast<size_t>(ldh) * ldh + ldh;
@@ -140,6 +141,7 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> roots;
   int num_cliques = 0;
   int update_count = 0;
+  int path_stamp = 0;
   int stamp = 0;
   double dogleg_radius = 1.0;
   // Scratch indexed by pose, always restored to −1 / 0 after use (no O(n) clearing).
@@ -593,6 +595,32 @@ struct IncrementalSmoother<G>::Impl {
   // times on the 3D sets were unchanged or better (docs/benchmarks.md).
   static int separatorBudget(const Clique& k) { return 2 * k.eliminated_sn + 4 * D; }
 
+  // Rough flop counts that decide between folding factors in and re-eliminating their paths:
+  // a rank-D update of a clique costs about 4·D·F·N (plus D·Sn² for its cached factor), a
+  // re-elimination F³/3 + F²·Sn + F·Sn² (plus assembling it, ordering, new storage: taken as a
+  // fixed cost per clique).
+  static constexpr double kCliqueOverhead = 4000;
+  double foldFlops(int start) const {
+    double flops = 0;
+    for (int c = start; c >= 0; c = cliques[c].parent) {
+      const double F = cliques[c].F, S = cliques[c].Sn;
+      flops += 4.0 * D * F * (F + S) + D * S * S + kCliqueOverhead / 4;
+    }
+    return flops;
+  }
+  // The union of the paths from `starts` to the root, each clique counted once.
+  double eliminationFlops(const std::vector<int>& starts) {
+    ++path_stamp;
+    double flops = 0;
+    for (int start : starts)
+      for (int c = start; c >= 0 && cliques[c].path_stamp != path_stamp; c = cliques[c].parent) {
+        cliques[c].path_stamp = path_stamp;
+        const double F = cliques[c].F, S = cliques[c].Sn;
+        flops += F * F * F / 3 + F * F * S + F * S * S + kCliqueOverhead;
+      }
+    return flops;
+  }
+
   // Adds v to the separator of clique id. Its rows of [L; Sᵀ] and of the cached factor are
   // zero: before the factor that needs it is folded in, v is not coupled to the frontals. The
   // storage keeps room to grow (a quarter more), so most extensions copy nothing.
@@ -913,9 +941,85 @@ struct IncrementalSmoother<G>::Impl {
     for (Vec& v : delta) v.setZero();
   }
 
-  // Kaess 2012 Alg. 1 (with Alg. 2 fluid relinearisation); `all` relinearises every variable
-  // and re-eliminates the whole tree.
+  // One update. When new poses arrive together with factors that a rank update could take (a
+  // pose with its loop closures, --step pose), the factors that bring the new poses into the
+  // tree go first (Alg. 1, re-eliminating the top) and the others are folded in after: the
+  // linear system, hence the step, is that of one update with all of them.
   UpdateStats update(bool all) {
+    if (!all) ++update_count;
+    const bool relinearize_now = !all && update_count % opt.relinearize_skip == 0;
+    if (all || !opt.rank_updates || opt.dogleg || new_vars.empty() || queued.size() < 2)
+      return updateStep(all, relinearize_now, true);
+    std::vector<Edge> rest = splitOffIntroducing();
+    if (!worthFolding(rest)) {
+      queued.insert(queued.end(), rest.begin(), rest.end());
+      rest.clear();
+    }
+    if (rest.empty()) return updateStep(false, relinearize_now, true);
+    const auto t0 = Clock::now();
+    UpdateStats st = updateStep(false, relinearize_now, false);
+    queued.swap(rest);
+    accumulate(&st, updateStep(false, false, true));
+    st.time_s = secondsSince(t0);
+    return st;
+  }
+
+  // Whether folding `factors` in (after their new poses join the tree at the root) is estimated
+  // cheaper than re-eliminating the paths from their old ends' cliques to the root with them.
+  bool worthFolding(const std::vector<Edge>& factors) {
+    if (factors.empty()) return false;
+    std::vector<int> starts;
+    double fold_flops = 0;
+    for (const Edge& e : factors) {
+      int start = -1;
+      for (int v : {e.i, e.j})
+        if (!fixed[v] && clique_of[v] >= 0 && (start < 0 || isAncestorOrSelf(start, clique_of[v])))
+          start = clique_of[v];
+      if (start < 0) continue;
+      starts.push_back(start);
+      fold_flops += foldFlops(start);
+    }
+    return fold_flops <= eliminationFlops(starts);
+  }
+
+  // Keeps in `queued` the factors that join each new pose to the tree (one per pose, or those
+  // that cannot be told apart) and returns the others, whose ends will all be in the tree.
+  std::vector<Edge> splitOffIntroducing() {
+    std::vector<Edge> intro, rest;
+    std::vector<char> placed(queued.size(), 0);
+    std::vector<int> joined;  // new poses joined by a factor in `intro` (slot[v] = 1)
+    auto known = [&](int v) { return fixed[v] || clique_of[v] >= 0 || slot[v] == 1; };
+    for (bool progress = true; progress;) {
+      progress = false;
+      for (size_t k = 0; k < queued.size(); ++k) {
+        if (placed[k]) continue;
+        const Edge& e = queued[k];
+        const bool ki = known(e.i), kj = known(e.j);
+        if (ki && kj) {
+          rest.push_back(e);
+        } else if (ki || kj) {
+          const int v = ki ? e.j : e.i;
+          slot[v] = 1;
+          joined.push_back(v);
+          intro.push_back(e);
+        } else {
+          continue;
+        }
+        placed[k] = 1;
+        progress = true;
+      }
+    }
+    for (size_t k = 0; k < queued.size(); ++k)
+      if (!placed[k]) intro.push_back(queued[k]);
+    for (int v : joined) slot[v] = -1;
+    queued.swap(intro);
+    return rest;
+  }
+
+  // Kaess 2012 Alg. 1 (with Alg. 2 fluid relinearisation when `relinearize_now`); `all`
+  // relinearises every variable and re-eliminates the whole tree; `solve` runs the partial
+  // state update (Alg. 3) at the end.
+  UpdateStats updateStep(bool all, bool relinearize_now, bool solve) {
     const auto t0 = Clock::now();
     UpdateStats st;
     ++stamp;
@@ -953,7 +1057,7 @@ struct IncrementalSmoother<G>::Impl {
     if (all) {
       for (int v = 0; v < n; ++v)
         if (!fixed[v]) relin.push_back(v);
-    } else if (++update_count % opt.relinearize_skip == 0) {
+    } else if (relinearize_now) {
       for (int v = 0; v < n; ++v)
         if (!fixed[v] && clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
     }
@@ -989,8 +1093,8 @@ struct IncrementalSmoother<G>::Impl {
         for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
           st.cliques_updated += foldIn(f);
         for (int v : touched) mark[v] = 0;
-        st.cliques_solved = backSubstitute(opt.full_backsubstitution);
-        if (opt.dogleg) doglegStep();
+        if (solve) st.cliques_solved = backSubstitute(opt.full_backsubstitution);
+        if (solve && opt.dogleg) doglegStep();
         st.time_s = secondsSince(t0);
         return st;
       }
@@ -1053,6 +1157,10 @@ struct IncrementalSmoother<G>::Impl {
     for (int c : free_cliques) cliques[c].storage.fit(0);  // those not recycled hold no memory
     for (int v : touched) mark[v] = 0;
     // Alg. 1 line 8 / Alg. 3: partial state update.
+    if (!solve) {
+      st.time_s = secondsSince(t0);
+      return st;
+    }
     st.cliques_solved = backSubstitute(all || opt.full_backsubstitution);
     if (opt.dogleg && !top.empty()) doglegStep();
     st.time_s = secondsSince(t0);

@@ -255,6 +255,41 @@ void expectFoldInExact(int n, int loops, unsigned seed) {
   EXPECT_GT(folded, closures / 2);
 }
 
+// One update per new pose with all its edges (as `--step pose`): the edges that bring the pose
+// into the tree are eliminated first and its loop closures folded in after, in the same update.
+template <class G>
+void expectPoseStepFoldInExact(int n, int loops, unsigned seed) {
+  const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
+  SmootherOptions o = exactOptions();
+  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
+  IncrementalSmoother<G> s(o);
+  s.addFixedPose(g.poses[0]);
+  int folded = 0;
+  size_t e = 0;
+  while (e < g.edges.size()) {
+    const int newest = std::max(g.edges[e].i, g.edges[e].j);
+    ASSERT_EQ(s.addPose(g.poses[newest]), newest);
+    for (; e < g.edges.size() && std::max(g.edges[e].i, g.edges[e].j) == newest; ++e)
+      s.addFactor(g.edges[e]);
+    const UpdateStats st = s.update();
+    s.checkInvariants();
+    if (st.cliques_updated > 0) ++folded;
+    EXPECT_EQ(st.new_variables, 1);
+    const auto ref = gaussNewtonStep(graphOf(s), s.linearizationPoint());
+    for (int v = 0; v < s.numPoses(); ++v) {
+      const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
+      ASSERT_LE((s.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol)
+          << "pose step " << newest << " pose " << v;
+    }
+  }
+  EXPECT_GT(folded, 0);
+}
+
+TEST(BayesTreeFoldIn, PoseStepEqualsBatchGaussNewtonStep) {
+  expectPoseStepFoldInExact<SE2>(80, 40, 41);
+  expectPoseStepFoldInExact<SE3>(50, 25, 42);
+}
+
 TEST(BayesTreeFoldIn, EqualsBatchGaussNewtonStep2D) {
   for (unsigned seed = 21; seed <= 23; ++seed) expectFoldInExact<SE2>(80, 40, seed);
 }
