@@ -560,7 +560,7 @@ struct IncrementalSmoother<G>::Impl {
 
   // The clique of the first eliminated non-fixed end of factor f (−1 when the factor cannot be
   // folded in: an end not yet in the tree, ends in different branches, or a damped clique on
-  // the way to the root).
+  // the way to the root). Folding one factor in leaves this unchanged for the others.
   int foldInClique(int f) const {
     const Edge& e = edges[f];
     int lower = -1, upper = -1;
@@ -577,17 +577,23 @@ struct IncrementalSmoother<G>::Impl {
     }
     for (int c = start; c >= 0; c = cliques[c].parent)
       if (cliques[c].damped) return -1;
-    // The later end joins the separators up to its own clique: refuse when that would grow one
-    // beyond its budget (fill that only a re-elimination, with a fresh ordering, keeps down).
+    return start;
+  }
+
+  // Whether folding factor f in from clique `start` keeps every separator on the way within
+  // its budget (the later end joins the separators up to its own clique: fill that only a
+  // re-elimination, with a fresh ordering, keeps down).
+  bool withinBudget(int f, int start) const {
+    const Edge& e = edges[f];
     const int first = clique_of[e.i] == start && !fixed[e.i] ? e.i : e.j;
     const int other = first == e.i ? e.j : e.i;
     if (!fixed[other])
       for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
         const Clique& k = cliques[c];
         if (std::find(k.separator.begin(), k.separator.end(), other) != k.separator.end()) break;
-        if (k.Sn + D > separatorBudget(k)) return -1;
+        if (k.Sn + D > separatorBudget(k)) return false;
       }
-    return start;
+    return true;
   }
 
   // How far fold-ins may grow a separator: twice its size at elimination plus four poses.
@@ -975,7 +981,7 @@ struct IncrementalSmoother<G>::Impl {
       for (int v : {e.i, e.j})
         if (!fixed[v] && clique_of[v] >= 0 && (start < 0 || isAncestorOrSelf(start, clique_of[v])))
           start = clique_of[v];
-      if (start < 0) continue;
+      if (start < 0) return false;  // both ends new: no path to compare
       starts.push_back(start);
       fold_flops += foldFlops(start);
     }
@@ -1087,8 +1093,10 @@ struct IncrementalSmoother<G>::Impl {
     // rank updates along their paths to the root instead of re-eliminating the top.
     if (!all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 && opt.rank_updates) {
       bool foldable = true;
-      for (int f = first_new; f < static_cast<int>(edges.size()) && foldable; ++f)
-        foldable = foldInClique(f) >= 0;
+      for (int f = first_new; f < static_cast<int>(edges.size()) && foldable; ++f) {
+        const int start = foldInClique(f);
+        foldable = start >= 0 && withinBudget(f, start);
+      }
       if (foldable) {
         for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
           st.cliques_updated += foldIn(f);

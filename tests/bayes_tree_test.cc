@@ -290,6 +290,44 @@ TEST(BayesTreeFoldIn, PoseStepEqualsBatchGaussNewtonStep) {
   expectPoseStepFoldInExact<SE3>(50, 25, 42);
 }
 
+// Many loop closures in one update, all between poses already in the tree: they are folded in
+// one after the other (the separators they grow may pass their budget part-way: the budget is
+// checked once, before the first).
+template <class G>
+void expectBatchOfClosuresFoldedExactly(int n, int loops, unsigned seed) {
+  const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
+  SmootherOptions o = exactOptions();
+  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
+  IncrementalSmoother<G> s(o);
+  s.addFixedPose(g.poses[0]);
+  for (int k = 1; k < n; ++k) s.addPose(g.poses[k]);
+  std::vector<RelativePoseEdge<G>> closures;
+  for (const auto& e : g.edges) {
+    if (std::abs(e.i - e.j) == 1) {
+      s.addFactor(e);
+      s.update();
+    } else {
+      closures.push_back(e);
+    }
+  }
+  for (const auto& e : closures) s.addFactor(e);
+  const UpdateStats st = s.update();
+  s.checkInvariants();
+  EXPECT_EQ(st.new_factors, static_cast<int>(closures.size()));
+  EXPECT_GT(st.cliques_updated, 0);
+  EXPECT_EQ(st.cliques_reeliminated, 0);
+  const auto ref = gaussNewtonStep(graphOf(s), s.linearizationPoint());
+  for (int v = 0; v < s.numPoses(); ++v) {
+    const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
+    ASSERT_LE((s.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol) << "pose " << v;
+  }
+}
+
+TEST(BayesTreeFoldIn, BatchOfClosuresInOneUpdate) {
+  expectBatchOfClosuresFoldedExactly<SE2>(60, 30, 51);
+  expectBatchOfClosuresFoldedExactly<SE3>(40, 20, 52);
+}
+
 TEST(BayesTreeFoldIn, EqualsBatchGaussNewtonStep2D) {
   for (unsigned seed = 21; seed <= 23; ++seed) expectFoldInExact<SE2>(80, 40, seed);
 }
