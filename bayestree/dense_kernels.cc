@@ -149,6 +149,12 @@ void rotateRowsAny(double* l, double* const* w, const double* s, const double* i
 
 }  // namespace
 
+void lowerRankUpdate(double* C, int ldc, int n, const double* A, int lda, int k) {
+  if (n == 0 || k == 0) return;
+  const double one = 1.0;
+  dsyrk_("L", "N", &n, &k, &one, A, &lda, &one, C, &ldc, 1, 1);
+}
+
 void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* W, int ldw, int k) {
   constexpr int kMax = 16;
   double* w[kMax];

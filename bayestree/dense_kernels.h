@@ -72,6 +72,10 @@ class DoubleBuffer {
 /// left-looking loop, large ones LAPACK/BLAS (dpotrf, dtrsm, dsyrk; OpenBLAS where installed).
 bool partialCholesky(double* A, int lda, int F, int M, const double* dg);
 
+/// C += A Aᵀ on the lower triangle of the n×n column-major C (leading dimension ldc), A n×k
+/// (leading dimension lda): BLAS dsyrk.
+void lowerRankUpdate(double* C, int ldc, int n, const double* A, int lda, int k);
+
 /// Rank-k update of a partial Cholesky factor (the rank-one update of Golub & Van Loan §6.5.4,
 /// applied column by column for k vectors at once). `L` (N×F, column-major, leading dimension
 /// ldl ≥ N) and `d` (F) are the first F columns of the factor of an (N+1)×(N+1) matrix M, `d` being

@@ -308,7 +308,8 @@ struct IncrementalSmoother<G>::Impl {
     Eigen::Map<Eigen::VectorXd> cg(c.gPtr(), Sn);
     const auto P = c.pending.leftCols(c.pending_cols);
     const auto Ps = P.topRows(Sn);
-    cH.template selfadjointView<Eigen::Lower>().rankUpdate(Ps);
+    bayestree::lowerRankUpdate(c.hPtr(), c.ldh, Sn, c.pending.data(),
+                               static_cast<int>(c.pending.rows()), c.pending_cols);
     cg.noalias() += Ps * P.row(Sn).transpose();
     for (int b = 0; b < Sn; b += D)
       cH.template block<D, D>(b, b).template triangularView<Eigen::StrictlyUpper>() =
