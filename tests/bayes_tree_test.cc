@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -223,15 +224,30 @@ TEST(BayesTreeExactness, EqualsBatchGaussNewtonStep3D) {
   for (unsigned seed = 11; seed <= 12; ++seed) expectExactAfterEveryUpdate<SE3>(40, 15, seed);
 }
 
+// Full back-substitution and no relinearisation: what the rank updates of fold-ins need.
+SmootherOptions foldInOptions() {
+  SmootherOptions o = exactOptions();
+  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
+  return o;
+}
+
+// The smoother's step equals one batch Gauss–Newton step from its linearisation point.
+template <class G>
+void expectBatchStep(const IncrementalSmoother<G>& s, const std::string& where) {
+  const auto ref = gaussNewtonStep(graphOf(s), s.linearizationPoint());
+  for (int v = 0; v < s.numPoses(); ++v) {
+    const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
+    ASSERT_LE((s.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol) << where << ", pose " << v;
+  }
+}
+
 // Without relinearisation a loop closure between poses already in the tree is folded in by
 // rank updates along its path (no re-elimination); the result must still be the batch
 // Gauss–Newton step from the same linearisation point, and the tree a valid Bayes tree.
 template <class G>
 void expectFoldInExact(int n, int loops, unsigned seed) {
   const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
-  SmootherOptions o = exactOptions();
-  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
-  IncrementalSmoother<G> s(o);
+  IncrementalSmoother<G> s(foldInOptions());
   int updates = 0, folded = 0;
   replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
     ++updates;
@@ -240,12 +256,8 @@ void expectFoldInExact(int n, int loops, unsigned seed) {
       ++folded;
       EXPECT_EQ(st.cliques_reeliminated, 0);
     }
-    const auto ref = gaussNewtonStep(graphOf(sm), sm.linearizationPoint());
-    for (int v = 0; v < sm.numPoses(); ++v) {
-      const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
-      ASSERT_LE((sm.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol)
-          << "update " << updates << " pose " << v << (st.cliques_updated ? " (folded in)" : "");
-    }
+    expectBatchStep(
+        sm, "update " + std::to_string(updates) + (st.cliques_updated ? " (folded in)" : ""));
   });
   // Every loop closure (the edges beyond the odometry chain) joins two poses already in the
   // tree, below its newest pose, which is frontal in the root; most are folded in, the others
@@ -260,9 +272,7 @@ void expectFoldInExact(int n, int loops, unsigned seed) {
 template <class G>
 void expectPoseStepFoldInExact(int n, int loops, unsigned seed) {
   const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
-  SmootherOptions o = exactOptions();
-  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
-  IncrementalSmoother<G> s(o);
+  IncrementalSmoother<G> s(foldInOptions());
   s.addFixedPose(g.poses[0]);
   int folded = 0;
   size_t e = 0;
@@ -275,12 +285,7 @@ void expectPoseStepFoldInExact(int n, int loops, unsigned seed) {
     s.checkInvariants();
     if (st.cliques_updated > 0) ++folded;
     EXPECT_EQ(st.new_variables, 1);
-    const auto ref = gaussNewtonStep(graphOf(s), s.linearizationPoint());
-    for (int v = 0; v < s.numPoses(); ++v) {
-      const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
-      ASSERT_LE((s.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol)
-          << "pose step " << newest << " pose " << v;
-    }
+    expectBatchStep(s, "pose step " + std::to_string(newest));
   }
   EXPECT_GT(folded, 0);
 }
@@ -296,9 +301,7 @@ TEST(BayesTreeFoldIn, PoseStepEqualsBatchGaussNewtonStep) {
 template <class G>
 void expectBatchOfClosuresFoldedExactly(int n, int loops, unsigned seed) {
   const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
-  SmootherOptions o = exactOptions();
-  o.relinearize_threshold_translation = o.relinearize_threshold_rotation = 1e9;
-  IncrementalSmoother<G> s(o);
+  IncrementalSmoother<G> s(foldInOptions());
   s.addFixedPose(g.poses[0]);
   for (int k = 1; k < n; ++k) s.addPose(g.poses[k]);
   std::vector<RelativePoseEdge<G>> closures;
@@ -316,11 +319,7 @@ void expectBatchOfClosuresFoldedExactly(int n, int loops, unsigned seed) {
   EXPECT_EQ(st.new_factors, static_cast<int>(closures.size()));
   EXPECT_GT(st.cliques_updated, 0);
   EXPECT_EQ(st.cliques_reeliminated, 0);
-  const auto ref = gaussNewtonStep(graphOf(s), s.linearizationPoint());
-  for (int v = 0; v < s.numPoses(); ++v) {
-    const double tol = 1e-9 * std::max(1.0, ref[v].cwiseAbs().maxCoeff());
-    ASSERT_LE((s.delta()[v] - ref[v]).cwiseAbs().maxCoeff(), tol) << "pose " << v;
-  }
+  expectBatchStep(s, "closures in one update");
 }
 
 TEST(BayesTreeFoldIn, BatchOfClosuresInOneUpdate) {
