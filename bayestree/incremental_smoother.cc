@@ -291,10 +291,14 @@ struct IncrementalSmoother<G>::Impl {
     const int Sn = c->Sn;
     double* h = c->hPtr();
     double* g = c->gPtr();
-    for (int q = 0; q < Sn; ++q) {
-      Eigen::Matrix<double, 1, D> vq = V.row(q);
+    for (int q = 0; q < Sn; ++q) {  // column q gets Σ_t V(q, t)·V(·, t): D contiguous axpys
       double* col = h + static_cast<size_t>(q) * c->ldh;
-      for (int p = q - q % D; p < Sn; ++p) col[p] += V.row(p).dot(vq);
+      const int first = q - q % D;
+      for (int t = 0; t < D; ++t) {
+        const double vqt = V(q, t);
+        const double* vt = V.data() + static_cast<size_t>(t) * V.outerStride();
+        for (int p = first; p < Sn; ++p) col[p] += vqt * vt[p];
+      }
       g[q] += V.row(q).dot(V.row(Sn));
     }
   }
