@@ -149,7 +149,7 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<char> mark, changed;
   // Scratch buffers of the elimination and back-substitution (reused, no per-clique malloc).
   DoubleBuffer h_buf, extend_buf;
-  Eigen::MatrixXd w_buf, w_parent_buf;
+  DoubleBuffer w_buf, w_parent_buf;  // a fold-in's W of this clique and of its parent
   std::vector<double> x_buf, diag_buf;
   std::vector<int> child_slots, changed_scratch, stack_scratch;
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
@@ -193,8 +193,8 @@ struct IncrementalSmoother<G>::Impl {
       sep_sum += c.Sn;
     }
     if (m.cliques > 0) m.mean_separator_dim = sep_sum / m.cliques;
-    m.scratch_bytes = (h_buf.capacity() + extend_buf.capacity() + x_buf.capacity() + w_buf.size() +
-                       w_parent_buf.size()) *
+    m.scratch_bytes = (h_buf.capacity() + extend_buf.capacity() + x_buf.capacity() +
+                       w_buf.capacity() + w_parent_buf.capacity()) *
                       sizeof(double);
     for (const auto& b : s_buffers) m.scratch_bytes += b.capacity() * sizeof(double);
     return m;
@@ -703,21 +703,23 @@ struct IncrementalSmoother<G>::Impl {
     Mat Ai, Aj;
     Vec r;
     e.linearize(theta[e.i], theta[e.j], &Ai, &Aj, &r);
-    Eigen::MatrixXd& W = w_buf;
+    using MatMap = Eigen::Map<Eigen::MatrixXd>;
+    int rows = cliques[start].F + cliques[start].Sn + 1;
     {
       const Clique& c = cliques[start];
-      const int N = c.F + c.Sn;
-      W.setZero(N + 1, D);
+      w_buf.resize(static_cast<size_t>(rows) * D);
+      MatMap W(w_buf.data(), rows, D);
+      W.setZero();
       if (!fixed[e.i]) W.middleRows(positionIn(c, e.i) * D, D) = Ai.transpose();
       if (!fixed[e.j]) W.middleRows(positionIn(c, e.j) * D, D) = Aj.transpose();
-      W.row(N) = -r.transpose();
+      W.row(rows - 1) = -r.transpose();
     }
     int updated = 0;
     for (int id = start;;) {
       Clique& c = cliques[id];
       const int F = c.F, Sn = c.Sn, N = F + Sn;
-      bayestree::partialCholeskyUpdate(c.lsPtr(), c.ld, N, F, c.dPtr(), W.data(),
-                                       static_cast<int>(W.rows()), D);
+      bayestree::partialCholeskyUpdate(c.lsPtr(), c.ld, N, F, c.dPtr(), w_buf.data(), rows, D);
+      const MatMap W(w_buf.data(), rows, D);
       c.dirty = true;
       ++updated;
       if (c.parent < 0) break;  // what is left is the constant term
@@ -742,14 +744,16 @@ struct IncrementalSmoother<G>::Impl {
       const int Np = p.F + p.Sn, nfp = static_cast<int>(p.frontals.size());
       for (int a = 0; a < nfp; ++a) slot[p.frontals[a]] = a;
       for (int b = 0; b < static_cast<int>(p.separator.size()); ++b) slot[p.separator[b]] = nfp + b;
-      Eigen::MatrixXd& Wp = w_parent_buf;
-      Wp.setZero(Np + 1, D);
+      w_parent_buf.resize(static_cast<size_t>(Np + 1) * D);
+      MatMap Wp(w_parent_buf.data(), Np + 1, D);
+      Wp.setZero();
       for (int b = 0; b < static_cast<int>(c.separator.size()); ++b)
         Wp.middleRows(slot[c.separator[b]] * D, D) = V.middleRows(b * D, D);
       Wp.row(Np) = V.row(Sn);
       for (int v : p.frontals) slot[v] = -1;
       for (int v : p.separator) slot[v] = -1;
-      W.swap(Wp);
+      w_buf.swap(w_parent_buf);
+      rows = Np + 1;
       id = c.parent;
     }
     return updated;
