@@ -11,6 +11,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
+#include "bayestree/clique.h"
 #include "bayestree/dense_kernels.h"
 #include "bayestree/elimination_plan.h"
 #include "core/information.h"
@@ -60,68 +61,7 @@ struct IncrementalSmoother<G>::Impl {
     Mat Hii = Mat::Zero(), Hij = Mat::Zero(), Hjj = Mat::Zero();
     Vec gi = Vec::Zero(), gj = Vec::Zero();
   };
-
-  // A clique: the conditional ‖R x_f + S x_s − d‖² on its frontal variables given its separator,
-  // and the factor it passes to its parent (the Schur complement on the separator).
-  struct Clique {
-    using Map = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
-    using ConstMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
-    using ConstVecMap = Eigen::Map<const Eigen::VectorXd>;
-
-    std::vector<int> frontals;   // in elimination order
-    std::vector<int> separator;  // poses of the parent's frontals ∪ separator
-    int parent = -1;
-    std::vector<int> children;
-    // One allocation: [LS (ld×F) | d (F) | cached H (ldh×ldh) | cached g (ldh)], column-major,
-    // F = nf·D, Sn = ns·D, N = F + Sn ≤ ld, Sn ≤ ldh (room for the separator to grow in place);
-    // LS = [L; Sᵀ] (rows 0..N−1) with R = Lᵀ (so R x_f + S x_s = d).
-    DoubleBuffer storage;
-    // Rank updates of the cached factor not yet applied: it is [H g] + P_s [P_sᵀ P_gᵀ], with
-    // P = [P_s; P_g] ((Sn+1)×K). Applied when the parent reads the cached factor (or K grows).
-    Eigen::MatrixXd pending;  // its first pending_cols columns are in use
-    int pending_cols = 0;
-    int F = 0, Sn = 0, ld = 0, ldh = 0;
-    int eliminated_sn = 0;  // Sn when last eliminated (the separator grows by fold-ins)
-    bool dirty = false;     // re-eliminated since the last back-substitution
-    bool damped = false;    // the factor is of a damped (indeterminate) Hessian
-    bool in_use = false;
-    int removed_stamp = -1;
-    int path_stamp = -1;
-
-    static size_t sizeFor(int F, int ld, int ldh) {
-      return static_cast<size_t>(ld) * F + F + static_cast<size_t>(ldh) * ldh + ldh;
-    }
-    void allocate() {  // exactly the room needed
-      F = static_cast<int>(frontals.size()) * D;
-      Sn = static_cast<int>(separator.size()) * D;
-      ld = F + Sn;
-      ldh = Sn;
-      eliminated_sn = Sn;
-      storage.fit(sizeFor(F, ld, ldh));
-      pending.resize(0, 0);
-      pending_cols = 0;
-    }
-    double* lsPtr() { return storage.data(); }
-    double* dPtr() { return storage.data() + static_cast<size_t>(ld) * F; }
-    double* hPtr() { return dPtr() + F; }
-    double* gPtr() { return hPtr() + static_cast<size_t>(ldh) * ldh; }
-    const double* lsPtr() const { return storage.data(); }
-    const double* dPtr() const { return storage.data() + static_cast<size_t>(ld) * F; }
-    const double* hPtr() const { return dPtr() + F; }
-    const double* gPtr() const { return hPtr() + static_cast<size_t>(ldh) * ldh; }
-    ConstMap LS() const { return ConstMap(lsPtr(), F + Sn, F, Eigen::OuterStride<>(ld)); }
-    Map cachedHMutable() { return Map(hPtr(), Sn, Sn, Eigen::OuterStride<>(ldh)); }
-    Eigen::MatrixXd R() const {  // upper triangular
-      Eigen::MatrixXd L = LS().topRows(F).template triangularView<Eigen::Lower>();
-      return L.transpose();
-    }
-    Eigen::MatrixXd S() const { return LS().bottomRows(Sn).transpose(); }
-    ConstVecMap d() const { return ConstVecMap(dPtr(), F); }
-    ConstMap cachedH() const {  // lower triangle and full diagonal D×D blocks
-      return ConstMap(hPtr(), Sn, Sn, Eigen::OuterStride<>(ldh));
-    }
-    ConstVecMap cachedG() const { return ConstVecMap(gPtr(), Sn); }
-  };
+  using Clique = bayestree::Clique<D>;
 
   SmootherOptions opt;
   std::vector<G> theta;
@@ -281,51 +221,10 @@ struct IncrementalSmoother<G>::Impl {
     free_cliques.push_back(id);
   }
 
-  // Separators up to this order take a fold-in's update of their cached factor at once.
-  static constexpr int kDirectUpdateOrder = 48;
-
-  // [H g] += V_s [V_sᵀ V_gᵀ] on the cached factor (lower triangle and full diagonal blocks),
-  // V = [V_s; V_g] with D columns: a plain loop, faster than a general product at small orders.
-  template <class Block>
-  void addOuterProduct(Clique* c, const Block& V) {
-    const int Sn = c->Sn;
-    double* h = c->hPtr();
-    double* g = c->gPtr();
-    for (int q = 0; q < Sn; ++q) {  // column q gets Σ_t V(q, t)·V(·, t): D contiguous axpys
-      double* col = h + static_cast<size_t>(q) * c->ldh;
-      const int first = q - q % D;
-      for (int t = 0; t < D; ++t) {
-        const double vqt = V(q, t);
-        const double* vt = V.data() + static_cast<size_t>(t) * V.outerStride();
-        for (int p = first; p < Sn; ++p) col[p] += vqt * vt[p];
-      }
-      g[q] += V.row(q).dot(V.row(Sn));
-    }
-  }
-
-  // Applies the clique's pending rank updates to its cached factor (lower triangle and full
-  // diagonal blocks, as eliminateClique stores it).
-  void applyPending(Clique& c) {
-    if (c.pending_cols == 0) return;
-    const int Sn = c.Sn;
-    auto cH = c.cachedHMutable();
-    Eigen::Map<Eigen::VectorXd> cg(c.gPtr(), Sn);
-    const auto P = c.pending.leftCols(c.pending_cols);
-    const auto Ps = P.topRows(Sn);
-    bayestree::lowerRankUpdate(c.hPtr(), c.ldh, Sn, c.pending.data(),
-                               static_cast<int>(c.pending.rows()), c.pending_cols);
-    cg.noalias() += Ps * P.row(Sn).transpose();
-    for (int b = 0; b < Sn; b += D)
-      cH.template block<D, D>(b, b).template triangularView<Eigen::StrictlyUpper>() =
-          cH.template block<D, D>(b, b).transpose();
-    c.pending.resize(0, 0);
-    c.pending_cols = 0;
-  }
-
   // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into h_buf
   // ((N+1)×(N+1), column-major; g in row N).
   void assemble(const Clique& c) {
-    for (int ch : c.children) applyPending(cliques[ch]);
+    for (int ch : c.children) cliques[ch].applyPending();
     const int nf = static_cast<int>(c.frontals.size());
     const int ns = static_cast<int>(c.separator.size());
     const int N = c.F + c.Sn;
@@ -596,15 +495,10 @@ struct IncrementalSmoother<G>::Impl {
       for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
         const Clique& k = cliques[c];
         if (std::find(k.separator.begin(), k.separator.end(), other) != k.separator.end()) break;
-        if (k.Sn + D > separatorBudget(k)) return false;
+        if (k.Sn + D > k.separatorBudget()) return false;
       }
     return true;
   }
-
-  // How far fold-ins may grow a separator: twice its size at elimination plus four poses.
-  // Without a bound, cubicle's cached factors grew to 1.1 GB (GTSAM: 0.4); with it, replay
-  // times on the 3D sets were unchanged or better (docs/benchmarks.md).
-  static int separatorBudget(const Clique& k) { return 2 * k.eliminated_sn + 4 * D; }
 
   // Rough flop counts that decide between folding factors in and re-eliminating their paths:
   // a rank-D update of a clique costs about 4·D·F·N (plus D·Sn² for its cached factor), a
@@ -632,51 +526,6 @@ struct IncrementalSmoother<G>::Impl {
     return flops;
   }
 
-  // Adds v to the separator of clique id. Its rows of [L; Sᵀ] and of the cached factor are
-  // zero: before the factor that needs it is folded in, v is not coupled to the frontals. The
-  // storage keeps room to grow (a quarter more), so most extensions copy nothing.
-  void extendSeparator(int id, int v) {
-    Clique& c = cliques[id];
-    const int F = c.F, Sn = c.Sn, N = F + Sn;
-    if (c.ld < N + D || c.ldh < Sn + D) {
-      const int room = D * std::max(2, Sn / (4 * D));
-      const int ld = N + D + room, ldh = Sn + D + room;
-      extend_buf.fit(Clique::sizeFor(F, ld, ldh));
-      double* ls = extend_buf.data();
-      for (int k = 0; k < F; ++k)
-        std::copy(c.lsPtr() + static_cast<size_t>(k) * c.ld,
-                  c.lsPtr() + static_cast<size_t>(k) * c.ld + N, ls + static_cast<size_t>(k) * ld);
-      double* d = ls + static_cast<size_t>(ld) * F;
-      std::copy(c.dPtr(), c.dPtr() + F, d);
-      double* h = d + F;
-      for (int q = 0; q < Sn; ++q)
-        std::copy(c.hPtr() + static_cast<size_t>(q) * c.ldh,
-                  c.hPtr() + static_cast<size_t>(q) * c.ldh + Sn, h + static_cast<size_t>(q) * ldh);
-      std::copy(c.gPtr(), c.gPtr() + Sn, h + static_cast<size_t>(ldh) * ldh);
-      c.storage.swap(extend_buf);
-      c.ld = ld;
-      c.ldh = ldh;
-    }
-    for (int k = 0; k < F; ++k) {
-      double* col = c.lsPtr() + static_cast<size_t>(k) * c.ld;
-      std::fill(col + N, col + N + D, 0.0);
-    }
-    for (int q = 0; q < Sn + D; ++q) {
-      double* col = c.hPtr() + static_cast<size_t>(q) * c.ldh;
-      std::fill(col + (q < Sn ? Sn : 0), col + Sn + D, 0.0);
-    }
-    std::fill(c.gPtr() + Sn, c.gPtr() + Sn + D, 0.0);
-    if (c.pending_cols > 0) {  // zero rows for v, before the right-hand side's row
-      const int K = c.pending_cols;
-      Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(Sn + D + 1, c.pending.cols());
-      grown.topLeftCorner(Sn, K) = c.pending.topLeftCorner(Sn, K);
-      grown.row(Sn + D).head(K) = c.pending.row(Sn).head(K);
-      c.pending.swap(grown);
-    }
-    c.separator.push_back(v);
-    c.Sn = Sn + D;
-  }
-
   // Position (in variables) of v among the clique's frontals then separator; −1 if absent.
   static int positionIn(const Clique& c, int v) {
     const auto f = std::find(c.frontals.begin(), c.frontals.end(), v);
@@ -697,7 +546,7 @@ struct IncrementalSmoother<G>::Impl {
     if (!fixed[other] && clique_of[other] != start)
       for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
         if (positionIn(cliques[c], other) >= 0) break;
-        extendSeparator(c, other);
+        cliques[c].extendSeparator(other, &extend_buf);
       }
     // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
     Mat Ai, Aj;
@@ -717,28 +566,11 @@ struct IncrementalSmoother<G>::Impl {
     int updated = 0;
     for (int id = start;;) {
       Clique& c = cliques[id];
-      const int F = c.F, Sn = c.Sn, N = F + Sn;
-      bayestree::partialCholeskyUpdate(c.lsPtr(), c.ld, N, F, c.dPtr(), w_buf.data(), rows, D);
-      const MatMap W(w_buf.data(), rows, D);
-      c.dirty = true;
+      const int Sn = c.Sn;
+      c.rankUpdate(w_buf.data(), rows);  // leaves V = rows F..F+Sn of W
       ++updated;
       if (c.parent < 0) break;  // what is left is the constant term
-      // The cached factor grows by VVᵀ, V = rows F..N of W (separator, then rhs): kept pending
-      // until the parent is re-eliminated, or until it would outgrow a quarter of the factor.
-      const auto V = W.bottomRows(Sn + 1);
-      const int K = c.pending_cols;
-      if (K == 0 && Sn <= kDirectUpdateOrder) {
-        addOuterProduct(&c, V);
-      } else {
-        if (c.pending.cols() < K + D) {  // room up to where it is applied
-          Eigen::MatrixXd grown(Sn + 1, std::max(K + D, Sn / 4 + D));
-          grown.leftCols(K) = c.pending.leftCols(K);
-          c.pending.swap(grown);
-        }
-        c.pending.middleCols(K, D) = V;
-        c.pending_cols = K + D;
-        if (4 * (K + D) > Sn) applyPending(c);
-      }
+      const auto V = MatMap(w_buf.data(), rows, D).bottomRows(Sn + 1);
       // The parent's W: V scattered to the parent's rows.
       const Clique& p = cliques[c.parent];
       const int Np = p.F + p.Sn, nfp = static_cast<int>(p.frontals.size());
