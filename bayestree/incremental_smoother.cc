@@ -13,6 +13,7 @@
 
 #include "bayestree/clique.h"
 #include "bayestree/dense_kernels.h"
+#include "bayestree/dogleg_step.h"
 #include "bayestree/elimination_plan.h"
 #include "core/information.h"
 
@@ -677,115 +678,10 @@ struct IncrementalSmoother<G>::Impl {
     return f;
   }
 
-  // Σ over cliques of ‖R x_f + S x_s − d‖² (the linear model up to a constant).
-  double bayesNetError(const std::vector<Vec>* x) const {
-    double err = 0;
-    Eigen::VectorXd xf, xs, r;
-    for (const Clique& c : cliques) {
-      if (!c.in_use) continue;
-      if (!x) {
-        err += c.d().squaredNorm();
-        continue;
-      }
-      gatherVec(*x, c.frontals, &xf);
-      gatherVec(*x, c.separator, &xs);
-      r = -c.d();
-      r.noalias() += c.R().template triangularView<Eigen::Upper>() * xf;
-      if (xs.size() > 0) r.noalias() += c.S() * xs;
-      err += r.squaredNorm();
-    }
-    return err;
-  }
-
-  static void gatherVec(const std::vector<Vec>& x, const std::vector<int>& vars,
-                        Eigen::VectorXd* out) {
-    out->resize(static_cast<Eigen::Index>(vars.size()) * D);
-    for (size_t k = 0; k < vars.size(); ++k) out->template segment<D>(k * D) = x[vars[k]];
-  }
-
-  static double squaredNorm(const std::vector<Vec>& x) {
-    double s = 0;
-    for (const Vec& v : x) s += v.squaredNorm();
-    return s;
-  }
-
-  // Powell's dogleg on the Bayes tree (as GTSAM's ISAM2 with ISAM2DoglegParams): the Cauchy
-  // point from the gradient Aᵀb = Σ_cliques [Rᵀd; Sᵀd], blended with the Gauss–Newton step
-  // inside the trust region; the radius adapts with ρ = actual / predicted decrease of F.
+  // Powell's dogleg step on the Bayes tree (bayestree/dogleg_step.h) into Δ.
   void doglegStep() {
-    const int n = numPoses();
-    std::vector<Vec> grad(n, Vec::Zero());
-    Eigen::VectorXd gf, gs;
-    for (const Clique& c : cliques) {
-      if (!c.in_use) continue;
-      gf.noalias() = c.R().transpose() * c.d();
-      for (size_t a = 0; a < c.frontals.size(); ++a)
-        grad[c.frontals[a]] += gf.template segment<D>(a * D);
-      if (c.separator.empty()) continue;
-      gs.noalias() = c.S().transpose() * c.d();
-      for (size_t b = 0; b < c.separator.size(); ++b)
-        grad[c.separator[b]] += gs.template segment<D>(b * D);
-    }
-    const double gg = squaredNorm(grad);
-    // ‖A g‖² = Σ ‖R g_f + S g_s‖² (the Bayes net with d = 0).
-    double Agg = 0;
-    {
-      Eigen::VectorXd xf, xs, r;
-      for (const Clique& c : cliques) {
-        if (!c.in_use) continue;
-        gatherVec(grad, c.frontals, &xf);
-        gatherVec(grad, c.separator, &xs);
-        r.noalias() = c.R().template triangularView<Eigen::Upper>() * xf;
-        if (xs.size() > 0) r.noalias() += c.S() * xs;
-        Agg += r.squaredNorm();
-      }
-    }
-    std::vector<Vec> dx_u(n, Vec::Zero());
-    if (gg > 0 && Agg > 0)
-      for (int v = 0; v < n; ++v) dx_u[v] = (gg / Agg) * grad[v];
-    const double norm_n = std::sqrt(squaredNorm(delta_newton));
-    const double norm_u = std::sqrt(squaredNorm(dx_u));
-    const double F0 = objectiveAt(std::vector<Vec>(n, Vec::Zero()));
-    const double M0 = bayesNetError(nullptr);
-    std::vector<Vec> dx_d(n);
-    for (int attempt = 0; attempt < 60; ++attempt) {
-      const double radius = dogleg_radius;
-      double norm_d;
-      if (norm_n <= radius) {
-        dx_d = delta_newton;
-        norm_d = norm_n;
-      } else if (norm_u >= radius) {
-        for (int v = 0; v < n; ++v) dx_d[v] = (radius / norm_u) * dx_u[v];
-        norm_d = radius;
-      } else {  // the point on the segment dx_u → dx_n at distance radius
-        double a = 0, b = 0;
-        for (int v = 0; v < n; ++v) {
-          const Vec diff = delta_newton[v] - dx_u[v];
-          a += diff.squaredNorm();
-          b += dx_u[v].dot(diff);
-        }
-        const double cc = norm_u * norm_u - radius * radius;
-        const double tau = a > 0 ? (-b + std::sqrt(std::max(b * b - a * cc, 0.0))) / a : 0.0;
-        for (int v = 0; v < n; ++v) dx_d[v] = dx_u[v] + tau * (delta_newton[v] - dx_u[v]);
-        norm_d = radius;
-      }
-      const double predicted = M0 - bayesNetError(&dx_d);
-      const double F1 = objectiveAt(dx_d);
-      const double rho = predicted > 0 ? (F0 - F1) / predicted : (F1 <= F0 ? 1.0 : -1.0);
-      if (rho >= 0.75) {
-        dogleg_radius = std::max(radius, 3.0 * norm_d);
-      } else if (rho < 0.25) {
-        dogleg_radius = 0.5 * radius;
-      }
-      if (rho >= 0 || F1 <= F0) {
-        delta = dx_d;
-        return;
-      }
-      if (dogleg_radius < opt.dogleg_min_radius) break;
-    }
-    // No step decreases F: stay at the linearisation point.
-    dogleg_radius = std::max(dogleg_radius, opt.dogleg_min_radius);
-    for (Vec& v : delta) v.setZero();
+    delta = bayestree::doglegStep<D>(cliques, delta_newton, &dogleg_radius, opt.dogleg_min_radius,
+                                     [&](const std::vector<Vec>& x) { return objectiveAt(x); });
   }
 
   // One update. When new poses arrive together with factors that a rank update could take (a
