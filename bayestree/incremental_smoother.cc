@@ -454,8 +454,9 @@ struct IncrementalSmoother<G>::Impl {
   // matrices only by a rank-D term: its whitened rows W (WWᵀ = [A r]ᵀ[A r]) are folded into the
   // clique of its first eliminated end by a rank-D Cholesky update, and what is left of W passes
   // on to the parent as the update of that clique's cached factor, up to the root (the
-  // incremental QR of iSAM, Kaess et al. 2008 §IV, applied clique by clique). Nothing is
-  // re-ordered or re-eliminated: O(D·N·F) per clique on the path instead of O(F·N²).
+  // incremental factorisation of iSAM, Kaess, Ranganathan, Dellaert, T-RO 2008, applied clique
+  // by clique). Nothing is re-ordered or re-eliminated: O(D·N·F) per clique on the path instead
+  // of O(F·N²).
 
   bool isAncestorOrSelf(int ancestor, int c) const {
     for (; c >= 0; c = cliques[c].parent)
@@ -503,8 +504,8 @@ struct IncrementalSmoother<G>::Impl {
 
   // Rough flop counts that decide between folding factors in and re-eliminating their paths:
   // a rank-D update of a clique costs about 4·D·F·N (plus D·Sn² for its cached factor), a
-  // re-elimination F³/3 + F²·Sn + F·Sn² (plus assembling it, ordering, new storage: taken as a
-  // fixed cost per clique).
+  // re-elimination F³/3 + F²·Sn + F·Sn²; each also has a fixed cost per clique (assembly,
+  // ordering, new storage: kCliqueOverhead to re-eliminate, a quarter of it to update).
   static constexpr double kCliqueOverhead = 4000;
   double foldFlops(int start) const {
     double flops = 0;
