@@ -633,9 +633,16 @@ struct IncrementalSmoother<G>::Impl {
       for (int i = 0; i < F; ++i) inv[i] = 1.0 / ls[static_cast<size_t>(i) * c.ld + i];
       for (int i = F - 1; i >= 0; --i) {
         const double* col = ls + static_cast<size_t>(i) * c.ld;
-        double dot = 0;
-        for (int r = i + 1; r < F; ++r) dot += col[r] * x[r];
-        x[i] = (x[i] - dot) * inv[i];
+        double d0 = 0, d1 = 0, d2 = 0, d3 = 0;  // four sums: no chain of dependent adds
+        int r = i + 1;
+        for (; r + 4 <= F; r += 4) {
+          d0 += col[r] * x[r];
+          d1 += col[r + 1] * x[r + 1];
+          d2 += col[r + 2] * x[r + 2];
+          d3 += col[r + 3] * x[r + 3];
+        }
+        for (; r < F; ++r) d0 += col[r] * x[r];
+        x[i] = (x[i] - ((d0 + d1) + (d2 + d3))) * inv[i];
       }
       // The new values are always taken. A variable is "changed" (the cliques below that hold
       // it in their separator must be recomputed) when it moved by at least the threshold from
