@@ -1,6 +1,7 @@
-// Dense kernels of the clique elimination: a non-zeroing growable buffer and the partial
-// Cholesky factorisation of a clique's Hessian (Kaess et al. 2012 §3: a clique's conditional
-// and the factor it passes to its parent are one partial factorisation of its dense Hessian).
+// Dense kernels of the clique elimination: a non-zeroing growable buffer, the partial
+// Cholesky factorisation of a clique's Hessian and its rank-k update (Kaess et al. 2012 §3: a
+// clique's conditional and the factor it passes to its parent are one partial factorisation of its
+// dense Hessian).
 #pragma once
 
 #include <algorithm>

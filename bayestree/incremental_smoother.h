@@ -5,7 +5,10 @@
 // edge to one is a unary factor on its other end. Linearised factors are kept in Hessian
 // (information) form and every clique is eliminated by a dense Cholesky factorisation of its
 // assembled Hessian: R = chol(H_ff)ᵀ, S = R⁻ᵀH_fs, d = R⁻ᵀg_f; the parent receives the Schur
-// complement (H_ss − SᵀS, g_s − Sᵀd) as the clique's cached factor.
+// complement (H_ss − SᵀS, g_s − Sᵀd) as the clique's cached factor. An update that only adds
+// factors between poses already in the tree (a loop closure) is folded in by rank updates along
+// the path to the root instead of re-eliminating it (SmootherOptions::rank_updates;
+// docs/design.md).
 //
 // Not thread-safe: one thread owns a smoother (const methods may run concurrently with each
 // other, never with a non-const one).
