@@ -93,6 +93,7 @@ struct IncrementalSmoother<G>::Impl {
   DoubleBuffer w_buf, w_parent_buf;  // a fold-in's W of this clique and of its parent
   std::vector<double> x_buf, diag_buf;
   std::vector<int> child_slots, changed_scratch, stack_scratch;
+  std::vector<int> s_path;  // cliques whose separator a fold-in extends
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
   bayestree::RowList s_rows;
   std::vector<int> s_by_need, s_by_capacity;
@@ -486,19 +487,29 @@ struct IncrementalSmoother<G>::Impl {
     return start;
   }
 
-  // Whether folding factor f in from clique `start` keeps every separator on the way within
-  // its budget (the later end joins the separators up to its own clique: fill that only a
-  // re-elimination, with a fresh ordering, keeps down).
-  bool withinBudget(int f, int start) const {
+  // Folding factor f in from clique `start`: its later end joins the separators on the way up
+  // to its own clique (running intersection) until one already holds it. Sets *later to that
+  // end and fills `path` with the cliques whose separator it joins (empty when none).
+  void separatorsToExtend(int f, int start, int* later, std::vector<int>* path) const {
     const Edge& e = edges[f];
-    const int first = clique_of[e.i] == start && !fixed[e.i] ? e.i : e.j;
-    const int other = first == e.i ? e.j : e.i;
-    if (!fixed[other])
-      for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
-        const Clique& k = cliques[c];
-        if (std::find(k.separator.begin(), k.separator.end(), other) != k.separator.end()) break;
-        if (k.Sn + D > k.separatorBudget()) return false;
-      }
+    *later = clique_of[e.i] == start && !fixed[e.i] ? e.j : e.i;
+    path->clear();
+    if (fixed[*later]) return;
+    for (int c = start; c != clique_of[*later]; c = cliques[c].parent) {
+      const auto& sep = cliques[c].separator;
+      if (std::find(sep.begin(), sep.end(), *later) != sep.end()) break;
+      path->push_back(c);
+    }
+  }
+
+  // Whether folding factor f in from clique `start` keeps every separator on the way within
+  // its budget (the fill of separatorsToExtend, which only a re-elimination, with a fresh
+  // ordering, keeps down).
+  bool withinBudget(int f, int start) {
+    int later;
+    separatorsToExtend(f, start, &later, &s_path);
+    for (int c : s_path)
+      if (cliques[c].Sn + D > cliques[c].separatorBudget()) return false;
     return true;
   }
 
@@ -542,14 +553,9 @@ struct IncrementalSmoother<G>::Impl {
   int foldIn(int f) {
     const Edge& e = edges[f];
     const int start = foldInClique(f);
-    // The later end joins the separators on the way up to its own clique (running intersection).
-    const int first = clique_of[e.i] == start && !fixed[e.i] ? e.i : e.j;
-    const int other = first == e.i ? e.j : e.i;
-    if (!fixed[other] && clique_of[other] != start)
-      for (int c = start; c != clique_of[other]; c = cliques[c].parent) {
-        if (positionIn(cliques[c], other) >= 0) break;
-        cliques[c].extendSeparator(other, &extend_buf);
-      }
+    int later;
+    separatorsToExtend(f, start, &later, &s_path);
+    for (int c : s_path) cliques[c].extendSeparator(later, &extend_buf);
     // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
     Mat Ai, Aj;
     Vec r;
