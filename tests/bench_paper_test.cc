@@ -80,6 +80,16 @@ bench::SolverRun keepStart(const PoseGraph<G>&, std::vector<G>*) {
 
 bench::ExternalSolver fakeSolver() { return {"fake", keepStart<SE2>, keepStart<SE3>}; }
 
+// The paper runner on `graph` with the fake external solver, tight tolerances, output in `dir`.
+template <class G>
+bench::DatasetReport runPaper(const std::string& name, const PoseGraph<G>& graph,
+                              const fs::path& dir) {
+  bench::PaperSettings settings;
+  settings.relative_tolerance = 1e-10;
+  settings.out_dir = dir.string();
+  return bench::runPaperBenchmark(name, graph, settings, {fakeSolver()});
+}
+
 TEST(BenchPaper, EverySolverOnSmallManhattanAgrees) {
   sim::ManhattanOptions options;
   options.poses = 150;
@@ -87,10 +97,7 @@ TEST(BenchPaper, EverySolverOnSmallManhattanAgrees) {
   options.seed = 3;
   const auto sim = sim::manhattanWorld(options);
   const fs::path dir = scratchDir("2d");
-  bench::PaperSettings settings;
-  settings.relative_tolerance = 1e-10;
-  settings.out_dir = dir.string();
-  const auto report = bench::runPaperBenchmark("manhattan150", sim.graph, settings, {fakeSolver()});
+  const auto report = runPaper("manhattan150", sim.graph, dir);
   EXPECT_EQ(report.dim, 2);
   EXPECT_EQ(report.poses, 150);
   expectAgreement<SE2>(report, 150);
@@ -135,10 +142,7 @@ TEST(BenchPaper, EverySolverOnSmallSphereAgrees) {
   options.seed = 2;
   const auto sim = sim::sphereWorld(options);
   const fs::path dir = scratchDir("3d");
-  bench::PaperSettings settings;
-  settings.relative_tolerance = 1e-10;
-  settings.out_dir = dir.string();
-  const auto report = bench::runPaperBenchmark("sphere60", sim.graph, settings, {fakeSolver()});
+  const auto report = runPaper("sphere60", sim.graph, dir);
   EXPECT_EQ(report.dim, 3);
   expectAgreement<SE3>(report, 60);
   std::ifstream csv(run(report, "rtr").estimate_file);
