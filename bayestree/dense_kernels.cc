@@ -106,6 +106,15 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg) {
 
 namespace {
 
+// One rotation of the rank-one update on one row: the factor's entry l and the vector's entry
+// *w become (l + s·w)/c and c·w − s·(new l); returns the new l.
+inline double rotate(double l, double* w, double s, double inv_c, double c) {
+  const double wi = *w;
+  l = (l + s * wi) * inv_c;
+  *w = c * wi - s * l;
+  return l;
+}
+
 // Rows `begin`..`end`−1 of column `l` through K Givens-like rotations in turn (one sweep: each
 // row's entry passes the K vectors' rotations while it is in a register).
 template <int K>
@@ -122,11 +131,7 @@ void rotateRows(double* l, double* const* w, const double* s, const double* inv_
 #pragma GCC ivdep
   for (int i = begin; i < end; ++i) {
     double li = l[i];
-    for (int a = 0; a < K; ++a) {
-      const double wi = wp[a][i];
-      li = (li + sa[a] * wi) * ia[a];
-      wp[a][i] = ca[a] * wi - sa[a] * li;
-    }
+    for (int a = 0; a < K; ++a) li = rotate(li, wp[a] + i, sa[a], ia[a], ca[a]);
     l[i] = li;
   }
 }
@@ -159,7 +164,6 @@ void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* 
   constexpr int kMax = 16;
   double* w[kMax];
   double s[kMax], c[kMax], inv_c[kMax];
-  double* d_w[kMax];
   for (int t0 = 0; t0 < k; t0 += kMax) {  // at most kMax vectors per sweep
     const int kt = std::min(kMax, k - t0);
     for (int j = 0; j < F; ++j) {
@@ -183,15 +187,8 @@ void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* 
       if (count == 0) continue;
       Lj[j] = ljj;
       rotateRowsAny(Lj, w, s, inv_c, c, count, j + 1, N);
-      // The right-hand side's row (d, kept apart from L), rotated the same way.
-      for (int a = 0; a < count; ++a) d_w[a] = w[a] + N;
-      double dj = d[j];
-      for (int a = 0; a < count; ++a) {
-        const double wi = *d_w[a];
-        dj = (dj + s[a] * wi) * inv_c[a];
-        *d_w[a] = c[a] * wi - s[a] * dj;
-      }
-      d[j] = dj;
+      // The right-hand side's row (d, kept apart from L: row N of W), rotated the same way.
+      for (int a = 0; a < count; ++a) d[j] = rotate(d[j], w[a] + N, s[a], inv_c[a], c[a]);
     }
   }
 }
