@@ -223,15 +223,25 @@ struct IncrementalSmoother<G>::Impl {
     free_cliques.push_back(id);
   }
 
+  // slot[v] = v's position (in variables) among the clique's frontals then separator, until
+  // clearSlots.
+  void setSlots(const Clique& c) {
+    const int nf = static_cast<int>(c.frontals.size());
+    for (int a = 0; a < nf; ++a) slot[c.frontals[a]] = a;
+    for (int b = 0; b < static_cast<int>(c.separator.size()); ++b) slot[c.separator[b]] = nf + b;
+  }
+  void clearSlots(const Clique& c) {
+    for (int v : c.frontals) slot[v] = -1;
+    for (int v : c.separator) slot[v] = -1;
+  }
+
   // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into h_buf
   // ((N+1)×(N+1), column-major; g in row N).
   void assemble(const Clique& c) {
     for (int ch : c.children) cliques[ch].applyPending();
     const int nf = static_cast<int>(c.frontals.size());
-    const int ns = static_cast<int>(c.separator.size());
     const int N = c.F + c.Sn;
-    for (int a = 0; a < nf; ++a) slot[c.frontals[a]] = a;
-    for (int b = 0; b < ns; ++b) slot[c.separator[b]] = nf + b;
+    setSlots(c);
     const int lda = N + 1;
     h_buf.resize(static_cast<size_t>(lda) * lda);
     for (int j = 0; j < lda; ++j)  // only the lower triangle is used
@@ -284,8 +294,7 @@ struct IncrementalSmoother<G>::Impl {
         }
       }
     }
-    for (int v : c.frontals) slot[v] = -1;
-    for (int v : c.separator) slot[v] = -1;
+    clearSlots(c);
   }
 
   // Dense Cholesky elimination of one clique (its children already eliminated): L = chol(H_ff),
@@ -539,16 +548,6 @@ struct IncrementalSmoother<G>::Impl {
     return flops;
   }
 
-  // Position (in variables) of v among the clique's frontals then separator; −1 if absent.
-  static int positionIn(const Clique& c, int v) {
-    const auto f = std::find(c.frontals.begin(), c.frontals.end(), v);
-    if (f != c.frontals.end()) return static_cast<int>(f - c.frontals.begin());
-    const auto s = std::find(c.separator.begin(), c.separator.end(), v);
-    if (s != c.separator.end())
-      return static_cast<int>(c.frontals.size() + (s - c.separator.begin()));
-    return -1;
-  }
-
   // Folds factor f into the tree (foldInClique(f) ≥ 0); returns the cliques updated.
   int foldIn(int f) {
     const Edge& e = edges[f];
@@ -567,8 +566,10 @@ struct IncrementalSmoother<G>::Impl {
       w_buf.resize(static_cast<size_t>(rows) * D);
       MatMap W(w_buf.data(), rows, D);
       W.setZero();
-      if (!fixed[e.i]) W.middleRows(positionIn(c, e.i) * D, D) = Ai.transpose();
-      if (!fixed[e.j]) W.middleRows(positionIn(c, e.j) * D, D) = Aj.transpose();
+      setSlots(c);
+      if (!fixed[e.i]) W.middleRows(slot[e.i] * D, D) = Ai.transpose();
+      if (!fixed[e.j]) W.middleRows(slot[e.j] * D, D) = Aj.transpose();
+      clearSlots(c);
       W.row(rows - 1) = -r.transpose();
     }
     int updated = 0;
@@ -581,17 +582,15 @@ struct IncrementalSmoother<G>::Impl {
       const auto V = MatMap(w_buf.data(), rows, D).bottomRows(Sn + 1);
       // The parent's W: V scattered to the parent's rows.
       const Clique& p = cliques[c.parent];
-      const int Np = p.F + p.Sn, nfp = static_cast<int>(p.frontals.size());
-      for (int a = 0; a < nfp; ++a) slot[p.frontals[a]] = a;
-      for (int b = 0; b < static_cast<int>(p.separator.size()); ++b) slot[p.separator[b]] = nfp + b;
+      const int Np = p.F + p.Sn;
+      setSlots(p);
       w_parent_buf.resize(static_cast<size_t>(Np + 1) * D);
       MatMap Wp(w_parent_buf.data(), Np + 1, D);
       Wp.setZero();
       for (int b = 0; b < static_cast<int>(c.separator.size()); ++b)
         Wp.middleRows(slot[c.separator[b]] * D, D) = V.middleRows(b * D, D);
       Wp.row(Np) = V.row(Sn);
-      for (int v : p.frontals) slot[v] = -1;
-      for (int v : p.separator) slot[v] = -1;
+      clearSlots(p);
       w_buf.swap(w_parent_buf);
       rows = Np + 1;
       id = c.parent;
@@ -841,24 +840,36 @@ struct IncrementalSmoother<G>::Impl {
       }
 
     // Only factors between variables already in the tree, nothing relinearised: fold them in by
-    // rank updates along their paths to the root instead of re-eliminating the top.
-    if (!all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 && opt.rank_updates) {
-      bool foldable = true;
-      for (int f = first_new; f < static_cast<int>(edges.size()) && foldable; ++f) {
-        const int start = foldInClique(f);
-        foldable = start >= 0 && withinBudget(f, start);
-      }
-      if (foldable) {
-        for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
-          st.cliques_updated += foldIn(f);
-        for (int v : touched) mark[v] = 0;
-        if (solve) st.cliques_solved = backSubstitute(opt.full_backsubstitution);
-        if (solve && opt.dogleg) doglegStep();
-        st.time_s = secondsSince(t0);
-        return st;
-      }
+    // rank updates along their paths to the root; otherwise re-eliminate the top (Alg. 1).
+    const bool folded = !all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 &&
+                        opt.rank_updates && foldInNewFactors(first_new, &st);
+    const bool tree_changed = folded || reeliminateTop(relin, all, &st);
+    for (int v : touched) mark[v] = 0;
+    // Alg. 1 line 8 / Alg. 3: partial state update.
+    if (solve) {
+      st.cliques_solved = backSubstitute(all || opt.full_backsubstitution);
+      if (opt.dogleg && tree_changed) doglegStep();
     }
+    st.time_s = secondsSince(t0);
+    return st;
+  }
 
+  // Folds the factors from first_new on into the tree when every one of them can be (within
+  // its separators' budget: checked for all before the first is folded in); false otherwise.
+  bool foldInNewFactors(int first_new, UpdateStats* st) {
+    for (int f = first_new; f < static_cast<int>(edges.size()); ++f) {
+      const int start = foldInClique(f);
+      if (start < 0 || !withinBudget(f, start)) return false;
+    }
+    for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
+      st->cliques_updated += foldIn(f);
+    return true;
+  }
+
+  // Kaess 2012 Alg. 1 lines 3–7 for the marked variables (s_touched, and `relin` relinearised;
+  // `all`: every clique); returns whether there was a top to re-eliminate.
+  bool reeliminateTop(const std::vector<int>& relin, bool all, UpdateStats* st) {
+    const std::vector<int>& touched = s_touched;
     // Alg. 1 line 3 / Alg. 2 line 4: mark the cliques that contain a touched variable as
     // frontal and, for relinearised variables, every clique that contains it at all (the
     // subtree below its frontal clique where it appears in the separator).
@@ -912,18 +923,9 @@ struct IncrementalSmoother<G>::Impl {
       for (int c : removed) freeClique(c);
     }
     // Alg. 1 lines 5–7: re-order, re-eliminate the top, re-attach the orphans.
-    eliminateTop(top, orphans, !all, &st);
+    eliminateTop(top, orphans, !all, st);
     for (int c : free_cliques) cliques[c].storage.fit(0);  // those not recycled hold no memory
-    for (int v : touched) mark[v] = 0;
-    // Alg. 1 line 8 / Alg. 3: partial state update.
-    if (!solve) {
-      st.time_s = secondsSince(t0);
-      return st;
-    }
-    st.cliques_solved = backSubstitute(all || opt.full_backsubstitution);
-    if (opt.dogleg && !top.empty()) doglegStep();
-    st.time_s = secondsSince(t0);
-    return st;
+    return !top.empty();
   }
 
   UpdateStats relinearizeAll() {
