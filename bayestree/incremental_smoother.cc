@@ -1,12 +1,15 @@
 #include "bayestree/incremental_smoother.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -15,6 +18,7 @@
 #include "bayestree/dense_kernels.h"
 #include "bayestree/dogleg_step.h"
 #include "bayestree/elimination_plan.h"
+#include "bayestree/work_lanes.h"
 #include "core/information.h"
 
 namespace arbor {
@@ -86,20 +90,47 @@ struct IncrementalSmoother<G>::Impl {
   int stamp = 0;
   double dogleg_radius = 1.0;
   // Scratch indexed by pose, always restored to −1 / 0 after use (no O(n) clearing).
-  std::vector<int> slot;
+  std::vector<int> slot;  // lane 0's (and the single-threaded steps')
   std::vector<char> mark, changed;
-  // Scratch buffers of the elimination and back-substitution (reused, no per-clique malloc).
-  DoubleBuffer h_buf, extend_buf;
+  // What one thread uses while it eliminates or back-substitutes cliques (reused: no
+  // per-clique malloc).
+  struct Lane {
+    std::vector<int> slot;  // lanes 1..: their own slot (lane 0 uses Impl::slot)
+    DoubleBuffer h;         // the clique's assembled Hessian
+    std::vector<double> diag, x;
+    std::vector<int> child_slots, changed_list;
+    std::deque<int> pending;  // cliques this thread is to back-substitute
+    int solved = 0, indeterminate = 0;
+  };
+  // The threads of an update (SmootherOptions::threads): lane 0 is the caller's. A copy of the
+  // smoother gets threads of its own.
+  struct Threads {
+    explicit Threads(int n) : lanes(n), workers(n) {}
+    Threads(const Threads& o) : lanes(o.lanes), workers(o.workers.lanes()) {}
+    Threads& operator=(const Threads&) = delete;
+    std::vector<Lane> lanes;
+    bayestree::WorkLanes workers;
+  };
+  Threads threads;
+  DoubleBuffer extend_buf;
   DoubleBuffer w_buf, w_parent_buf;  // a fold-in's W of this clique and of its parent
-  std::vector<double> x_buf, diag_buf;
-  std::vector<int> child_slots, changed_scratch, stack_scratch;
+  std::vector<int> stack_scratch, ready_scratch;
   std::vector<int> s_path;  // cliques whose separator a fold-in extends
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
   bayestree::RowList s_rows;
   std::vector<int> s_by_need, s_by_capacity;
   std::vector<DoubleBuffer> s_buffers;
 
-  explicit Impl(const SmootherOptions& o) : opt(o), dogleg_radius(o.dogleg_initial_radius) {
+  static int threadCount(int requested) {
+    if (requested < 0)
+      throw std::invalid_argument("IncrementalSmoother: bad option threads = " +
+                                  std::to_string(requested));
+    if (requested > 0) return requested;
+    return static_cast<int>(std::clamp(std::thread::hardware_concurrency(), 1u, 4u));
+  }
+
+  explicit Impl(const SmootherOptions& o)
+      : opt(o), dogleg_radius(o.dogleg_initial_radius), threads(threadCount(o.threads)) {
     auto bad = [](const std::string& what, double v) {
       throw std::invalid_argument("IncrementalSmoother: bad option " + what + " = " +
                                   std::to_string(v));
@@ -135,9 +166,10 @@ struct IncrementalSmoother<G>::Impl {
       sep_sum += c.Sn;
     }
     if (m.cliques > 0) m.mean_separator_dim = sep_sum / m.cliques;
-    m.scratch_bytes = (h_buf.capacity() + extend_buf.capacity() + x_buf.capacity() +
-                       w_buf.capacity() + w_parent_buf.capacity()) *
-                      sizeof(double);
+    m.scratch_bytes =
+        (extend_buf.capacity() + w_buf.capacity() + w_parent_buf.capacity()) * sizeof(double);
+    for (const Lane& l : threads.lanes)
+      m.scratch_bytes += (l.h.capacity() + l.diag.capacity() + l.x.capacity()) * sizeof(double);
     for (const auto& b : s_buffers) m.scratch_bytes += b.capacity() * sizeof(double);
     return m;
   }
@@ -153,6 +185,7 @@ struct IncrementalSmoother<G>::Impl {
     clique_of.push_back(-1);
     var_factors.emplace_back();
     slot.push_back(-1);
+    for (size_t l = 1; l < threads.lanes.size(); ++l) threads.lanes[l].slot.push_back(-1);
     mark.push_back(0);
     changed.push_back(0);
     if (!is_fixed) new_vars.push_back(index);
@@ -223,25 +256,31 @@ struct IncrementalSmoother<G>::Impl {
     free_cliques.push_back(id);
   }
 
-  // slot[v] = v's position (in variables) among the clique's frontals then separator, until
+  std::vector<int>& slotsOf(int lane) { return lane == 0 ? slot : threads.lanes[lane].slot; }
+
+  // slots[v] = v's position (in variables) among the clique's frontals then separator, until
   // clearSlots.
-  void setSlots(const Clique& c) {
+  static void setSlots(const Clique& c, std::vector<int>* slots) {
     const int nf = static_cast<int>(c.frontals.size());
-    for (int a = 0; a < nf; ++a) slot[c.frontals[a]] = a;
-    for (int b = 0; b < static_cast<int>(c.separator.size()); ++b) slot[c.separator[b]] = nf + b;
+    for (int a = 0; a < nf; ++a) (*slots)[c.frontals[a]] = a;
+    for (int b = 0; b < static_cast<int>(c.separator.size()); ++b)
+      (*slots)[c.separator[b]] = nf + b;
   }
-  void clearSlots(const Clique& c) {
-    for (int v : c.frontals) slot[v] = -1;
-    for (int v : c.separator) slot[v] = -1;
+  static void clearSlots(const Clique& c, std::vector<int>* slots) {
+    for (int v : c.frontals) (*slots)[v] = -1;
+    for (int v : c.separator) (*slots)[v] = -1;
   }
 
-  // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into h_buf
-  // ((N+1)×(N+1), column-major; g in row N).
-  void assemble(const Clique& c) {
+  // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into the lane's
+  // h ((N+1)×(N+1), column-major; g in row N).
+  void assemble(const Clique& c, int lane) {
     for (int ch : c.children) cliques[ch].applyPending();
     const int nf = static_cast<int>(c.frontals.size());
     const int N = c.F + c.Sn;
-    setSlots(c);
+    std::vector<int>& slot = slotsOf(lane);
+    std::vector<int>& child_slots = threads.lanes[lane].child_slots;
+    DoubleBuffer& h_buf = threads.lanes[lane].h;
+    setSlots(c, &slot);
     const int lda = N + 1;
     h_buf.resize(static_cast<size_t>(lda) * lda);
     for (int j = 0; j < lda; ++j)  // only the lower triangle is used
@@ -294,18 +333,19 @@ struct IncrementalSmoother<G>::Impl {
         }
       }
     }
-    clearSlots(c);
+    clearSlots(c, &slot);
   }
 
   // Dense Cholesky elimination of one clique (its children already eliminated): L = chol(H_ff),
   // R = Lᵀ, S = R⁻ᵀH_fs, d = R⁻ᵀg_f, cached factor (H_ss − SᵀS, g_s − Sᵀd). Returns true when
   // the frontal block was nearly singular and had to be damped (Levenberg-style).
-  bool eliminateClique(int id) {
+  bool eliminateClique(int id, int lane) {
     Clique& c = cliques[id];
     c.allocate();
     const int F = c.F, Sn = c.Sn, N = F + Sn, lda = N + 1;
-    assemble(c);
-    double* A = h_buf.data();
+    assemble(c, lane);
+    double* A = threads.lanes[lane].h.data();
+    std::vector<double>& diag_buf = threads.lanes[lane].diag;
     diag_buf.resize(F);
     for (int k = 0; k < F; ++k) diag_buf[k] = A[static_cast<size_t>(k) * lda + k];
     bool damped = false;
@@ -323,7 +363,7 @@ struct IncrementalSmoother<G>::Impl {
         base[k] = std::isfinite(diag_buf[k]) ? std::max(diag_buf[k], floor) : floor;
       bool ok = false;
       for (double lambda = 1e-6; lambda < 1e6 && !ok && finite; lambda *= 10) {
-        assemble(c);
+        assemble(c, lane);
         for (int k = 0; k < F; ++k) {
           A[static_cast<size_t>(k) * lda + k] += lambda * base[k];
           damped_diag[k] = A[static_cast<size_t>(k) * lda + k];
@@ -452,9 +492,26 @@ struct IncrementalSmoother<G>::Impl {
       cliques[parent].children.push_back(oc);
     }
     for (int a = 0; a < n; ++a) slot[top[a]] = -1;
-    // Alg. 1 line 6: eliminate, children before parents.
+    // Alg. 1 line 6: eliminate, children before parents: a clique is ready once its last child
+    // is done, and independent subtrees go to different threads.
+    std::unique_ptr<std::atomic<int>[]> children_left(new std::atomic<int>[m]);
+    for (int k = 0; k < m; ++k) children_left[k].store(0, std::memory_order_relaxed);
     for (int k = 0; k < m; ++k)
-      if (eliminateClique(ids[k])) ++st->indeterminate_cliques;
+      if (plan.cliques[k].parent >= 0)
+        children_left[plan.cliques[k].parent].fetch_add(1, std::memory_order_relaxed);
+    std::vector<int>& leaves = ready_scratch;
+    leaves.clear();
+    for (int k = m - 1; k >= 0; --k)
+      if (children_left[k].load(std::memory_order_relaxed) == 0) leaves.push_back(k);
+    for (Lane& l : threads.lanes) l.indeterminate = 0;
+    threads.workers.run(leaves, [&](int lane, int k) {
+      if (eliminateClique(ids[k], lane)) ++threads.lanes[lane].indeterminate;
+      const int parent = plan.cliques[k].parent;
+      return parent >= 0 && children_left[parent].fetch_sub(1, std::memory_order_acq_rel) == 1
+                 ? parent
+                 : -1;
+    });
+    for (const Lane& l : threads.lanes) st->indeterminate_cliques += l.indeterminate;
     st->cliques_reeliminated += m;
     st->variables_reeliminated += n;
   }
@@ -566,10 +623,10 @@ struct IncrementalSmoother<G>::Impl {
       w_buf.resize(static_cast<size_t>(rows) * D);
       MatMap W(w_buf.data(), rows, D);
       W.setZero();
-      setSlots(c);
+      setSlots(c, &slot);
       if (!fixed[e.i]) W.middleRows(slot[e.i] * D, D) = Ai.transpose();
       if (!fixed[e.j]) W.middleRows(slot[e.j] * D, D) = Aj.transpose();
-      clearSlots(c);
+      clearSlots(c, &slot);
       W.row(rows - 1) = -r.transpose();
     }
     int updated = 0;
@@ -583,14 +640,14 @@ struct IncrementalSmoother<G>::Impl {
       // The parent's W: V scattered to the parent's rows.
       const Clique& p = cliques[c.parent];
       const int Np = p.F + p.Sn;
-      setSlots(p);
+      setSlots(p, &slot);
       w_parent_buf.resize(static_cast<size_t>(Np + 1) * D);
       MatMap Wp(w_parent_buf.data(), Np + 1, D);
       Wp.setZero();
       for (int b = 0; b < static_cast<int>(c.separator.size()); ++b)
         Wp.middleRows(slot[c.separator[b]] * D, D) = V.middleRows(b * D, D);
       Wp.row(Np) = V.row(Sn);
-      clearSlots(p);
+      clearSlots(p, &slot);
       w_buf.swap(w_parent_buf);
       rows = Np + 1;
       id = c.parent;
@@ -600,85 +657,102 @@ struct IncrementalSmoother<G>::Impl {
 
   // Kaess 2012 Alg. 3 (partial state update, "wildfire"): solve top-down from the roots,
   // entering a clique only if it was re-eliminated or a separator variable changed by at least
-  // the threshold; returns the number of cliques solved.
+  // the threshold (`full`: every clique); returns the number of cliques solved. A clique is
+  // ready once its parent is solved: independent subtrees go to different threads.
   int backSubstitute(bool full) {
-    std::vector<int>& changed_list = changed_scratch;
-    std::vector<int>& stack = stack_scratch;
-    changed_list.clear();
-    stack.assign(roots.begin(), roots.end());
+    auto needs_solving = [&](const Clique& c) {
+      if (full || c.dirty) return true;
+      for (int v : c.separator)
+        if (changed[v]) return true;
+      return false;
+    };
+    std::vector<int>& ready = ready_scratch;
+    ready.clear();
+    for (int r : roots)
+      if (needs_solving(cliques[r])) ready.push_back(r);
+    for (Lane& l : threads.lanes) l.solved = 0;
+    // Each thread walks its subtree depth-first on a stack of its own and hands the oldest
+    // entry (the largest subtree waiting) to a thread that has run out of work.
+    threads.workers.run(ready, [&](int lane, int id) {
+      std::deque<int>& pending = threads.lanes[lane].pending;
+      pending.assign(1, id);
+      while (!pending.empty()) {
+        const int c = pending.back();
+        pending.pop_back();
+        solveClique(c, full, &threads.lanes[lane]);
+        // A child's separator lies in this clique's frontals ∪ separator, all solved by now.
+        for (int ch : cliques[c].children)
+          if (needs_solving(cliques[ch])) pending.push_back(ch);
+        if (pending.size() > 1 && threads.workers.hungry()) {
+          threads.workers.push(pending.front());
+          pending.pop_front();
+        }
+      }
+      return -1;
+    });
     int solved = 0;
-    while (!stack.empty()) {
-      const int id = stack.back();
-      stack.pop_back();
-      Clique& c = cliques[id];
-      // Recompute when re-eliminated, or when a separator variable changed.
-      bool sep_changed = full;
-      for (int k = 0; k < static_cast<int>(c.separator.size()) && !sep_changed; ++k)
-        sep_changed = changed[c.separator[k]] != 0;
-      if (!sep_changed && !c.dirty) continue;
-      ++solved;
-      const int nf = static_cast<int>(c.frontals.size());
-      const int ns = static_cast<int>(c.separator.size());
-      const int F = c.F;
-      // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s) with the clique's stored columns [L; Sᵀ]: the
-      // separator's share as one matrix-vector product, then the triangular solve from the last
-      // frontal up, z_i = (b_i − L(i+1..F, i)ᵀ x(i+1..F)) / L_ii, with z = [x; x_s] in one buffer.
-      const int N = F + c.Sn;
-      x_buf.resize(N + F);
-      double* x = x_buf.data();
-      double* inv = x + N;
-      for (int b = 0; b < ns; ++b) Eigen::Map<Vec>(x + F + b * D) = delta_newton[c.separator[b]];
-      const typename Clique::ConstMap LS = c.LS();
-      Eigen::Map<Eigen::VectorXd> xf(x, F);
-      xf = c.d();
-      if (c.Sn > 0)
-        xf.noalias() -=
-            LS.bottomRows(c.Sn).transpose() * Eigen::Map<const Eigen::VectorXd>(x + F, c.Sn);
-      const double* ls = c.lsPtr();
-      for (int i = 0; i < F; ++i) inv[i] = 1.0 / ls[static_cast<size_t>(i) * c.ld + i];
-      for (int i = F - 1; i >= 0; --i) {
-        const double* col = ls + static_cast<size_t>(i) * c.ld;
-        double d0 = 0, d1 = 0, d2 = 0, d3 = 0;  // four sums: no chain of dependent adds
-        int r = i + 1;
-        for (; r + 4 <= F; r += 4) {
-          d0 += col[r] * x[r];
-          d1 += col[r + 1] * x[r + 1];
-          d2 += col[r + 2] * x[r + 2];
-          d3 += col[r + 3] * x[r + 3];
-        }
-        for (; r < F; ++r) d0 += col[r] * x[r];
-        x[i] = (x[i] - ((d0 + d1) + (d2 + d3))) * inv[i];
-      }
-      // The new values are always taken. A variable is "changed" (the cliques below that hold
-      // it in their separator must be recomputed) when it moved by at least the threshold from
-      // the value they were last solved with (delta_seen), so small moves cannot accumulate.
-      bool frontal_changed = full;
-      for (int a = 0; a < nf; ++a) {
-        const int v = c.frontals[a];
-        const Eigen::Map<const Vec> xv(x + a * D);
-        if (full || (xv - delta_seen[v]).cwiseAbs().maxCoeff() >= opt.wildfire_threshold) {
-          delta_seen[v] = xv;
-          frontal_changed = true;
-          if (!changed[v]) {
-            changed[v] = 1;
-            changed_list.push_back(v);
-          }
-        }
-        delta_newton[v] = xv;
-        if (!opt.dogleg) delta[v] = xv;
-      }
-      // A child's separator lies in this clique's frontals ∪ separator: it can only need
-      // recomputing if one of those changed (or if it was itself re-eliminated).
-      if (frontal_changed || sep_changed) {
-        for (int ch : c.children) stack.push_back(ch);
-      } else {
-        for (int ch : c.children)
-          if (cliques[ch].dirty) stack.push_back(ch);
-      }
-      c.dirty = false;
+    for (Lane& l : threads.lanes) {
+      solved += l.solved;
+      for (int v : l.changed_list) changed[v] = 0;
+      l.changed_list.clear();
     }
-    for (int v : changed_list) changed[v] = 0;
     return solved;
+  }
+
+  // x_f = R⁻¹ (d − S x_s) for one clique, into Δ (Alg. 3); marks the frontals that moved by at
+  // least the wildfire threshold as changed.
+  void solveClique(int id, bool full, Lane* lane) {
+    Clique& c = cliques[id];
+    ++lane->solved;
+    const int nf = static_cast<int>(c.frontals.size());
+    const int ns = static_cast<int>(c.separator.size());
+    const int F = c.F;
+    // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s) with the clique's stored columns [L; Sᵀ]: the
+    // separator's share as one matrix-vector product, then the triangular solve from the last
+    // frontal up, z_i = (b_i − L(i+1..F, i)ᵀ x(i+1..F)) / L_ii, with z = [x; x_s] in one buffer.
+    const int N = F + c.Sn;
+    lane->x.resize(N + F);
+    double* x = lane->x.data();
+    double* inv = x + N;
+    for (int b = 0; b < ns; ++b) Eigen::Map<Vec>(x + F + b * D) = delta_newton[c.separator[b]];
+    const typename Clique::ConstMap LS = c.LS();
+    Eigen::Map<Eigen::VectorXd> xf(x, F);
+    xf = c.d();
+    if (c.Sn > 0)
+      xf.noalias() -=
+          LS.bottomRows(c.Sn).transpose() * Eigen::Map<const Eigen::VectorXd>(x + F, c.Sn);
+    const double* ls = c.lsPtr();
+    for (int i = 0; i < F; ++i) inv[i] = 1.0 / ls[static_cast<size_t>(i) * c.ld + i];
+    for (int i = F - 1; i >= 0; --i) {
+      const double* col = ls + static_cast<size_t>(i) * c.ld;
+      double d0 = 0, d1 = 0, d2 = 0, d3 = 0;  // four sums: no chain of dependent adds
+      int r = i + 1;
+      for (; r + 4 <= F; r += 4) {
+        d0 += col[r] * x[r];
+        d1 += col[r + 1] * x[r + 1];
+        d2 += col[r + 2] * x[r + 2];
+        d3 += col[r + 3] * x[r + 3];
+      }
+      for (; r < F; ++r) d0 += col[r] * x[r];
+      x[i] = (x[i] - ((d0 + d1) + (d2 + d3))) * inv[i];
+    }
+    // The new values are always taken. A variable is "changed" (the cliques below that hold it
+    // in their separator must be recomputed) when it moved by at least the threshold from the
+    // value they were last solved with (delta_seen), so small moves cannot accumulate.
+    for (int a = 0; a < nf; ++a) {
+      const int v = c.frontals[a];
+      const Eigen::Map<const Vec> xv(x + a * D);
+      if (full || (xv - delta_seen[v]).cwiseAbs().maxCoeff() >= opt.wildfire_threshold) {
+        delta_seen[v] = xv;
+        if (!changed[v]) {
+          changed[v] = 1;
+          lane->changed_list.push_back(v);
+        }
+      }
+      delta_newton[v] = xv;
+      if (!opt.dogleg) delta[v] = xv;
+    }
+    c.dirty = false;
   }
 
   // F at θ ⊞ x for every pose.

@@ -11,7 +11,8 @@
 // docs/design.md).
 //
 // Not thread-safe: one thread owns a smoother (const methods may run concurrently with each
-// other, never with a non-const one).
+// other, never with a non-const one). Inside an update, the smoother's own helper threads
+// share the work on the tree (SmootherOptions::threads).
 #pragma once
 
 #include <memory>
@@ -46,6 +47,11 @@ struct SmootherOptions {
   /// iterations.
   double finalize_relative_tolerance = 1e-6;
   int finalize_max_iterations = 10;
+  /// Threads that work on one update: the caller's and threads − 1 helpers (owned by the
+  /// smoother, idle between updates), which eliminate and back-substitute independent subtrees
+  /// of the Bayes tree side by side. The estimate does not depend on it, bit for bit. 0: one per
+  /// core, at most 4.
+  int threads = 0;
 };
 
 struct UpdateStats {

@@ -544,6 +544,52 @@ TEST(BayesTreeApi, CopiesAreIndependentAndBehaveTheSame) {
   EXPECT_DOUBLE_EQ(c.objective(), a.objective());
 }
 
+// The helper threads of an update (SmootherOptions::threads) share the elimination and the
+// back-substitution out; the estimate must not depend on how many there are, to the last bit,
+// after every update (folds, relinearisation, wildfire and all).
+template <class G>
+void expectSameEstimateForAnyThreadCount(bool dogleg) {
+  const PoseGraph<G> g = randomGraph<G>(300, 120, 81, 0.1, 0.05);
+  std::vector<std::vector<G>> by_update[3];
+  for (int threads = 1; threads <= 3; ++threads) {
+    SmootherOptions o;
+    o.threads = threads;
+    o.dogleg = dogleg;
+    IncrementalSmoother<G> s(o);
+    int parallel_walks = 0;
+    replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
+      by_update[threads - 1].push_back(sm.estimate());
+      if (st.cliques_reeliminated > 1 || st.cliques_solved > 1) ++parallel_walks;
+    });
+    s.checkInvariants();
+    EXPECT_GT(parallel_walks, g.numEdges() / 2) << "too few updates with work to share";
+  }
+  for (int threads = 2; threads <= 3; ++threads) {
+    ASSERT_EQ(by_update[threads - 1].size(), by_update[0].size());
+    for (size_t u = 0; u < by_update[0].size(); ++u)
+      for (size_t v = 0; v < by_update[0][u].size(); ++v)
+        ASSERT_EQ(by_update[0][u][v].localCoordinates(by_update[threads - 1][u][v]),
+                  G::Tangent::Zero())
+            << threads << " threads, update " << u + 1 << ", pose " << v;
+  }
+}
+
+TEST(BayesTreeThreads, SameEstimateForAnyThreadCount2D) {
+  expectSameEstimateForAnyThreadCount<SE2>(false);
+}
+TEST(BayesTreeThreads, SameEstimateForAnyThreadCount3D) {
+  expectSameEstimateForAnyThreadCount<SE3>(false);
+}
+TEST(BayesTreeThreads, SameEstimateForAnyThreadCountDogleg) {
+  expectSameEstimateForAnyThreadCount<SE3>(true);
+}
+
+TEST(BayesTreeThreads, RejectsANegativeThreadCount) {
+  SmootherOptions o;
+  o.threads = -1;
+  EXPECT_THROW(IncrementalSmoother<SE2>{o}, std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace arbor
 

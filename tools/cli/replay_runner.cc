@@ -37,7 +37,8 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     result.relinearized += s.variables_relinearized;
     result.indeterminate += s.indeterminate_cliques;
     result.rows.push_back({static_cast<int>(result.rows.size()) + 1, fed, ms,
-                           s.cliques_reeliminated, s.variables_relinearized, s.cliques_updated});
+                           s.cliques_reeliminated, s.variables_relinearized, s.cliques_updated,
+                           s.cliques_solved});
     if (hooks.after_update) hooks.after_update(smoother, result.rows.back());
   }
   if (hooks.after_stream) hooks.after_stream(smoother);
@@ -80,11 +81,12 @@ ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& setti
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows) {
   std::ofstream csv(path);
   if (!csv) throw std::runtime_error("cannot write " + path);
-  csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated\n";
+  csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated,cliques_solved\n";
   csv << std::setprecision(6);
   for (const auto& r : rows) {
     csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << "," << r.cliques_reeliminated
-        << "," << r.variables_relinearized << "," << r.cliques_updated << "\n";
+        << "," << r.variables_relinearized << "," << r.cliques_updated << ","
+        << r.cliques_solved << "\n";
   }
   if (!csv) throw std::runtime_error("error writing " + path);
 }

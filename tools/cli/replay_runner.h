@@ -29,6 +29,7 @@ struct UpdateRow {
   int cliques_reeliminated = 0;
   int variables_relinearized = 0;
   int cliques_updated = 0;  ///< cliques given a rank update instead of re-eliminated
+  int cliques_solved = 0;   ///< cliques re-solved by back-substitution
 };
 
 template <class G>
@@ -67,7 +68,7 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
                            OnlineSmoother<G>& smoother, const ReplayHooks<G>& hooks = {});
 
 /// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized,
-/// cliques_updated).
+/// cliques_updated, cliques_solved).
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows);
 
 }  // namespace arbor::cli

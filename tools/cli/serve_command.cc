@@ -90,6 +90,8 @@ int serveCommand(const std::vector<std::string>& args) {
       "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
       "relinearize-skip", po::value(&options.smoother.relinearize_skip)->default_value(10),
       "check relinearisation every K updates")(
+      "threads", po::value(&options.smoother.threads)->default_value(0),
+      "threads per update, sharing independent subtrees (0: one per core, at most 4)")(
       "wildfire", po::value(&options.smoother.wildfire_threshold)->default_value(0.001),
       "partial back-substitution threshold")(
       "status-period", po::value(&options.status_period_s)->default_value(1.0),
