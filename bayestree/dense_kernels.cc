@@ -17,6 +17,17 @@ void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, con
             std::size_t, std::size_t);
 }
 
+// The hot loops below are compiled three times, for plain x86-64 (SSE2), AVX2/FMA and
+// AVX-512, and the loader picks the widest the CPU has (as OpenBLAS does at run time): the
+// project itself is built for any x86-64 (ARBOR_NATIVE off). `flatten` inlines the helpers
+// into each copy.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define ARBOR_VECTOR_CLONES \
+  __attribute__((target_clones("default", "arch=x86-64-v3", "arch=x86-64-v4"), flatten))
+#else
+#define ARBOR_VECTOR_CLONES
+#endif
+
 namespace arbor::bayestree {
 namespace {
 
@@ -29,6 +40,7 @@ constexpr double kCliquePivot = 1e-14;
 // dimension lda): factors the first F columns (L and the rows below it, i.e. Sᵀ and d) and
 // leaves the Schur complement in the trailing block. False when a pivot is not safely positive
 // relative to its diagonal `dg` (the clique is then indeterminate).
+ARBOR_VECTOR_CLONES
 bool partialCholeskySmall(double* A, int lda, int F, int M, const double* dg) {
   double max_diag = 0;
   for (int k = 0; k < F; ++k) max_diag = std::max(max_diag, dg[k]);
@@ -160,6 +172,7 @@ void lowerRankUpdate(double* C, int ldc, int n, const double* A, int lda, int k)
   dsyrk_("L", "N", &n, &k, &one, A, &lda, &one, C, &ldc, 1, 1);
 }
 
+ARBOR_VECTOR_CLONES
 void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* W, int ldw, int k) {
   constexpr int kMax = 16;
   double* w[kMax];
@@ -190,6 +203,28 @@ void partialCholeskyUpdate(double* L, int ldl, int N, int F, double* d, double* 
       // The right-hand side's row (d, kept apart from L: row N of W), rotated the same way.
       for (int a = 0; a < count; ++a) d[j] = rotate(d[j], w[a] + N, s[a], inv_c[a], c[a]);
     }
+  }
+}
+
+namespace {
+
+// Σ a_r b_r over n entries, in eight running sums (vectorisable without reassociating).
+inline double dot(const double* a, const double* b, int n) {
+  double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  int r = 0;
+  for (; r + 8 <= n; r += 8)
+    for (int u = 0; u < 8; ++u) acc[u] += a[r + u] * b[r + u];
+  for (; r < n; ++r) acc[0] += a[r] * b[r];
+  return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+}
+
+}  // namespace
+
+ARBOR_VECTOR_CLONES
+void solveConditional(const double* LS, int ld, int N, int F, const double* d, double* z) {
+  for (int i = F - 1; i >= 0; --i) {
+    const double* col = LS + static_cast<size_t>(i) * ld;
+    z[i] = (d[i] - dot(col + i + 1, z + i + 1, N - i - 1)) / col[i];
   }
 }
 

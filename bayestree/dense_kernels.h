@@ -77,6 +77,12 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg);
 /// (leading dimension lda): BLAS dsyrk.
 void lowerRankUpdate(double* C, int ldc, int n, const double* A, int lda, int k);
 
+/// Back-substitution of one conditional R x_f + S x_s = d, stored as LS = [L; Sᵀ] (N×F,
+/// column-major, leading dimension ld) with R = Lᵀ: z = [x_f; x_s] (N entries), x_s given in
+/// z[F..N), x_f written to z[0..F): x_i = (d_i − LS(i+1..N, i)ᵀ z(i+1..N)) / L_ii, from the last
+/// frontal up.
+void solveConditional(const double* LS, int ld, int N, int F, const double* d, double* z);
+
 /// Rank-k update of a partial Cholesky factor (the rank-one update of Golub & Van Loan §6.5.4,
 /// applied column by column for k vectors at once). `L` (N×F, column-major, leading dimension
 /// ldl ≥ N) and `d` (F) are the first F columns of the factor of an (N+1)×(N+1) matrix M, `d` being

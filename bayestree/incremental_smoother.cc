@@ -707,35 +707,12 @@ struct IncrementalSmoother<G>::Impl {
     const int nf = static_cast<int>(c.frontals.size());
     const int ns = static_cast<int>(c.separator.size());
     const int F = c.F;
-    // x = R⁻¹ (d − S x_s) = L⁻ᵀ (d − (Sᵀ)ᵀ x_s) with the clique's stored columns [L; Sᵀ]: the
-    // separator's share as one matrix-vector product, then the triangular solve from the last
-    // frontal up, z_i = (b_i − L(i+1..F, i)ᵀ x(i+1..F)) / L_ii, with z = [x; x_s] in one buffer.
+    // z = [x_f; x_s]: the separator's values in, the frontals' out (bayestree/dense_kernels.h).
     const int N = F + c.Sn;
-    lane->x.resize(N + F);
+    lane->x.resize(N);
     double* x = lane->x.data();
-    double* inv = x + N;
     for (int b = 0; b < ns; ++b) Eigen::Map<Vec>(x + F + b * D) = delta_newton[c.separator[b]];
-    const typename Clique::ConstMap LS = c.LS();
-    Eigen::Map<Eigen::VectorXd> xf(x, F);
-    xf = c.d();
-    if (c.Sn > 0)
-      xf.noalias() -=
-          LS.bottomRows(c.Sn).transpose() * Eigen::Map<const Eigen::VectorXd>(x + F, c.Sn);
-    const double* ls = c.lsPtr();
-    for (int i = 0; i < F; ++i) inv[i] = 1.0 / ls[static_cast<size_t>(i) * c.ld + i];
-    for (int i = F - 1; i >= 0; --i) {
-      const double* col = ls + static_cast<size_t>(i) * c.ld;
-      double d0 = 0, d1 = 0, d2 = 0, d3 = 0;  // four sums: no chain of dependent adds
-      int r = i + 1;
-      for (; r + 4 <= F; r += 4) {
-        d0 += col[r] * x[r];
-        d1 += col[r + 1] * x[r + 1];
-        d2 += col[r + 2] * x[r + 2];
-        d3 += col[r + 3] * x[r + 3];
-      }
-      for (; r < F; ++r) d0 += col[r] * x[r];
-      x[i] = (x[i] - ((d0 + d1) + (d2 + d3))) * inv[i];
-    }
+    bayestree::solveConditional(c.lsPtr(), c.ld, N, F, c.dPtr(), x);
     // The new values are always taken. A variable is "changed" (the cliques below that hold it
     // in their separator must be recomputed) when it moved by at least the threshold from the
     // value they were last solved with (delta_seen), so small moves cannot accumulate.

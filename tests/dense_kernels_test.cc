@@ -96,6 +96,32 @@ TEST(DenseKernels, RankUpdateEqualsRefactorisation) {
   }
 }
 
+TEST(DenseKernels, SolveConditionalEqualsTriangularSolve) {
+  std::mt19937_64 rng(12);
+  std::normal_distribution<double> normal(0, 1);
+  for (const auto& [F, S] : std::vector<std::pair<int, int>>{{1, 0}, {6, 12}, {13, 7}, {60, 200}}) {
+    const int N = F + S, ld = N + 3;
+    Eigen::MatrixXd LS = Eigen::MatrixXd::Zero(ld, F);
+    for (int i = 0; i < N; ++i)
+      for (int j = 0; j < std::min(i + 1, F); ++j) LS(i, j) = normal(rng);
+    for (int j = 0; j < F; ++j) LS(j, j) = 2.0 + std::abs(LS(j, j));  // well conditioned
+    LS.bottomRows(3).setConstant(1e300);  // slack below row N must not be read
+    Eigen::VectorXd d(F), xs(S);
+    for (int i = 0; i < F; ++i) d(i) = normal(rng);
+    for (int i = 0; i < S; ++i) xs(i) = normal(rng);
+    Eigen::VectorXd z(N);
+    z.tail(S) = xs;
+    solveConditional(LS.data(), ld, N, F, d.data(), z.data());
+    // R x_f + S x_s = d with R = Lᵀ, S = (rows F..N of LS)ᵀ.
+    const Eigen::MatrixXd L = LS.topRows(F).triangularView<Eigen::Lower>();
+    const Eigen::VectorXd rhs = d - LS.middleRows(F, S).transpose() * xs;
+    const Eigen::VectorXd expected = L.transpose().triangularView<Eigen::Upper>().solve(rhs);
+    EXPECT_LT((z.head(F) - expected).cwiseAbs().maxCoeff(), 1e-12 * (1 + expected.norm()))
+        << "F " << F << " S " << S;
+    EXPECT_EQ(z.tail(S), xs) << "the separator's values are input only";
+  }
+}
+
 TEST(DenseKernels, ConcurrentCallsAgree) {
   std::atomic<int> bad{0};
   auto work = [&](unsigned seed) {
