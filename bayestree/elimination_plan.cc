@@ -1,5 +1,7 @@
 #include "bayestree/elimination_plan.h"
 
+#include <cholmod.h>
+
 #include <algorithm>
 #include <numeric>
 #include <stdexcept>
@@ -39,6 +41,39 @@ std::vector<int> constrainedColamd(int n, const RowList& rows, const std::vector
     throw std::runtime_error("constrainedColamd: ccolamd failed with status " +
                              std::to_string(stats[CCOLAMD_STATUS]));
   order.assign(p.begin(), p.begin() + n);
+  return order;
+}
+
+std::vector<int> constrainedNestedDissection(int n, const RowList& rows,
+                                             const std::vector<int>& group) {
+  if (static_cast<int>(group.size()) != n)
+    throw std::invalid_argument("constrainedNestedDissection: group size " +
+                                std::to_string(group.size()) + " != n " + std::to_string(n));
+  const int n_row = rows.numRows();
+  const int nnz = static_cast<int>(rows.vars.size());
+  if (n <= 64 || nnz == 0) return constrainedColamd(n, rows, group);
+  // CHOLMOD orders A·Aᵀ for the n×n_row pattern A whose column r is row r of `rows`.
+  cholmod_common common;
+  cholmod_start(&common);
+  std::vector<int> order(n);
+  cholmod_sparse* A = cholmod_allocate_sparse(n, n_row, nnz, /*sorted=*/0, /*packed=*/1,
+                                              /*stype=*/0, CHOLMOD_PATTERN, &common);
+  bool ok = A != nullptr;
+  if (ok) {
+    int* Ap = static_cast<int*>(A->p);
+    int* Ai = static_cast<int*>(A->i);
+    for (int r = 0; r <= n_row; ++r) Ap[r] = rows.start[r];
+    std::copy(rows.vars.begin(), rows.vars.end(), Ai);
+    std::vector<int> cparent(n), cmember(n);
+    ok = cholmod_nested_dissection(A, nullptr, 0, order.data(), cparent.data(), cmember.data(),
+                                   &common) >= 0 &&
+         common.status == CHOLMOD_OK;
+  }
+  cholmod_free_sparse(&A, &common);
+  cholmod_finish(&common);
+  if (!ok) return constrainedColamd(n, rows, group);  // e.g. METIS out of memory
+  // The constraint: variables of a larger group after the others (in their order).
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return group[a] < group[b]; });
   return order;
 }
 

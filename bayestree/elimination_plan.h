@@ -40,6 +40,13 @@ struct EliminationPlan {
 /// ordering). rows may be empty; a row lists distinct columns.
 std::vector<int> constrainedColamd(int n, const RowList& rows, const std::vector<int>& group);
 
+/// As constrainedColamd, by CHOLMOD's nested dissection (METIS bisection, then constrained
+/// minimum degree on the separator tree; George 1973): less fill and a bushier tree than
+/// minimum degree on large, mesh-like problems. The variables of a larger group are then moved
+/// after the others, keeping their order.
+std::vector<int> constrainedNestedDissection(int n, const RowList& rows,
+                                             const std::vector<int>& group);
+
 /// Symbolic elimination of the structure `rows` over n variables in `order` (position →
 /// variable), grouped into cliques: a variable joins the clique of its parent (the first
 /// eliminated variable of its separator) when its separator equals that clique's variables.

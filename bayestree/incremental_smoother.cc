@@ -140,6 +140,7 @@ struct IncrementalSmoother<G>::Impl {
     if (!(o.relinearize_threshold_rotation >= 0))
       bad("relinearize_threshold_rotation", o.relinearize_threshold_rotation);
     if (o.relinearize_skip < 1) bad("relinearize_skip", o.relinearize_skip);
+    if (o.nested_dissection_min < -1) bad("nested_dissection_min", o.nested_dissection_min);
     if (!(o.wildfire_threshold >= 0)) bad("wildfire_threshold", o.wildfire_threshold);
     if (!(o.dogleg_initial_radius > 0)) bad("dogleg_initial_radius", o.dogleg_initial_radius);
     if (!(o.dogleg_min_radius > 0)) bad("dogleg_min_radius", o.dogleg_min_radius);
@@ -403,6 +404,13 @@ struct IncrementalSmoother<G>::Impl {
     return damped;
   }
 
+  // Tops of at least this many variables are ordered by nested dissection
+  // (SmootherOptions::nested_dissection_min; automatic: 100 poses in 3D, never in 2D).
+  int nestedDissectionMin() const {
+    if (opt.nested_dissection_min >= 0) return opt.nested_dissection_min;
+    return D == 6 ? 100 : std::numeric_limits<int>::max();
+  }
+
   // Kaess 2012 Alg. 1 lines 5–7: order the removed top (CCOLAMD, `constrained` variables last),
   // eliminate it into new cliques and re-attach the orphaned subtrees.
   void eliminateTop(const std::vector<int>& top, const std::vector<int>& orphans, bool constrain,
@@ -436,8 +444,10 @@ struct IncrementalSmoother<G>::Impl {
     group.assign(n, 0);
     if (constrain)
       for (int a = 0; a < n; ++a) group[a] = mark[top[a]] ? 1 : 0;
-    bayestree::EliminationPlan plan =
-        bayestree::planElimination(n, rows, bayestree::constrainedColamd(n, rows, group));
+    bayestree::EliminationPlan plan = bayestree::planElimination(
+        n, rows,
+        n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, rows, group)
+                                   : bayestree::constrainedColamd(n, rows, group));
 
     const int m = static_cast<int>(plan.cliques.size());
     std::vector<int>& ids = s_ids;

@@ -47,6 +47,12 @@ struct SmootherOptions {
   /// iterations.
   double finalize_relative_tolerance = 1e-6;
   int finalize_max_iterations = 10;
+  /// A re-eliminated top of at least this many variables is ordered by nested dissection
+  /// (CHOLMOD/METIS, bayestree/elimination_plan.h) instead of CCOLAMD; the variables of the new
+  /// factors still go last. −1: automatic, 100 for SE(3) (measured: replay total on the shared
+  /// 3D sets 15–45% lower, docs/benchmarks.md) and never for SE(2) (23–28% higher on M3500,
+  /// manhattan: the cheaper 3×3 eliminations do not pay for the ordering); 0: always.
+  int nested_dissection_min = -1;
   /// Threads that work on one update: the caller's and threads − 1 helpers (owned by the
   /// smoother, idle between updates), which eliminate and back-substitute independent subtrees
   /// of the Bayes tree side by side. The estimate does not depend on it, bit for bit. 0: one per

@@ -191,9 +191,10 @@ SmootherOptions exactOptions() {
 }
 
 template <class G>
-void expectExactAfterEveryUpdate(int n, int loops, unsigned seed) {
+void expectExactAfterEveryUpdate(int n, int loops, unsigned seed,
+                                 const SmootherOptions& options = exactOptions()) {
   const PoseGraph<G> g = randomGraph<G>(n, loops, seed, 0.1, 0.05);
-  IncrementalSmoother<G> s(exactOptions());
+  IncrementalSmoother<G> s(options);
   int updates = 0;
   replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
     ++updates;
@@ -222,6 +223,15 @@ TEST(BayesTreeExactness, EqualsBatchGaussNewtonStep2D) {
 
 TEST(BayesTreeExactness, EqualsBatchGaussNewtonStep3D) {
   for (unsigned seed = 11; seed <= 12; ++seed) expectExactAfterEveryUpdate<SE3>(40, 15, seed);
+}
+
+// Every top ordered by nested dissection (tops above 64 variables: the whole tree, relinearised
+// on every update, once the graph has grown past that).
+TEST(BayesTreeExactness, EqualsBatchGaussNewtonStepWithNestedDissection) {
+  SmootherOptions o = exactOptions();
+  o.nested_dissection_min = 0;
+  expectExactAfterEveryUpdate<SE2>(110, 40, 5, o);
+  expectExactAfterEveryUpdate<SE3>(90, 30, 13, o);
 }
 
 // Full back-substitution and no relinearisation: what the rank updates of fold-ins need.

@@ -136,6 +136,8 @@ int replayCommand(const std::vector<std::string>& args) {
       "β for rotation")("relinearize-skip",
                         po::value(&run.smoother.relinearize_skip)->default_value(10),
                         "check relinearisation every K updates")(
+      "nested-dissection-min", po::value(&run.smoother.nested_dissection_min)->default_value(-1),
+      "order re-eliminated tops of at least N variables by nested dissection (-1: automatic)")(
       "threads", po::value(&run.smoother.threads)->default_value(0),
       "threads per update, sharing independent subtrees (0: one per core, at most 4)")(
       "wildfire", po::value(&run.smoother.wildfire_threshold)->default_value(0.001),

@@ -1,0 +1,99 @@
+// Tests of bayestree/elimination_plan.h: the constrained orderings (CCOLAMD, nested dissection)
+// and the symbolic elimination they feed.
+
+#include <algorithm>
+#include <numeric>
+#include <vector>
+
+#include "bayestree/elimination_plan.h"
+
+#include <gtest/gtest.h>
+
+namespace arbor::bayestree {
+namespace {
+
+// A k×k grid of variables, one row per edge (a 2D mesh: where nested dissection shines).
+RowList gridRows(int k) {
+  RowList rows;
+  for (int r = 0; r < k; ++r)
+    for (int c = 0; c < k; ++c) {
+      const int v = r * k + c;
+      if (c + 1 < k) {
+        rows.add(v);
+        rows.add(v + 1);
+        rows.endRow();
+      }
+      if (r + 1 < k) {
+        rows.add(v);
+        rows.add(v + k);
+        rows.endRow();
+      }
+    }
+  return rows;
+}
+
+bool isPermutation(std::vector<int> order, int n) {
+  std::sort(order.begin(), order.end());
+  std::vector<int> expected(n);
+  std::iota(expected.begin(), expected.end(), 0);
+  return order == expected;
+}
+
+// Σ over cliques of f³/3 + f²s + fs² (f frontals, s separator): the dense work of the
+// elimination, in units of one variable.
+double eliminationWork(const EliminationPlan& plan) {
+  double work = 0;
+  for (const SymbolicClique& c : plan.cliques) {
+    const double f = static_cast<double>(c.frontals.size());
+    const double s = static_cast<double>(c.separator.size());
+    work += f * f * f / 3 + f * f * s + f * s * s;
+  }
+  return work;
+}
+
+TEST(EliminationPlan, NestedDissectionIsAConstrainedPermutation) {
+  const int k = 30, n = k * k;
+  const RowList rows = gridRows(k);
+  std::vector<int> group(n, 0);
+  const std::vector<int> last = {17, 450, 899, 3};
+  for (int v : last) group[v] = 1;
+  const std::vector<int> order = constrainedNestedDissection(n, rows, group);
+  ASSERT_TRUE(isPermutation(order, n));
+  std::vector<int> tail(order.end() - 4, order.end());
+  std::sort(tail.begin(), tail.end());
+  std::vector<int> expected = last;
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(tail, expected) << "the constrained variables go last";
+}
+
+// On a large grid (on small ones minimum degree is as good or better).
+TEST(EliminationPlan, NestedDissectionDoesLessWorkThanMinimumDegreeOnALargeGrid) {
+  const int k = 120, n = k * k;
+  const RowList rows = gridRows(k);
+  const std::vector<int> group(n, 0);
+  const EliminationPlan nd = planElimination(n, rows, constrainedNestedDissection(n, rows, group));
+  const EliminationPlan md = planElimination(n, rows, constrainedColamd(n, rows, group));
+  EXPECT_LT(eliminationWork(nd), eliminationWork(md));
+  // The same variables, each frontal in exactly one clique.
+  std::vector<int> seen(n, 0);
+  for (const SymbolicClique& c : nd.cliques)
+    for (int v : c.frontals) ++seen[v];
+  EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](int x) { return x == 1; }));
+}
+
+TEST(EliminationPlan, SmallProblemsKeepMinimumDegree) {
+  const int k = 6, n = k * k;  // 36 variables: below nested dissection's minimum
+  const RowList rows = gridRows(k);
+  std::vector<int> group(n, 0);
+  group[5] = 1;
+  EXPECT_EQ(constrainedNestedDissection(n, rows, group), constrainedColamd(n, rows, group));
+}
+
+TEST(EliminationPlan, RejectsAGroupOfTheWrongSize) {
+  const RowList rows = gridRows(10);
+  EXPECT_THROW(constrainedNestedDissection(100, rows, std::vector<int>(99, 0)),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace arbor::bayestree
