@@ -1,6 +1,4 @@
 // arbor: an incremental pose-graph smoother. `arbor help` lists the subcommands.
-#include <dlfcn.h>
-
 #include <cstdlib>
 #include <iostream>
 #include <map>
@@ -30,18 +28,6 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
   return table;
 }
 
-// OpenBLAS (what scripts/install-deps.sh installs) would fan each large clique factorisation out
-// to every core: no faster here (torus3D replay 30.8 vs 29.7 s) for a third more CPU, taken from
-// the background batch. One thread, when the BLAS in use is OpenBLAS; a user's
-// OPENBLAS_NUM_THREADS wins.
-void useOneBlasThread() {
-  if (std::getenv("OPENBLAS_NUM_THREADS")) return;
-  using SetThreads = void (*)(int);
-  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) {
-    set(1);
-  }
-}
-
 void printUsage(std::ostream& out) {
   out << "usage: arbor <command> [options]   (arbor <command> --help for its options)\n";
   for (const auto& [name, entry] : commands()) out << "  " << name << "\t" << entry.second << "\n";
@@ -50,7 +36,7 @@ void printUsage(std::ostream& out) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  useOneBlasThread();
+  arbor::cli::useOneBlasThread();
   if (argc < 2 || std::string(argv[1]) == "help" || std::string(argv[1]) == "--help") {
     printUsage(argc < 2 ? std::cerr : std::cout);
     return argc < 2 ? 2 : 0;

@@ -28,6 +28,7 @@
 #include "tools/bench/ceres_pose_graph.h"
 #include "tools/bench/paper_runner.h"
 #include "tools/bench/shared_data.h"
+#include "tools/cli/cli_common.h"
 #include "tools/cli/replay_runner.h"
 
 namespace {
@@ -315,6 +316,7 @@ int micro(const std::vector<std::string>& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  arbor::cli::useOneBlasThread();
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout

@@ -1,5 +1,8 @@
 #include "tools/cli/cli_common.h"
 
+#include <dlfcn.h>
+
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -36,6 +39,13 @@ InformationPolicy parseInformationPolicy(const std::string& name) {
   if (name == "repair") return InformationPolicy::kRepair;
   if (name == "isotropic") return InformationPolicy::kIsotropic;
   throw UsageError("--information must be refuse, repair or isotropic, not '" + name + "'");
+}
+
+void useOneBlasThread() {
+  if (std::getenv("OPENBLAS_NUM_THREADS")) return;
+  using SetThreads = void (*)(int);
+  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads")))
+    set(1);
 }
 
 double peakRssMb() {

@@ -10,6 +10,7 @@
 #include <benchmark/benchmark.h>
 
 #include "tools/bench/micro/bench_graphs.h"
+#include "tools/cli/cli_common.h"
 
 namespace {
 
@@ -39,6 +40,7 @@ std::vector<int> parseSizes(const std::string& list) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  arbor::cli::useOneBlasThread();
   std::vector<int> sizes = {500, 1000, 2000};
   std::vector<char*> rest;
   try {
