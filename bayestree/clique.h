@@ -46,6 +46,9 @@ struct Clique {
   bool damped = false;    ///< the factor is of a damped (indeterminate) Hessian
   bool in_use = false;
   int removed_stamp = -1;
+  /// Entries of [L; Sᵀ] in the subtree it roots (itself included) when last eliminated: what
+  /// back-substituting the subtree reads.
+  double subtree_entries = 0;
   int path_stamp = -1;
 
   static size_t sizeFor(int F, int ld, int ldh) {

@@ -75,14 +75,17 @@ void WorkLanes::workOne(int lane, std::unique_lock<std::mutex>& lock) {
   if (ready_.empty() && busy_.load(std::memory_order_relaxed) == 0) wake_.notify_all();
 }
 
-void WorkLanes::run(const std::vector<int>& initial, const Work& work) {
-  if (helpers_.empty()) {  // one lane: a plain stack walk, no locking
-    ready_.assign(initial.begin(), initial.end());
-    while (!ready_.empty()) {
-      int item = ready_.back();
-      ready_.pop_back();
+void WorkLanes::run(const std::vector<int>& initial, const Work& work, bool share) {
+  if (helpers_.empty() || !share) {  // one lane: a plain stack walk, no locking
+    std::vector<int>& ready = helpers_.empty() ? ready_ : alone_;
+    ready.assign(initial.begin(), initial.end());
+    alone_running_ = !helpers_.empty();
+    while (!ready.empty()) {
+      int item = ready.back();
+      ready.pop_back();
       while (item >= 0) item = work(0, item);
     }
+    alone_running_ = false;
     return;
   }
   std::unique_lock<std::mutex> lock(mutex_);
@@ -118,8 +121,8 @@ void WorkLanes::run(const std::vector<int>& initial, const Work& work) {
 }
 
 void WorkLanes::push(int item) {
-  if (helpers_.empty()) {
-    ready_.push_back(item);
+  if (helpers_.empty() || alone_running_) {
+    (helpers_.empty() ? ready_ : alone_).push_back(item);
     return;
   }
   {

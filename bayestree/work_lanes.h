@@ -34,8 +34,9 @@ class WorkLanes {
 
   /// Works through `initial` and everything made ready from it; returns when no item is left
   /// and no lane is working. The first exception thrown by `work` is rethrown here (the items
-  /// still pooled are then dropped). Not reentrant; one caller at a time.
-  void run(const std::vector<int>& initial, const Work& work);
+  /// still pooled are then dropped). `share` false: all on the calling thread (a walk too small
+  /// to be worth a helper's wake-up). Not reentrant; one caller at a time.
+  void run(const std::vector<int>& initial, const Work& work, bool share = true);
 
   /// From within work(): makes `item` ready for any lane.
   void push(int item);
@@ -62,6 +63,8 @@ class WorkLanes {
   std::atomic<bool> stopping_{false};
   std::atomic<int> idle_{0};  // lanes waiting for an item
   const Work* work_ = nullptr;
+  std::vector<int> alone_;      // the pool of a walk run on the calling thread alone
+  bool alone_running_ = false;  // (helpers never see these)
   std::exception_ptr error_;
   std::vector<std::thread> helpers_;
 };
