@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -115,7 +116,9 @@ struct IncrementalSmoother<G>::Impl {
   DoubleBuffer extend_buf;
   DoubleBuffer w_buf, w_parent_buf;  // a fold-in's W of this clique and of its parent
   std::vector<int> stack_scratch, ready_scratch;
-  std::vector<int> s_path;  // cliques whose separator a fold-in extends
+  std::vector<int> s_path;       // cliques whose separator a fold-in extends
+  std::vector<int> s_linearize;  // factors to (re-)linearise in this update
+  const std::vector<int> no_factors;
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
   bayestree::RowList s_rows;
   std::vector<int> s_by_need, s_by_capacity;
@@ -219,6 +222,29 @@ struct IncrementalSmoother<G>::Impl {
     L.Hjj.noalias() = Aj.transpose() * Aj;
     L.gi.noalias() = -Ai.transpose() * r;
     L.gj.noalias() = -Aj.transpose() * r;
+  }
+
+  // linearize(f) for every f of `factors`, in chunks shared among the threads when many, side
+  // by side with `alongside` (if any: a task that does not read the linearised factors).
+  void linearizeAll(const std::vector<int>& factors, const std::function<void()>& alongside = {}) {
+    constexpr int kChunk = 128;
+    const int n = static_cast<int>(factors.size());
+    const int chunks = (n + kChunk - 1) / kChunk;
+    std::vector<int>& items = ready_scratch;
+    items.clear();
+    for (int k = 0; k < chunks; ++k) items.push_back(k);
+    if (alongside) items.push_back(chunks);  // taken first (the pool is a stack)
+    threads.workers.run(
+        items,
+        [&](int, int k) {
+          if (k == chunks) {
+            alongside();
+          } else {
+            for (int i = k * kChunk; i < std::min(n, (k + 1) * kChunk); ++i) linearize(factors[i]);
+          }
+          return -1;
+        },
+        /*share=*/items.size() > 1);
   }
 
   bool exceedsThreshold(const Vec& dx) const {
@@ -414,9 +440,9 @@ struct IncrementalSmoother<G>::Impl {
   // Kaess 2012 Alg. 1 lines 5–7: order the removed top (CCOLAMD, `constrained` variables last),
   // eliminate it into new cliques and re-attach the orphaned subtrees.
   void eliminateTop(const std::vector<int>& top, const std::vector<int>& orphans, bool constrain,
-                    UpdateStats* st) {
+                    const std::vector<int>& to_linearize, UpdateStats* st) {
     const int n = static_cast<int>(top.size());
-    if (n == 0) return;
+    if (n == 0) return linearizeAll(to_linearize);
     for (int a = 0; a < n; ++a) slot[top[a]] = a;
     bayestree::RowList& rows = s_rows;
     rows.clear();
@@ -444,10 +470,15 @@ struct IncrementalSmoother<G>::Impl {
     group.assign(n, 0);
     if (constrain)
       for (int a = 0; a < n; ++a) group[a] = mark[top[a]] ? 1 : 0;
-    bayestree::EliminationPlan plan = bayestree::planElimination(
-        n, rows,
-        n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, rows, group)
-                                   : bayestree::constrainedColamd(n, rows, group));
+    // The ordering and symbolic elimination, side by side with the linearisation of the
+    // relinearised factors (Alg. 2 line 3), which they do not need.
+    bayestree::EliminationPlan plan;
+    linearizeAll(to_linearize, [&] {
+      plan = bayestree::planElimination(n, rows,
+                                        n >= nestedDissectionMin()
+                                            ? bayestree::constrainedNestedDissection(n, rows, group)
+                                            : bayestree::constrainedColamd(n, rows, group));
+    });
 
     const int m = static_cast<int>(plan.cliques.size());
     std::vector<int>& ids = s_ids;
@@ -919,25 +950,28 @@ struct IncrementalSmoother<G>::Impl {
       delta_seen[v].setZero();
     }
     st.variables_relinearized = static_cast<int>(relin.size());
-    // Alg. 2 line 3: re-linearise the factors of the relinearised variables.
+    // Alg. 2 line 3: re-linearise the factors of the relinearised variables; Alg. 1 line 2:
+    // linearise the new factors.
+    std::vector<int>& to_linearize = s_linearize;
+    to_linearize.clear();
+    auto add = [&](int f) {
+      if (factor_stamp[f] == stamp) return;
+      factor_stamp[f] = stamp;
+      to_linearize.push_back(f);
+    };
     for (int v : relin)
-      for (int f : var_factors[v])
-        if (factor_stamp[f] != stamp) {
-          linearize(f);
-          factor_stamp[f] = stamp;
-        }
-    // Alg. 1 line 2: linearise the new factors.
-    for (int f = first_new; f < static_cast<int>(edges.size()); ++f)
-      if (factor_stamp[f] != stamp) {
-        linearize(f);
-        factor_stamp[f] = stamp;
-      }
+      for (int f : var_factors[v]) add(f);
+    for (int f = first_new; f < static_cast<int>(edges.size()); ++f) add(f);
+    // With variables relinearised the top is re-eliminated: its ordering can run while the
+    // factors are linearised (eliminateTop); otherwise (few new factors) linearise them now.
+    if (relin.empty()) linearizeAll(to_linearize);
 
     // Only factors between variables already in the tree, nothing relinearised: fold them in by
     // rank updates along their paths to the root; otherwise re-eliminate the top (Alg. 1).
     const bool folded = !all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 &&
                         opt.rank_updates && foldInNewFactors(first_new, &st);
-    const bool tree_changed = folded || reeliminateTop(relin, all, &st);
+    const bool tree_changed =
+        folded || reeliminateTop(relin, all, relin.empty() ? no_factors : to_linearize, &st);
     for (int v : touched) mark[v] = 0;
     // Alg. 1 line 8 / Alg. 3: partial state update.
     if (solve) {
@@ -962,7 +996,8 @@ struct IncrementalSmoother<G>::Impl {
 
   // Kaess 2012 Alg. 1 lines 3–7 for the marked variables (s_touched, and `relin` relinearised;
   // `all`: every clique); returns whether there was a top to re-eliminate.
-  bool reeliminateTop(const std::vector<int>& relin, bool all, UpdateStats* st) {
+  bool reeliminateTop(const std::vector<int>& relin, bool all, const std::vector<int>& to_linearize,
+                      UpdateStats* st) {
     const std::vector<int>& touched = s_touched;
     // Alg. 1 line 3 / Alg. 2 line 4: mark the cliques that contain a touched variable as
     // frontal and, for relinearised variables, every clique that contains it at all (the
@@ -1017,7 +1052,7 @@ struct IncrementalSmoother<G>::Impl {
       for (int c : removed) freeClique(c);
     }
     // Alg. 1 lines 5–7: re-order, re-eliminate the top, re-attach the orphans.
-    eliminateTop(top, orphans, !all, st);
+    eliminateTop(top, orphans, !all, to_linearize, st);
     for (int c : free_cliques) cliques[c].storage.fit(0);  // those not recycled hold no memory
     return !top.empty();
   }
