@@ -228,6 +228,7 @@ struct IncrementalSmoother<G>::Impl {
   // by side with `alongside` (if any: a task that does not read the linearised factors).
   void linearizeAll(const std::vector<int>& factors, const std::function<void()>& alongside = {}) {
     constexpr int kChunk = 128;
+    constexpr int kMinSharedChunks = 4;  // fewer factors are linearised in well under 0.1 ms
     const int n = static_cast<int>(factors.size());
     const int chunks = (n + kChunk - 1) / kChunk;
     std::vector<int>& items = ready_scratch;
@@ -244,7 +245,7 @@ struct IncrementalSmoother<G>::Impl {
           }
           return -1;
         },
-        /*share=*/items.size() > 1);
+        /*share=*/chunks >= kMinSharedChunks);
   }
 
   bool exceedsThreshold(const Vec& dx) const {

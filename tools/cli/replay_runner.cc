@@ -81,12 +81,13 @@ ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& setti
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows) {
   std::ofstream csv(path);
   if (!csv) throw std::runtime_error("cannot write " + path);
-  csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated,cliques_solved\n";
+  csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated,"
+         "cliques_solved\n";
   csv << std::setprecision(6);
   for (const auto& r : rows) {
     csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << "," << r.cliques_reeliminated
-        << "," << r.variables_relinearized << "," << r.cliques_updated << ","
-        << r.cliques_solved << "\n";
+        << "," << r.variables_relinearized << "," << r.cliques_updated << "," << r.cliques_solved
+        << "\n";
   }
   if (!csv) throw std::runtime_error("error writing " + path);
 }
