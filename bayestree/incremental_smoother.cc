@@ -438,8 +438,9 @@ struct IncrementalSmoother<G>::Impl {
     return D == 6 ? 100 : std::numeric_limits<int>::max();
   }
 
-  // Kaess 2012 Alg. 1 lines 5–7: order the removed top (CCOLAMD, `constrained` variables last),
-  // eliminate it into new cliques and re-attach the orphaned subtrees.
+  // Kaess 2012 Alg. 1 lines 5–7: order the removed top (CCOLAMD, or nested dissection when
+  // large; `constrained` variables last), eliminate it into new cliques and re-attach the
+  // orphaned subtrees. `to_linearize`: factors whose linearisation was left to this step.
   void eliminateTop(const std::vector<int>& top, const std::vector<int>& orphans, bool constrain,
                     const std::vector<int>& to_linearize, UpdateStats* st) {
     const int n = static_cast<int>(top.size());
