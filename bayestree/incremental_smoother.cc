@@ -118,6 +118,7 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> stack_scratch, ready_scratch;
   std::vector<int> s_path;       // cliques whose separator a fold-in extends
   std::vector<int> s_linearize;  // factors to (re-)linearise in this update
+  std::vector<double> s_chain_flops;
   const std::vector<int> no_factors;
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
   bayestree::RowList s_rows;
@@ -562,7 +563,7 @@ struct IncrementalSmoother<G>::Impl {
                      ? parent
                      : -1;
         },
-        /*share=*/m >= kMinSharedElimination);
+        /*share=*/offCriticalPathFlops(plan) >= kMinSharedElimination);
     for (const Lane& l : threads.lanes) st->indeterminate_cliques += l.indeterminate;
     st->cliques_reeliminated += m;
     st->variables_reeliminated += n;
@@ -708,9 +709,30 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   // Work smaller than this stays on one thread (a helper's wake-up and the hand-over would cost
-  // more than they save): an elimination of fewer cliques, a back-substitution subtree that
-  // reads fewer entries (tens of microseconds; tuned on intel and parking-garage).
-  static constexpr int kMinSharedElimination = 16;
+  // more than they save, tens of microseconds): an elimination with fewer flops off its critical
+  // path (tuned on smallGrid3D, torus3D, parking-garage), a back-substitution subtree that reads
+  // fewer entries (tuned on intel and parking-garage).
+  static constexpr double kMinSharedElimination = 1e6;  // flops off the critical path
+
+  // The flops of eliminating `plan` (F³/3 + F²·S + F·S² per clique) that lie off its critical
+  // path (the costliest chain from a leaf to a root): what a second thread could take on.
+  double offCriticalPathFlops(const bayestree::EliminationPlan& plan) {
+    const int m = static_cast<int>(plan.cliques.size());
+    std::vector<double>& chain = s_chain_flops;
+    chain.assign(m, 0.0);
+    double total = 0, critical = 0;
+    for (int k = 0; k < m; ++k) {  // children before parents
+      const bayestree::SymbolicClique& c = plan.cliques[k];
+      const double F = static_cast<double>(c.frontals.size()) * D;
+      const double S = static_cast<double>(c.separator.size()) * D;
+      const double flops = F * F * F / 3 + F * F * S + F * S * S;
+      total += flops;
+      chain[k] += flops;
+      critical = std::max(critical, chain[k]);
+      if (c.parent >= 0) chain[c.parent] = std::max(chain[c.parent], chain[k]);
+    }
+    return total - critical;
+  }
   static constexpr double kMinSharedSolve = 20000;  // entries of [L; Sᵀ] in the subtree
 
   // Kaess 2012 Alg. 3 (partial state update, "wildfire"): solve top-down from the roots,
