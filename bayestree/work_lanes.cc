@@ -80,10 +80,15 @@ void WorkLanes::run(const std::vector<int>& initial, const Work& work, bool shar
     std::vector<int>& ready = helpers_.empty() ? ready_ : alone_;
     ready.assign(initial.begin(), initial.end());
     alone_running_ = !helpers_.empty();
-    while (!ready.empty()) {
-      int item = ready.back();
-      ready.pop_back();
-      while (item >= 0) item = work(0, item);
+    try {
+      while (!ready.empty()) {
+        int item = ready.back();
+        ready.pop_back();
+        while (item >= 0) item = work(0, item);
+      }
+    } catch (...) {
+      alone_running_ = false;  // later shared walks must pool their items again
+      throw;
     }
     alone_running_ = false;
     return;

@@ -132,6 +132,31 @@ TEST(WorkLanes, ExceptionReachesTheCallerAndLanesStayUsable) {
   EXPECT_EQ(count.load(), 100);
 }
 
+// A walk kept on the calling thread that throws must leave the lanes as they were: the next
+// shared walk still pools what it pushes (and so reaches every item).
+TEST(WorkLanes, ExceptionInAWalkKeptOnTheCallerLeavesSharingIntact) {
+  WorkLanes lanes(2);
+  EXPECT_THROW(lanes.run(
+                   {1, 2, 3},
+                   [&](int, int k) -> int {
+                     if (k == 2) throw std::runtime_error("item 2");
+                     lanes.push(10 + k);
+                     return -1;
+                   },
+                   /*share=*/false),
+               std::runtime_error);
+  std::atomic<int> count{0};
+  lanes.run({0}, [&](int, int k) {
+    ++count;
+    if (k < 50) {
+      lanes.push(2 * k + 1);
+      lanes.push(2 * k + 2);
+    }
+    return -1;
+  });
+  EXPECT_EQ(count.load(), 101);  // 0..100: a binary tree, every item once
+}
+
 TEST(WorkLanes, RejectsZeroLanes) { EXPECT_THROW(WorkLanes(0), std::invalid_argument); }
 
 }  // namespace
