@@ -20,8 +20,9 @@ void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, con
 // The hot loops below are compiled three times, for plain x86-64 (SSE2), AVX2/FMA and
 // AVX-512, and the loader picks the widest the CPU has (as OpenBLAS does at run time): the
 // project itself is built for any x86-64 (ARBOR_NATIVE off). `flatten` inlines the helpers
-// into each copy.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+// into each copy. Not under ThreadSanitizer: the loader runs the copies' resolver before TSan's
+// runtime is up, and the program crashes at start.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_THREAD__)
 #define ARBOR_VECTOR_CLONES \
   __attribute__((target_clones("default", "arch=x86-64-v3", "arch=x86-64-v4"), flatten))
 #else
