@@ -51,6 +51,7 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->indeterminate_cliques += s.indeterminate_cliques;
   total->cliques_solved += s.cliques_solved;
   total->cliques_updated += s.cliques_updated;
+  total->cliques_on_helpers += s.cliques_on_helpers;
 }
 
 }  // namespace
@@ -100,8 +101,8 @@ struct IncrementalSmoother<G>::Impl {
     DoubleBuffer h;         // the clique's assembled Hessian
     std::vector<double> diag, x;
     std::vector<int> child_slots, changed_list;
-    std::deque<int> pending;  // cliques this thread is to back-substitute
-    int solved = 0, indeterminate = 0;
+    std::deque<int> pending;                            // cliques this thread is to back-substitute
+    int solved = 0, eliminated = 0, indeterminate = 0;  // cliques, in the current walk
   };
   // The threads of an update (SmootherOptions::threads): lane 0 is the caller's. A copy of the
   // smoother gets threads of its own.
@@ -119,7 +120,6 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> s_path;       // cliques whose separator a fold-in extends
   std::vector<int> s_linearize;  // factors to (re-)linearise in this update
   std::vector<double> s_chain_flops;
-  const std::vector<int> no_factors;
   std::vector<int> s_touched, s_relin, s_marked, s_removed, s_top, s_orphans, s_group, s_ids;
   bayestree::RowList s_rows;
   std::vector<int> s_by_need, s_by_capacity;
@@ -553,10 +553,11 @@ struct IncrementalSmoother<G>::Impl {
     leaves.clear();
     for (int k = m - 1; k >= 0; --k)
       if (children_left[k].load(std::memory_order_relaxed) == 0) leaves.push_back(k);
-    for (Lane& l : threads.lanes) l.indeterminate = 0;
+    for (Lane& l : threads.lanes) l.eliminated = l.indeterminate = 0;
     threads.workers.run(
         leaves,
         [&](int lane, int k) {
+          ++threads.lanes[lane].eliminated;
           if (eliminateClique(ids[k], lane)) ++threads.lanes[lane].indeterminate;
           const int parent = plan.cliques[k].parent;
           return parent >= 0 && children_left[parent].fetch_sub(1, std::memory_order_acq_rel) == 1
@@ -564,7 +565,10 @@ struct IncrementalSmoother<G>::Impl {
                      : -1;
         },
         /*share=*/offCriticalPathFlops(plan) >= kMinSharedElimination);
-    for (const Lane& l : threads.lanes) st->indeterminate_cliques += l.indeterminate;
+    for (size_t l = 0; l < threads.lanes.size(); ++l) {
+      st->indeterminate_cliques += threads.lanes[l].indeterminate;
+      if (l > 0) st->cliques_on_helpers += threads.lanes[l].eliminated;
+    }
     st->cliques_reeliminated += m;
     st->variables_reeliminated += n;
   }
@@ -739,7 +743,7 @@ struct IncrementalSmoother<G>::Impl {
   // entering a clique only if it was re-eliminated or a separator variable changed by at least
   // the threshold (`full`: every clique); returns the number of cliques solved. A clique is
   // ready once its parent is solved: independent subtrees go to different threads.
-  int backSubstitute(bool full) {
+  void backSubstitute(bool full, UpdateStats* st) {
     auto needs_solving = [&](const Clique& c) {
       if (full || c.dirty) return true;
       for (int v : c.separator)
@@ -753,19 +757,22 @@ struct IncrementalSmoother<G>::Impl {
     auto worth_sharing = [&](const std::deque<int>& pending) {
       return pending.size() > 1 && cliques[pending.front()].subtree_entries >= kMinSharedSolve;
     };
+    // Solves the top of `lane`'s stack and stacks the children that need solving (a child's
+    // separator lies in this clique's frontals ∪ separator, all solved by now).
+    auto solve_next = [&](int lane) {
+      std::deque<int>& stack = threads.lanes[lane].pending;
+      const int c = stack.back();
+      stack.pop_back();
+      solveClique(c, full, &threads.lanes[lane]);
+      for (int ch : cliques[c].children)
+        if (needs_solving(cliques[ch])) stack.push_back(ch);
+    };
     const bool can_share = threads.lanes.size() > 1;
     std::deque<int>& pending = threads.lanes[0].pending;
     pending.clear();
     for (int r : roots)
       if (needs_solving(cliques[r])) pending.push_back(r);
-    while (!pending.empty() && !(can_share && worth_sharing(pending))) {
-      const int c = pending.back();
-      pending.pop_back();
-      solveClique(c, full, &threads.lanes[0]);
-      // A child's separator lies in this clique's frontals ∪ separator, all solved by now.
-      for (int ch : cliques[c].children)
-        if (needs_solving(cliques[ch])) pending.push_back(ch);
-    }
+    while (!pending.empty() && !(can_share && worth_sharing(pending))) solve_next(0);
     // Then with the helpers: each thread walks a subtree depth-first on a stack of its own and
     // hands the oldest entry to a thread that has run out of work.
     if (!pending.empty()) {
@@ -775,11 +782,7 @@ struct IncrementalSmoother<G>::Impl {
         std::deque<int>& stack = threads.lanes[lane].pending;
         stack.assign(1, id);
         while (!stack.empty()) {
-          const int c = stack.back();
-          stack.pop_back();
-          solveClique(c, full, &threads.lanes[lane]);
-          for (int ch : cliques[c].children)
-            if (needs_solving(cliques[ch])) stack.push_back(ch);
+          solve_next(lane);
           if (worth_sharing(stack) && threads.workers.hungry()) {
             threads.workers.push(stack.front());
             stack.pop_front();
@@ -788,13 +791,13 @@ struct IncrementalSmoother<G>::Impl {
         return -1;
       });
     }
-    int solved = 0;
-    for (Lane& l : threads.lanes) {
-      solved += l.solved;
-      for (int v : l.changed_list) changed[v] = 0;
-      l.changed_list.clear();
+    for (size_t l = 0; l < threads.lanes.size(); ++l) {
+      Lane& lane = threads.lanes[l];
+      st->cliques_solved += lane.solved;
+      if (l > 0) st->cliques_on_helpers += lane.solved;
+      for (int v : lane.changed_list) changed[v] = 0;
+      lane.changed_list.clear();
     }
-    return solved;
   }
 
   // x_f = R⁻¹ (d − S x_s) for one clique, into Δ (Alg. 3); marks the frontals that moved by at
@@ -988,18 +991,20 @@ struct IncrementalSmoother<G>::Impl {
     for (int f = first_new; f < static_cast<int>(edges.size()); ++f) add(f);
     // With variables relinearised the top is re-eliminated: its ordering can run while the
     // factors are linearised (eliminateTop); otherwise (few new factors) linearise them now.
-    if (relin.empty()) linearizeAll(to_linearize);
+    if (relin.empty()) {
+      linearizeAll(to_linearize);
+      to_linearize.clear();
+    }
 
     // Only factors between variables already in the tree, nothing relinearised: fold them in by
     // rank updates along their paths to the root; otherwise re-eliminate the top (Alg. 1).
     const bool folded = !all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 &&
                         opt.rank_updates && foldInNewFactors(first_new, &st);
-    const bool tree_changed =
-        folded || reeliminateTop(relin, all, relin.empty() ? no_factors : to_linearize, &st);
+    const bool tree_changed = folded || reeliminateTop(relin, all, to_linearize, &st);
     for (int v : touched) mark[v] = 0;
     // Alg. 1 line 8 / Alg. 3: partial state update.
     if (solve) {
-      st.cliques_solved = backSubstitute(all || opt.full_backsubstitution);
+      backSubstitute(all || opt.full_backsubstitution, &st);
       if (opt.dogleg && tree_changed) doglegStep();
     }
     st.time_s = secondsSince(t0);

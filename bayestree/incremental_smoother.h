@@ -71,6 +71,9 @@ struct UpdateStats {
   int variables_relinearized = 0;
   int indeterminate_cliques = 0;  ///< nearly singular cliques that had to be damped
   int cliques_solved = 0;         ///< cliques re-solved by back-substitution
+  /// of the cliques re-eliminated and solved, those done by the smoother's helper threads
+  /// (SmootherOptions::threads)
+  int cliques_on_helpers = 0;
   double time_s = 0.0;
 };
 

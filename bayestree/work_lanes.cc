@@ -77,13 +77,12 @@ void WorkLanes::workOne(int lane, std::unique_lock<std::mutex>& lock) {
 
 void WorkLanes::run(const std::vector<int>& initial, const Work& work, bool share) {
   if (helpers_.empty() || !share) {  // one lane: a plain stack walk, no locking
-    std::vector<int>& ready = helpers_.empty() ? ready_ : alone_;
-    ready.assign(initial.begin(), initial.end());
-    alone_running_ = !helpers_.empty();
+    alone_.assign(initial.begin(), initial.end());
+    alone_running_ = true;
     try {
-      while (!ready.empty()) {
-        int item = ready.back();
-        ready.pop_back();
+      while (!alone_.empty()) {
+        int item = alone_.back();
+        alone_.pop_back();
         while (item >= 0) item = work(0, item);
       }
     } catch (...) {
@@ -126,8 +125,8 @@ void WorkLanes::run(const std::vector<int>& initial, const Work& work, bool shar
 }
 
 void WorkLanes::push(int item) {
-  if (helpers_.empty() || alone_running_) {
-    (helpers_.empty() ? ready_ : alone_).push_back(item);
+  if (alone_running_) {
+    alone_.push_back(item);
     return;
   }
   {

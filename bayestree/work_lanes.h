@@ -63,7 +63,7 @@ class WorkLanes {
   std::atomic<bool> stopping_{false};
   std::atomic<int> idle_{0};  // lanes waiting for an item
   const Work* work_ = nullptr;
-  std::vector<int> alone_;      // the pool of a walk run on the calling thread alone
+  std::vector<int> alone_;      // the stack of a walk run on the calling thread alone
   bool alone_running_ = false;  // (helpers never see these)
   std::exception_ptr error_;
   std::vector<std::thread> helpers_;

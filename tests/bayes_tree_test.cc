@@ -558,21 +558,26 @@ TEST(BayesTreeApi, CopiesAreIndependentAndBehaveTheSame) {
 // back-substitution out; the estimate must not depend on how many there are, to the last bit,
 // after every update (folds, relinearisation, wildfire and all).
 template <class G>
-void expectSameEstimateForAnyThreadCount(bool dogleg) {
-  const PoseGraph<G> g = randomGraph<G>(300, 120, 81, 0.1, 0.05);
+void expectSameEstimateForAnyThreadCount(int poses, int loops, bool dogleg) {
+  const PoseGraph<G> g = randomGraph<G>(poses, loops, 81, 0.1, 0.05);
   std::vector<std::vector<G>> by_update[3];
   for (int threads = 1; threads <= 3; ++threads) {
     SmootherOptions o;
     o.threads = threads;
     o.dogleg = dogleg;
     IncrementalSmoother<G> s(o);
-    int parallel_walks = 0;
+    int on_helpers = 0;
     replay(g, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
       by_update[threads - 1].push_back(sm.estimate());
-      if (st.cliques_reeliminated > 1 || st.cliques_solved > 1) ++parallel_walks;
+      on_helpers += st.cliques_on_helpers;
     });
     s.checkInvariants();
-    EXPECT_GT(parallel_walks, g.numEdges() / 2) << "too few updates with work to share";
+    // Only walks large enough are shared: the graph must be big enough that the helpers get
+    // some of the work (how much depends on the scheduler; 300 2D poses gave them none).
+    if (threads == 1)
+      EXPECT_EQ(on_helpers, 0);
+    else
+      EXPECT_GT(on_helpers, 0) << threads << " threads: the helpers got no work";
   }
   for (int threads = 2; threads <= 3; ++threads) {
     ASSERT_EQ(by_update[threads - 1].size(), by_update[0].size());
@@ -585,13 +590,13 @@ void expectSameEstimateForAnyThreadCount(bool dogleg) {
 }
 
 TEST(BayesTreeThreads, SameEstimateForAnyThreadCount2D) {
-  expectSameEstimateForAnyThreadCount<SE2>(false);
+  expectSameEstimateForAnyThreadCount<SE2>(800, 300, false);
 }
 TEST(BayesTreeThreads, SameEstimateForAnyThreadCount3D) {
-  expectSameEstimateForAnyThreadCount<SE3>(false);
+  expectSameEstimateForAnyThreadCount<SE3>(300, 120, false);
 }
 TEST(BayesTreeThreads, SameEstimateForAnyThreadCountDogleg) {
-  expectSameEstimateForAnyThreadCount<SE3>(true);
+  expectSameEstimateForAnyThreadCount<SE3>(300, 120, true);
 }
 
 TEST(BayesTreeThreads, RejectsANegativeThreadCount) {
