@@ -25,6 +25,8 @@ struct Clique {
 
   /// Separators up to this order take a fold-in's update of their cached factor at once.
   static constexpr int kDirectUpdateOrder = 48;
+  /// At most this much of a recycled buffer's spare capacity becomes separator room (4 poses).
+  static constexpr int kAllocationRoom = 4 * D;
 
   std::vector<int> frontals;   ///< in elimination order
   std::vector<int> separator;  ///< poses of the parent's frontals ∪ separator
@@ -54,13 +56,21 @@ struct Clique {
   static size_t sizeFor(int F, int ld, int ldh) {
     return static_cast<size_t>(ld) * F + F + static_cast<size_t>(ldh) * ldh + ldh;
   }
-  /// Sizes the storage for the current frontals and separator, exactly (before elimination).
+  /// Sizes the storage for the current frontals and separator (before elimination). A recycled
+  /// buffer larger than needed keeps its size (DoubleBuffer::fit), and what it has beyond the
+  /// need, up to four poses, becomes room for fold-ins to grow the separator in place: the
+  /// first extension after an elimination then copies nothing.
   void allocate() {
     F = static_cast<int>(frontals.size()) * D;
     Sn = static_cast<int>(separator.size()) * D;
-    ld = F + Sn;
-    ldh = Sn;
     eliminated_sn = Sn;
+    storage.fit(sizeFor(F, F + Sn, Sn));
+    int room = 0;
+    while (room < kAllocationRoom &&
+           sizeFor(F, F + Sn + room + D, Sn + room + D) <= storage.capacity())
+      room += D;
+    ld = F + Sn + room;
+    ldh = Sn + room;
     storage.fit(sizeFor(F, ld, ldh));
     pending.resize(0, 0);
     pending_cols = 0;
