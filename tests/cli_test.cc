@@ -101,4 +101,48 @@ TEST(Cli, MalformedFileNamesLine) {
   std::filesystem::remove(file);
 }
 
+// `arbor bench replay` on a shared folder of its own: one generated dataset and an anchors table
+// whose GTSAM rows differ per feeding, so the ratio shows which row was used; a GTSAM row that
+// did not end "ok" is reported as aborted.
+TEST(Cli, BenchReplayComparesWithTheGtsamRowOfItsFeeding) {
+  const std::filesystem::path shared = tempPath("bench_shared");
+  std::filesystem::create_directories(shared / "datasets");
+  std::filesystem::create_directories(shared / "reference");
+  ASSERT_EQ(run("generate manhattan --poses 120 --grid 4 --seed 5 -o " +
+                (shared / "datasets" / "gridA.g2o").string())
+                .status,
+            0);
+  ASSERT_EQ(run("generate manhattan --poses 80 --grid 4 --seed 6 -o " +
+                (shared / "datasets" / "gridB.g2o").string())
+                .status,
+            0);
+  {
+    std::FILE* f = std::fopen((shared / "reference" / "anchors.tsv").c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs(
+        "dataset\tdim\tnodes\tedges\trun\ttotal_s\tp50_ms\tp90_ms\tp99_ms\tmax_ms\titerations\tF"
+        "\tpeak_rss_mb\tstatus\n"
+        "gridA\t2\t120\t0\tisam2_edge\t1000\t0\t0\t2000\t0\t0\t1\t0\tok\n"
+        "gridA\t2\t120\t0\tisam2_pose\t500\t0\t0\t4000\t0\t0\t1\t0\tok\n"
+        "gridB\t2\t80\t0\tisam2_edge\t1000\t0\t0\t2000\t0\t0\t1\t0\tok\n"
+        "gridB\t2\t80\t0\tisam2_pose\t0.001\t0\t0\t1\t0\t0\t1\t0\t"
+        "fail:IndeterminantLinearSystem\n",
+        f);
+    std::fclose(f);
+  }
+  const Result edge = run("bench replay --shared " + shared.string());
+  ASSERT_EQ(edge.status, 0) << edge.out;
+  EXPECT_NE(edge.out.find("Edge-by-edge replay"), std::string::npos) << edge.out;
+  EXPECT_NE(edge.out.find("| 1000.000 | 2000.00 |"), std::string::npos) << edge.out;
+  const Result pose = run("bench replay --step pose --shared " + shared.string());
+  ASSERT_EQ(pose.status, 0) << pose.out;
+  EXPECT_NE(pose.out.find("Pose-by-pose replay"), std::string::npos) << pose.out;
+  EXPECT_NE(pose.out.find("| 500.000 | 4000.00 |"), std::string::npos) << pose.out;
+  const size_t row_b = pose.out.find("| gridB |");
+  ASSERT_NE(row_b, std::string::npos) << pose.out;
+  EXPECT_NE(pose.out.find("aborted", row_b), std::string::npos) << pose.out;
+  EXPECT_NE(run("bench replay --step sideways --shared " + shared.string()).status, 0);
+  std::filesystem::remove_all(shared);
+}
+
 }  // namespace

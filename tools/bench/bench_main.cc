@@ -2,8 +2,9 @@
 //   arbor-bench batch [--shared DIR] [--only NAME,...] [--repeat N] [--no-ceres]
 //     LM from a spanning-tree start for Arbor and for Ceres (the paper's settings), a Markdown
 //     table like the paper's Table II on stdout.
-//   arbor-bench replay [--shared DIR] [--only NAME,...] [--csv-dir DIR]
-//     edge-by-edge replay through the incremental smoother beside GTSAM iSAM2's figures.
+//   arbor-bench replay [--shared DIR] [--only NAME,...] [--csv-dir DIR] [--step edge|pose]
+//     edge-by-edge (or pose-by-pose) replay through the incremental smoother beside GTSAM
+//     iSAM2's figures fed the same way.
 //   arbor-bench paper [--shared DIR] [--only NAME,...] [--out-dir DIR] [--markdown FILE] [--plots]
 //     every solver (replay, LM, GN, dogleg, RTR, Ceres) on every shared dataset with the settings
 //     of the paper's Table II; estimates, latency CSVs, results.tsv/json and a Markdown report.
@@ -82,8 +83,10 @@ void benchBatch(const std::string& name, const PoseGraph<G>& graph, const bench:
 
 template <class G>
 void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench::Reference* ref,
-                 const bench::Anchor* gtsam, const std::string& csv_dir, const std::string& note) {
+                 const bench::Anchor* gtsam, const std::string& csv_dir, const std::string& note,
+                 bool per_pose) {
   cli::ReplaySettings settings;
+  settings.per_pose = per_pose;
   const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
   if (!csv_dir.empty()) cli::writeLatencyCsv(csv_dir + "/" + name + ".csv", r.rows);
   const auto& l = r.latency;
@@ -134,28 +137,37 @@ bool parseOptions(const std::vector<std::string>& args, const po::options_descri
 
 int replay(const std::vector<std::string>& args, const std::string& default_shared) {
   DatasetOptions data;
-  std::string csv_dir;
+  std::string csv_dir, step;
   po::options_description options =
       datasetOptions("arbor bench replay [options]", &data, default_shared);
   options.add_options()("csv-dir", po::value(&csv_dir),
-                        "write per-update latency CSVs (NAME.csv) here");
+                        "write per-update latency CSVs (NAME.csv) here")(
+      "step", po::value(&step)->default_value("edge"),
+      "edge: an update per edge (against GTSAM's isam2_edge rows); pose: per new pose with its "
+      "edges (against isam2_pose)");
   if (!parseOptions(args, options)) return 0;
+  if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
+  const bool per_pose = step == "pose";
   const auto files = bench::selectDatasets(data.shared, data.only);
   const auto refs = bench::readOptimumTable(data.shared);
   const auto anchors = bench::readAnchorTable(data.shared);
-  std::cout << "Edge-by-edge replay (GN, β = 0.1, skip 10, wildfire 0.001, final relinearise-all "
-               "pass), then batch LM from its estimate. GTSAM: iSAM2 per edge from "
-               "reference/anchors.tsv (update() only; its back-substitution is deferred).\n\n"
+  std::cout << (per_pose ? "Pose-by-pose" : "Edge-by-edge")
+            << " replay (GN, β = 0.1, skip 10, wildfire 0.001, final relinearise-all "
+               "pass), then batch LM from its estimate. GTSAM: iSAM2 "
+            << (per_pose ? "per pose" : "per edge")
+            << " from reference/anchors.tsv (update() only; its back-substitution is deferred).\n\n"
             << "| dataset | edges | total s | p50 ms | p99 ms | max ms | F_final | vs F* | LM s | "
                "LM F | GTSAM s | GTSAM p99 | GTSAM F | total/GTSAM | p99/GTSAM |\n"
             << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
     const auto ref = refs.find(d.name);
-    const auto gtsam = anchors.find({d.name, "isam2_edge"});
+    // A GTSAM row that did not end "ok" (it aborted) counts as missing.
+    const auto gtsam = anchors.find({d.name, per_pose ? "isam2_pose" : "isam2_edge"});
+    const bool gtsam_ok = gtsam != anchors.end() && gtsam->second.status == "ok";
     std::visit(
         [&](const auto& g) {
           benchReplay(d.name, g, ref == refs.end() ? nullptr : &ref->second,
-                      gtsam == anchors.end() ? nullptr : &gtsam->second, csv_dir, d.note);
+                      gtsam_ok ? &gtsam->second : nullptr, csv_dir, d.note, per_pose);
         },
         d.graph);
   });
