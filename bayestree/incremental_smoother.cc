@@ -1216,18 +1216,25 @@ struct IncrementalSmoother<G>::Impl {
       if (change < opt.finalize_relative_tolerance) break;
       // Another iteration (relinearise, re-eliminate everything) would gain about the Newton
       // decrement, which the tree gives for a fraction of that. When that is below the
-      // tolerance, a chord step (the same Hessian, the new gradient) stands in for the last
-      // iteration, at the cost of two passes over the tree.
-      // (Not tried while F still changes by a percent: the check could not pass.)
-      if (it + 1 < opt.finalize_max_iterations && change < 1e-2 &&
-          newtonDecrement() < opt.finalize_relative_tolerance * F_new) {
-        const std::vector<Vec> before = delta, before_newton = delta_newton;
-        chordStep();
-        if (!(objectiveAt(delta) <= F_new)) {  // no gain: keep the estimate it had
+      // tolerance, a chord step (the same Hessian, the new gradient; two passes over the tree)
+      // stands in for the last iteration, kept if it gains at least half of what it promised
+      // (else the iterations go on). (Not tried while F still changes by a percent: the check
+      // could not pass.)
+      if (it + 1 < opt.finalize_max_iterations && change < 1e-2) {
+        const double decrement = newtonDecrement();
+        const double tol = opt.finalize_relative_tolerance;
+        if (decrement < tol * F_new) {
+          const std::vector<Vec> before = delta, before_newton = delta_newton;
+          chordStep();
+          const double gain = F_new - objectiveAt(delta);
+          // Kept when it did what it promised; when the promise is a thousandth of the
+          // tolerance, whatever it gained (F is as good as converged either way).
+          const bool negligible = decrement < 1e-3 * tol * F_new;
+          if (gain >= 0.5 * decrement || (negligible && gain >= 0)) break;
           delta = before;
           delta_newton = before_newton;
+          if (negligible) break;
         }
-        break;
       }
     }
     total.time_s = secondsSince(t0);
