@@ -105,6 +105,10 @@ TEST(Cli, MalformedFileNamesLine) {
 // whose GTSAM rows differ per feeding, so the ratio shows which row was used; a GTSAM row that
 // did not end "ok" is reported as aborted.
 TEST(Cli, BenchReplayComparesWithTheGtsamRowOfItsFeeding) {
+  const std::filesystem::path bench =
+      std::filesystem::path(ARBOR_EXE).parent_path() / "arbor-bench";
+  if (!std::filesystem::exists(bench))
+    GTEST_SKIP() << bench << " absent (built with ARBOR_BUILD_BENCHMARKS=OFF)";
   const std::filesystem::path shared = tempPath("bench_shared");
   std::filesystem::create_directories(shared / "datasets");
   std::filesystem::create_directories(shared / "reference");
