@@ -98,12 +98,16 @@ EliminationPlan planElimination(int n, const RowList& rows, std::vector<int> ord
   // Symbolic elimination: the separator of position k is the union of its rows and of the
   // separators of the positions whose parent it is, minus k itself.
   // Separators are stored one after another in sep_vars (position k: sep_start[k] ..
-  // sep_start[k + 1]), each sorted.
+  // sep_start[k + 1]).
   std::vector<int> sep_start(n + 1, 0), sep_vars;
   sep_vars.reserve(4 * static_cast<size_t>(n));
   std::vector<int> child_head(n, -1), child_next(n, -1), marker(n, -1);
+  // (A separator is kept unsorted: only its size, its first position (the parent) and, for a
+  // position that starts a clique, its sorted copy are needed below.)
+  std::vector<int> sep_first(n, n);
   for (int k = 0; k < n; ++k) {
     const size_t begin = sep_vars.size();
+    int first = n;
     marker[k] = k;
     for (int r = row_head[k]; r >= 0; r = row_next[r])
       for (int q = rows.start[r]; q < rows.start[r + 1]; ++q) {
@@ -111,6 +115,7 @@ EliminationPlan planElimination(int n, const RowList& rows, std::vector<int> ord
         if (marker[pos] != k) {
           marker[pos] = k;
           sep_vars.push_back(pos);
+          first = std::min(first, pos);
         }
       }
     for (int c = child_head[k]; c >= 0; c = child_next[c])
@@ -119,14 +124,14 @@ EliminationPlan planElimination(int n, const RowList& rows, std::vector<int> ord
         if (marker[pos] != k) {
           marker[pos] = k;
           sep_vars.push_back(pos);
+          first = std::min(first, pos);
         }
       }
-    std::sort(sep_vars.begin() + begin, sep_vars.end());
     sep_start[k + 1] = static_cast<int>(sep_vars.size());
+    sep_first[k] = first;
     if (sep_vars.size() > begin) {
-      const int parent = sep_vars[begin];
-      child_next[k] = child_head[parent];
-      child_head[parent] = k;
+      child_next[k] = child_head[first];
+      child_head[first] = k;
     }
   }
   // Supernodes, from the last position down: k joins its parent's clique when its separator is
@@ -137,7 +142,7 @@ EliminationPlan planElimination(int n, const RowList& rows, std::vector<int> ord
     const int* s = sep_vars.data() + sep_start[k];
     const size_t s_size = static_cast<size_t>(sep_start[k + 1] - sep_start[k]);
     if (s_size > 0) {
-      const int c = clique_of_pos[s[0]];
+      const int c = clique_of_pos[sep_first[k]];
       if (rev[c].frontals.size() + rev[c].separator.size() == s_size) {
         rev[c].frontals.push_back(k);
         clique_of_pos[k] = c;
@@ -147,7 +152,8 @@ EliminationPlan planElimination(int n, const RowList& rows, std::vector<int> ord
     SymbolicClique clique;
     clique.frontals.push_back(k);
     clique.separator.assign(s, s + s_size);
-    clique.parent = s_size == 0 ? -1 : clique_of_pos[s[0]];
+    std::sort(clique.separator.begin(), clique.separator.end());
+    clique.parent = s_size == 0 ? -1 : clique_of_pos[sep_first[k]];
     clique_of_pos[k] = static_cast<int>(rev.size());
     rev.push_back(std::move(clique));
   }
