@@ -1189,6 +1189,8 @@ struct IncrementalSmoother<G>::Impl {
     return !top.empty();
   }
 
+  static constexpr int kMinPosesForChordStep = 32;
+
   UpdateStats relinearizeAll() {
     const auto t0 = Clock::now();
     UpdateStats total;
@@ -1218,9 +1220,11 @@ struct IncrementalSmoother<G>::Impl {
       // decrement, which the tree gives for a fraction of that. When that is below the
       // tolerance, a chord step (the same Hessian, the new gradient; two passes over the tree)
       // stands in for the last iteration, kept if it gains at least half of what it promised
-      // (else the iterations go on). (Not tried while F still changes by a percent: the check
-      // could not pass.)
-      if (it + 1 < opt.finalize_max_iterations && change < 1e-2) {
+      // (else the iterations go on). Not tried while F still changes by a percent (the check
+      // could not pass), nor on a tree of a few poses, whose iterations cost no more than the
+      // check (tinyGrid3D, 9 poses: 0.063 against 0.052 ms; smallGrid3D, 125: 2.0 against 2.5).
+      if (it + 1 < opt.finalize_max_iterations && change < 1e-2 &&
+          numPoses() >= kMinPosesForChordStep) {
         const double decrement = newtonDecrement();
         const double tol = opt.finalize_relative_tolerance;
         if (decrement < tol * F_new) {
