@@ -122,6 +122,7 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> s_chord_order, s_chord_offset;
   std::vector<double> s_chord_d;
   std::vector<Vec> s_chord_step;
+  std::vector<G> s_chord_poses;
   std::vector<int> s_path;       // cliques whose separator a fold-in extends
   std::vector<int> s_linearize;  // factors to (re-)linearise in this update
   std::vector<double> s_chain_flops;
@@ -305,11 +306,34 @@ struct IncrementalSmoother<G>::Impl {
     for (int v : c.separator) (*slots)[v] = -1;
   }
 
+  // Calls fn(f, a, b, v_is_i) for each factor f assembled in clique c: those whose first
+  // eliminated variable is a frontal of c (its a-th, v; v_is_i: v is the factor's end i). b is
+  // the other end's slot (its position in c's frontals then separator, `slot` set by setSlots),
+  // −1 when that end is fixed (a unary factor on v).
+  template <class Fn>
+  void forEachFactorOf(const Clique& c, const std::vector<int>& slot, Fn fn) const {
+    const int nf = static_cast<int>(c.frontals.size());
+    for (int a = 0; a < nf; ++a) {
+      const int v = c.frontals[a];
+      for (int f : var_factors[v]) {
+        const Edge& e = edges[f];
+        const bool v_is_i = e.i == v;
+        const int o = v_is_i ? e.j : e.i;
+        if (fixed[o]) {
+          fn(f, a, -1, v_is_i);
+          continue;
+        }
+        const int b = slot[o];
+        if (b <= a) continue;  // below (in a child's cached factor) or taken from the other end
+        fn(f, a, b, v_is_i);
+      }
+    }
+  }
+
   // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into the lane's
   // h ((N+1)×(N+1), column-major; g in row N).
   void assemble(const Clique& c, int lane) {
     for (int ch : c.children) cliques[ch].applyPending();
-    const int nf = static_cast<int>(c.frontals.size());
     const int N = c.F + c.Sn;
     std::vector<int>& slot = slotsOf(lane);
     std::vector<int>& child_slots = threads.lanes[lane].child_slots;
@@ -320,31 +344,18 @@ struct IncrementalSmoother<G>::Impl {
     for (int j = 0; j < lda; ++j)  // only the lower triangle is used
       std::fill(h_buf.data() + static_cast<size_t>(j) * lda + j, h_buf.data() + (j + 1) * lda, 0.0);
     Eigen::Map<Eigen::MatrixXd> H(h_buf.data(), N + 1, N + 1);
-    // The factors whose first eliminated variable is a frontal of this clique.
-    for (int a = 0; a < nf; ++a) {
-      const int v = c.frontals[a];
-      for (int f : var_factors[v]) {
-        const Edge& e = edges[f];
-        const LinearFactor& L = lin[f];
-        const bool v_is_i = e.i == v;
-        const int o = v_is_i ? e.j : e.i;
-        if (fixed[o]) {  // unary on v
-          H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
-          H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
-          continue;
-        }
-        const int b = slot[o];
-        if (b <= a) continue;  // below (in a child's cached factor) or added from the other end
-        H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
-        H.template block<D, D>(b * D, b * D) += v_is_i ? L.Hjj : L.Hii;
-        if (v_is_i)
-          H.template block<D, D>(b * D, a * D) += L.Hij.transpose();  // H_ji
-        else
-          H.template block<D, D>(b * D, a * D) += L.Hij;
-        H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
-        H.row(N).template segment<D>(b * D) += (v_is_i ? L.gj : L.gi).transpose();
-      }
-    }
+    forEachFactorOf(c, slot, [&](int f, int a, int b, bool v_is_i) {
+      const LinearFactor& L = lin[f];
+      H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
+      H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
+      if (b < 0) return;  // unary on v
+      H.template block<D, D>(b * D, b * D) += v_is_i ? L.Hjj : L.Hii;
+      if (v_is_i)
+        H.template block<D, D>(b * D, a * D) += L.Hij.transpose();  // H_ji
+      else
+        H.template block<D, D>(b * D, a * D) += L.Hij;
+      H.row(N).template segment<D>(b * D) += (v_is_i ? L.gj : L.gi).transpose();
+    });
     // The children's cached factors on their separators.
     for (int ch : c.children) {
       const Clique& k = cliques[ch];
@@ -875,6 +886,9 @@ struct IncrementalSmoother<G>::Impl {
     passed.resize(passed_size);
     s_chord_d.resize(d_size);
     std::vector<double>& g_buf = threads.lanes[0].x;
+    std::vector<G>& x = s_chord_poses;  // θ ⊞ Δ
+    x.resize(theta.size());
+    for (size_t v = 0; v < theta.size(); ++v) x[v] = estimateOf(static_cast<int>(v));
     double decrement = 0;
     Mat Ai, Aj;
     Vec r;
@@ -883,21 +897,13 @@ struct IncrementalSmoother<G>::Impl {
       g_buf.assign(c.F + c.Sn, 0.0);
       Eigen::Map<Eigen::VectorXd> g(g_buf.data(), c.F + c.Sn);
       setSlots(c, &slot);
-      // The factors whose first eliminated variable is a frontal of this clique (as assemble),
-      // linearised at θ ⊞ Δ.
-      const int nf = static_cast<int>(c.frontals.size());
-      for (int a = 0; a < nf; ++a) {
-        const int v = c.frontals[a];
-        for (int f : var_factors[v]) {
-          const Edge& e = edges[f];
-          const int o = e.i == v ? e.j : e.i;
-          const int b = fixed[o] ? -1 : slot[o];
-          if (!fixed[o] && b <= a) continue;
-          e.linearize(estimateOf(e.i), estimateOf(e.j), &Ai, &Aj, &r);
-          g.template segment<D>(a * D) -= (e.i == v ? Ai : Aj).transpose() * r;
-          if (b >= 0) g.template segment<D>(b * D) -= (e.i == v ? Aj : Ai).transpose() * r;
-        }
-      }
+      // The clique's factors (as assemble), linearised at θ ⊞ Δ.
+      forEachFactorOf(c, slot, [&](int f, int a, int b, bool v_is_i) {
+        const Edge& e = edges[f];
+        e.linearize(x[e.i], x[e.j], &Ai, &Aj, &r);
+        g.template segment<D>(a * D) -= (v_is_i ? Ai : Aj).transpose() * r;
+        if (b >= 0) g.template segment<D>(b * D) -= (v_is_i ? Aj : Ai).transpose() * r;
+      });
       for (int ch : c.children) {
         const auto& sep = cliques[ch].separator;
         const double* from = passed.data() + passed_at[ch];
@@ -923,23 +929,21 @@ struct IncrementalSmoother<G>::Impl {
   void chordStep() {
     std::vector<Vec>& x = s_chord_step;
     x.assign(theta.size(), Vec::Zero());
-    std::vector<double>& rhs = threads.lanes[0].x;
-    for (int id : s_chord_order) {  // parents before children
+    std::vector<double>& z = threads.lanes[0].x;  // [x_f; x_s], as solveClique
+    for (int id : s_chord_order) {                // parents before children
       const Clique& c = cliques[id];
-      const auto LS = c.LS();
-      rhs.assign(s_chord_d.begin() + s_chord_offset[id],
-                 s_chord_d.begin() + s_chord_offset[id] + c.F);
-      Eigen::Map<Eigen::VectorXd> xf(rhs.data(), c.F);
-      for (size_t q = 0; q < c.separator.size(); ++q)
-        xf.noalias() -=
-            LS.middleRows(c.F + static_cast<int>(q) * D, D).transpose() * x[c.separator[q]];
-      LS.topRows(c.F).template triangularView<Eigen::Lower>().transpose().solveInPlace(xf);
+      const int N = c.F + c.Sn;
+      z.resize(N);
+      for (size_t b = 0; b < c.separator.size(); ++b)
+        Eigen::Map<Vec>(z.data() + c.F + b * D) = x[c.separator[b]];
+      bayestree::solveConditional(c.lsPtr(), c.ld, N, c.F, s_chord_d.data() + s_chord_offset[id],
+                                  z.data());
       for (size_t a = 0; a < c.frontals.size(); ++a)
-        x[c.frontals[a]] = xf.template segment<D>(static_cast<int>(a) * D);
+        x[c.frontals[a]] = Eigen::Map<Vec>(z.data() + a * D);
     }
     for (size_t v = 0; v < theta.size(); ++v) {
       if (fixed[v]) continue;
-      delta[v] = theta[v].localCoordinates(theta[v].retract(delta[v]).retract(x[v]));
+      delta[v] = theta[v].localCoordinates(estimateOf(static_cast<int>(v)).retract(x[v]));
       if (!opt.dogleg) delta_newton[v] = delta[v];
     }
   }
@@ -1373,8 +1377,7 @@ G IncrementalSmoother<G>::estimate(int index) const {
   if (index < 0 || index >= impl_->numPoses())
     throw std::out_of_range("IncrementalSmoother::estimate: index " + std::to_string(index) +
                             " out of range");
-  if (impl_->fixed[index]) return impl_->theta[index];
-  return impl_->theta[index].retract(impl_->delta[index]);
+  return impl_->estimateOf(index);
 }
 template <class G>
 const std::vector<G>& IncrementalSmoother<G>::linearizationPoint() const {
