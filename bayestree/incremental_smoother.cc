@@ -117,12 +117,6 @@ struct IncrementalSmoother<G>::Impl {
   DoubleBuffer extend_buf;
   DoubleBuffer w_buf, w_parent_buf;  // a fold-in's W of this clique and of its parent
   std::vector<int> stack_scratch, ready_scratch;
-  // newtonDecrement and chordStep: the cliques parents first, each clique's L⁻¹g and its offset,
-  // the step.
-  std::vector<int> s_chord_order, s_chord_offset;
-  std::vector<double> s_chord_d;
-  std::vector<Vec> s_chord_step;
-  std::vector<G> s_chord_poses;
   std::vector<int> s_path;       // cliques whose separator a fold-in extends
   std::vector<int> s_linearize;  // factors to (re-)linearise in this update
   std::vector<double> s_chain_flops;
@@ -306,34 +300,11 @@ struct IncrementalSmoother<G>::Impl {
     for (int v : c.separator) (*slots)[v] = -1;
   }
 
-  // Calls fn(f, a, b, v_is_i) for each factor f assembled in clique c: those whose first
-  // eliminated variable is a frontal of c (its a-th, v; v_is_i: v is the factor's end i). b is
-  // the other end's slot (its position in c's frontals then separator, `slot` set by setSlots),
-  // −1 when that end is fixed (a unary factor on v).
-  template <class Fn>
-  void forEachFactorOf(const Clique& c, const std::vector<int>& slot, Fn fn) const {
-    const int nf = static_cast<int>(c.frontals.size());
-    for (int a = 0; a < nf; ++a) {
-      const int v = c.frontals[a];
-      for (int f : var_factors[v]) {
-        const Edge& e = edges[f];
-        const bool v_is_i = e.i == v;
-        const int o = v_is_i ? e.j : e.i;
-        if (fixed[o]) {
-          fn(f, a, -1, v_is_i);
-          continue;
-        }
-        const int b = slot[o];
-        if (b <= a) continue;  // below (in a child's cached factor) or taken from the other end
-        fn(f, a, b, v_is_i);
-      }
-    }
-  }
-
   // The clique's Hessian [H g; gᵀ ·] over frontals ∪ separator, lower triangle, into the lane's
   // h ((N+1)×(N+1), column-major; g in row N).
   void assemble(const Clique& c, int lane) {
     for (int ch : c.children) cliques[ch].applyPending();
+    const int nf = static_cast<int>(c.frontals.size());
     const int N = c.F + c.Sn;
     std::vector<int>& slot = slotsOf(lane);
     std::vector<int>& child_slots = threads.lanes[lane].child_slots;
@@ -344,18 +315,31 @@ struct IncrementalSmoother<G>::Impl {
     for (int j = 0; j < lda; ++j)  // only the lower triangle is used
       std::fill(h_buf.data() + static_cast<size_t>(j) * lda + j, h_buf.data() + (j + 1) * lda, 0.0);
     Eigen::Map<Eigen::MatrixXd> H(h_buf.data(), N + 1, N + 1);
-    forEachFactorOf(c, slot, [&](int f, int a, int b, bool v_is_i) {
-      const LinearFactor& L = lin[f];
-      H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
-      H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
-      if (b < 0) return;  // unary on v
-      H.template block<D, D>(b * D, b * D) += v_is_i ? L.Hjj : L.Hii;
-      if (v_is_i)
-        H.template block<D, D>(b * D, a * D) += L.Hij.transpose();  // H_ji
-      else
-        H.template block<D, D>(b * D, a * D) += L.Hij;
-      H.row(N).template segment<D>(b * D) += (v_is_i ? L.gj : L.gi).transpose();
-    });
+    // The factors whose first eliminated variable is a frontal of this clique.
+    for (int a = 0; a < nf; ++a) {
+      const int v = c.frontals[a];
+      for (int f : var_factors[v]) {
+        const Edge& e = edges[f];
+        const LinearFactor& L = lin[f];
+        const bool v_is_i = e.i == v;
+        const int o = v_is_i ? e.j : e.i;
+        if (fixed[o]) {  // unary on v
+          H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
+          H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
+          continue;
+        }
+        const int b = slot[o];
+        if (b <= a) continue;  // below (in a child's cached factor) or added from the other end
+        H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
+        H.template block<D, D>(b * D, b * D) += v_is_i ? L.Hjj : L.Hii;
+        if (v_is_i)
+          H.template block<D, D>(b * D, a * D) += L.Hij.transpose();  // H_ji
+        else
+          H.template block<D, D>(b * D, a * D) += L.Hij;
+        H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
+        H.row(N).template segment<D>(b * D) += (v_is_i ? L.gj : L.gi).transpose();
+      }
+    }
     // The children's cached factors on their separators.
     for (int ch : c.children) {
       const Clique& k = cliques[ch];
@@ -859,97 +843,6 @@ struct IncrementalSmoother<G>::Impl {
     return f;
   }
 
-  // The Newton decrement (Boyd & Vandenberghe, Convex Optimization, §9.5.1) of the current
-  // estimate θ ⊞ Δ with the Bayes tree's Hessian H (that of θ): gᵀH⁻¹g, g the gradient at
-  // θ ⊞ Δ, what the Gauss–Newton model expects a further step to gain. With H = LLᵀ clique by
-  // clique it is Σ‖L_c⁻¹ g_c‖², g_c the clique's frontal gradient once its children's shares
-  // have been passed up (the forward half of a solve: no factorisation). Leaves each clique's
-  // L_c⁻¹ g_c in s_chord_d (at s_chord_offset[c]) for chordStep.
-  double newtonDecrement() {
-    std::vector<int>& order = s_chord_order;  // cliques, parents before children
-    order.assign(roots.begin(), roots.end());
-    for (size_t k = 0; k < order.size(); ++k)
-      for (int ch : cliques[order[k]].children) order.push_back(ch);
-    // Each clique's g_s − S·d, passed to its parent, at passed_at[c]; its d at s_chord_offset[c].
-    std::vector<int>& passed_at = s_ids;
-    std::vector<int>& d_at = s_chord_offset;
-    passed_at.assign(cliques.size(), 0);
-    d_at.assign(cliques.size(), 0);
-    size_t passed_size = 0, d_size = 0;
-    for (int c : order) {
-      passed_at[c] = static_cast<int>(passed_size);
-      passed_size += cliques[c].Sn;
-      d_at[c] = static_cast<int>(d_size);
-      d_size += cliques[c].F;
-    }
-    DoubleBuffer& passed = threads.lanes[0].h;
-    passed.resize(passed_size);
-    s_chord_d.resize(d_size);
-    std::vector<double>& g_buf = threads.lanes[0].x;
-    std::vector<G>& x = s_chord_poses;  // θ ⊞ Δ
-    x.resize(theta.size());
-    for (size_t v = 0; v < theta.size(); ++v) x[v] = estimateOf(static_cast<int>(v));
-    double decrement = 0;
-    Mat Ai, Aj;
-    Vec r;
-    for (auto it = order.rbegin(); it != order.rend(); ++it) {
-      const Clique& c = cliques[*it];
-      g_buf.assign(c.F + c.Sn, 0.0);
-      Eigen::Map<Eigen::VectorXd> g(g_buf.data(), c.F + c.Sn);
-      setSlots(c, &slot);
-      // The clique's factors (as assemble), linearised at θ ⊞ Δ.
-      forEachFactorOf(c, slot, [&](int f, int a, int b, bool v_is_i) {
-        const Edge& e = edges[f];
-        e.linearize(x[e.i], x[e.j], &Ai, &Aj, &r);
-        g.template segment<D>(a * D) -= (v_is_i ? Ai : Aj).transpose() * r;
-        if (b >= 0) g.template segment<D>(b * D) -= (v_is_i ? Aj : Ai).transpose() * r;
-      });
-      for (int ch : c.children) {
-        const auto& sep = cliques[ch].separator;
-        const double* from = passed.data() + passed_at[ch];
-        for (size_t q = 0; q < sep.size(); ++q)
-          for (int k = 0; k < D; ++k) g[slot[sep[q]] * D + k] += from[q * D + k];
-      }
-      clearSlots(c, &slot);
-      const auto LS = c.LS();
-      auto d = g.head(c.F);
-      LS.topRows(c.F).template triangularView<Eigen::Lower>().solveInPlace(d);
-      decrement += d.squaredNorm();
-      std::copy(g_buf.begin(), g_buf.begin() + c.F, s_chord_d.begin() + d_at[*it]);
-      if (c.Sn > 0)
-        Eigen::Map<Eigen::VectorXd>(passed.data() + passed_at[*it], c.Sn).noalias() =
-            g.tail(c.Sn) - LS.bottomRows(c.Sn) * d;
-    }
-    return decrement;
-  }
-
-  // A chord step (Gauss–Newton with the tree's Hessian, that of θ, and the gradient at the
-  // estimate) after newtonDecrement: the back-substitution of its L⁻¹g, R x_f = d − S x_s from
-  // the roots down, applied to the estimate: θ ⊞ Δ ← (θ ⊞ Δ) ⊞ x. θ and the tree are unchanged.
-  void chordStep() {
-    std::vector<Vec>& x = s_chord_step;
-    x.assign(theta.size(), Vec::Zero());
-    std::vector<double>& z = threads.lanes[0].x;  // [x_f; x_s], as solveClique
-    for (int id : s_chord_order) {                // parents before children
-      const Clique& c = cliques[id];
-      const int N = c.F + c.Sn;
-      z.resize(N);
-      for (size_t b = 0; b < c.separator.size(); ++b)
-        Eigen::Map<Vec>(z.data() + c.F + b * D) = x[c.separator[b]];
-      bayestree::solveConditional(c.lsPtr(), c.ld, N, c.F, s_chord_d.data() + s_chord_offset[id],
-                                  z.data());
-      for (size_t a = 0; a < c.frontals.size(); ++a)
-        x[c.frontals[a]] = Eigen::Map<Vec>(z.data() + a * D);
-    }
-    for (size_t v = 0; v < theta.size(); ++v) {
-      if (fixed[v]) continue;
-      delta[v] = theta[v].localCoordinates(estimateOf(static_cast<int>(v)).retract(x[v]));
-      if (!opt.dogleg) delta_newton[v] = delta[v];
-    }
-  }
-
-  G estimateOf(int v) const { return fixed[v] ? theta[v] : theta[v].retract(delta[v]); }
-
   // Powell's dogleg step on the Bayes tree (bayestree/dogleg_step.h) into Δ.
   void doglegStep() {
     delta = bayestree::doglegStep<D>(cliques, delta_newton, &dogleg_radius, opt.dogleg_min_radius,
@@ -1193,8 +1086,6 @@ struct IncrementalSmoother<G>::Impl {
     return !top.empty();
   }
 
-  static constexpr int kMinPosesForChordStep = 32;
-
   UpdateStats relinearizeAll() {
     const auto t0 = Clock::now();
     UpdateStats total;
@@ -1220,30 +1111,6 @@ struct IncrementalSmoother<G>::Impl {
       const double change = std::abs(F_prev - F_new) / std::max(F_prev, 1e-300);
       F_prev = F_new;
       if (change < opt.finalize_relative_tolerance) break;
-      // Another iteration (relinearise, re-eliminate everything) would gain about the Newton
-      // decrement, which the tree gives for a fraction of that. When that is below the
-      // tolerance, a chord step (the same Hessian, the new gradient; two passes over the tree)
-      // stands in for the last iteration, kept if it gains at least half of what it promised
-      // (else the iterations go on). Not tried while F still changes by a percent (the check
-      // could not pass), nor on a tree of a few poses, whose iterations cost no more than the
-      // check (tinyGrid3D, 9 poses: 0.063 against 0.052 ms; smallGrid3D, 125: 2.0 against 2.5).
-      if (it + 1 < opt.finalize_max_iterations && change < 1e-2 &&
-          numPoses() >= kMinPosesForChordStep) {
-        const double decrement = newtonDecrement();
-        const double tol = opt.finalize_relative_tolerance;
-        if (decrement < tol * F_new) {
-          const std::vector<Vec> before = delta, before_newton = delta_newton;
-          chordStep();
-          const double gain = F_new - objectiveAt(delta);
-          // Kept when it did what it promised; when the promise is a thousandth of the
-          // tolerance, whatever it gained (F is as good as converged either way).
-          const bool negligible = decrement < 1e-3 * tol * F_new;
-          if (gain >= 0.5 * decrement || (negligible && gain >= 0)) break;
-          delta = before;
-          delta_newton = before_newton;
-          if (negligible) break;
-        }
-      }
     }
     total.time_s = secondsSince(t0);
     return total;
@@ -1377,7 +1244,8 @@ G IncrementalSmoother<G>::estimate(int index) const {
   if (index < 0 || index >= impl_->numPoses())
     throw std::out_of_range("IncrementalSmoother::estimate: index " + std::to_string(index) +
                             " out of range");
-  return impl_->estimateOf(index);
+  if (impl_->fixed[index]) return impl_->theta[index];
+  return impl_->theta[index].retract(impl_->delta[index]);
 }
 template <class G>
 const std::vector<G>& IncrementalSmoother<G>::linearizationPoint() const {
@@ -1390,10 +1258,6 @@ const std::vector<typename G::Tangent>& IncrementalSmoother<G>::delta() const {
 template <class G>
 double IncrementalSmoother<G>::objective() const {
   return impl_->objectiveAt(impl_->delta);
-}
-template <class G>
-double IncrementalSmoother<G>::newtonDecrement() {
-  return impl_->newtonDecrement();
 }
 template <class G>
 void IncrementalSmoother<G>::checkInvariants() const {

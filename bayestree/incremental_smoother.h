@@ -113,9 +113,8 @@ class IncrementalSmoother {
   /// affected top of the Bayes tree and updates Δ. The estimate is current on return.
   UpdateStats update();
   /// Relinearises every variable, re-eliminates the whole tree and back-substitutes fully,
-  /// repeated until F changes by less than finalize_relative_tolerance (relative), or the Newton
-  /// decrement says the next iteration would, or finalize_max_iterations. Adds queued factors
-  /// first. Returns the summed stats.
+  /// repeated until F changes by less than finalize_relative_tolerance (relative) or
+  /// finalize_max_iterations. Adds queued factors first. Returns the summed stats.
   UpdateStats relinearizeAll();
 
   std::vector<G> estimate() const;  ///< θ ⊞ Δ for every pose (O(n))
@@ -123,11 +122,6 @@ class IncrementalSmoother {
   const std::vector<G>& linearizationPoint() const;
   const std::vector<Tangent>& delta() const;  ///< Δ per pose (zero for fixed poses)
   double objective() const;                   ///< F = Σ eᵀΩe at estimate() (O(m))
-  /// gᵀH⁻¹g for the gradient g of F/2 at estimate() and the Bayes tree's Hessian H (that of
-  /// linearizationPoint()): the Newton decrement, about what one more Gauss–Newton iteration
-  /// would lower F by. O(m + entries of the tree): no factorisation. Uses the smoother's
-  /// scratch (not const).
-  double newtonDecrement();
   /// Throws std::logic_error describing the first violated Bayes-tree invariant.
   void checkInvariants() const;
 
