@@ -27,6 +27,7 @@
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
 #include "tools/bench/ceres_pose_graph.h"
+#include "tools/bench/growth.h"
 #include "tools/bench/paper_runner.h"
 #include "tools/bench/shared_data.h"
 #include "tools/cli/cli_common.h"
@@ -202,6 +203,47 @@ int batch(const std::vector<std::string>& args, const std::string& default_share
   return 0;
 }
 
+// `arbor bench growth`: the replay's latency slice by slice as the graph grows, beside the cost
+// of one batch factorisation of the graph so far (tools/bench/growth.h).
+int growth(const std::vector<std::string>& args, const std::string& default_shared) {
+  DatasetOptions data;
+  std::string step;
+  int slices = 8;
+  po::options_description options =
+      datasetOptions("arbor bench growth [options]", &data, default_shared);
+  options.add_options()("slices", po::value(&slices)->default_value(8),
+                        "slices of equal pose count per dataset")(
+      "step", po::value(&step)->default_value("edge"), "edge or pose, as arbor replay --step");
+  if (!parseOptions(args, options)) return 0;
+  if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
+  if (slices < 1) throw po::error("--slices must be at least 1");
+  const bool per_pose = step == "pose";
+  const auto files = bench::selectDatasets(data.shared, data.only);
+  std::cout << "Replay (one update per " << step
+            << ", GN, β = 0.1, skip 10) in slices of equal pose count. \"relin.\": the updates "
+               "that relinearised (every tenth, when a variable's step exceeds β), their latency "
+               "and the mean share of the poses they relinearised; \"factorisation\": flops of "
+               "one sparse Cholesky factorisation of the graph so far (best of AMD, METIS, "
+               "nested dissection) and its time on one thread (the fastest of BlockCholesky and "
+               "CHOLMOD), the least a step that relinearises the whole graph costs.\n";
+  bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
+    std::visit(
+        [&](const auto& g) {
+          cli::ReplaySettings settings;
+          settings.per_pose = per_pose;
+          settings.finalize = false;
+          settings.batch = false;
+          const auto replay = cli::runReplay(g, settings);
+          std::cout << "\n### " << d.name << d.note << " (" << g.numPoses() << " poses, "
+                    << g.numEdges() << " edges, " << fmt("%.3f", replay.update_s) << " s)\n\n";
+          bench::printGrowthTable(std::cout, bench::growthSlices(g, replay, per_pose, slices));
+          std::cout.flush();
+        },
+        d.graph);
+  });
+  return 0;
+}
+
 // Ceres as an external solver of the paper runner, with the same iteration cap and tolerance.
 bench::ExternalSolver ceresSolver(const bench::PaperSettings& settings) {
   auto solve = [settings](const auto& graph, auto* poses) {
@@ -336,6 +378,8 @@ int main(int argc, char** argv) {
            "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n"
            "       arbor bench paper [--shared DIR] [--only NAMES] [--out-dir DIR] "
            "[--markdown FILE] [--plots]\n"
+           "       arbor bench growth [--shared DIR] [--only NAMES] [--slices K] [--step "
+           "edge|pose]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
@@ -344,6 +388,7 @@ int main(int argc, char** argv) {
     if (args[0] == "batch") return batch(rest, ARBOR_SHARED_DIR);
     if (args[0] == "replay") return replay(rest, ARBOR_SHARED_DIR);
     if (args[0] == "paper") return paper(rest, ARBOR_SHARED_DIR);
+    if (args[0] == "growth") return growth(rest, ARBOR_SHARED_DIR);
     if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";
     return 2;

@@ -1,0 +1,129 @@
+#include "tools/bench/growth.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <stdexcept>
+
+#include "core/normal_equations.h"
+#include "tools/cli/cli_common.h"
+#include "tools/cli/latency.h"
+#include "tools/cli/replay_order.h"
+
+namespace arbor::bench {
+namespace {
+
+// The graph of the poses 0..m−1 and the edges among them, the first pose fixed.
+template <class G>
+PoseGraph<G> prefix(const PoseGraph<G>& graph, int m) {
+  PoseGraph<G> p;
+  p.ids.assign(graph.ids.begin(), graph.ids.begin() + m);
+  for (int k = 0; k < m; ++k) p.index[p.ids[k]] = k;
+  p.poses.assign(graph.poses.begin(), graph.poses.begin() + m);
+  for (const auto& e : graph.edges)
+    if (e.i < m && e.j < m) p.edges.push_back(e);
+  p.fixed = {0};
+  return p;
+}
+
+// factorization_flops and factorization_ms of `graph` (its initial poses): the faster of the
+// two backends, each the fastest of three runs.
+template <class G>
+void measureFactorization(const PoseGraph<G>& graph, GrowthSlice* slice) {
+  for (CholeskyBackend backend : {CholeskyBackend::kBlock, CholeskyBackend::kCholmod}) {
+    NormalEquations<G> equations(graph, backend);
+    slice->factorization_flops = equations.factorizationFlops();
+    equations.linearize(graph.poses);
+    for (int run = 0; run < 3; ++run) {
+      cli::Stopwatch clock;
+      if (!equations.factorize()) return;
+      const double ms = 1e3 * clock.seconds();
+      if (slice->factorization_ms == 0 || ms < slice->factorization_ms)
+        slice->factorization_ms = ms;
+    }
+  }
+}
+
+double median(std::vector<double> v) { return cli::summarizeLatency(std::move(v)).p50; }
+
+std::string fmt(const char* f, double x) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, x);
+  return buf;
+}
+
+}  // namespace
+
+template <class G>
+std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::ReplayResult<G>& replay,
+                                      bool per_pose, int slices) {
+  if (slices < 1) throw std::invalid_argument("growthSlices: slices must be at least 1");
+  const auto groups = cli::replayGroups(graph, per_pose);
+  if (groups.size() != replay.rows.size())
+    throw std::invalid_argument("growthSlices: " + std::to_string(replay.rows.size()) +
+                                " update rows for " + std::to_string(groups.size()) + " updates");
+  const int n = graph.numPoses();
+  std::vector<GrowthSlice> out;
+  size_t u = 0;
+  int known = 0;
+  for (int s = 1; s <= slices; ++s) {
+    GrowthSlice slice;
+    const int limit = static_cast<int>(static_cast<long long>(n) * s / slices);
+    std::vector<double> relin_ms, other_ms;
+    double share = 0;
+    for (; u < groups.size(); ++u) {
+      const auto& last = graph.edges[groups[u].back()];
+      const int after = std::max(known, std::max(last.i, last.j) + 1);
+      if (after > limit) break;
+      known = after;
+      const cli::UpdateRow& row = replay.rows[u];
+      if (row.variables_relinearized > 0) {
+        relin_ms.push_back(row.latency_ms);
+        share += static_cast<double>(row.variables_relinearized) / known;
+      } else {
+        other_ms.push_back(row.latency_ms);
+      }
+      slice.edges = row.edges_so_far;
+    }
+    if (relin_ms.empty() && other_ms.empty()) continue;
+    slice.poses = known;
+    slice.relin_updates = static_cast<int>(relin_ms.size());
+    if (!relin_ms.empty()) {
+      slice.relin_p50_ms = median(relin_ms);
+      slice.relin_max_ms = *std::max_element(relin_ms.begin(), relin_ms.end());
+      slice.relin_share = share / static_cast<double>(relin_ms.size());
+    }
+    slice.other_updates = static_cast<int>(other_ms.size());
+    if (!other_ms.empty()) {
+      const cli::LatencySummary l = cli::summarizeLatency(other_ms);
+      slice.other_p50_ms = l.p50;
+      slice.other_p99_ms = l.p99;
+    }
+    if (known > 1) measureFactorization(prefix(graph, known), &slice);
+    out.push_back(slice);
+  }
+  return out;
+}
+
+void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices) {
+  out << "| poses | edges | factorisation MFlop | factorisation ms | relin. updates | relin. p50 "
+         "ms | relin. max ms | relinearised | relin. / factorisation | other updates | other p50 "
+         "ms | other p99 ms |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const GrowthSlice& s : slices) {
+    const bool timed = s.factorization_ms > 0;
+    out << "| " << s.poses << " | " << s.edges << " | " << fmt("%.1f", s.factorization_flops / 1e6)
+        << " | " << (timed ? fmt("%.3f", s.factorization_ms) : "—") << " | " << s.relin_updates
+        << " | " << fmt("%.3f", s.relin_p50_ms) << " | " << fmt("%.3f", s.relin_max_ms) << " | "
+        << fmt("%.0f%%", 100 * s.relin_share) << " | "
+        << (timed && s.relin_updates > 0 ? fmt("%.1f", s.relin_p50_ms / s.factorization_ms) : "—")
+        << " | " << s.other_updates << " | " << fmt("%.3f", s.other_p50_ms) << " | "
+        << fmt("%.3f", s.other_p99_ms) << " |\n";
+  }
+}
+
+template std::vector<GrowthSlice> growthSlices(const PoseGraph<SE2>&, const cli::ReplayResult<SE2>&,
+                                               bool, int);
+template std::vector<GrowthSlice> growthSlices(const PoseGraph<SE3>&, const cli::ReplayResult<SE3>&,
+                                               bool, int);
+
+}  // namespace arbor::bench

@@ -1,0 +1,49 @@
+// How the replay's latency grows with the graph, set against what one batch factorisation of
+// the graph so far costs (`arbor bench growth`). A relinearisation step that relinearises
+// variables spread over the whole graph re-eliminates nearly every clique, so its cost cannot
+// fall below a factorisation of the graph: this table shows whether the band of those steps
+// follows that cost, and how much of the graph each step relinearised.
+#pragma once
+
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "core/pose_graph.h"
+#include "tools/cli/replay_runner.h"
+
+namespace arbor::bench {
+
+/// The updates of one slice of a replay (those after which the graph had more than the
+/// previous slice's poses and at most `poses`).
+struct GrowthSlice {
+  int poses = 0;  ///< poses known after the slice's last update
+  int edges = 0;  ///< edges fed so far
+  /// Flops of one sparse Cholesky factorisation of the Gauss–Newton system of the graph so far
+  /// (the poses 0..poses−1 and the edges among them, gauge the first pose), in the best of
+  /// AMD, METIS and CHOLMOD's nested dissection (NormalEquations); 0 when not computable.
+  double factorization_flops = 0;
+  /// Time of that numeric factorisation at the graph's initial poses, on one thread
+  /// (NormalEquations::factorize, the fastest of three runs with BlockCholesky and three with
+  /// CHOLMOD); 0 when H is not positive definite there.
+  double factorization_ms = 0;
+  int relin_updates = 0;    ///< updates that relinearised at least one variable
+  double relin_p50_ms = 0;  ///< their median latency
+  double relin_max_ms = 0;  ///< and their largest
+  double relin_share = 0;   ///< their mean variables relinearised / poses known
+  int other_updates = 0;    ///< the rest
+  double other_p50_ms = 0, other_p99_ms = 0;
+};
+
+/// Splits `replay` (one row per update of cli::replayGroups(graph, per_pose), as replayInto
+/// returns it) into `slices` slices of equal pose count and measures each. Throws
+/// std::invalid_argument when the rows do not match the graph's groups or slices < 1.
+template <class G>
+std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::ReplayResult<G>& replay,
+                                      bool per_pose, int slices);
+
+/// The slices as a markdown table (one row per slice; "relin. / factorisation" = relin_p50_ms
+/// over factorization_ms).
+void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices);
+
+}  // namespace arbor::bench
