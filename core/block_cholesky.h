@@ -2,8 +2,8 @@
 // blocks (one per pose): right-looking ("fan-out") column Cholesky over block columns (Davis,
 // Rajamanickam & Sid-Lakhdar, "A survey of direct methods for sparse linear systems", Acta
 // Numerica 2016) with fixed-size Eigen kernels. On pose graphs it is 2–3× faster than CHOLMOD
-// below ~1e8 flops per factorisation (where CHOLMOD's simplicial and small-supernode paths pay
-// per-entry and per-BLAS-call overheads) and on par up to ~2e9.
+// below ~2e7 flops per factorisation (where CHOLMOD's simplicial and small-supernode paths pay
+// per-entry and per-BLAS-call overheads), on par around 1e8, slower beyond (normal_equations.h).
 #pragma once
 
 #include <vector>

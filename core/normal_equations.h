@@ -2,7 +2,7 @@
 // block by block over the whitened edge linearisations, with the block pattern, a
 // fill-reducing block ordering and the symbolic factorisation computed once (Dellaert & Kaess,
 // "Square Root SAM", IJRR 2006, §3–4). The numeric factorisation is BlockCholesky (fixed-size
-// blocks) up to ~2e9 flops and CHOLMOD's supernodal LLᵀ beyond.
+// blocks) up to ~1e8 flops and CHOLMOD's supernodal LLᵀ beyond.
 #pragma once
 
 #include <memory>
@@ -29,10 +29,14 @@ enum class CholeskyBackend {
   kBlock,    ///< BlockCholesky
   kCholmod,  ///< CHOLMOD (supernodal or simplicial, its choice)
 };
-/// Where kAuto switches to CHOLMOD, whose supernodal BLAS-3 kernels win on large dense fronts
-/// (measured per factorisation: on par at 1e9 flops on torus3D and a 12³ grid, CHOLMOD 20%
-/// faster at 7e9 on a 16³ grid; BlockCholesky 2–3× faster below 1e8).
-inline constexpr double kBlockCholeskyMaxFlops = 2e9;
+/// Where kAuto switches to CHOLMOD, whose supernodal BLAS-3 kernels win on large dense fronts.
+/// Measured per factorisation with Debian's OpenBLAS at one thread (`arbor bench growth`,
+/// docs/design.md): BlockCholesky is 2–3× faster below ~2e7 flops (garage, M3500, intel); the
+/// crossover lies between 4e7 and 2e8 (BlockCholesky's time over CHOLMOD's: torus3D 0.71 at
+/// 43 MFlop and 1.07 at 182 MFlop, sphere_bignoise 1.37 at 55 MFlop); beyond, CHOLMOD is up to
+/// 1.9× faster (sphere_bignoise 535 MFlop, torus3D 1 GFlop). The first tuning (2e9) was done
+/// with ATLAS.
+inline constexpr double kBlockCholeskyMaxFlops = 1e8;
 
 /// Normal equations over the non-gauge poses (the variables) of one graph. The variables are
 /// numbered in a fill-reducing order; vectors over them (gradient, steps) have kDoF entries per

@@ -224,8 +224,9 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
                "that relinearised (every tenth, when a variable's step exceeds β), their latency "
                "and the mean share of the poses they relinearised; \"factorisation\": flops of "
                "one sparse Cholesky factorisation of the graph so far (best of AMD, METIS, "
-               "nested dissection) and its time on one thread (the fastest of BlockCholesky and "
-               "CHOLMOD), the least a step that relinearises the whole graph costs.\n";
+               "nested dissection) and its time on one thread with each backend; the faster is "
+               "the least a step that relinearises the whole graph costs, and \"relin. / "
+               "factorisation\" divides the median step by it.\n";
   bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
     std::visit(
         [&](const auto& g) {

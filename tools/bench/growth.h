@@ -24,9 +24,9 @@ struct GrowthSlice {
   /// AMD, METIS and CHOLMOD's nested dissection (NormalEquations); 0 when not computable.
   double factorization_flops = 0;
   /// Time of that numeric factorisation at the graph's initial poses, on one thread
-  /// (NormalEquations::factorize, the fastest of three runs with BlockCholesky and three with
-  /// CHOLMOD); 0 when H is not positive definite there.
-  double factorization_ms = 0;
+  /// (NormalEquations::factorize, the fastest of three runs) with BlockCholesky and with
+  /// CHOLMOD, and the faster of the two; 0 when H is not positive definite there.
+  double block_ms = 0, cholmod_ms = 0, factorization_ms = 0;
   int relin_updates = 0;    ///< updates that relinearised at least one variable
   double relin_p50_ms = 0;  ///< their median latency
   double relin_max_ms = 0;  ///< and their largest
@@ -43,7 +43,7 @@ std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::Repl
                                       bool per_pose, int slices);
 
 /// The slices as a markdown table (one row per slice; "relin. / factorisation" = relin_p50_ms
-/// over factorization_ms).
+/// over factorization_ms; both backends' times are shown).
 void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices);
 
 }  // namespace arbor::bench
