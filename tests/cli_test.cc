@@ -137,12 +137,12 @@ TEST(Cli, BenchReplayComparesWithTheGtsamRowOfItsFeeding) {
   const Result edge = run("bench replay --shared " + shared.string());
   ASSERT_EQ(edge.status, 0) << edge.out;
   EXPECT_NE(edge.out.find("Edge-by-edge replay"), std::string::npos) << edge.out;
-  EXPECT_NE(edge.out.find("| 1000.000 | 2000.00 |"), std::string::npos) << edge.out;
+  EXPECT_NE(edge.out.find("| 1000 | 2000.00 |"), std::string::npos) << edge.out;
   EXPECT_NE(edge.out.find("updates/GTSAM"), std::string::npos) << edge.out;
   const Result pose = run("bench replay --step pose --shared " + shared.string());
   ASSERT_EQ(pose.status, 0) << pose.out;
   EXPECT_NE(pose.out.find("Pose-by-pose replay"), std::string::npos) << pose.out;
-  EXPECT_NE(pose.out.find("| 500.000 | 4000.00 |"), std::string::npos) << pose.out;
+  EXPECT_NE(pose.out.find("| 500 | 4000.00 |"), std::string::npos) << pose.out;
   const size_t row_b = pose.out.find("| gridB |");
   ASSERT_NE(row_b, std::string::npos) << pose.out;
   EXPECT_NE(pose.out.find("aborted", row_b), std::string::npos) << pose.out;

@@ -91,15 +91,15 @@ void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench
   const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
   if (!csv_dir.empty()) cli::writeLatencyCsv(csv_dir + "/" + name + ".csv", r.rows);
   const auto& l = r.latency;
-  std::cout << "| " << name << note << " | " << graph.numEdges() << " | " << fmt("%.3f", r.total_s)
-            << " | " << fmt("%.4f", r.finalize_s) << " | " << fmt("%.3f", l.p50) << " | "
+  std::cout << "| " << name << note << " | " << graph.numEdges() << " | " << fmt("%.4g", r.total_s)
+            << " | " << fmt("%.3g", r.finalize_s) << " | " << fmt("%.3f", l.p50) << " | "
             << fmt("%.3f", l.p99) << " | " << fmt("%.2f", l.max) << " | " << fmt("%.6e", r.F_final)
             << " | "
             << (ref ? fmt("%+.3f%%", 100.0 * (r.F_final - ref->F_star) / ref->F_star) : "—")
             << " | " << fmt("%.3f", r.batch.time_s) << " | " << fmt("%.6e", r.batch.F_final)
             << " | ";
   if (gtsam) {
-    std::cout << fmt("%.3f", gtsam->total_s) << " | " << fmt("%.2f", gtsam->p99_ms) << " | "
+    std::cout << fmt("%.4g", gtsam->total_s) << " | " << fmt("%.2f", gtsam->p99_ms) << " | "
               << fmt("%.6e", gtsam->F) << " | " << fmt("%.2f", r.total_s / gtsam->total_s) << " | "
               << fmt("%.2f", r.update_s / gtsam->total_s) << " | "
               << fmt("%.2f", l.p99 / gtsam->p99_ms) << " |";
