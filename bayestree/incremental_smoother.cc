@@ -8,6 +8,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -135,22 +136,26 @@ struct IncrementalSmoother<G>::Impl {
 
   explicit Impl(const SmootherOptions& o)
       : opt(o), dogleg_radius(o.dogleg_initial_radius), threads(threadCount(o.threads)) {
-    auto bad = [](const std::string& what, double v) {
-      throw std::invalid_argument("IncrementalSmoother: bad option " + what + " = " +
-                                  std::to_string(v));
+    auto bad = [](const std::string& what, double v, const char* must) {
+      std::ostringstream msg;
+      msg << "IncrementalSmoother: bad option " << what << " = " << v << " (must be " << must
+          << ")";
+      throw std::invalid_argument(msg.str());
     };
     if (!(o.relinearize_threshold_translation >= 0))
-      bad("relinearize_threshold_translation", o.relinearize_threshold_translation);
+      bad("relinearize_threshold_translation", o.relinearize_threshold_translation, "≥ 0");
     if (!(o.relinearize_threshold_rotation >= 0))
-      bad("relinearize_threshold_rotation", o.relinearize_threshold_rotation);
-    if (o.relinearize_skip < 1) bad("relinearize_skip", o.relinearize_skip);
-    if (o.nested_dissection_min < -1) bad("nested_dissection_min", o.nested_dissection_min);
-    if (!(o.wildfire_threshold >= 0)) bad("wildfire_threshold", o.wildfire_threshold);
-    if (!(o.dogleg_initial_radius > 0)) bad("dogleg_initial_radius", o.dogleg_initial_radius);
-    if (!(o.dogleg_min_radius > 0)) bad("dogleg_min_radius", o.dogleg_min_radius);
+      bad("relinearize_threshold_rotation", o.relinearize_threshold_rotation, "≥ 0");
+    if (o.relinearize_skip < 1) bad("relinearize_skip", o.relinearize_skip, "≥ 1");
+    if (o.nested_dissection_min < -1) bad("nested_dissection_min", o.nested_dissection_min, "≥ −1");
+    if (!(o.wildfire_threshold >= 0)) bad("wildfire_threshold", o.wildfire_threshold, "≥ 0");
+    if (!(o.dogleg_initial_radius > 0))
+      bad("dogleg_initial_radius", o.dogleg_initial_radius, "> 0");
+    if (!(o.dogleg_min_radius > 0)) bad("dogleg_min_radius", o.dogleg_min_radius, "> 0");
     if (!(o.finalize_relative_tolerance >= 0))
-      bad("finalize_relative_tolerance", o.finalize_relative_tolerance);
-    if (o.finalize_max_iterations < 1) bad("finalize_max_iterations", o.finalize_max_iterations);
+      bad("finalize_relative_tolerance", o.finalize_relative_tolerance, "≥ 0");
+    if (o.finalize_max_iterations < 1)
+      bad("finalize_max_iterations", o.finalize_max_iterations, "≥ 1");
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }

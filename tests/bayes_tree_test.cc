@@ -501,7 +501,17 @@ TEST(BayesTreeApi, RejectsBadFactors) {
   EXPECT_THROW(s.estimate(7), std::out_of_range);
   SmootherOptions bad;
   bad.relinearize_skip = 0;
-  EXPECT_THROW(IncrementalSmoother<SE2>{bad}, std::invalid_argument);
+  try {
+    IncrementalSmoother<SE2> refused{bad};
+    ADD_FAILURE() << "relinearize_skip = 0 accepted";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("relinearize_skip = 0 (must be ≥ 1)"),
+              std::string::npos)
+        << error.what();
+  }
+  SmootherOptions nan_threshold;
+  nan_threshold.wildfire_threshold = std::nan("");
+  EXPECT_THROW(IncrementalSmoother<SE2>{nan_threshold}, std::invalid_argument);
 }
 
 TEST(BayesTreeApi, FactorBetweenFixedPosesOnlyCounts) {

@@ -214,19 +214,32 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
   DatasetOptions data;
   std::string step;
   int slices = 8;
+  cli::ReplaySettings settings;
+  settings.finalize = false;
+  settings.batch = false;
   po::options_description options =
       datasetOptions("arbor bench growth [options]", &data, default_shared);
   options.add_options()("slices", po::value(&slices)->default_value(8),
                         "slices of equal pose count per dataset")(
-      "step", po::value(&step)->default_value("edge"), "edge or pose, as arbor replay --step");
+      "step", po::value(&step)->default_value("edge"), "edge or pose, as arbor replay --step")(
+      "relinearize-threshold",
+      po::value(&settings.smoother.relinearize_threshold_translation)->default_value(0.1),
+      "β for rotation and translation, as arbor replay")(
+      "relinearize-skip", po::value(&settings.smoother.relinearize_skip)->default_value(10),
+      "check relinearisation every K updates, as arbor replay");
   if (!parseOptions(args, options)) return 0;
   if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
   if (slices < 1) throw po::error("--slices must be at least 1");
-  const bool per_pose = step == "pose";
+  settings.smoother.relinearize_threshold_rotation =
+      settings.smoother.relinearize_threshold_translation;
+  settings.per_pose = step == "pose";
+  const bool per_pose = settings.per_pose;
   const auto files = bench::selectDatasets(data.shared, data.only);
   std::cout << "Replay (one update per " << step
-            << ", GN, β = 0.1, skip 10) in slices of equal pose count. \"relin.\": the updates "
-               "that relinearised (every tenth, when a variable's step exceeds β), their latency "
+            << ", GN, β = " << settings.smoother.relinearize_threshold_translation << ", skip "
+            << settings.smoother.relinearize_skip
+            << ") in slices of equal pose count. \"relin.\": the updates "
+               "that relinearised (every skip-th, when a variable's step exceeds β), their latency "
                "and the mean share of the poses they relinearised; \"factorisation\": flops of "
                "one sparse Cholesky factorisation of the graph so far (best of AMD, METIS, "
                "nested dissection) and its time on one thread with each backend; the faster is "
@@ -235,10 +248,6 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
   bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
     std::visit(
         [&](const auto& g) {
-          cli::ReplaySettings settings;
-          settings.per_pose = per_pose;
-          settings.finalize = false;
-          settings.batch = false;
           const auto replay = cli::runReplay(g, settings);
           std::cout << "\n### " << d.name << d.note << " (" << g.numPoses() << " poses, "
                     << g.numEdges() << " edges, " << fmt("%.3f", replay.update_s) << " s)\n\n";
