@@ -109,6 +109,8 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
   if (from == to) return reject("self-loop on pose " + std::to_string(from));
   const std::string problem = informationProblem(omega);
   if (!problem.empty()) return reject("bad information: " + problem);
+  const std::string far = translationProblem(z);
+  if (!far.empty()) return reject("bad measurement: " + far);
 
   Measurement m{from, to, z, omega};
   std::vector<Measurement>& same_pair = seen_[{from, to}];

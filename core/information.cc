@@ -18,6 +18,12 @@ std::string informationProblem(const Eigen::MatrixXd& omega) {
     return "contains an infinite entry";
   }
   const double scale = std::max(omega.cwiseAbs().maxCoeff(), 1e-300);
+  if (scale > kMaxInformationEntry) {
+    std::ostringstream os;
+    os << "has an entry of magnitude " << scale << ", beyond the largest accepted ("
+       << kMaxInformationEntry << ": eᵀΩe would overflow)";
+    return os.str();
+  }
   const double asym = (omega - omega.transpose()).cwiseAbs().maxCoeff();
   if (asym > 1e-9 * scale) {
     std::ostringstream os;

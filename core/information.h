@@ -7,8 +7,15 @@
 
 namespace arbor {
 
-/// Why Ω cannot be used as an information matrix, or "" when it can: it must be finite,
-/// symmetric (to 1e-9 relative) and positive definite (a Cholesky factorisation exists).
+/// The largest |entry| accepted in an information matrix. Beyond it, eᵀΩe can overflow double
+/// precision within a few steps of an estimate (with translations up to kMaxTranslation,
+/// core/relative_pose_factor.h, one edge's cost stays below ~1e60). Real data is far below:
+/// the shared datasets reach 3.2e8.
+inline constexpr double kMaxInformationEntry = 1e30;
+
+/// Why Ω cannot be used as an information matrix, or "" when it can: it must be finite, no
+/// entry larger than kMaxInformationEntry in magnitude, symmetric (to 1e-9 relative) and
+/// positive definite (a Cholesky factorisation exists).
 std::string informationProblem(const Eigen::MatrixXd& omega);
 
 /// The nearest positive-definite matrix: eigenvalues clamped to at least

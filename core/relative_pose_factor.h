@@ -3,6 +3,7 @@
 // cost eᵀ Ω e. Jacobians are taken with respect to right perturbations xᵢ ⊞ τᵢ, xⱼ ⊞ τⱼ.
 #pragma once
 
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -14,6 +15,24 @@
 #include "core/se3.h"
 
 namespace arbor {
+
+/// The largest |translation component| accepted in a measurement or a pose. Beyond it,
+/// residuals weighted by Ω (entries up to kMaxInformationEntry) can overflow F = Σ eᵀΩe; an
+/// edge of 1e308 metres, finite as it is, turned a whole estimate into NaN. Real data is far
+/// below (the shared datasets reach 471 m).
+inline constexpr double kMaxTranslation = 1e15;
+
+/// Why x cannot be a measurement or a pose, or "" when it can: a translation component beyond
+/// kMaxTranslation in magnitude (finiteness is checked where values are parsed).
+template <class Group>
+std::string translationProblem(const Group& x) {
+  const double largest = x.translation().cwiseAbs().maxCoeff();
+  if (!(largest > kMaxTranslation)) return "";
+  std::ostringstream os;
+  os << "translation component of magnitude " << largest << " beyond the largest accepted ("
+     << kMaxTranslation << ")";
+  return os.str();
+}
 
 /// e(z, xᵢ, xⱼ) with optional ∂e/∂τᵢ and ∂e/∂τⱼ.
 Eigen::Vector3d relativePoseError(const SE2& z, const SE2& xi, const SE2& xj,
@@ -40,6 +59,8 @@ struct RelativePoseEdge {
   static RelativePoseEdge make(int i, int j, const Group& z, const Matrix& omega) {
     const std::string problem = informationProblem(omega);
     if (!problem.empty()) throw std::invalid_argument("information matrix " + problem);
+    const std::string far = translationProblem(z);
+    if (!far.empty()) throw std::invalid_argument("measurement " + far);
     RelativePoseEdge e;
     e.i = i;
     e.j = j;

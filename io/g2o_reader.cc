@@ -99,6 +99,14 @@ class Line {
   const std::vector<std::string_view>& fields_;
 };
 
+// x, or a failure naming the line when its translation is beyond kMaxTranslation.
+template <class G>
+G checkedTranslation(const G& x, const Line& line) {
+  const std::string problem = translationProblem(x);
+  if (!problem.empty()) line.fail(problem);
+  return x;
+}
+
 // Per-group record layout: pose values after the id, information entries after the measurement.
 template <class G>
 struct Layout;
@@ -110,8 +118,8 @@ struct Layout<SE2> {
   static constexpr const char* kVertexFields = "id x y theta";
   static constexpr const char* kEdgeFields = "i j x y theta + 6 information entries";
 
-  static SE2 pose(const double* v, const Line&, std::vector<std::string>*) {
-    return SE2(v[0], v[1], v[2]);
+  static SE2 pose(const double* v, const Line& line, std::vector<std::string>*) {
+    return checkedTranslation(SE2(v[0], v[1], v[2]), line);
   }
 };
 
@@ -134,7 +142,7 @@ struct Layout<SE3> {
       warnings->push_back(line.where() + ": quaternion norm " + formatValue(norm) +
                           " is far from 1; renormalised");
     }
-    return SE3(q, Eigen::Vector3d(v[0], v[1], v[2]));  // SE3 normalises q
+    return checkedTranslation(SE3(q, Eigen::Vector3d(v[0], v[1], v[2])), line);  // normalises q
   }
 };
 

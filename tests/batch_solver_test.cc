@@ -468,6 +468,22 @@ TEST(BlockCholesky, MatchesDenseFactorisation) {
   EXPECT_THROW(BlockCholesky<d>{on_diagonal}, std::invalid_argument);
 }
 
+TEST(RelativePoseEdge, RefusesMagnitudesThatWouldOverflowF) {
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  EXPECT_NO_THROW(RelativePoseEdge<SE2>::make(0, 1, SE2(kMaxTranslation, 0, 0), I));
+  EXPECT_NO_THROW(RelativePoseEdge<SE2>::make(0, 1, SE2(), kMaxInformationEntry * I));
+  EXPECT_THROW(RelativePoseEdge<SE2>::make(0, 1, SE2(0, -2 * kMaxTranslation, 0), I),
+               std::invalid_argument);
+  EXPECT_THROW(RelativePoseEdge<SE2>::make(0, 1, SE2(), 2 * kMaxInformationEntry * I),
+               std::invalid_argument);
+  EXPECT_EQ(translationProblem(SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 1e15))),
+            "");
+  EXPECT_EQ(translationProblem(SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 3e15))),
+            "translation component of magnitude 3e+15 beyond the largest accepted (1e+15)");
+  EXPECT_NE(informationProblem(Eigen::MatrixXd::Identity(6, 6) * 1e300).find("1e+300"),
+            std::string::npos);
+}
+
 TEST(BatchSolver, NamesRoundTripAndBadInputIsRefused) {
   for (BatchMethod m : kMethods) EXPECT_EQ(parseBatchMethod(toString(m)), m);
   EXPECT_EQ(toString(BatchMethod::kLevenbergMarquardt), "lm");

@@ -100,6 +100,24 @@ TEST(OnlineSmoother, RejectsBadEdges) {
   EXPECT_EQ(s.stats().edges_rejected, 4);
   EXPECT_EQ(s.stats().poses, 0);
   EXPECT_EQ(s.addEdge(3, 4, SE2(), kI3).status, EdgeStatus::kAccepted);
+  // Finite values so large that F would overflow are refused, and what was accepted stays.
+  const EdgeResult far = s.addEdge(4, 5, SE2(-1e308, 0, 0), kI3);
+  EXPECT_EQ(far.status, EdgeStatus::kRejected);
+  EXPECT_NE(far.reason.find("bad measurement: translation component of magnitude 1e+308"),
+            std::string::npos)
+      << far.reason;
+  const EdgeResult heavy = s.addEdge(4, 5, SE2(1, 0, 0), 1e31 * kI3);
+  EXPECT_EQ(heavy.status, EdgeStatus::kRejected);
+  EXPECT_NE(heavy.reason.find("bad information: has an entry of magnitude 1e+31"),
+            std::string::npos)
+      << heavy.reason;
+  EXPECT_EQ(s.stats().edges_rejected, 6);
+  s.update();
+  EXPECT_EQ(s.stats().poses, 2);
+  EXPECT_TRUE(s.estimate(4).translation().allFinite());
+  EXPECT_EQ(s.addEdge(4, 5, SE2(1e14, 0, 0), 1e29 * kI3).status, EdgeStatus::kAccepted);
+  s.update();
+  EXPECT_NEAR(s.estimate(5).x(), 1e14, 1.0);
 }
 
 // Exact measurements of a random 3D trajectory fed in a shuffled order (out of order, both

@@ -364,6 +364,16 @@ TEST(PoseGraphFile, MalformedLinesNameTheLineAndTheProblem) {
       {v2 + "VERTEX_SE3:QUAT 2 0 0 0 0 0 0 1\n", 3,
        "mixes 2D and 3D records: VERTEX_SE3:QUAT after VERTEX_SE2 at line 1"},
       {v3 + "EDGE2 0 1 1 0 0" + info2 + "\n", 3, "mixes 2D and 3D records: EDGE2"},
+      // Finite but so large that F = Σ eᵀΩe would overflow (an edge of 1e308 m once made a
+      // whole replay's estimate NaN).
+      {"VERTEX_SE2 0 1e16 0 0\n", 1,
+       "translation component of magnitude 1e+16 beyond the largest accepted (1e+15)"},
+      {v2 + "EDGE_SE2 0 1 -1e308 0 0" + info2 + "\n", 3,
+       "translation component of magnitude 1e+308 beyond the largest accepted"},
+      {v3 + "EDGE_SE3:QUAT 0 1 0 0 2e15 0 0 0 1" + info3 + "\n", 3,
+       "translation component of magnitude 2e+15"},
+      {v2 + "EDGE_SE2 0 1 1 0 0 1e308 0 0 1 0 1\n", 3,
+       "information matrix has an entry of magnitude 1e+308, beyond the largest accepted"},
   };
   for (const auto& c : cases) {
     const std::string message = readError(c.text);
