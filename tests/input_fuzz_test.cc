@@ -108,14 +108,16 @@ void fuzz(const std::string& file, unsigned seed, int rounds) {
   EXPECT_GT(refused, 0);
 }
 
-TEST(InputFuzz, CorruptedGridIsRefusedOrReplayedToAFiniteEstimate) { fuzz("grid_3d.g2o", 3, 60); }
-
-TEST(InputFuzz, CorruptedManhattanIsRefusedOrReplayedToAFiniteEstimate) {
-  fuzz("manhattan_2d.g2o", 3, 60);
-}
+// Seeds and rounds chosen so that each test meets at least one of the overflowing values
+// (checked by disabling kMaxTranslation and kMaxInformationEntry: each then fails).
+TEST(InputFuzz, CorruptedGridIsRefusedOrReplayedToAFiniteEstimate) { fuzz("grid_3d.g2o", 1, 40); }
 
 TEST(InputFuzz, CorruptedSphereIsRefusedOrReplayedToAFiniteEstimate) {
-  fuzz("sphere_3d.g2o", 5, 80);
+  fuzz("sphere_3d.g2o", 2, 40);
+}
+
+TEST(InputFuzz, CorruptedManhattanIsRefusedOrReplayedToAFiniteEstimate) {
+  fuzz("manhattan_2d.g2o", 9, 150);
 }
 
 }  // namespace
