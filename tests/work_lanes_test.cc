@@ -140,7 +140,7 @@ TEST(WorkLanes, ExceptionInAWalkKeptOnTheCallerLeavesSharingIntact) {
                    {1, 2, 3},
                    [&](int, int k) -> int {
                      if (k == 2) throw std::runtime_error("item 2");
-                     lanes.push(10 + k);
+                     if (k < 10) lanes.push(10 + k);  // 3 pushes 13, a leaf; then 2 throws
                      return -1;
                    },
                    /*share=*/false),
