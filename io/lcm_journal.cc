@@ -1,9 +1,12 @@
 #include "io/lcm_journal.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <stdexcept>
+#include <vector>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -18,6 +21,29 @@ std::int64_t steadyMicros() {
   return std::chrono::duration_cast<std::chrono::microseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+// The offset of the first event sync word (0xEDA1DA01, big-endian) at or after `from` and
+// before `end`, or −1.
+std::int64_t nextSyncWord(FILE* f, std::int64_t from, std::int64_t end) {
+  static constexpr unsigned char kSync[4] = {0xED, 0xA1, 0xDA, 0x01};
+  if (from >= end || std::fseek(f, from, SEEK_SET) != 0) return -1;
+  std::vector<unsigned char> buffer(1 << 16);
+  std::int64_t base = from;  // file offset of buffer[0]
+  size_t kept = 0;           // bytes carried over from the previous chunk
+  for (;;) {
+    const size_t got = std::fread(buffer.data() + kept, 1, buffer.size() - kept, f);
+    const size_t n = kept + got;
+    for (size_t k = 0; k + 4 <= n; ++k)
+      if (std::memcmp(buffer.data() + k, kSync, 4) == 0) {
+        const std::int64_t at = base + static_cast<std::int64_t>(k);
+        return at < end ? at : -1;
+      }
+    if (got == 0) return -1;
+    kept = std::min<size_t>(3, n);  // a sync word may straddle two chunks
+    std::memmove(buffer.data(), buffer.data() + n - kept, kept);
+    base += static_cast<std::int64_t>(n - kept);
+  }
 }
 
 std::string systemError(const std::string& what, const std::string& path) {
@@ -36,15 +62,33 @@ EventLogContents readEventLog(const std::string& path) {
   out.file_bytes = st.st_size;
   lcm_eventlog_t* log = lcm_eventlog_create(path.c_str(), "r");
   if (log == nullptr) throw std::runtime_error(systemError("readEventLog: cannot open", path));
-  while (lcm_eventlog_event_t* e = lcm_eventlog_read_next_event(log)) {
-    LogEvent event;
-    event.channel.assign(e->channel, static_cast<size_t>(e->channellen));
-    event.timestamp = e->timestamp;
-    const auto* bytes = static_cast<const std::uint8_t*>(e->data);
-    event.data.assign(bytes, bytes + e->datalen);
-    lcm_eventlog_free_event(e);
-    out.events.push_back(std::move(event));
-    out.valid_bytes = ftell(log->f);
+  // Where the reading stopped short of the end (damage, or a torn tail), it resumes at the next
+  // sync word; the stretch becomes `damaged` once a complete event follows it.
+  std::int64_t damage_start = -1;
+  std::int64_t resume = 0;
+  for (;;) {
+    while (lcm_eventlog_event_t* e = lcm_eventlog_read_next_event(log)) {
+      LogEvent event;
+      event.channel.assign(e->channel, static_cast<size_t>(e->channellen));
+      event.timestamp = e->timestamp;
+      const auto* bytes = static_cast<const std::uint8_t*>(e->data);
+      event.data.assign(bytes, bytes + e->datalen);
+      lcm_eventlog_free_event(e);
+      out.events.push_back(std::move(event));
+      if (damage_start >= 0) {
+        out.damaged.emplace_back(damage_start, resume);
+        damage_start = -1;
+      }
+      out.valid_bytes = ftell(log->f);
+    }
+    if (out.valid_bytes >= out.file_bytes) break;
+    if (damage_start < 0) {
+      damage_start = out.valid_bytes;
+      resume = out.valid_bytes;
+    }
+    resume = nextSyncWord(log->f, resume + 1, out.file_bytes);
+    if (resume < 0 || std::fseek(log->f, resume, SEEK_SET) != 0) break;  // a torn tail
+    std::clearerr(log->f);
   }
   lcm_eventlog_destroy(log);
   return out;

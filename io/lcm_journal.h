@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 struct _lcm_eventlog_t;
@@ -19,13 +20,19 @@ struct LogEvent {
 };
 
 struct EventLogContents {
-  std::vector<LogEvent> events;  ///< every complete event, in file order
+  std::vector<LogEvent> events;  ///< every complete event found, in file order
   std::int64_t valid_bytes = 0;  ///< file offset just after the last complete event
   std::int64_t file_bytes = 0;   ///< > valid_bytes when the tail is torn (e.g. after kill -9)
+  /// Byte ranges [first, second) that are not events but have complete events after them
+  /// (damage inside the file, not a torn tail): skipped, the reading resumed at the next
+  /// event's sync word. Empty for a sound log. They lie before valid_bytes, so a writer opened
+  /// at valid_bytes keeps them, and every event after them, in the file.
+  std::vector<std::pair<std::int64_t, std::int64_t>> damaged;
 };
 
-/// Reads an LCM event log up to its first incomplete event. A missing file is empty.
-/// Throws std::runtime_error if the file exists but cannot be read.
+/// Reads an LCM event log: every complete event, skipping damaged stretches (see
+/// EventLogContents::damaged), up to a torn tail. A missing file is empty. Throws
+/// std::runtime_error if the file exists but cannot be read.
 EventLogContents readEventLog(const std::string& path);
 
 struct EventLogWriterOptions {

@@ -265,5 +265,61 @@ TEST(LcmJournal, AppendReadAndTornTail) {
   std::remove(path.c_str());
 }
 
+// Damage inside the log (here: event 4's channel-length field overwritten, as a bad sector
+// might) must not cost the events after it: they are read, the stretch is reported, and a writer
+// opened at valid_bytes keeps them in the file.
+TEST(LcmJournal, DamageInsideTheLogSkipsOnlyTheDamagedEvent) {
+  const std::string path =
+      "/tmp/arbor_lcm_journal_damage_test_" + std::to_string(getpid()) + ".lcmlog";
+  std::remove(path.c_str());
+  std::vector<std::int64_t> starts;  // file offset of each event
+  {
+    EventLogWriter w(path, -1);
+    std::int64_t offset = 0;
+    for (int k = 0; k < 10; ++k) {
+      const std::string payload(16 + k, static_cast<char>('a' + k));
+      starts.push_back(offset);
+      w.append("CH" + std::to_string(k), 2000 + k, payload.data(),
+               static_cast<int>(payload.size()));
+      offset += 4 + 8 + 8 + 4 + 4 + 3 + static_cast<std::int64_t>(payload.size());  // header
+    }
+  }
+  {
+    std::fstream f(path, std::ios::binary | std::ios::in | std::ios::out);
+    f.seekp(starts[4] + 20);  // after sync word, event number and timestamp
+    const char garbage[4] = {'\x7f', '\x7f', '\x7f', '\x7f'};
+    f.write(garbage, sizeof garbage);
+  }
+  EventLogContents c = readEventLog(path);
+  ASSERT_EQ(c.events.size(), 9u);
+  EXPECT_EQ(c.events[3].channel, "CH3");
+  EXPECT_EQ(c.events[4].channel, "CH5");
+  EXPECT_EQ(c.events[8].channel, "CH9");
+  ASSERT_EQ(c.damaged.size(), 1u);
+  EXPECT_EQ(c.damaged[0].first, starts[4]);
+  EXPECT_EQ(c.damaged[0].second, starts[5]);
+  EXPECT_EQ(c.valid_bytes, c.file_bytes);
+  {
+    EventLogWriter w(path, c.valid_bytes);
+    w.append("AFTER", 9, "xyz", 3);
+    w.sync();
+  }
+  c = readEventLog(path);
+  ASSERT_EQ(c.events.size(), 10u);
+  EXPECT_EQ(c.events[8].channel, "CH9");
+  EXPECT_EQ(c.events[9].channel, "AFTER");
+  // Damage and then a torn tail: the events between are kept, the tail is not "damage".
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::app);
+    const char half[] = {'\xED', '\xA1', '\xDA', '\x01', 0, 0};
+    out.write(half, sizeof half);
+  }
+  c = readEventLog(path);
+  EXPECT_EQ(c.events.size(), 10u);
+  EXPECT_EQ(c.damaged.size(), 1u);
+  EXPECT_EQ(c.file_bytes - c.valid_bytes, 6);
+  std::remove(path.c_str());
+}
+
 }  // namespace
 }  // namespace arbor

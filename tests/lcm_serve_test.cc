@@ -6,6 +6,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
@@ -18,6 +19,7 @@
 #include <unistd.h>
 
 #include "bayestree/online_smoother.h"
+#include "io/lcm_journal.h"
 #include "io/lcm_messages.h"
 #include "io/pose_graph_file.h"
 #include "tests/lcm_test_support.h"
@@ -454,6 +456,57 @@ TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
   EXPECT_EQ(s.final_estimate.num_poses, graph.numPoses());
   const OnlineSmoother2 replay = finalizedReplay(graph, order);
   EXPECT_NEAR(s.F_final, replay.smoother().objective(), 1e-9 * replay.smoother().objective());
+  std::remove(journal.c_str());
+}
+
+// A journal damaged in the middle (one edge event's header overwritten) loses that edge only:
+// the restart replays every journaled edge after it.
+TEST(LcmServe, JournalDamagedInTheMiddleLosesOnlyTheDamagedEdge) {
+  const PoseGraph2 graph = smallGraph();
+  const std::vector<int> order = replayOrder(graph);
+  const size_t sent = order.size() / 2;
+  const std::string journal = tempJournal("damaged.lcmlog");
+  {
+    lcm::LCM lcm("memq://");
+    ServeOptions options;
+    options.refine_on_exit = false;
+    options.journal_path = journal;
+    Service service(lcm, options);
+    Collector collector(lcm, service.channels());
+    service.start();
+    for (size_t k = 0; k < sent; ++k) {
+      const auto b = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
+      lcm.publish(service.channels().edges, b.data(), static_cast<unsigned>(b.size()));
+    }
+    ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(sent)));
+    service.stop();
+    EXPECT_EQ(service.summary().applied, static_cast<std::int64_t>(sent));
+  }
+  // Events are written back to back: find the offset of an edge event in the middle.
+  const EventLogContents log = readEventLog(journal);
+  std::int64_t offset = 0, target = -1;
+  int edges_seen = 0;
+  for (const LogEvent& e : log.events) {
+    const bool is_edge = e.channel == Channels::withPrefix("").edges;
+    if (is_edge && ++edges_seen == static_cast<int>(sent / 2)) target = offset;
+    offset += 4 + 8 + 8 + 4 + 4 + static_cast<std::int64_t>(e.channel.size() + e.data.size());
+  }
+  ASSERT_GE(target, 0);
+  ASSERT_EQ(offset, log.file_bytes);
+  {
+    std::fstream f(journal, std::ios::binary | std::ios::in | std::ios::out);
+    f.seekp(target + 20);  // the channel length
+    const char garbage[4] = {'\x7f', '\x7f', '\x7f', '\x7f'};
+    f.write(garbage, sizeof garbage);
+  }
+  lcm::LCM lcm("memq://");
+  ServeOptions options;
+  options.refine_on_exit = false;
+  options.journal_path = journal;
+  Service service(lcm, options);
+  service.start();
+  service.stop();
+  EXPECT_EQ(service.summary().journal_edges, static_cast<std::int64_t>(sent) - 1);
   std::remove(journal.c_str());
 }
 

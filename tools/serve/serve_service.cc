@@ -574,6 +574,12 @@ void Service::publishStatus() {
 
 void Service::replayJournal() {
   const EventLogContents log = readEventLog(options_.journal_path);
+  for (const auto& [first, end] : log.damaged) {
+    logLine("journal " + options_.journal_path + ": bytes " + std::to_string(first) + " to " +
+            std::to_string(end) +
+            " are not events (damaged); skipped, the events after them are replayed and the "
+            "bytes stay in the file");
+  }
   if (log.valid_bytes < log.file_bytes) {
     logLine("journal " + options_.journal_path + ": dropping " +
             std::to_string(log.file_bytes - log.valid_bytes) +
