@@ -27,6 +27,7 @@
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
 #include "tools/bench/ceres_pose_graph.h"
+#include "tools/bench/format.h"
 #include "tools/bench/growth.h"
 #include "tools/bench/paper_runner.h"
 #include "tools/bench/shared_data.h"
@@ -38,11 +39,7 @@ namespace {
 namespace po = boost::program_options;
 using namespace arbor;
 
-std::string fmt(const char* f, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
+using bench::fmt;
 
 struct Row {
   double time = 1e300;
@@ -138,6 +135,12 @@ bool parseOptions(const std::vector<std::string>& args, const po::options_descri
   return true;
 }
 
+// --step edge|pose: whether each update takes a pose with all its edges.
+bool perPose(const std::string& step) {
+  if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
+  return step == "pose";
+}
+
 int replay(const std::vector<std::string>& args, const std::string& default_shared) {
   DatasetOptions data;
   std::string csv_dir, step;
@@ -149,8 +152,7 @@ int replay(const std::vector<std::string>& args, const std::string& default_shar
       "edge: an update per edge (against GTSAM's isam2_edge rows); pose: per new pose with its "
       "edges (against isam2_pose)");
   if (!parseOptions(args, options)) return 0;
-  if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
-  const bool per_pose = step == "pose";
+  const bool per_pose = perPose(step);
   const auto files = bench::selectDatasets(data.shared, data.only);
   const auto refs = bench::readOptimumTable(data.shared);
   const auto anchors = bench::readAnchorTable(data.shared);
@@ -228,11 +230,10 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
       "relinearize-skip", po::value(&settings.smoother.relinearize_skip)->default_value(10),
       "check relinearisation every K updates, as arbor replay");
   if (!parseOptions(args, options)) return 0;
-  if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
   if (slices < 1) throw po::error("--slices must be at least 1");
   settings.smoother.relinearize_threshold_rotation =
       settings.smoother.relinearize_threshold_translation;
-  settings.per_pose = step == "pose";
+  settings.per_pose = perPose(step);
   const bool per_pose = settings.per_pose;
   const auto files = bench::selectDatasets(data.shared, data.only);
   std::cout << "Replay (one update per " << step

@@ -1,10 +1,10 @@
 #include "tools/bench/growth.h"
 
 #include <algorithm>
-#include <cstdio>
 #include <stdexcept>
 
 #include "core/normal_equations.h"
+#include "tools/bench/format.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/latency.h"
 #include "tools/cli/replay_order.h"
@@ -46,12 +46,6 @@ void measureFactorization(const PoseGraph<G>& graph, GrowthSlice* slice) {
 }
 
 double median(std::vector<double> v) { return cli::summarizeLatency(std::move(v)).p50; }
-
-std::string fmt(const char* f, double x) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, x);
-  return buf;
-}
 
 }  // namespace
 

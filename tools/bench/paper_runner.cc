@@ -14,17 +14,12 @@
 #include "core/batch_solver.h"
 #include "core/initialization.h"
 #include "core/riemannian_staircase.h"
+#include "tools/bench/format.h"
 
 namespace arbor::bench {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string fmt(const char* f, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
 
 std::string termination(Termination t) {
   return t == Termination::kDiverged ? "failed" : toString(t);
