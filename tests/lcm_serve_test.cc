@@ -56,6 +56,16 @@ std::string tempJournal(const std::string& name) {
   return testing::tempPath("arbor_lcm_serve", name);
 }
 
+// Publishes edge order[k] of `graph` to the service, as the k-th of the stream (seq k + 1);
+// returns the bytes sent.
+std::vector<std::uint8_t> publishInOrder(lcm::LCM& lcm, const Service& service,
+                                         const PoseGraph2& graph, const std::vector<int>& order,
+                                         size_t k) {
+  const auto bytes = edgeBytes(graph, order[k], static_cast<std::int64_t>(k) + 1);
+  lcm.publish(service.channels().edges, bytes.data(), static_cast<unsigned>(bytes.size()));
+  return bytes;
+}
+
 TEST(EdgeIntake, SeqGapsDuplicatesReuseDimAndRevoke) {
   const PoseGraph2 graph = smallGraph();
   EdgeIntake intake;
@@ -166,8 +176,7 @@ TEST(LcmServe, LockstepStreamEqualsReplayFeeding) {
   // One edge at a time, each waited for: one update per edge, as `arbor replay --step edge`.
   OnlineSmoother2 reference;
   for (size_t k = 0; k < order.size(); ++k) {
-    const auto bytes = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-    lcm.publish(service.channels().edges, bytes.data(), static_cast<unsigned>(bytes.size()));
+    const auto bytes = publishInOrder(lcm, service, graph, order, k);
     ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(k) + 1)) << "edge " << k;
     // The reference gets exactly what went over the wire.
     const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
@@ -203,8 +212,7 @@ TEST(LcmServe, BurstIsFullyAppliedInFewerUpdatesAndMatchesReplay) {
   Collector collector(lcm, service.channels());
   service.start();
   for (size_t k = 0; k < order.size(); ++k) {
-    const auto bytes = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-    lcm.publish(service.channels().edges, bytes.data(), static_cast<unsigned>(bytes.size()));
+    publishInOrder(lcm, service, graph, order, k);
   }
   ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(order.size())));
   service.stop();
@@ -335,17 +343,12 @@ TEST(LcmServe, GapsAreReportedAndFilledByLateEdges) {
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();
-  auto send = [&](size_t k) {
-    const auto b = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-    lcm.publish(service.channels().edges, b.data(), static_cast<unsigned>(b.size()));
-  };
-  for (size_t k = 0; k < 10; ++k) send(k);
-  for (size_t k = 13; k < 20; ++k) send(k);  // seq 11..13 missing
+  for (size_t k = 0; k < 10; ++k) publishInOrder(lcm, service, graph, order, k);
+  // seq 11..13 missing
+  for (size_t k = 13; k < 20; ++k) publishInOrder(lcm, service, graph, order, k);
   ASSERT_TRUE(collector.waitCovered(20));
   EXPECT_EQ(service.status().gaps, 3);
-  send(10);
-  send(11);
-  send(12);
+  for (size_t k = 10; k < 13; ++k) publishInOrder(lcm, service, graph, order, k);
   command_t c;
   c.command = command_t::STATUS;
   const auto cb = encodeMessage(c);
@@ -367,8 +370,7 @@ TEST(LcmServe, CommandsRefinePublishAndSnapshot) {
   Collector collector(lcm, service.channels());
   service.start();
   for (size_t k = 0; k < order.size(); ++k) {
-    const auto b = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-    lcm.publish(service.channels().edges, b.data(), static_cast<unsigned>(b.size()));
+    publishInOrder(lcm, service, graph, order, k);
   }
   ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(order.size())));
   const std::string snapshot = tempJournal("snapshot.g2o");
@@ -413,8 +415,7 @@ TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
     Collector collector(lcm, service.channels());
     service.start();
     for (size_t k = 0; k < half; ++k) {
-      const auto b = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-      lcm.publish(service.channels().edges, b.data(), static_cast<unsigned>(b.size()));
+      publishInOrder(lcm, service, graph, order, k);
       if (k % 7 == 0) collector.waitCovered(static_cast<std::int64_t>(k) + 1);  // mixed grouping
     }
     ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(half)));
@@ -444,8 +445,7 @@ TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
   EXPECT_EQ(full.back().rotation, before.rotation);
   EXPECT_EQ(full.back().last_seq, static_cast<std::int64_t>(half));
   for (size_t k = half; k < order.size(); ++k) {
-    const auto b = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-    lcm.publish(service.channels().edges, b.data(), static_cast<unsigned>(b.size()));
+    publishInOrder(lcm, service, graph, order, k);
   }
   ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(order.size())));
   service.stop();
@@ -475,8 +475,7 @@ TEST(LcmServe, JournalDamagedInTheMiddleLosesOnlyTheDamagedEdge) {
     Collector collector(lcm, service.channels());
     service.start();
     for (size_t k = 0; k < sent; ++k) {
-      const auto b = edgeBytes(streamEdge(graph, order[k], static_cast<std::int64_t>(k) + 1));
-      lcm.publish(service.channels().edges, b.data(), static_cast<unsigned>(b.size()));
+      publishInOrder(lcm, service, graph, order, k);
     }
     ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(sent)));
     service.stop();
