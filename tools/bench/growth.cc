@@ -45,8 +45,6 @@ void measureFactorization(const PoseGraph<G>& graph, GrowthSlice* slice) {
   slice->factorization_ms = std::min(slice->block_ms, slice->cholmod_ms);
 }
 
-double median(std::vector<double> v) { return cli::summarizeLatency(std::move(v)).p50; }
-
 }  // namespace
 
 template <class G>
@@ -84,8 +82,9 @@ std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::Repl
     slice.poses = known;
     slice.relin_updates = static_cast<int>(relin_ms.size());
     if (!relin_ms.empty()) {
-      slice.relin_p50_ms = median(relin_ms);
-      slice.relin_max_ms = *std::max_element(relin_ms.begin(), relin_ms.end());
+      const cli::LatencySummary l = cli::summarizeLatency(relin_ms);
+      slice.relin_p50_ms = l.p50;
+      slice.relin_max_ms = l.max;
       slice.relin_share = share / static_cast<double>(relin_ms.size());
     }
     slice.other_updates = static_cast<int>(other_ms.size());
