@@ -1,11 +1,15 @@
-// A pose graph: poses (indexed densely 0..n−1, each with its external id) and relative-pose
-// edges between them. The first pose (or the poses marked fixed) fixes the gauge.
+// A pose graph: poses (indexed densely 0..n−1, each with its external id), relative-pose edges
+// between them and priors on single poses (core/prior_factors.h). The gauge: the poses marked
+// fixed; when none are, the priors anchor the graph, and a graph without priors is anchored at
+// its first pose (core/gauge.h gives every connected component its anchor).
 #pragma once
 
 #include <cstdint>
 #include <unordered_map>
 #include <vector>
 
+#include "core/gauge.h"
+#include "core/prior_factors.h"
 #include "core/relative_pose_factor.h"
 
 namespace arbor {
@@ -17,31 +21,39 @@ struct PoseGraph {
   using GroupType = Group;
   using Edge = RelativePoseEdge<Group>;
 
-  std::vector<Key> ids;                ///< dense index → external id, ascending
-  std::unordered_map<Key, int> index;  ///< external id → dense index
-  std::vector<Group> poses;            ///< the estimate (or initial guess), one per id
-  std::vector<Edge> edges;             ///< in file order
-  std::vector<int> fixed;              ///< dense indices held fixed (empty: the first pose)
-  bool has_initial_estimate = false;   ///< poses came from the file's VERTEX lines
+  std::vector<Key> ids;                             ///< dense index → external id, ascending
+  std::unordered_map<Key, int> index;               ///< external id → dense index
+  std::vector<Group> poses;                         ///< the estimate (or initial guess), one per id
+  std::vector<Edge> edges;                          ///< in file order
+  std::vector<PosePriorFactor<Group>> pose_priors;  ///< in file order
+  std::vector<PositionPriorFactor<Group>> position_priors;  ///< in file order
+  std::vector<int> fixed;             ///< dense indices held fixed (empty: the first pose)
+  bool has_initial_estimate = false;  ///< poses came from the file's VERTEX lines
 
   int numPoses() const { return static_cast<int>(ids.size()); }
   int numEdges() const { return static_cast<int>(edges.size()); }
+  int numPriors() const { return static_cast<int>(pose_priors.size() + position_priors.size()); }
+  bool hasPriors() const { return numPriors() > 0; }
 
-  /// The dense indices that fix the gauge: `fixed`, or the first pose when it is empty.
+  /// The dense indices held fixed by the batch solvers: `fixed` when it is not empty, else the
+  /// first pose of every connected component that its priors do not anchor (core/gauge.h): the
+  /// first pose of a graph without priors; none when the priors anchor everything. O(n + m).
   std::vector<int> gaugeIndices() const {
     if (!fixed.empty() || ids.empty()) return fixed;
-    return {0};
+    return anchorPoses<Group>(numPoses(), edges, pose_priors, position_priors);
   }
 };
 
 using PoseGraph2 = PoseGraph<SE2>;
 using PoseGraph3 = PoseGraph<SE3>;
 
-/// Σ eᵢⱼᵀ Ωᵢⱼ eᵢⱼ over the edges at `poses` (the objective F reported everywhere).
+/// Σ eᵀΩe over the edges and priors at `poses` (the objective F reported everywhere).
 template <class Group>
 double objective(const PoseGraph<Group>& graph, const std::vector<Group>& poses) {
   double f = 0.0;
   for (const auto& e : graph.edges) f += e.cost(poses[e.i], poses[e.j]);
+  for (const auto& p : graph.pose_priors) f += p.cost(poses[p.i]);
+  for (const auto& p : graph.position_priors) f += p.cost(poses[p.i]);
   return f;
 }
 

@@ -1,0 +1,48 @@
+#include "core/factor.h"
+
+#include <cmath>
+
+namespace arbor {
+namespace {
+
+bool finitePose(const SE2& x) {
+  return std::isfinite(x.x()) && std::isfinite(x.y()) && std::isfinite(x.cos()) &&
+         std::isfinite(x.sin());
+}
+bool finitePose(const SE3& x) {
+  return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
+}
+
+}  // namespace
+
+const char* toString(FactorKind kind) {
+  switch (kind) {
+    case FactorKind::kRelativePose:
+      return "relative_pose";
+    case FactorKind::kPosePrior:
+      return "pose_prior";
+    case FactorKind::kPositionPrior:
+      return "position_prior";
+  }
+  return "unknown";
+}
+
+template <class G>
+bool Factor<G>::isFinite() const {
+  return std::visit(
+      [](const auto& f) {
+        using F = std::decay_t<decltype(f)>;
+        bool ok = f.information.allFinite() && f.sqrt_information_t.allFinite();
+        if constexpr (std::is_same_v<F, PositionPriorFactor<G>>)
+          ok = ok && f.position.allFinite();
+        else
+          ok = ok && finitePose(f.measurement);
+        return ok;
+      },
+      f_);
+}
+
+template class Factor<SE2>;
+template class Factor<SE3>;
+
+}  // namespace arbor

@@ -1,0 +1,122 @@
+// One factor of the smoother's objective: a relative pose (binary), a pose prior or a position
+// prior (unary), as a value type with static dispatch (std::variant) so that the dense kernels
+// stay inlined. Every factor linearises into whitened blocks of one common shape,
+//
+//   ‖Σ_k A_k τ_{key k} + r‖²,   A_k: kDoF×kDoF,  r: kDoF,
+//
+// where a factor whose residual has fewer than kDoF entries (the position prior: kDim) fills the
+// remaining rows with zeros; zero rows change neither AᵀA nor Aᵀr, so the Bayes tree can treat
+// every factor alike (docs/design.md, "Factors"; how to add one: "Adding a factor").
+#pragma once
+
+#include <array>
+#include <type_traits>
+#include <variant>
+
+#include <Eigen/Core>
+
+#include "core/prior_factors.h"
+#include "core/relative_pose_factor.h"
+
+namespace arbor {
+
+enum class FactorKind { kRelativePose, kPosePrior, kPositionPrior };
+
+const char* toString(FactorKind kind);  ///< "relative_pose", "pose_prior", "position_prior"
+
+template <class G>
+class Factor {
+ public:
+  static constexpr int kDoF = G::kDoF;
+  static constexpr int kMaxKeys = 2;
+  using Block = Eigen::Matrix<double, kDoF, kDoF>;
+  using Vector = Eigen::Matrix<double, kDoF, 1>;
+  using Variant = std::variant<RelativePoseEdge<G>, PosePriorFactor<G>, PositionPriorFactor<G>>;
+
+  /// The whitened linearisation ‖Σ_k A[k] τ_k + r‖² over the factor's keys (arity() of them).
+  struct Linearization {
+    std::array<Block, kMaxKeys> A;
+    Vector r;
+  };
+
+  Factor() = default;
+  Factor(const RelativePoseEdge<G>& f) : f_(f) {}     // NOLINT: implicit on purpose
+  Factor(const PosePriorFactor<G>& f) : f_(f) {}      // NOLINT
+  Factor(const PositionPriorFactor<G>& f) : f_(f) {}  // NOLINT
+
+  FactorKind kind() const { return static_cast<FactorKind>(f_.index()); }
+  int arity() const { return kind() == FactorKind::kRelativePose ? 2 : 1; }
+  /// The k-th key (dense pose index): i then j for a relative pose.
+  int key(int k) const {
+    if (const auto* e = std::get_if<RelativePoseEdge<G>>(&f_)) return k == 0 ? e->i : e->j;
+    return std::visit([](const auto& f) { return f.i; }, f_);
+  }
+  /// Renumbers the keys (k-th key → keys[k]).
+  void setKeys(int k0, int k1 = -1) {
+    if (auto* e = std::get_if<RelativePoseEdge<G>>(&f_)) {
+      e->i = k0;
+      e->j = k1;
+      return;
+    }
+    std::visit([&](auto& f) { f.i = k0; }, f_);
+  }
+  bool involves(int v) const { return key(0) == v || (arity() > 1 && key(1) == v); }
+
+  const Variant& variant() const { return f_; }
+  const RelativePoseEdge<G>* relativePose() const { return std::get_if<RelativePoseEdge<G>>(&f_); }
+  const PosePriorFactor<G>* posePrior() const { return std::get_if<PosePriorFactor<G>>(&f_); }
+  const PositionPriorFactor<G>* positionPrior() const {
+    return std::get_if<PositionPriorFactor<G>>(&f_);
+  }
+
+  /// eᵀΩe at the poses x (indexed by key).
+  template <class Poses>
+  double cost(const Poses& x) const {
+    return std::visit(
+        [&](const auto& f) {
+          if constexpr (std::is_same_v<std::decay_t<decltype(f)>, RelativePoseEdge<G>>)
+            return f.cost(x[f.i], x[f.j]);
+          else
+            return f.cost(x[f.i]);
+        },
+        f_);
+  }
+
+  /// The whitened linearisation at the poses x (indexed by key).
+  template <class Poses>
+  void linearize(const Poses& x, Linearization* out) const {
+    std::visit(
+        [&](const auto& f) {
+          using F = std::decay_t<decltype(f)>;
+          if constexpr (std::is_same_v<F, RelativePoseEdge<G>>) {
+            f.linearize(x[f.i], x[f.j], &out->A[0], &out->A[1], &out->r);
+          } else if constexpr (F::kRows == kDoF) {
+            f.linearize(x[f.i], &out->A[0], &out->r);
+          } else {  // fewer residual rows: zero-padded
+            typename F::Jacobian A;
+            typename F::Vector r;
+            f.linearize(x[f.i], &A, &r);
+            out->A[0].setZero();
+            out->A[0].template topRows<F::kRows>() = A;
+            out->r.setZero();
+            out->r.template head<F::kRows>() = r;
+          }
+        },
+        f_);
+  }
+
+  /// Whether the measurement and information are finite and Ω's square root is (a factor built
+  /// by make() always is; one assembled by hand may not be).
+  bool isFinite() const;
+
+ private:
+  Variant f_;
+};
+
+extern template class Factor<SE2>;
+extern template class Factor<SE3>;
+
+using Factor2 = Factor<SE2>;
+using Factor3 = Factor<SE3>;
+
+}  // namespace arbor
