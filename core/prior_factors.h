@@ -1,13 +1,15 @@
 // Unary factors on one pose, in the world frame (docs/design.md, "Factors"):
 //
-//   pose prior      δ = z⁻¹ x,  e = [t(δ); wrap θ(δ)] (2D), [t(δ); 2·vec q(δ)] (3D), cost eᵀΩe
-//                   (the relative-pose error of core/relative_pose_factor.h with xᵢ = I: g2o's
-//                   EDGE_SE2_PRIOR / EDGE_SE3_PRIOR, GTSAM's PriorFactor<Pose>);
+//   pose prior      δ = z⁻¹ x o,  e = [t(δ); wrap θ(δ)] (2D), [t(δ); 2·vec q(δ)] (3D), cost eᵀΩe,
+//                   with a sensor offset o (identity unless given: g2o's PARAMS_SE3OFFSET) —
+//                   the relative-pose error of core/relative_pose_factor.h with xᵢ = I and
+//                   xⱼ = x o (g2o's EDGE_SE2_PRIOR / EDGE_SE3_PRIOR, GTSAM's PriorFactor<Pose>);
 //   position prior  e = t(x) − p (kDim entries: a GPS fix in a local frame), cost eᵀΩe with Ω
 //                   kDim×kDim (GTSAM's GPSFactor, g2o's EDGE_SE2_XYPRIOR / EDGE_SE3_XYZPRIOR).
 //
 // Jacobians are taken with respect to the right perturbation x ⊞ τ = x·(Exp(ω), v), so
-// t(x ⊞ τ) = t + R v and ∂e/∂τ = [R 0] for the position prior.
+// t(x ⊞ τ) = t + R v and ∂e/∂τ = [R 0] for the position prior; for the pose prior
+// x Exp(τ) o = x o Exp(Ad(o⁻¹) τ), so ∂e/∂τ = ∂e/∂τⱼ(x o) · Ad(o⁻¹).
 #pragma once
 
 #include <stdexcept>
@@ -34,9 +36,12 @@ struct PosePriorFactor {
   Group measurement;
   Matrix information = Matrix::Identity();
   Matrix sqrt_information_t = Matrix::Identity();  ///< Lᵀ with Ω = L Lᵀ
+  Group offset;                                    ///< o: the prior is on x o
+  bool has_offset = false;                         ///< o ≠ I (skips two products when false)
 
   /// Validates Ω and z (throws std::invalid_argument naming the problem) and factors Ω.
-  static PosePriorFactor make(int i, const Group& z, const Matrix& omega) {
+  static PosePriorFactor make(int i, const Group& z, const Matrix& omega,
+                              const Group& offset = Group::Identity()) {
     const std::string problem = informationProblem(omega);
     if (!problem.empty()) throw std::invalid_argument("information matrix " + problem);
     const std::string far = translationProblem(z);
@@ -46,12 +51,18 @@ struct PosePriorFactor {
     f.measurement = z;
     f.information = 0.5 * (omega + omega.transpose());
     f.sqrt_information_t = Eigen::LLT<Matrix>(f.information).matrixU();
+    f.offset = offset;
+    f.has_offset = offset.localCoordinates(Group::Identity()).cwiseAbs().maxCoeff() > 0;
     return f;
   }
 
   /// e(x) with optional ∂e/∂τ.
   Vector error(const Group& x, Jacobian* J = nullptr) const {
-    return relativePoseError(measurement, Group::Identity(), x, nullptr, J);
+    if (!has_offset) return relativePoseError(measurement, Group::Identity(), x, nullptr, J);
+    const Vector e =
+        relativePoseError(measurement, Group::Identity(), x.compose(offset), nullptr, J);
+    if (J) *J = *J * offset.inverse().Adj();
+    return e;
   }
   double cost(const Group& x) const {
     const Vector e = error(x);
