@@ -1,6 +1,7 @@
 #include "bayestree/incremental_smoother.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <variant>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -64,10 +66,16 @@ struct IncrementalSmoother<G>::Impl {
   using Mat = Eigen::Matrix<double, D, D>;
   using Vec = Tangent;
 
-  // One whitened factor ‖A_i τ_i + A_j τ_j + r‖² in Hessian form: τᵀHτ − 2gᵀτ + rᵀr, g = −Aᵀr.
+  // One whitened factor ‖Σ_k A_k τ_k + r‖² over its keys in Hessian form: τᵀHτ − 2gᵀτ + rᵀr,
+  // H_kl = A_kᵀA_l, g_k = −A_kᵀr; H is kept as its lower triangle of blocks, H(k, l) for k ≥ l
+  // at block(k, l).
+  static constexpr int kMaxKeys = Factor<G>::kMaxKeys;
   struct LinearFactor {
-    Mat Hii = Mat::Zero(), Hij = Mat::Zero(), Hjj = Mat::Zero();
-    Vec gi = Vec::Zero(), gj = Vec::Zero();
+    std::array<Mat, kMaxKeys*(kMaxKeys + 1) / 2> H;
+    std::array<Vec, kMaxKeys> g;
+    static int block(int k, int l) { return k * (k + 1) / 2 + l; }
+    // H(k, l) for any k, l.
+    Mat at(int k, int l) const { return k >= l ? H[block(k, l)] : H[block(l, k)].transpose(); }
   };
   using Clique = bayestree::Clique<D>;
 
@@ -79,10 +87,12 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<Vec> delta_seen;    // Δ_newton as last propagated to the cliques below (Alg. 3)
   std::vector<int> clique_of;     // pose → clique where it is frontal (−1: fixed / new)
   std::vector<std::vector<int>> var_factors;
-  std::vector<Edge> edges;
+  std::vector<Factor<G>> edges;  // every factor added by update(), in order
   std::vector<LinearFactor> lin;
   std::vector<int> factor_stamp;
-  std::vector<Edge> queued;
+  std::vector<Factor<G>> queued;
+  std::vector<int> to_touch;        // variables whose cliques the next update re-eliminates
+  std::vector<int> to_relinearize;  // factors the next update relinearises (transformPoses)
   std::vector<int> new_vars;
   std::vector<Clique> cliques;
   std::vector<int> free_cliques;
@@ -160,6 +170,41 @@ struct IncrementalSmoother<G>::Impl {
 
   int numPoses() const { return static_cast<int>(theta.size()); }
 
+  void releaseFixedPose(int v) {
+    if (v < 0 || v >= numPoses() || !fixed[v])
+      throw std::invalid_argument("IncrementalSmoother::releaseFixedPose: " + std::to_string(v) +
+                                  " is not a fixed pose");
+    fixed[v] = 0;
+    new_vars.push_back(v);
+    // Its factors were unary terms on their other keys, assembled in those keys' cliques: these
+    // are re-eliminated with v as a variable.
+    for (int f : var_factors[v])
+      for (int k = 0; k < edges[f].arity(); ++k)
+        if (edges[f].key(k) != v && !fixed[edges[f].key(k)]) to_touch.push_back(edges[f].key(k));
+  }
+
+  void transformPoses(const std::vector<int>& poses, const G& T) {
+    if (!isFinitePose(T))
+      throw std::invalid_argument("IncrementalSmoother::transformPoses: transform not finite");
+    for (int v : poses)
+      if (v < 0 || v >= numPoses())
+        throw std::invalid_argument("IncrementalSmoother::transformPoses: index " +
+                                    std::to_string(v) + " out of range");
+    for (int v : poses) mark[v] = 1;
+    for (int v : poses) {
+      theta[v] = T.compose(theta[v]);
+      theta[v].normalize();
+      for (int f : var_factors[v]) {
+        const Factor<G>& e = edges[f];
+        if (e.kind() == FactorKind::kRelativePose && mark[e.key(0)] && mark[e.key(1)]) continue;
+        to_relinearize.push_back(f);  // not invariant: relinearised at the moved θ
+        for (int k = 0; k < e.arity(); ++k)
+          if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
+      }
+    }
+    for (int v : poses) mark[v] = 0;
+  }
+
   TreeMemory memory() const {
     TreeMemory m;
     double sep_sum = 0;
@@ -202,32 +247,44 @@ struct IncrementalSmoother<G>::Impl {
     return index;
   }
 
-  void addFactor(const Edge& e) {
-    const std::string where = "IncrementalSmoother::addFactor(" + std::to_string(e.i) + ", " +
-                              std::to_string(e.j) + "): ";
-    if (e.i < 0 || e.i >= numPoses() || e.j < 0 || e.j >= numPoses())
-      throw std::invalid_argument(where + "pose index out of range (" + std::to_string(numPoses()) +
-                                  " poses)");
-    if (e.i == e.j) throw std::invalid_argument(where + "self-loop");
-    if (!isFinitePose(e.measurement)) throw std::invalid_argument(where + "measurement not finite");
-    const std::string problem = informationProblem(e.information);
+  void addFactor(const Factor<G>& f) {
+    std::string where = std::string("IncrementalSmoother::addFactor(") + toString(f.kind());
+    for (int k = 0; k < f.arity(); ++k) where += (k ? ", " : " ") + std::to_string(f.key(k));
+    where += "): ";
+    for (int k = 0; k < f.arity(); ++k)
+      if (f.key(k) < 0 || f.key(k) >= numPoses())
+        throw std::invalid_argument(where + "pose index out of range (" +
+                                    std::to_string(numPoses()) + " poses)");
+    if (f.arity() == 2 && f.key(0) == f.key(1)) throw std::invalid_argument(where + "self-loop");
+    if (!f.isFinite()) throw std::invalid_argument(where + "measurement or information not finite");
+    const std::string problem =
+        std::visit([](const auto& x) { return informationProblem(x.information); }, f.variant());
     if (!problem.empty()) throw std::invalid_argument(where + "information matrix " + problem);
-    if (!e.sqrt_information_t.allFinite())
-      throw std::invalid_argument(where + "square-root information not finite");
-    queued.push_back(e);
+    queued.push_back(f);
   }
 
   void linearize(int f) {
-    const Edge& e = edges[f];
-    Mat Ai, Aj;
-    Vec r;
-    e.linearize(theta[e.i], theta[e.j], &Ai, &Aj, &r);
+    typename Factor<G>::Linearization A;
+    edges[f].linearize(theta, &A);
     LinearFactor& L = lin[f];
-    L.Hii.noalias() = Ai.transpose() * Ai;
-    L.Hij.noalias() = Ai.transpose() * Aj;
-    L.Hjj.noalias() = Aj.transpose() * Aj;
-    L.gi.noalias() = -Ai.transpose() * r;
-    L.gj.noalias() = -Aj.transpose() * r;
+    const int n = edges[f].arity();
+    for (int k = 0; k < n; ++k) {
+      for (int l = 0; l <= k; ++l) L.H[L.block(k, l)].noalias() = A.A[k].transpose() * A.A[l];
+      L.g[k].noalias() = -A.A[k].transpose() * A.r;
+    }
+  }
+
+  // Whether factor f is assembled into the clique whose slots are `slot` at its frontal v (at
+  // slot a): every non-fixed key of f lies in the clique, and v is the first of them (the
+  // others were not eliminated before v). The one rule of where a factor's terms enter the tree.
+  bool assembledAt(const Factor<G>& f, int v, const std::vector<int>& slot) const {
+    const int a = slot[v];
+    for (int k = 0; k < f.arity(); ++k) {
+      const int o = f.key(k);
+      if (o == v || fixed[o]) continue;
+      if (slot[o] <= a) return false;  // below (in a child's cached factor), or added from o
+    }
+    return true;
   }
 
   // linearize(f) for every f of `factors`, in chunks shared among the threads when many, side
@@ -320,29 +377,25 @@ struct IncrementalSmoother<G>::Impl {
     for (int j = 0; j < lda; ++j)  // only the lower triangle is used
       std::fill(h_buf.data() + static_cast<size_t>(j) * lda + j, h_buf.data() + (j + 1) * lda, 0.0);
     Eigen::Map<Eigen::MatrixXd> H(h_buf.data(), N + 1, N + 1);
-    // The factors whose first eliminated variable is a frontal of this clique.
+    // The factors whose first eliminated variable is a frontal of this clique: H(p, q) and g_p
+    // for every pair of their non-fixed keys (a fixed key is a constant).
     for (int a = 0; a < nf; ++a) {
       const int v = c.frontals[a];
       for (int f : var_factors[v]) {
-        const Edge& e = edges[f];
+        const Factor<G>& e = edges[f];
+        if (!assembledAt(e, v, slot)) continue;
         const LinearFactor& L = lin[f];
-        const bool v_is_i = e.i == v;
-        const int o = v_is_i ? e.j : e.i;
-        if (fixed[o]) {  // unary on v
-          H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
-          H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
-          continue;
+        const int arity = e.arity();
+        for (int k = 0; k < arity; ++k) {
+          if (fixed[e.key(k)]) continue;
+          const int sk = slot[e.key(k)] * D;
+          H.row(N).template segment<D>(sk) += L.g[k].transpose();
+          for (int l = 0; l < arity; ++l) {
+            if (fixed[e.key(l)]) continue;
+            const int sl = slot[e.key(l)] * D;
+            if (sk >= sl) H.template block<D, D>(sk, sl) += L.at(k, l);  // lower triangle
+          }
         }
-        const int b = slot[o];
-        if (b <= a) continue;  // below (in a child's cached factor) or added from the other end
-        H.template block<D, D>(a * D, a * D) += v_is_i ? L.Hii : L.Hjj;
-        H.template block<D, D>(b * D, b * D) += v_is_i ? L.Hjj : L.Hii;
-        if (v_is_i)
-          H.template block<D, D>(b * D, a * D) += L.Hij.transpose();  // H_ji
-        else
-          H.template block<D, D>(b * D, a * D) += L.Hij;
-        H.row(N).template segment<D>(a * D) += (v_is_i ? L.gi : L.gj).transpose();
-        H.row(N).template segment<D>(b * D) += (v_is_i ? L.gj : L.gi).transpose();
       }
     }
     // The children's cached factors on their separators.
@@ -454,18 +507,24 @@ struct IncrementalSmoother<G>::Impl {
     for (int a = 0; a < n; ++a) slot[top[a]] = a;
     bayestree::RowList& rows = s_rows;
     rows.clear();
-    // Factors with both ends in the top (a unary factor adds no structure).
+    // Factors with two or more non-fixed keys in the top, once each (from their first key in
+    // the top's order; a unary factor adds no structure).
     for (int a = 0; a < n; ++a) {
       const int v = top[a];
       for (int f : var_factors[v]) {
-        const int o = edges[f].i == v ? edges[f].j : edges[f].i;
-        if (fixed[o]) continue;
-        const int b = slot[o];
-        if (b > a) {
-          rows.add(a);
-          rows.add(b);
-          rows.endRow();
+        const Factor<G>& e = edges[f];
+        int keys = 0;
+        bool first = true;
+        for (int k = 0; k < e.arity(); ++k) {
+          const int o = e.key(k);
+          if (fixed[o]) continue;
+          ++keys;
+          if (slot[o] < a) first = false;  // a key outside the top has slot −1: not first
         }
+        if (keys < 2 || !first) continue;
+        for (int k = 0; k < e.arity(); ++k)
+          if (!fixed[e.key(k)]) rows.add(slot[e.key(k)]);
+        rows.endRow();
       }
     }
     // Alg. 1 line 5: the orphans' cached factors join the factors of the top.
@@ -597,9 +656,10 @@ struct IncrementalSmoother<G>::Impl {
   // folded in: an end not yet in the tree, ends in different branches, or a damped clique on
   // the way to the root). Folding one factor in leaves this unchanged for the others.
   int foldInClique(int f) const {
-    const Edge& e = edges[f];
+    const Factor<G>& e = edges[f];
     int lower = -1, upper = -1;
-    for (int v : {e.i, e.j}) {
+    for (int k = 0; k < e.arity(); ++k) {
+      const int v = e.key(k);
       if (fixed[v]) continue;
       if (clique_of[v] < 0) return -1;
       (lower < 0 ? lower : upper) = v;
@@ -619,9 +679,11 @@ struct IncrementalSmoother<G>::Impl {
   // to its own clique (running intersection) until one already holds it. Sets *later to that
   // end and fills `path` with the cliques whose separator it joins (empty when none).
   void separatorsToExtend(int f, int start, int* later, std::vector<int>* path) const {
-    const Edge& e = edges[f];
-    *later = clique_of[e.i] == start && !fixed[e.i] ? e.j : e.i;
+    const Factor<G>& e = edges[f];
     path->clear();
+    *later = -1;
+    if (e.arity() < 2) return;  // a unary factor lies in its clique already
+    *later = clique_of[e.key(0)] == start && !fixed[e.key(0)] ? e.key(1) : e.key(0);
     if (fixed[*later]) return;
     for (int c = start; c != clique_of[*later]; c = cliques[c].parent) {
       const auto& sep = cliques[c].separator;
@@ -669,15 +731,14 @@ struct IncrementalSmoother<G>::Impl {
 
   // Folds factor f into the tree (foldInClique(f) ≥ 0); returns the cliques updated.
   int foldIn(int f) {
-    const Edge& e = edges[f];
+    const Factor<G>& e = edges[f];
     const int start = foldInClique(f);
     int later;
     separatorsToExtend(f, start, &later, &s_path);
     for (int c : s_path) cliques[c].extendSeparator(later, &extend_buf);
     // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
-    Mat Ai, Aj;
-    Vec r;
-    e.linearize(theta[e.i], theta[e.j], &Ai, &Aj, &r);
+    typename Factor<G>::Linearization A;
+    e.linearize(theta, &A);
     using MatMap = Eigen::Map<Eigen::MatrixXd>;
     int rows = cliques[start].F + cliques[start].Sn + 1;
     {
@@ -686,10 +747,10 @@ struct IncrementalSmoother<G>::Impl {
       MatMap W(w_buf.data(), rows, D);
       W.setZero();
       setSlots(c, &slot);
-      if (!fixed[e.i]) W.middleRows(slot[e.i] * D, D) = Ai.transpose();
-      if (!fixed[e.j]) W.middleRows(slot[e.j] * D, D) = Aj.transpose();
+      for (int k = 0; k < e.arity(); ++k)
+        if (!fixed[e.key(k)]) W.middleRows(slot[e.key(k)] * D, D) = A.A[k].transpose();
       clearSlots(c, &slot);
-      W.row(rows - 1) = -r.transpose();
+      W.row(rows - 1) = -A.r.transpose();
     }
     int updated = 0;
     for (int id = start;;) {
@@ -844,7 +905,7 @@ struct IncrementalSmoother<G>::Impl {
     for (size_t v = 0; v < theta.size(); ++v)
       poses[v] = fixed[v] ? theta[v] : theta[v].retract(x[v]);
     double f = 0;
-    for (const Edge& e : edges) f += e.cost(poses[e.i], poses[e.j]);
+    for (const Factor<G>& e : edges) f += e.cost(poses);
     return f;
   }
 
@@ -861,9 +922,10 @@ struct IncrementalSmoother<G>::Impl {
   UpdateStats update(bool all) {
     if (!all) ++update_count;
     const bool relinearize_now = !all && update_count % opt.relinearize_skip == 0;
-    if (all || !opt.rank_updates || opt.dogleg || new_vars.empty() || queued.size() < 2)
+    if (all || !opt.rank_updates || opt.dogleg || new_vars.empty() || queued.size() < 2 ||
+        !to_touch.empty())
       return updateStep(all, relinearize_now, true);
-    std::vector<Edge> rest = splitOffIntroducing();
+    std::vector<Factor<G>> rest = splitOffIntroducing();
     if (!worthFolding(rest)) {
       queued.insert(queued.end(), rest.begin(), rest.end());
       rest.clear();
@@ -879,15 +941,17 @@ struct IncrementalSmoother<G>::Impl {
 
   // Whether folding `factors` in (after their new poses join the tree at the root) is estimated
   // cheaper than re-eliminating the paths from their old ends' cliques to the root with them.
-  bool worthFolding(const std::vector<Edge>& factors) {
+  bool worthFolding(const std::vector<Factor<G>>& factors) {
     if (factors.empty()) return false;
     std::vector<int> starts;
     double fold_flops = 0;
-    for (const Edge& e : factors) {
+    for (const Factor<G>& e : factors) {
       int start = -1;
-      for (int v : {e.i, e.j})
+      for (int k = 0; k < e.arity(); ++k) {
+        const int v = e.key(k);
         if (!fixed[v] && clique_of[v] >= 0 && (start < 0 || isAncestorOrSelf(start, clique_of[v])))
           start = clique_of[v];
+      }
       if (start < 0) return false;  // both ends new: no path to compare
       starts.push_back(start);
       fold_flops += foldFlops(start);
@@ -897,8 +961,8 @@ struct IncrementalSmoother<G>::Impl {
 
   // Keeps in `queued` the factors that join each new pose to the tree (one per pose, or those
   // that cannot be told apart) and returns the others, whose ends will all be in the tree.
-  std::vector<Edge> splitOffIntroducing() {
-    std::vector<Edge> intro, rest;
+  std::vector<Factor<G>> splitOffIntroducing() {
+    std::vector<Factor<G>> intro, rest;
     std::vector<char> placed(queued.size(), 0);
     std::vector<int> joined;  // new poses joined by a factor in `intro` (slot[v] = 1)
     auto known = [&](int v) { return fixed[v] || clique_of[v] >= 0 || slot[v] == 1; };
@@ -906,12 +970,12 @@ struct IncrementalSmoother<G>::Impl {
       progress = false;
       for (size_t k = 0; k < queued.size(); ++k) {
         if (placed[k]) continue;
-        const Edge& e = queued[k];
-        const bool ki = known(e.i), kj = known(e.j);
+        const Factor<G>& e = queued[k];
+        const bool ki = known(e.key(0)), kj = e.arity() < 2 || known(e.key(1));
         if (ki && kj) {
           rest.push_back(e);
-        } else if (ki || kj) {
-          const int v = ki ? e.j : e.i;
+        } else if (e.arity() == 2 && (ki || kj)) {
+          const int v = ki ? e.key(1) : e.key(0);
           slot[v] = 1;
           joined.push_back(v);
           intro.push_back(e);
@@ -948,16 +1012,22 @@ struct IncrementalSmoother<G>::Impl {
     st.new_variables = static_cast<int>(new_vars.size());
     for (int v : new_vars) touch(v);
     new_vars.clear();
+    // Variables whose cliques must be re-eliminated though no new factor touches them (a
+    // released anchor's neighbours, the factors of moved poses: our extension, for the online
+    // layer's components).
+    const bool restructured = !to_touch.empty();
+    for (int v : to_touch) touch(v);
+    to_touch.clear();
     const int first_new = static_cast<int>(edges.size());
-    for (const Edge& e : queued) {
+    for (const Factor<G>& e : queued) {
       const int f = static_cast<int>(edges.size());
       edges.push_back(e);
       lin.emplace_back();
       factor_stamp.push_back(-1);
-      var_factors[e.i].push_back(f);
-      var_factors[e.j].push_back(f);
-      touch(e.i);
-      touch(e.j);
+      for (int k = 0; k < e.arity(); ++k) {
+        var_factors[e.key(k)].push_back(f);
+        touch(e.key(k));
+      }
     }
     st.new_factors = static_cast<int>(queued.size());
     queued.clear();
@@ -993,6 +1063,8 @@ struct IncrementalSmoother<G>::Impl {
     };
     for (int v : relin)
       for (int f : var_factors[v]) add(f);
+    for (int f : to_relinearize) add(f);
+    to_relinearize.clear();
     for (int f = first_new; f < static_cast<int>(edges.size()); ++f) add(f);
     // With variables relinearised the top is re-eliminated: its ordering can run while the
     // factors are linearised (eliminateTop); otherwise (few new factors) linearise them now.
@@ -1003,8 +1075,8 @@ struct IncrementalSmoother<G>::Impl {
 
     // Only factors between variables already in the tree, nothing relinearised: fold them in by
     // rank updates along their paths to the root; otherwise re-eliminate the top (Alg. 1).
-    const bool folded = !all && relin.empty() && st.new_variables == 0 && st.new_factors > 0 &&
-                        opt.rank_updates && foldInNewFactors(first_new, &st);
+    const bool folded = !all && relin.empty() && !restructured && st.new_variables == 0 &&
+                        st.new_factors > 0 && opt.rank_updates && foldInNewFactors(first_new, &st);
     const bool tree_changed = folded || reeliminateTop(relin, all, to_linearize, &st);
     for (int v : touched) mark[v] = 0;
     // Alg. 1 line 8 / Alg. 3: partial state update.
@@ -1184,18 +1256,30 @@ struct IncrementalSmoother<G>::Impl {
         fail("variable " + std::to_string(v) + " is frontal in " +
              std::to_string(frontal_count[v]) + " cliques");
     }
-    // Every factor lies within the clique of its first eliminated variable.
+    // Every factor lies within the clique of its first eliminated variable: some non-fixed key's
+    // clique holds every other non-fixed key.
     for (size_t f = 0; f < edges.size(); ++f) {
-      const int i = edges[f].i, j = edges[f].j;
-      if (fixed[i] || fixed[j]) continue;
+      const Factor<G>& e = edges[f];
       auto contains = [&](int c, int v) {
         const Clique& k = cliques[c];
         return std::find(k.frontals.begin(), k.frontals.end(), v) != k.frontals.end() ||
                std::find(k.separator.begin(), k.separator.end(), v) != k.separator.end();
       };
-      if (!contains(clique_of[i], j) && !contains(clique_of[j], i))
-        fail("factor " + std::to_string(f) + " (" + std::to_string(i) + ", " + std::to_string(j) +
-             ") lies in no clique");
+      bool held = false, any = false;
+      for (int k = 0; k < e.arity() && !held; ++k) {
+        const int v = e.key(k);
+        if (fixed[v] || mark[v] || clique_of[v] < 0) continue;
+        any = true;
+        bool all = true;
+        for (int l = 0; l < e.arity(); ++l)
+          all = all && (fixed[e.key(l)] || contains(clique_of[v], e.key(l)));
+        held = all;
+      }
+      if (any && !held) {
+        std::string keys;
+        for (int k = 0; k < e.arity(); ++k) keys += (k ? ", " : "") + std::to_string(e.key(k));
+        fail("factor " + std::to_string(f) + " (" + keys + ") lies in no clique");
+      }
     }
   }
 };
@@ -1227,8 +1311,16 @@ int IncrementalSmoother<G>::addPose(const G& initial) {
   return impl_->addPose(initial, false);
 }
 template <class G>
-void IncrementalSmoother<G>::addFactor(const Edge& edge) {
-  impl_->addFactor(edge);
+void IncrementalSmoother<G>::addFactor(const Factor<G>& factor) {
+  impl_->addFactor(factor);
+}
+template <class G>
+void IncrementalSmoother<G>::releaseFixedPose(int index) {
+  impl_->releaseFixedPose(index);
+}
+template <class G>
+void IncrementalSmoother<G>::transformPoses(const std::vector<int>& indices, const G& T) {
+  impl_->transformPoses(indices, T);
 }
 template <class G>
 UpdateStats IncrementalSmoother<G>::update() {
@@ -1290,7 +1382,7 @@ bool IncrementalSmoother<G>::isFixed(int index) const {
   return index >= 0 && index < impl_->numPoses() && impl_->fixed[index];
 }
 template <class G>
-const std::vector<RelativePoseEdge<G>>& IncrementalSmoother<G>::factors() const {
+const std::vector<Factor<G>>& IncrementalSmoother<G>::factors() const {
   return impl_->edges;
 }
 template <class G>

@@ -18,6 +18,7 @@
 #include <memory>
 #include <vector>
 
+#include "core/factor.h"
 #include "core/pose_graph.h"
 #include "core/relative_pose_factor.h"
 
@@ -105,9 +106,22 @@ class IncrementalSmoother {
   int addFixedPose(const G& value);
   /// A new variable with initial estimate `initial`; returns its dense index.
   int addPose(const G& initial);
-  /// Queues a factor (dense indices of added poses) until update(). Throws
-  /// std::invalid_argument on a bad index, a self-loop or a non-finite measurement/information.
-  void addFactor(const Edge& edge);
+  /// Queues a factor (dense indices of added poses) until update(): a relative pose, a pose
+  /// prior or a position prior (core/factor.h). Throws std::invalid_argument on a bad index, a
+  /// self-loop or a non-finite or non-positive-definite measurement/information.
+  void addFactor(const Factor<G>& factor);
+
+  /// Makes a fixed pose a variable (an anchor no longer needed: its component joined another,
+  /// or priors now fix its gauge). The next update() re-eliminates the cliques of its factors.
+  /// Throws std::invalid_argument if `index` is not a fixed pose.
+  void releaseFixedPose(int index);
+  /// Moves the given poses rigidly: θ_v ← T θ_v (so estimate(v) ← T estimate(v)). A relative-pose
+  /// factor between two of them keeps its whitened linearisation and Δ (the errors and right
+  /// Jacobians are invariant under x ↦ T x), so nothing of the Bayes tree changes for it; every
+  /// other factor on them (a prior, an edge to a pose not moved) is relinearised and its
+  /// cliques re-eliminated by the next update(). O(Σ degree). Throws std::invalid_argument on a
+  /// bad index or a non-finite T.
+  void transformPoses(const std::vector<int>& indices, const G& T);
 
   /// Kaess 2012 Alg. 1: adds the queued factors and poses, relinearises, re-eliminates the
   /// affected top of the Bayes tree and updates Δ. The estimate is current on return.
@@ -130,7 +144,7 @@ class IncrementalSmoother {
   int numPoses() const;
   int numFactors() const;  ///< factors added by update() (not the queued ones)
   bool isFixed(int index) const;
-  const std::vector<Edge>& factors() const;
+  const std::vector<Factor<G>>& factors() const;  ///< added by update(), in order
   const SmootherOptions& options() const;
 
  private:

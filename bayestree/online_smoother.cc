@@ -49,54 +49,99 @@ bool OnlineSmoother<G>::sameMeasurement(const Measurement& a, const Measurement&
 }
 
 template <class G>
-int OnlineSmoother<G>::createPose(Key id, const G& value, int creator) {
-  const int index = ids_.empty() ? smoother_.addFixedPose(value) : smoother_.addPose(value);
+int OnlineSmoother<G>::createPose(Key id, const G& value, int creator, bool anchor) {
+  const int index =
+      creator < 0 && anchor ? smoother_.addFixedPose(value) : smoother_.addPose(value);
   index_.emplace(id, index);
   ids_.push_back(id);
   creator_.push_back(creator);
+  component_parent_.push_back(creator < 0 ? index : root(creator));
+  components_.emplace_back();
+  if (creator < 0) {
+    Component& c = components_[index];
+    c.members = {index};
+    c.first = index;
+    c.anchor = anchor ? index : -1;
+    ++stats_.components;
+  } else {
+    components_[root(creator)].members.push_back(index);
+  }
   ++stats_.poses;
   return index;
 }
 
 template <class G>
-bool OnlineSmoother<G>::apply(const Measurement& m, Key* created) {
+int OnlineSmoother<G>::root(int v) const {
+  while (component_parent_[v] != v)
+    v = component_parent_[v] = component_parent_[component_parent_[v]];
+  return v;
+}
+
+template <class G>
+void OnlineSmoother<G>::releaseAnchorIfFixed(int c) {
+  Component& comp = components_[c];
+  if (comp.anchor < 0 || !comp.gauge.fixesGauge()) return;
+  smoother_.releaseFixedPose(comp.anchor);
+  comp.anchor = -1;
+  ++stats_.anchors_released;
+}
+
+// Joining two components by the edge from → to with measurement z. The one that keeps its frame
+// ("keep"): the one whose priors fix its gauge, else the older. The other ("move"), unless its
+// priors fix its gauge too, moves rigidly so that the edge holds exactly at the current
+// estimates: T = x_from z x_to⁻¹ (moving to's side) or x_to z⁻¹ x_from⁻¹ (moving from's side).
+// Its anchor is released: the joined component keeps one.
+template <class G>
+void OnlineSmoother<G>::join(int from, int to, const G& z) {
+  const int a = root(from), b = root(to);
+  const bool world_a = components_[a].gauge.fixesGauge(),
+             world_b = components_[b].gauge.fixesGauge();
+  const bool keep_a = world_a != world_b ? world_a : components_[a].first < components_[b].first;
+  const int keep = keep_a ? a : b, move = keep_a ? b : a;
+  if (!components_[move].gauge.fixesGauge()) {
+    const G T = keep_a
+                    ? smoother_.estimate(from).compose(z).compose(smoother_.estimate(to).inverse())
+                    : smoother_.estimate(to)
+                          .compose(z.inverse())
+                          .compose(smoother_.estimate(from).inverse());
+    smoother_.transformPoses(components_[move].members, T);
+  }
+  if (components_[move].anchor >= 0) {
+    smoother_.releaseFixedPose(components_[move].anchor);
+    ++stats_.anchors_released;
+  }
+  // Union: the members of the smaller list go to the larger one's (O(n log n) over all joins).
+  Component moved = std::move(components_[move]);
+  components_[move] = Component{};
+  Component& kept = components_[keep];
+  if (kept.members.size() < moved.members.size()) kept.members.swap(moved.members);
+  kept.members.insert(kept.members.end(), moved.members.begin(), moved.members.end());
+  kept.gauge.add(moved.gauge);
+  kept.first = std::min(kept.first, moved.first);
+  component_parent_[move] = keep;
+  --stats_.components;
+  ++stats_.joins;
+  releaseAnchorIfFixed(keep);
+}
+
+template <class G>
+void OnlineSmoother<G>::apply(const Measurement& m) {
   auto from = index_.find(m.from);
   auto to = index_.find(m.to);
-  bool has_created = false;
-  if (from != index_.end() && to == index_.end()) {
+  if (from == index_.end() && to == index_.end()) {  // a new component, anchored at `from`
+    const int f = createPose(m.from, options_.gauge, -1);
+    createPose(m.to, smoother_.estimate(f).compose(m.z), f);
+  } else if (to == index_.end()) {
     createPose(m.to, smoother_.estimate(from->second).compose(m.z), from->second);
-    *created = m.to;
-    has_created = true;
-  } else if (from == index_.end() && to != index_.end()) {
+  } else if (from == index_.end()) {
     createPose(m.from, smoother_.estimate(to->second).compose(m.z.inverse()), to->second);
-    *created = m.from;
-    has_created = true;
+  } else if (root(from->second) != root(to->second)) {
+    join(from->second, to->second, m.z);
   }
   const auto edge = RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega);
   smoother_.addFactor(edge);
   queued_.push_back(edge);
   ++stats_.edges_accepted;
-  return has_created;
-}
-
-template <class G>
-void OnlineSmoother<G>::releasePending(Key known) {
-  std::vector<Key> work{known};
-  while (!work.empty()) {
-    const Key k = work.back();
-    work.pop_back();
-    auto it = pending_by_key_.find(k);
-    if (it == pending_by_key_.end()) continue;
-    const std::vector<int> list = std::move(it->second);
-    pending_by_key_.erase(it);
-    for (int p : list) {
-      if (!pending_alive_[p]) continue;
-      pending_alive_[p] = 0;
-      --stats_.edges_pending;
-      Key created = 0;
-      if (apply(pending_[p], &created)) work.push_back(created);  // iterative, no recursion
-    }
-  }
 }
 
 template <class G>
@@ -121,21 +166,86 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
                                                     " -> " + std::to_string(to)};
     }
   same_pair.push_back(m);
-
-  if (ids_.empty()) createPose(from, options_.gauge, -1);  // the first pose fixes the gauge
-  const bool from_known = index_.count(from) > 0, to_known = index_.count(to) > 0;
-  if (!from_known && !to_known) {
-    const int p = static_cast<int>(pending_.size());
-    pending_.push_back(m);
-    pending_alive_.push_back(1);
-    pending_by_key_[from].push_back(p);
-    pending_by_key_[to].push_back(p);
-    ++stats_.edges_pending;
-    return EdgeResult{EdgeStatus::kPending, "neither pose is known yet"};
-  }
-  Key created = 0;
-  if (apply(m, &created)) releasePending(created);
+  apply(m);
   return EdgeResult{EdgeStatus::kAccepted, ""};
+}
+
+template <class G>
+EdgeResult OnlineSmoother<G>::addPrior(Key id, const Factor<G>& prior, const G& start) {
+  auto it = index_.find(id);
+  const bool fixes = prior.kind() == FactorKind::kPosePrior;
+  int v;
+  if (it == index_.end()) {  // a new component, anchored unless the prior fixes its gauge
+    v = createPose(id, start, -1, /*anchor=*/!fixes);
+  } else {
+    v = it->second;
+  }
+  Factor<G> f = prior;
+  f.setKeys(v);
+  smoother_.addFactor(f);
+  queued_.push_back(f);
+  Component& c = components_[root(v)];
+  if (const auto* p = f.positionPrior())
+    c.gauge.addPositionPrior(p->position, p->information);
+  else
+    c.gauge.addPosePrior();
+  releaseAnchorIfFixed(root(v));
+  ++stats_.priors_accepted;
+  return EdgeResult{EdgeStatus::kAccepted, ""};
+}
+
+template <class G>
+EdgeResult OnlineSmoother<G>::addPosePrior(Key id, const G& z, const Matrix& omega,
+                                           const G& offset) {
+  if (!finitePose(z) || !finitePose(offset) || !omega.allFinite()) {
+    ++stats_.priors_rejected;
+    return {EdgeStatus::kRejected,
+            "pose prior on " + std::to_string(id) + ": NaN or infinite value"};
+  }
+  try {
+    const auto prior = PosePriorFactor<G>::make(0, z, omega, offset);
+    return addPrior(id, prior, z.compose(offset.inverse()));
+  } catch (const std::invalid_argument& e) {
+    ++stats_.priors_rejected;
+    return {EdgeStatus::kRejected, "pose prior on " + std::to_string(id) + ": " + e.what()};
+  }
+}
+
+template <class G>
+EdgeResult OnlineSmoother<G>::addPositionPrior(Key id, const typename G::Translation& p,
+                                               const PositionMatrix& omega) {
+  if (!p.allFinite() || !omega.allFinite()) {
+    ++stats_.priors_rejected;
+    return {EdgeStatus::kRejected,
+            "position prior on " + std::to_string(id) + ": NaN or infinite value"};
+  }
+  try {
+    const auto prior = PositionPriorFactor<G>::make(0, p, omega);
+    G start;
+    if constexpr (G::kDim == 2)
+      start = G(p, 0.0);
+    else
+      start = G(Eigen::Quaterniond::Identity(), p);
+    return addPrior(id, prior, start);
+  } catch (const std::invalid_argument& e) {
+    ++stats_.priors_rejected;
+    return {EdgeStatus::kRejected, "position prior on " + std::to_string(id) + ": " + e.what()};
+  }
+}
+
+template <class G>
+int OnlineSmoother<G>::componentOf(Key id) const {
+  auto it = index_.find(id);
+  if (it == index_.end())
+    throw std::out_of_range("OnlineSmoother::componentOf: unknown pose id " + std::to_string(id));
+  return root(it->second);
+}
+
+template <class G>
+std::optional<Key> OnlineSmoother<G>::anchorOf(Key id) const {
+  const int a = components_[componentOf(id)].anchor;
+  if (a < 0) return std::nullopt;
+  return ids_[a];
 }
 
 template <class G>
@@ -167,8 +277,9 @@ PoseGraph<G> OnlineSmoother<G>::snapshot() const {
   for (int k = 0; k < n; ++k) graph.index.emplace(ids_[k], k);
   graph.poses = smoother_.estimate();
   graph.poses.resize(static_cast<size_t>(n));
-  graph.edges = smoother_.factors();  // taken in by updates: only poses known at the last one
-  if (n > 0) graph.fixed = {0};
+  for (const auto& f : smoother_.factors()) addToGraph(f, &graph);  // only poses known then
+  for (int k = 0; k < n; ++k)
+    if (smoother_.isFixed(k)) graph.fixed.push_back(k);
   graph.has_initial_estimate = true;
   return graph;
 }
@@ -178,12 +289,19 @@ std::vector<G> OnlineSmoother<G>::completeSeed(std::vector<G> values,
                                                const std::vector<char>& given) const {
   const size_t n = ids_.size();
   const std::vector<G> current = smoother_.estimate();
-  // The rigid move that puts the given gauge value onto the fixed one.
-  const G anchor = given[0] ? current[0].compose(values[0].inverse()) : G::Identity();
-  values[0] = current[0];  // the gauge keeps its fixed value
+  // The rigid move that puts the given value of the first pose onto its fixed one (when it is an
+  // anchor); every anchor keeps its fixed value.
+  const bool first_fixed = smoother_.isFixed(0);
+  const G anchor =
+      given[0] && first_fixed ? current[0].compose(values[0].inverse()) : G::Identity();
+  if (!given[0] || first_fixed) values[0] = current[0];
   for (size_t k = 1; k < n; ++k) {
-    if (given[k]) {
+    if (smoother_.isFixed(static_cast<int>(k))) {
+      values[k] = current[k];
+    } else if (given[k]) {
       values[k] = anchor.compose(values[k]);
+    } else if (creator_[k] < 0) {  // a component's first pose (not fixed: prior-anchored)
+      values[k] = current[k];
     } else {  // creators come first in dense order
       const int c = creator_[k];
       values[k] = values[c].compose(current[c].inverse().compose(current[k]));
@@ -238,8 +356,12 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
   if (ids_.empty()) return result;
   const auto t0 = std::chrono::steady_clock::now();
   IncrementalSmoother<G> fresh(options_.smoother);
-  fresh.addFixedPose(seed[0]);
-  for (size_t k = 1; k < seed.size(); ++k) fresh.addPose(seed[k]);
+  for (size_t k = 0; k < seed.size(); ++k) {
+    if (smoother_.isFixed(static_cast<int>(k)))
+      fresh.addFixedPose(seed[k]);
+    else
+      fresh.addPose(seed[k]);
+  }
   for (const auto& f : smoother_.factors()) fresh.addFactor(f);
   for (const auto& f : queued_) fresh.addFactor(f);
   result.stats = fresh.update();
@@ -247,7 +369,7 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
   result.F_before = smoother_.objective();
   if (!queued_.empty()) {  // the queued factors count too, at the current estimate
     const std::vector<G> current = smoother_.estimate();
-    for (const auto& f : queued_) result.F_before += f.cost(current[f.i], current[f.j]);
+    for (const auto& f : queued_) result.F_before += f.cost(current);
   }
   result.applied = !only_if_lower || result.F_rebuilt < result.F_before;
   if (result.applied) {

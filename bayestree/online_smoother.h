@@ -1,7 +1,16 @@
-// The online layer over IncrementalSmoother: poses named by external ids (Key), edges arriving
-// one at a time in any order. An edge to an unknown pose creates it from the known end composed
-// with the measurement (or its inverse); an edge between two unknown poses is held (pending)
-// until one end becomes known. The first pose ever seen is the fixed gauge pose.
+// The online layer over IncrementalSmoother: poses named by external ids (Key), edges and priors
+// arriving one at a time in any order. An edge to an unknown pose creates it from the known end
+// composed with the measurement (or its inverse).
+//
+// Components (docs/design.md, "Gauge and components"): poses linked by edges form components,
+// each estimated from its first factor on. A component is anchored at its first pose, held
+// fixed, unless its priors fix its gauge (core/gauge.h); then nothing in it is fixed. An edge
+// between two unknown poses starts a new component (a second robot, a second session). When an
+// edge joins two components, the one whose priors fix its gauge — else the older — keeps its
+// frame; the other moves rigidly into that frame through the joining edge in the same update
+// (IncrementalSmoother::transformPoses: its relative-pose factors and Δ are unchanged by the
+// move) and its anchor is released. When priors come to fix a component's gauge, its anchor is
+// released.
 //
 // Reseeding (reseed()) makes given values — typically a batch solver's estimate of a snapshot()
 // — the linearisation point and rebuilds the Bayes tree from scratch; incremental updates then
@@ -13,6 +22,7 @@
 #pragma once
 
 #include <map>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -20,14 +30,16 @@
 #include <Eigen/Core>
 
 #include "bayestree/incremental_smoother.h"
+#include "core/factor.h"
+#include "core/gauge.h"
 #include "core/pose_graph.h"
 
 namespace arbor {
 
 enum class EdgeStatus {
   kAccepted,   ///< added (to be used by the next update())
-  kDuplicate,  ///< same ids, measurement and Ω as an accepted or pending edge: not added again
-  kPending,    ///< both ends unknown: held until one end is known, then added
+  kDuplicate,  ///< same ids, measurement and Ω as an accepted edge: not added again
+  kPending,    ///< not produced any more: an edge between unknown poses starts a component
   kRejected,   ///< bad input; see reason
 };
 
@@ -54,10 +66,15 @@ struct ReseedResult {
 
 struct OnlineStats {
   int poses = 0;
-  int edges_accepted = 0;  ///< edges handed to the smoother (including released pending ones)
+  int edges_accepted = 0;  ///< edges handed to the smoother
   int edges_duplicate = 0;
-  int edges_pending = 0;  ///< currently held
+  int edges_pending = 0;  ///< always 0 (kept for the status message's layout)
   int edges_rejected = 0;
+  int priors_accepted = 0;  ///< pose and position priors handed to the smoother
+  int priors_rejected = 0;
+  int components = 0;  ///< connected components now
+  int joins = 0;       ///< edges that joined two components
+  int anchors_released = 0;
   int updates = 0;
   double total_update_time_s = 0;
   int reseeds = 0;  ///< rebuilds by reseed() that were kept
@@ -69,20 +86,29 @@ template <class G>
 class OnlineSmoother {
  public:
   static constexpr int kDoF = G::kDoF;
+  static constexpr int kDim = G::kDim;
   using Matrix = Eigen::Matrix<double, kDoF, kDoF>;
+  using PositionMatrix = Eigen::Matrix<double, kDim, kDim>;
 
   explicit OnlineSmoother(OnlineSmootherOptions<G> options = {});
 
   /// One measurement z of pose `to` in the frame of pose `from`, with information Ω.
   EdgeResult addEdge(Key from, Key to, const G& z, const Matrix& omega);
+  /// A prior z on pose `id` in the world frame (core/prior_factors.h), with an optional sensor
+  /// offset o (the prior is on x o). An unknown id starts a component there, at z o⁻¹.
+  EdgeResult addPosePrior(Key id, const G& z, const Matrix& omega, const G& offset = G::Identity());
+  /// A prior p on the position of pose `id` in the world frame (GPS in a local frame). An
+  /// unknown id starts a component there (at p, identity rotation).
+  EdgeResult addPositionPrior(Key id, const typename G::Translation& p,
+                              const PositionMatrix& omega);
   /// Runs one incremental update over the edges accepted since the last one.
   UpdateStats update();
   /// Relinearises everything and iterates to convergence (the end of a replay).
   UpdateStats finalize();
 
-  /// The poses known at the last update() (the first ones in dense order; the gauge first and
-  /// listed in `fixed`), every edge taken in by the smoother so far, and the current estimate as
-  /// `poses`: a connected problem for a batch solver (ids in dense order, not sorted).
+  /// The poses known at the last update() (the first ones in dense order; the anchors listed in
+  /// `fixed`), every edge and prior taken in by the smoother so far, and the current estimate as
+  /// `poses`: a problem for a batch solver with the same gauge (ids in dense order, not sorted).
   PoseGraph<G> snapshot() const;
 
   /// The complete linearisation point reseed(values) would use, in dense order:
@@ -115,6 +141,12 @@ class OnlineSmoother {
   const IncrementalSmoother<G>& smoother() const { return smoother_; }
   /// Dense smoother index → id.
   const std::vector<Key>& ids() const { return ids_; }
+  /// The component of a known pose: its representative dense index (equal for poses of one
+  /// component, changing when components join). Throws std::out_of_range for an unknown id.
+  int componentOf(Key id) const;
+  /// The anchor (held-fixed pose) of a known pose's component, or nullopt when its priors fix
+  /// its gauge.
+  std::optional<Key> anchorOf(Key id) const;
 
  private:
   /// Bookkeeping after an update() or finalize() of the smoother.
@@ -125,10 +157,17 @@ class OnlineSmoother {
     Matrix omega;
   };
   bool sameMeasurement(const Measurement& a, const Measurement& b) const;
-  int createPose(Key id, const G& value, int creator);
-  /// Adds m to the smoother, creating its unknown end if any (returned in *created: true).
-  bool apply(const Measurement& m, Key* created);
-  void releasePending(Key known);
+  /// A new pose; creator −1 starts a component (anchored at it when `anchor`).
+  int createPose(Key id, const G& value, int creator, bool anchor = true);
+  /// Adds m to the smoother, creating an unknown end or a new component, or joining two.
+  void apply(const Measurement& m);
+  /// The edge from → to (dense indices, in different components) joins them.
+  void join(int from, int to, const G& z);
+  /// Priors of component c now fix its gauge: its anchor is released.
+  void releaseAnchorIfFixed(int c);
+  int root(int v) const;
+  /// Hands a prior to the smoother, validated; creates the pose (a component) when unknown.
+  EdgeResult addPrior(Key id, const Factor<G>& prior, const G& start);
   std::vector<G> completeSeed(std::vector<G> values, const std::vector<char>& given) const;
   ReseedResult rebuild(const std::vector<G>& seed, bool only_if_lower);
 
@@ -136,13 +175,20 @@ class OnlineSmoother {
   IncrementalSmoother<G> smoother_;
   std::unordered_map<Key, int> index_;
   std::vector<Key> ids_;
-  std::vector<int> creator_;  ///< per dense index: the known end it was created from (−1: gauge)
-  std::vector<RelativePoseEdge<G>> queued_;  ///< handed to the smoother since the last update
-  int poses_at_update_ = 0;                  ///< poses known at the last update
-  std::map<std::pair<Key, Key>, std::vector<Measurement>> seen_;  ///< accepted and pending
-  std::vector<Measurement> pending_;
-  std::vector<char> pending_alive_;
-  std::unordered_map<Key, std::vector<int>> pending_by_key_;
+  std::vector<int> creator_;  ///< per dense index: the known end it was created from (−1: none)
+  // Components, a union–find over dense indices (path halving; the root's entries are the
+  // component's): members (merged smaller into larger), anchor (−1: none), gauge information.
+  struct Component {
+    std::vector<int> members;
+    int first = 0;  ///< its first pose (the older component has the lower one)
+    int anchor = -1;
+    GaugeInformation<G> gauge;
+  };
+  mutable std::vector<int> component_parent_;
+  std::vector<Component> components_;
+  std::vector<Factor<G>> queued_;  ///< handed to the smoother since the last update
+  int poses_at_update_ = 0;        ///< poses known at the last update
+  std::map<std::pair<Key, Key>, std::vector<Measurement>> seen_;  ///< accepted edges
   OnlineStats stats_;
 };
 

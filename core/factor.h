@@ -12,9 +12,11 @@
 #include <array>
 #include <type_traits>
 #include <variant>
+#include <vector>
 
 #include <Eigen/Core>
 
+#include "core/pose_graph.h"
 #include "core/prior_factors.h"
 #include "core/relative_pose_factor.h"
 
@@ -112,6 +114,25 @@ class Factor {
  private:
   Variant f_;
 };
+
+/// Appends f to the graph's edges, pose priors or position priors, by its kind.
+template <class G>
+void addToGraph(const Factor<G>& f, PoseGraph<G>* graph) {
+  if (const auto* e = f.relativePose()) graph->edges.push_back(*e);
+  if (const auto* p = f.posePrior()) graph->pose_priors.push_back(*p);
+  if (const auto* p = f.positionPrior()) graph->position_priors.push_back(*p);
+}
+
+/// Every factor of the graph: its edges, then its pose priors, then its position priors.
+template <class G>
+std::vector<Factor<G>> factorsOf(const PoseGraph<G>& graph) {
+  std::vector<Factor<G>> out;
+  out.reserve(graph.edges.size() + graph.pose_priors.size() + graph.position_priors.size());
+  for (const auto& e : graph.edges) out.emplace_back(e);
+  for (const auto& p : graph.pose_priors) out.emplace_back(p);
+  for (const auto& p : graph.position_priors) out.emplace_back(p);
+  return out;
+}
 
 extern template class Factor<SE2>;
 extern template class Factor<SE3>;

@@ -1,7 +1,8 @@
-// Tests of the online layer (bayestree/online_smoother.h): external ids, duplicate, pending
-// (dangling) and out-of-order edges, rejected input.
+// Tests of the online layer (bayestree/online_smoother.h): external ids, duplicate edges, edges
+// between unknown poses (new components) and their joins, out-of-order edges, rejected input.
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -47,23 +48,35 @@ TEST(OnlineSmoother, DuplicatesAreReportedNotAdded) {
   EXPECT_NEAR(s.estimate(2).x(), 1.05, 1e-6);
 }
 
-TEST(OnlineSmoother, DanglingEdgesWaitUntilAnEndIsKnown) {
+TEST(OnlineSmoother, EdgesBetweenUnknownPosesStartAComponent) {
   OnlineSmoother<SE2> s;
   EXPECT_EQ(s.addEdge(0, 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
-  // 10–11 and 11–12: no end known.
-  EXPECT_EQ(s.addEdge(10, 11, SE2(1, 0, 0), kI3).status, EdgeStatus::kPending);
-  EXPECT_EQ(s.addEdge(12, 11, SE2(-1, 0, 0), kI3).status, EdgeStatus::kPending);
+  // 10–11 and 11–12: no end known. They start a second component, anchored at 10 and estimated
+  // at once in a frame of its own.
+  EXPECT_EQ(s.addEdge(10, 11, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  EXPECT_EQ(s.addEdge(12, 11, SE2(-1, 0, 0), kI3).status, EdgeStatus::kAccepted);
   EXPECT_EQ(s.addEdge(12, 11, SE2(-1, 0, 0), kI3).status, EdgeStatus::kDuplicate);
-  EXPECT_EQ(s.stats().edges_pending, 2);
-  s.update();
-  EXPECT_FALSE(s.hasPose(10));
-  EXPECT_FALSE(s.hasPose(12));
-  // 1 → 10 makes 10 known, which releases 10–11, which releases 12–11.
-  EXPECT_EQ(s.addEdge(1, 10, SE2(1, 0, M_PI / 2), kI3).status, EdgeStatus::kAccepted);
   EXPECT_EQ(s.stats().edges_pending, 0);
+  EXPECT_EQ(s.stats().components, 2);
   s.update();
   s.smoother().checkInvariants();
+  ASSERT_TRUE(s.hasPose(10));
   ASSERT_TRUE(s.hasPose(12));
+  EXPECT_EQ(s.anchorOf(12), std::optional<Key>(10));
+  EXPECT_NE(s.componentOf(0), s.componentOf(12));
+  EXPECT_NEAR(s.estimate(11).x(), 1, 1e-9);  // in its own frame: 10 at the origin
+  EXPECT_NEAR(s.estimate(12).x(), 2, 1e-9);
+  // 1 → 10 joins them: the younger moves into the older's frame, its anchor is released.
+  EXPECT_EQ(s.addEdge(1, 10, SE2(1, 0, M_PI / 2), kI3).status, EdgeStatus::kAccepted);
+  s.update();
+  s.smoother().checkInvariants();
+  EXPECT_EQ(s.stats().components, 1);
+  EXPECT_EQ(s.stats().joins, 1);
+  EXPECT_EQ(s.componentOf(0), s.componentOf(12));
+  EXPECT_EQ(s.anchorOf(12), std::optional<Key>(0));
+  EXPECT_TRUE(s.smoother().isFixed(0));
+  EXPECT_FALSE(s.smoother().isFixed(2));  // dense index of 10: released
+  EXPECT_NEAR(s.estimate(0).x(), 0, 1e-12);
   EXPECT_NEAR(s.estimate(10).x(), 2, 1e-9);
   EXPECT_NEAR(s.estimate(11).y(), 1, 1e-9);
   EXPECT_NEAR(s.estimate(12).y(), 2, 1e-9);
@@ -71,18 +84,24 @@ TEST(OnlineSmoother, DanglingEdgesWaitUntilAnEndIsKnown) {
   EXPECT_EQ(s.estimates().size(), 5u);
 }
 
-TEST(OnlineSmoother, LongPendingChainIsReleasedIteratively) {
+TEST(OnlineSmoother, LongChainStartedAsAComponentJoinsInOneUpdate) {
   OnlineSmoother<SE2> s;
   const int N = 20000;
   EXPECT_EQ(s.addEdge(0, 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  s.update();
+  // N−1 → N starts a component; each earlier pose extends it backwards.
   for (int k = N - 1; k >= 2; --k)
-    ASSERT_EQ(s.addEdge(k, k + 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kPending);
-  EXPECT_EQ(s.stats().edges_pending, N - 2);
+    ASSERT_EQ(s.addEdge(k, k + 1, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  EXPECT_EQ(s.stats().components, 2);
+  s.update();
+  EXPECT_NEAR(s.estimate(N).x() - s.estimate(2).x(), N - 2, 1e-6);
   EXPECT_EQ(s.addEdge(1, 2, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
-  EXPECT_EQ(s.stats().edges_pending, 0);
   EXPECT_EQ(s.stats().poses, N + 1);
   s.update();
+  s.smoother().checkInvariants();
+  EXPECT_EQ(s.stats().components, 1);
   EXPECT_NEAR(s.estimate(N).x(), N, 1e-6);
+  EXPECT_LT(s.smoother().objective(), 1e-12);
 }
 
 TEST(OnlineSmoother, RejectsBadEdges) {
@@ -140,18 +159,16 @@ TEST(OnlineSmoother, OutOfOrderExactEdgesRecoverTrajectory3D) {
   for (int k = 0; k + 7 < N; k += 5) edges.push_back({k + 7, k});
   std::shuffle(edges.begin() + 1, edges.end(), rng);
   OnlineSmoother<SE3> s;
-  int pending = 0;
   for (const E& e : edges) {
     const EdgeResult r = s.addEdge(1000 + e.a, 1000 + e.b, truth[e.a].between(truth[e.b]),
                                    Eigen::Matrix<double, 6, 6>::Identity());
     ASSERT_NE(r.status, EdgeStatus::kRejected) << r.reason;
     ASSERT_NE(r.status, EdgeStatus::kDuplicate);
-    if (r.status == EdgeStatus::kPending) ++pending;
     s.update();
     s.smoother().checkInvariants();
   }
-  EXPECT_GT(pending, 0);
-  EXPECT_EQ(s.stats().edges_pending, 0);
+  EXPECT_GT(s.stats().joins, 0);  // shuffled edges started components that joined later
+  EXPECT_EQ(s.stats().components, 1);
   EXPECT_EQ(s.stats().poses, N);
   const SE3 origin_inv = truth[edges[0].a].inverse();
   for (int k = 0; k < N; ++k) {

@@ -86,7 +86,7 @@ PoseGraph<G> graphOf(const IncrementalSmoother<G>& s) {
     if (s.isFixed(k)) g.fixed.push_back(k);
   }
   g.poses = s.linearizationPoint();
-  g.edges = s.factors();
+  for (const auto& f : s.factors()) addToGraph(f, &g);
   return g;
 }
 

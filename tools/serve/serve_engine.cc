@@ -115,11 +115,9 @@ class EngineImpl final : public Engine {
       graph.index[ids[order[g]]] = g;
       graph.poses.push_back(poses[order[g]]);
     }
-    for (const auto& f : smoother_.smoother().factors()) {
-      auto e = f;
-      e.i = dense_to_graph[f.i];
-      e.j = dense_to_graph[f.j];
-      graph.edges.push_back(e);
+    for (auto f : smoother_.smoother().factors()) {
+      f.setKeys(dense_to_graph[f.key(0)], f.arity() > 1 ? dense_to_graph[f.key(1)] : -1);
+      addToGraph(f, &graph);
     }
     for (int k = 0; k < static_cast<int>(ids.size()); ++k) {
       if (smoother_.smoother().isFixed(k)) graph.fixed.push_back(dense_to_graph[k]);
