@@ -24,7 +24,6 @@
 
 #include <boost/program_options.hpp>
 
-#include "core/batch_solver.h"
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
 #include "tools/bench/ceres_pose_graph.h"
@@ -35,6 +34,7 @@
 #include "tools/cli/cli_common.h"
 #include "tools/cli/replay_runner.h"
 #include "tools/cli/smoother_flags.h"
+#include "tools/refine/batch_solvers.h"
 
 namespace {
 
@@ -57,10 +57,9 @@ void benchBatch(const std::string& name, const PoseGraph<G>& graph, const bench:
   Row ours, theirs;
   for (int r = 0; r < repeat; ++r) {
     std::vector<G> poses = start;
-    BatchOptions options;
-    options.method = BatchMethod::kLevenbergMarquardt;
-    const BatchSummary s = solveBatch(graph, &poses, options);
-    if (s.time_s < ours.time) ours = {s.time_s, s.iterations, s.F_final, toString(s.termination)};
+    const refine::BatchSolve s =
+        refine::runBatchSolver(refine::BatchSolver::kLevenbergMarquardt, graph, &poses);
+    if (s.time_s < ours.time) ours = {s.time_s, s.iterations, s.F_final, s.termination};
     if (ceres) {
       std::vector<G> cposes = start;
       const bench::CeresResult c = bench::solveWithCeres(graph, &cposes);
