@@ -1,5 +1,6 @@
 // tools/refine/batch_refiner.h: keep-best verdicts, the one-in-flight rule, skip counting,
-// synchronous and background runs on an OnlineSmoother's snapshot, reseeding from the winner.
+// synchronous and background runs on an OnlineSmoother's snapshot, reseeding from the winner;
+// only the batch solvers marked for refinement are accepted.
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -61,7 +62,7 @@ OnlineSmoother<SE2> noisySmoother(int n, unsigned seed) {
 TEST(BatchRefiner, OneInFlightSkipsAreCountedAndTheRunIsCollected) {
   OnlineSmoother<SE2> s = noisySmoother(200, 1);
   RefinerOptions o;
-  o.kind = BatchKind::kRtr;
+  o.solver = BatchSolver::kRtr;
   o.every = 5;
   BatchRefiner<SE2> refiner(o);
   EXPECT_TRUE(refiner.due(10));
@@ -91,7 +92,7 @@ TEST(BatchRefiner, OneInFlightSkipsAreCountedAndTheRunIsCollected) {
 TEST(BatchRefiner, SynchronousReseedLandsOnTheWinner) {
   OnlineSmoother<SE2> s = noisySmoother(150, 2);
   RefinerOptions o;
-  o.kind = BatchKind::kLm;
+  o.solver = BatchSolver::kLevenbergMarquardt;
   o.every = 1;
   o.reseed = true;
   o.synchronous = true;
@@ -112,7 +113,7 @@ TEST(BatchRefiner, SynchronousReseedLandsOnTheWinner) {
 TEST(BatchRefiner, BackgroundRunsWhileUpdatesGoOn) {
   OnlineSmoother<SE2> s = noisySmoother(300, 3);
   RefinerOptions o;
-  o.kind = BatchKind::kRtr;
+  o.solver = BatchSolver::kRtr;
   BatchRefiner<SE2> refiner(o);
   ASSERT_TRUE(refiner.start(s, 1));
   int during = 0;
@@ -137,7 +138,17 @@ TEST(BatchRefiner, RefusesBadOptionsAndTinySnapshots) {
   RefinerOptions o;
   o.every = -1;
   EXPECT_THROW(BatchRefiner<SE2>{o}, std::invalid_argument);
-  EXPECT_THROW(parseBatchKind("gn"), std::invalid_argument);
+  // Only the table's rows marked `refines` run as the refinement.
+  for (const BatchSolverInfo& row : batchSolvers()) {
+    RefinerOptions r;
+    r.solver = row.solver;
+    if (row.refines) {
+      EXPECT_NO_THROW(BatchRefiner<SE2>{r}) << row.name;
+    } else {
+      EXPECT_THROW(BatchRefiner<SE2>{r}, std::invalid_argument) << row.name;
+      EXPECT_THROW(solveSnapshot(row.solver, PoseGraph<SE2>{}), std::invalid_argument) << row.name;
+    }
+  }
   BatchRefiner<SE2> refiner;
   OnlineSmoother<SE2> empty;
   EXPECT_FALSE(refiner.start(empty, 0));

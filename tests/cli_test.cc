@@ -5,9 +5,12 @@
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+
+#include "tools/refine/batch_solvers.h"
 
 namespace {
 
@@ -88,6 +91,68 @@ TEST(Cli, GenerateThenBatchJson) {
   std::filesystem::remove(out_file);
 }
 
+// Every row of the batch-solver table runs as `arbor batch --solver NAME` on a small 3D graph
+// of data/, lowers F from its start, and reports a certificate exactly when the row certifies;
+// --help describes every row.
+TEST(Cli, BatchRunsEverySolverOfTheTable) {
+  const std::string file = std::string(ARBOR_SOURCE_DIR) + "/data/sphere_3d.g2o";
+  for (const auto& row : arbor::refine::batchSolvers()) {
+    const Result r = run("batch " + file + " --json --solver " + row.name);
+    ASSERT_EQ(r.status, 0) << row.name << ": " << r.out;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["solver"], row.name);
+    EXPECT_EQ(j["nodes"], 250);
+    EXPECT_EQ(j["dim"], 3);
+    EXPECT_LT(j["F_final"].get<double>(), j["F_initial"].get<double>()) << row.name;
+    EXPECT_EQ(j.contains("certified"), row.certifies) << row.name;
+    if (row.certifies) {
+      EXPECT_EQ(j["certified"], true) << row.name;
+    }
+  }
+  const Result help = run("batch --help");
+  ASSERT_EQ(help.status, 0);
+  std::string text;  // whitespace runs as one space: the help wraps its lines
+  for (char c : help.out) {
+    const bool space = c == ' ' || c == '\n';
+    if (!space || (!text.empty() && text.back() != ' ')) text += space ? ' ' : c;
+  }
+  for (const auto& row : arbor::refine::batchSolvers()) {
+    EXPECT_NE(text.find(std::string(row.name) + ": " + row.description), std::string::npos)
+        << row.name << " in " << help.out;
+  }
+}
+
+// A value the smoother (or the refinement) refuses exits 2 with one line naming the flag and the
+// value, in replay, serve and the benchmarks alike.
+TEST(Cli, BadSmootherOrBatchValueExitsTwoNamingTheFlagAndValue) {
+  const std::string file = std::string(ARBOR_SOURCE_DIR) + "/data/manhattan_2d.g2o";
+  const std::filesystem::path bench =
+      std::filesystem::path(ARBOR_EXE).parent_path() / "arbor-bench";
+  struct Case {
+    std::string args, flag, value;
+  };
+  std::vector<Case> cases = {
+      {"replay " + file + " --relinearize-skip 0", "--relinearize-skip", "'0'"},
+      {"replay " + file + " --nested-dissection-min=-5", "--nested-dissection-min", "'-5'"},
+      {"serve --threads=-1", "--threads", "'-1'"},
+      {"serve --wildfire=-0.5", "--wildfire", "'-0.5'"},
+      {"replay " + file + " --batch gn", "--batch must be lm or rtr", "'gn'"},
+      {"serve --batch dogleg", "--batch must be lm or rtr", "'dogleg'"},
+      {"batch " + file + " --solver newton", "--solver must be lm, gn, dogleg or rtr", "'newton'"},
+  };
+  if (std::filesystem::exists(bench)) {
+    cases.push_back({"bench growth --relinearize-skip 0", "--relinearize-skip", "'0'"});
+    cases.push_back({"bench replay --dogleg-radius 0", "--dogleg-radius", "'0'"});
+  }
+  for (const Case& c : cases) {
+    const Result r = run(c.args);
+    EXPECT_EQ(r.status, 2) << c.args << ": " << r.out;
+    EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << c.args << ": " << r.out;
+    EXPECT_NE(r.out.find(c.flag), std::string::npos) << c.args << ": " << r.out;
+    EXPECT_NE(r.out.find(c.value), std::string::npos) << c.args << ": " << r.out;
+  }
+}
+
 TEST(Cli, MalformedFileNamesLine) {
   const std::string file = tempPath("bad.g2o");
   {
@@ -147,6 +212,12 @@ TEST(Cli, BenchReplayComparesWithTheGtsamRowOfItsFeeding) {
   ASSERT_NE(row_b, std::string::npos) << pose.out;
   EXPECT_NE(pose.out.find("aborted", row_b), std::string::npos) << pose.out;
   EXPECT_NE(run("bench replay --step sideways --shared " + shared.string()).status, 0);
+  // The smoother flags reach the benchmark: its settings line shows them.
+  const Result dogleg =
+      run("bench replay --dogleg --relinearize-skip 3 --only gridB --shared " + shared.string());
+  ASSERT_EQ(dogleg.status, 0) << dogleg.out;
+  EXPECT_NE(dogleg.out.find("replay (dogleg, β = 0.1, skip 3, wildfire 0.001,"), std::string::npos)
+      << dogleg.out;
   std::filesystem::remove_all(shared);
 }
 

@@ -63,7 +63,7 @@ TEST(LcmServeBatch, CommandBatchPublishesTheRunInStatus) {
   lcm::LCM lcm("memq://");
   ServeOptions options;
   options.refine_on_exit = false;
-  options.batch.kind = refine::BatchKind::kRtr;  // no --batch-every: only on command
+  options.batch.solver = refine::BatchSolver::kRtr;  // no --batch-every: only on command
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();
@@ -102,7 +102,7 @@ TEST(LcmServeBatch, ReseedingInLockstepEndsNoWorse) {
   auto run = [&](bool reseed) {
     lcm::LCM lcm("memq://");
     ServeOptions options;
-    options.batch.kind = refine::BatchKind::kRtr;
+    options.batch.solver = refine::BatchSolver::kRtr;
     options.batch.every = 50;
     options.batch.reseed = reseed;
     options.batch.synchronous = true;  // deterministic reseed points
@@ -132,13 +132,13 @@ TEST(LcmServeBatch, ReseedingInLockstepEndsNoWorse) {
 
 // Options of a first run that journals and reseeds (no refinement on exit: the restart must
 // reproduce the estimate of the last update).
-ServeOptions reseedingJournalOptions(const std::string& journal, refine::BatchKind kind,
+ServeOptions reseedingJournalOptions(const std::string& journal, refine::BatchSolver solver,
                                      int every) {
   ServeOptions options;
   options.refine_on_exit = false;
   options.journal_path = journal;
   options.fsync_before_update = false;
-  options.batch.kind = kind;
+  options.batch.solver = solver;
   options.batch.every = every;
   options.batch.reseed = true;
   return options;
@@ -173,7 +173,7 @@ TEST(LcmServeBatch, JournalRestartAfterReseedsReproducesTheEstimate) {
   int reseeds = 0;
   {
     lcm::LCM lcm("memq://");
-    ServeOptions options = reseedingJournalOptions(journal, refine::BatchKind::kRtr, 40);
+    ServeOptions options = reseedingJournalOptions(journal, refine::BatchSolver::kRtr, 40);
     options.batch.synchronous = true;
     Service service(lcm, options);
     Collector collector(lcm, service.channels());
@@ -198,7 +198,8 @@ TEST(LcmServeBatch, JournalRestartAfterBackgroundReseedsReproducesTheEstimate) {
   ServeSummary first;
   {
     lcm::LCM lcm("memq://");
-    Service service(lcm, reseedingJournalOptions(journal, refine::BatchKind::kLm, 10));
+    Service service(lcm,
+                    reseedingJournalOptions(journal, refine::BatchSolver::kLevenbergMarquardt, 10));
     Collector collector(lcm, service.channels());
     service.start();
     for (size_t k = 0; k < order.size(); ++k) {

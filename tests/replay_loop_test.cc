@@ -70,7 +70,7 @@ TEST(ReplayLoop, LmEveryNUpdatesCountsRunsAndNeverLosesToIncremental) {
   const PoseGraph<SE2> graph = manhattan(300, 0.01, 3);
   ReplaySettings settings;
   BatchLoopSettings loop;
-  loop.kind = BatchKind::kLm;
+  loop.solver = BatchSolver::kLevenbergMarquardt;
   loop.every = 40;
   const LoopResult<SE2> r = runReplayWithBatches(graph, settings, loop);
   const int updates = static_cast<int>(r.replay.rows.size());
@@ -119,7 +119,7 @@ TEST(ReplayLoop, RtrReportsCertificateAndUpdatesContinueMeanwhile) {
   const PoseGraph<SE2> graph = manhattan(300, 0.05, 7);
   ReplaySettings settings;
   BatchLoopSettings loop;
-  loop.kind = BatchKind::kRtr;
+  loop.solver = BatchSolver::kRtr;
   loop.every = 60;
   const LoopResult<SE2> r = runReplayWithBatches(graph, settings, loop);
   ASSERT_GE(r.batches.size(), 2u);
@@ -144,7 +144,7 @@ TEST(ReplayLoop, ReseedingFromBetterBatchEstimates) {
   const PoseGraph<SE2> graph = manhattan(300, 0.2, 11);
   ReplaySettings settings;
   BatchLoopSettings loop;
-  loop.kind = BatchKind::kRtr;
+  loop.solver = BatchSolver::kRtr;
   loop.every = 50;
   loop.synchronous = true;
   const LoopResult<SE2> without = runReplayWithBatches(graph, settings, loop);
@@ -189,7 +189,7 @@ TEST(ReplayLoop, BackgroundReseedKeepsUpdating) {
   const PoseGraph<SE2> graph = manhattan(300, 0.2, 11);
   ReplaySettings settings;
   BatchLoopSettings loop;
-  loop.kind = BatchKind::kRtr;
+  loop.solver = BatchSolver::kRtr;
   loop.every = 50;
   loop.reseed = true;
   const LoopResult<SE2> r = runReplayWithBatches(graph, settings, loop);
@@ -210,13 +210,14 @@ TEST(ReplayLoop, BackgroundReseedKeepsUpdating) {
   EXPECT_LE(r.replay.F_final, r.batches.back().F_batch * (1 + 1e-9));
 }
 
-TEST(ReplayLoop, RejectsNegativePeriodAndBadKind) {
+TEST(ReplayLoop, RejectsNegativePeriodAndASolverThatDoesNotRefine) {
   const PoseGraph<SE2> graph = manhattan(20, 0.01, 1);
   BatchLoopSettings loop;
   loop.every = -1;
   EXPECT_THROW(runReplayWithBatches(graph, ReplaySettings{}, loop), std::invalid_argument);
-  EXPECT_THROW(parseBatchKind("gn"), std::invalid_argument);
-  EXPECT_EQ(parseBatchKind(toString(BatchKind::kRtr)), BatchKind::kRtr);
+  loop.every = 0;
+  loop.solver = BatchSolver::kGaussNewton;
+  EXPECT_THROW(runReplayWithBatches(graph, ReplaySettings{}, loop), std::invalid_argument);
 }
 
 TEST(ReplayLoop, CommandLineReportsBatchesInJson) {
@@ -267,7 +268,7 @@ TEST(ReplayLoop, ReseedOnM3500bEndsNoWorseThanTheBatch) {
   const auto& graph = std::get<PoseGraph<SE2>>(any);
   ReplaySettings settings;
   BatchLoopSettings loop;
-  loop.kind = BatchKind::kRtr;
+  loop.solver = BatchSolver::kRtr;
   loop.every = 1000;
   loop.reseed = true;
   loop.synchronous = true;  // deterministic: the reseeds happen at the snapshots

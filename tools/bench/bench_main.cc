@@ -3,6 +3,7 @@
 //     LM from a spanning-tree start for Arbor and for Ceres (the paper's settings), a Markdown
 //     table like the paper's Table II on stdout.
 //   arbor-bench replay [--shared DIR] [--only NAME,...] [--csv-dir DIR] [--step edge|pose]
+//                      [smoother flags]
 //     edge-by-edge (or pose-by-pose) replay through the incremental smoother beside GTSAM
 //     iSAM2's figures fed the same way.
 //   arbor-bench paper [--shared DIR] [--only NAME,...] [--out-dir DIR] [--markdown FILE] [--plots]
@@ -23,7 +24,6 @@
 
 #include <boost/program_options.hpp>
 
-#include "core/batch_solver.h"
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
 #include "tools/bench/ceres_pose_graph.h"
@@ -33,6 +33,8 @@
 #include "tools/bench/shared_data.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/replay_runner.h"
+#include "tools/cli/smoother_flags.h"
+#include "tools/refine/batch_solvers.h"
 
 namespace {
 
@@ -55,10 +57,9 @@ void benchBatch(const std::string& name, const PoseGraph<G>& graph, const bench:
   Row ours, theirs;
   for (int r = 0; r < repeat; ++r) {
     std::vector<G> poses = start;
-    BatchOptions options;
-    options.method = BatchMethod::kLevenbergMarquardt;
-    const BatchSummary s = solveBatch(graph, &poses, options);
-    if (s.time_s < ours.time) ours = {s.time_s, s.iterations, s.F_final, toString(s.termination)};
+    const refine::BatchSolve s =
+        refine::runBatchSolver(refine::BatchSolver::kLevenbergMarquardt, graph, &poses);
+    if (s.time_s < ours.time) ours = {s.time_s, s.iterations, s.F_final, s.termination};
     if (ceres) {
       std::vector<G> cposes = start;
       const bench::CeresResult c = bench::solveWithCeres(graph, &cposes);
@@ -82,9 +83,7 @@ void benchBatch(const std::string& name, const PoseGraph<G>& graph, const bench:
 template <class G>
 void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench::Reference* ref,
                  const bench::Anchor* gtsam, const std::string& csv_dir, const std::string& note,
-                 bool per_pose) {
-  cli::ReplaySettings settings;
-  settings.per_pose = per_pose;
+                 const cli::ReplaySettings& settings) {
   const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
   if (!csv_dir.empty()) cli::writeLatencyCsv(csv_dir + "/" + name + ".csv", r.rows);
   const auto& l = r.latency;
@@ -123,21 +122,21 @@ po::options_description datasetOptions(const std::string& caption, DatasetOption
   return options;
 }
 
-// Parses `args` into the variables bound to `options`; false (after printing the help) on --help.
-bool parseOptions(const std::vector<std::string>& args, const po::options_description& options) {
-  po::variables_map vm;
-  po::store(po::command_line_parser(args).options(options).run(), vm);
-  po::notify(vm);
-  if (vm.count("help")) {
-    std::cout << options << "\n";
-    return false;
-  }
+// Parses `args` into the variables bound to `options` (and into *vm when given); false (after
+// printing the help) on --help. Throws cli::UsageError (exit 2) on a bad command line.
+bool parseOptions(const std::vector<std::string>& args, const po::options_description& options,
+                  po::variables_map* vm = nullptr) {
+  if (cli::helpRequested(args, options)) return false;
+  po::variables_map parsed =
+      cli::parseArguments(args, options, po::positional_options_description());
+  if (vm) *vm = std::move(parsed);
   return true;
 }
 
 // --step edge|pose: whether each update takes a pose with all its edges.
 bool perPose(const std::string& step) {
-  if (step != "edge" && step != "pose") throw po::error("--step must be edge or pose");
+  if (step != "edge" && step != "pose")
+    throw cli::UsageError("--step must be edge or pose, not '" + step + "'");
   return step == "pose";
 }
 
@@ -151,14 +150,19 @@ int replay(const std::vector<std::string>& args, const std::string& default_shar
       "step", po::value(&step)->default_value("edge"),
       "edge: an update per edge (against GTSAM's isam2_edge rows); pose: per new pose with its "
       "edges (against isam2_pose)");
-  if (!parseOptions(args, options)) return 0;
-  const bool per_pose = perPose(step);
+  cli::addSmootherFlags(options);
+  po::variables_map vm;
+  if (!parseOptions(args, options, &vm)) return 0;
+  cli::ReplaySettings settings;
+  settings.smoother = cli::readSmootherFlags(vm);
+  settings.per_pose = perPose(step);
+  const bool per_pose = settings.per_pose;
   const auto files = bench::selectDatasets(data.shared, data.only);
   const auto refs = bench::readOptimumTable(data.shared);
   const auto anchors = bench::readAnchorTable(data.shared);
-  std::cout << (per_pose ? "Pose-by-pose" : "Edge-by-edge")
-            << " replay (GN, β = 0.1, skip 10, wildfire 0.001, final relinearise-all "
-               "pass), then batch LM from its estimate. GTSAM: iSAM2 "
+  std::cout << (per_pose ? "Pose-by-pose" : "Edge-by-edge") << " replay ("
+            << cli::describeSmoother(settings.smoother)
+            << ", final relinearise-all pass), then batch LM from its estimate. GTSAM: iSAM2 "
             << (per_pose ? "per pose" : "per edge")
             << " from reference/anchors.tsv (update() only; its back-substitution is deferred, "
                "and it has no final pass). total = our updates + the final pass; updates/GTSAM "
@@ -175,7 +179,7 @@ int replay(const std::vector<std::string>& args, const std::string& default_shar
     std::visit(
         [&](const auto& g) {
           benchReplay(d.name, g, ref == refs.end() ? nullptr : &ref->second,
-                      gtsam_ok ? &gtsam->second : nullptr, csv_dir, d.note, per_pose);
+                      gtsam_ok ? &gtsam->second : nullptr, csv_dir, d.note, settings);
         },
         d.graph);
   });
@@ -223,22 +227,17 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
       datasetOptions("arbor bench growth [options]", &data, default_shared);
   options.add_options()("slices", po::value(&slices)->default_value(8),
                         "slices of equal pose count per dataset")(
-      "step", po::value(&step)->default_value("edge"), "edge or pose, as arbor replay --step")(
-      "relinearize-threshold",
-      po::value(&settings.smoother.relinearize_threshold_translation)->default_value(0.1),
-      "β for rotation and translation, as arbor replay")(
-      "relinearize-skip", po::value(&settings.smoother.relinearize_skip)->default_value(10),
-      "check relinearisation every K updates, as arbor replay");
-  if (!parseOptions(args, options)) return 0;
-  if (slices < 1) throw po::error("--slices must be at least 1");
-  settings.smoother.relinearize_threshold_rotation =
-      settings.smoother.relinearize_threshold_translation;
+      "step", po::value(&step)->default_value("edge"), "edge or pose, as arbor replay --step");
+  cli::addSmootherFlags(options);
+  po::variables_map vm;
+  if (!parseOptions(args, options, &vm)) return 0;
+  if (slices < 1)
+    throw cli::UsageError("--slices must be >= 1, not '" + std::to_string(slices) + "'");
+  settings.smoother = cli::readSmootherFlags(vm);
   settings.per_pose = perPose(step);
   const bool per_pose = settings.per_pose;
   const auto files = bench::selectDatasets(data.shared, data.only);
-  std::cout << "Replay (one update per " << step
-            << ", GN, β = " << settings.smoother.relinearize_threshold_translation << ", skip "
-            << settings.smoother.relinearize_skip
+  std::cout << "Replay (one update per " << step << ", " << cli::describeSmoother(settings.smoother)
             << ") in slices of equal pose count. \"relin.\": the updates "
                "that relinearised (every skip-th, when a variable's step exceeds β), their latency "
                "and the mean share of the poses they relinearised; \"factorisation\": flops of "
@@ -391,11 +390,14 @@ int main(int argc, char** argv) {
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout
         << "usage: arbor bench batch [--shared DIR] [--only NAMES] [--repeat N] [--no-ceres]\n"
-           "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR]\n"
+           "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR] [--step "
+           "edge|pose] [smoother flags]\n"
            "       arbor bench paper [--shared DIR] [--only NAMES] [--out-dir DIR] "
            "[--markdown FILE] [--plots]\n"
            "       arbor bench growth [--shared DIR] [--only NAMES] [--slices K] [--step "
-           "edge|pose]\n"
+           "edge|pose] [smoother flags]\n"
+           "  smoother flags: as arbor replay (--relinearize-threshold B, --relinearize-skip K, "
+           "--dogleg, ...; arbor bench replay --help lists them)\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
@@ -407,6 +409,9 @@ int main(int argc, char** argv) {
     if (args[0] == "growth") return growth(rest, ARBOR_SHARED_DIR);
     if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";
+    return 2;
+  } catch (const arbor::cli::UsageError& e) {
+    std::cerr << "arbor bench " << args[0] << ": " << e.what() << "\n";
     return 2;
   } catch (const std::exception& e) {
     std::cerr << "arbor bench: " << e.what() << "\n";

@@ -11,53 +11,41 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/batch_solver.h"
 #include "core/initialization.h"
-#include "core/riemannian_staircase.h"
 #include "tools/bench/format.h"
+#include "tools/refine/batch_solvers.h"
 
 namespace arbor::bench {
 namespace {
 
 namespace fs = std::filesystem;
 
-std::string termination(Termination t) {
-  return t == Termination::kDiverged ? "failed" : toString(t);
-}
-
+// One row of refine::batchSolvers() as `arbor batch --solver NAME` runs it: gn, lm and dogleg
+// from `start`, rtr from its own chordal relaxation.
 template <class G>
-SolverRun runBatch(const PoseGraph<G>& graph, const std::vector<G>& start, BatchMethod method,
-                   const PaperSettings& settings, std::vector<G>* poses) {
-  *poses = start;
-  BatchOptions options;
-  options.method = method;
-  options.max_iterations = settings.max_iterations;
-  options.relative_tolerance = settings.relative_tolerance;
-  const BatchSummary s = solveBatch(graph, poses, options);
+SolverRun runSolver(refine::BatchSolver solver, const PoseGraph<G>& graph,
+                    const std::vector<G>& start, const PaperSettings& settings,
+                    std::vector<G>* poses) {
+  refine::BatchSolveSettings solve_settings;
+  solve_settings.max_iterations = settings.max_iterations;
+  solve_settings.relative_tolerance = settings.relative_tolerance;
+  solve_settings.rtr.gradient_tolerance = settings.rtr_gradient_tolerance;
+  if (!refine::info(solver).own_start) *poses = start;
+  const refine::BatchSolve s = refine::runBatchSolver(solver, graph, poses, solve_settings);
   SolverRun run;
-  run.solver = toString(method);
+  run.solver = refine::toString(solver);
   run.time_s = s.time_s;
   run.iterations = s.iterations;
-  run.termination = termination(s.termination);
-  if (s.termination == Termination::kDiverged) run.note = s.message;
-  return run;
-}
-
-// As `arbor batch --solver rtr` (tools/cli/batch_command.cc).
-template <class G>
-SolverRun runRtr(const PoseGraph<G>& graph, const PaperSettings& settings, std::vector<G>* poses) {
-  RtrOptions options;
-  options.gradient_tolerance = settings.rtr_gradient_tolerance;
-  const RtrSummary s = solveRtr(graph, poses, options);
-  SolverRun run;
-  run.solver = "rtr";
-  run.time_s = s.time_s;
-  run.iterations = s.rtr_iterations;
-  run.termination = s.certified ? "certified" : "converged";
-  if (!s.certified) {
-    run.note = !s.message.empty()    ? s.message
-               : s.relaxation_solved ? "relaxation not exact"
-                                     : "not certified";
+  if (s.rtr) {
+    run.termination = s.rtr->certified ? "certified" : "converged";
+    if (!s.rtr->certified) {
+      run.note = !s.message.empty()         ? s.message
+                 : s.rtr->relaxation_solved ? "relaxation not exact"
+                                            : "not certified";
+    }
+  } else {
+    run.termination = s.diverged ? "failed" : s.termination;
+    if (s.diverged) run.note = s.message;
   }
   return run;
 }
@@ -184,14 +172,12 @@ DatasetReport runPaperBenchmark(const std::string& name, const PoseGraph<G>& gra
     if (start.empty()) start = spanningTreeInitialization(graph);  // throws the reason
     *poses = start;
   };
-  for (BatchMethod method :
-       {BatchMethod::kLevenbergMarquardt, BatchMethod::kGaussNewton, BatchMethod::kDogleg}) {
-    record(toString(method), [&](std::vector<G>* poses) {
-      from_start(poses);
-      return runBatch(graph, start, method, settings, poses);
+  for (const refine::BatchSolverInfo& row : refine::batchSolvers()) {
+    record(row.name, [&](std::vector<G>* poses) {
+      if (!row.own_start) from_start(poses);
+      return runSolver(row.solver, graph, start, settings, poses);
     });
   }
-  record("rtr", [&](std::vector<G>* poses) { return runRtr(graph, settings, poses); });
   for (const auto& e : external) {
     const auto& solve = externalFor(e, static_cast<const PoseGraph<G>*>(nullptr));
     if (!solve) continue;

@@ -53,11 +53,12 @@ struct DatasetReport {
   std::string latency_file;                                  ///< replay's latency CSV
 };
 
-/// Runs replay (cli::runReplay, smoother defaults, final pass, no trailing LM), LM, GN, dogleg
-/// (from a breadth-first spanning tree), RTR (SE-Sync's staircase from its chordal start, then
-/// LM polish, as `arbor batch --solver rtr`) and each `external` solver (from the same spanning
-/// tree) on `graph`. A solver that throws is reported as failed with the message; the others
-/// still run. Throws std::runtime_error if out_dir is given and a file cannot be written.
+/// Runs replay (cli::runReplay, smoother defaults, final pass, no trailing LM), every batch
+/// solver of refine::batchSolvers() in its order (LM, GN, dogleg from a breadth-first spanning
+/// tree; RTR: SE-Sync's staircase from its chordal start, then LM polish, as `arbor batch
+/// --solver rtr`) and each `external` solver (from the same spanning tree) on `graph`. A solver
+/// that throws is reported as failed with the message; the others still run. Throws
+/// std::runtime_error if out_dir is given and a file cannot be written.
 template <class G>
 DatasetReport runPaperBenchmark(const std::string& name, const PoseGraph<G>& graph,
                                 const PaperSettings& settings,

@@ -4,44 +4,44 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/batch_solver.h"
 #include "core/initialization.h"
-#include "core/riemannian_staircase.h"
 #include "io/pose_graph_file.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
+#include "tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 namespace {
 
 namespace po = boost::program_options;
 
+using refine::BatchSolver;
+
 struct BatchRun {
   std::string file;
-  BatchOptions solver;
-  bool rtr = false;  // SE-Sync's Riemannian staircase with a certificate, then an LM polish
+  BatchSolver solver = BatchSolver::kLevenbergMarquardt;
+  refine::BatchSolveSettings settings;
   std::string init;  // empty: "file" when the file has VERTEX lines, else "odometry"
   std::string output;
   bool json = false;
   ReadOptions read;
 };
 
-// arbor batch --solver rtr: the certifiable solver; it starts from its own chordal relaxation.
+// arbor batch --solver rtr: the certifiable solver; it starts from its own chordal relaxation
+// (F chordal is reported as the start).
 template <class G>
-int solveRtrAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
-                      const Stopwatch& total) {
+int solveCertifiableAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
+                              const Stopwatch& total) {
   std::vector<G> poses = chordalInitialization(graph);
   const double F_initial = objective(graph, poses);
-  RtrOptions options;
-  options.verbose = run.solver.verbose;
-  const RtrSummary s = solveRtr(graph, &poses, options);
+  const refine::BatchSolve solve = refine::runBatchSolver(run.solver, graph, &poses, run.settings);
+  const RtrSummary& s = *solve.rtr;
   if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
-  const std::string termination =
-      s.certified ? "certified" : (s.relaxation_solved ? "relaxation_not_exact" : "not_certified");
+  const std::string& termination = solve.termination;
   if (run.json) {
     nlohmann::json j = graphJson(run.file, graph);
     j.update({
-        {"solver", "rtr"},
+        {"solver", refine::toString(run.solver)},
         {"init", "chordal"},
         {"F_initial", F_initial},
         {"F_final", s.F_final},
@@ -67,7 +67,8 @@ int solveRtrAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport
     return 0;
   }
   std::cout << std::setprecision(10) << "file         " << graphLine(run.file, graph) << "\n"
-            << "solver       rtr (Riemannian staircase, SE-Sync relaxation, then LM polish)\n"
+            << "solver       " << refine::toString(run.solver) << " ("
+            << refine::info(run.solver).description << ")\n"
             << "F chordal    " << F_initial << "\n"
             << "relaxation   " << s.sesync_objective << " (rank " << s.rank << ", λ_min "
             << s.lambda_min << ")\n"
@@ -82,20 +83,22 @@ int solveRtrAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport
   return 0;
 }
 
+// gn, lm, dogleg: from --init.
 template <class G>
 int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
                    const Stopwatch& total) {
   const InitMethod init = parseInitMethod(
       run.init.empty() ? (graph.has_initial_estimate ? "file" : "odometry") : run.init);
   std::vector<G> poses = initialize(graph, init);
-  const BatchSummary summary = solveBatch(graph, &poses, run.solver);
+  const refine::BatchSolve solve = refine::runBatchSolver(run.solver, graph, &poses, run.settings);
+  const BatchSummary& summary = *solve.local;
   if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
   const double total_s = total.seconds();
 
   if (run.json) {
     nlohmann::json j = graphJson(run.file, graph);
     j.update({
-        {"solver", toString(run.solver.method)},
+        {"solver", refine::toString(run.solver)},
         {"init", toString(init)},
         {"F_initial", summary.F_initial},
         {"F_final", summary.F_final},
@@ -115,7 +118,7 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
       std::cout << "information  " << report.made_isotropic << " made isotropic\n";
     }
     std::cout << "init         " << toString(init) << "\n"
-              << "solver       " << toString(run.solver.method) << "\n"
+              << "solver       " << refine::toString(run.solver) << "\n"
               << "F initial    " << summary.F_initial << "\n"
               << "F final      " << summary.F_final << "\n"
               << "iterations   " << summary.iterations << " (" << toString(summary.termination)
@@ -127,48 +130,58 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
   return summary.termination == Termination::kDiverged ? 3 : 0;
 }
 
+// "lm | gn | dogleg | rtr", then one line per row of the table.
+std::string solverHelp() {
+  std::string help = refine::batchSolverNames();
+  for (const refine::BatchSolverInfo& row : refine::batchSolvers()) {
+    help += std::string("\n  ") + row.name + ": " + row.description;
+  }
+  return help;
+}
+
 }  // namespace
 
 int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
-  std::string solver = "lm", information = "refuse";
+  std::string solver = refine::toString(run.solver), information = "refuse";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
-      "solver", po::value(&solver)->default_value("lm"), "gn | lm | dogleg | rtr")(
+      "solver", po::value(&solver)->default_value(solver), solverHelp().c_str())(
       "init", po::value(&run.init),
       "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
-      "odometry)")("max-iterations", po::value(&run.solver.max_iterations)->default_value(100),
-                   "iteration limit")(
-      "rel-tol", po::value(&run.solver.relative_tolerance)->default_value(1e-5),
-      "stop when the relative decrease of F is below this")(
+      "odometry; rtr starts from its own chordal relaxation)")(
+      "max-iterations", po::value(&run.settings.max_iterations)->default_value(100),
+      "iteration limit (gn, lm, dogleg)")(
+      "rel-tol", po::value(&run.settings.relative_tolerance)->default_value(1e-5, "1e-05"),
+      "stop when the relative decrease of F is below this (gn, lm, dogleg)")(
       "information", po::value(&information)->default_value("refuse"),
       "what to do with information matrices that are not positive definite: refuse | repair | "
       "isotropic")("output,o", po::value(&run.output), "write the estimate as g2o")(
       "json", po::bool_switch(&run.json), "print one JSON object")(
-      "verbose,v", po::bool_switch(&run.solver.verbose), "per-iteration log on stderr");
+      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return 0;
   parseArguments(args, options, positional);
   try {
-    run.rtr = solver == "rtr";
-    if (!run.rtr) run.solver.method = parseBatchMethod(solver);
+    run.solver = refine::parseBatchSolver(solver, "--solver");
     if (!run.init.empty()) parseInitMethod(run.init);
   } catch (const std::invalid_argument& e) {
     throw UsageError(e.what());
   }
-  if (run.solver.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
-  if (!(run.solver.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
+  if (run.settings.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
+  if (!(run.settings.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
   run.read.information = parseInformationPolicy(information);
 
   ReadReport report;
   AnyPoseGraph any = readPoseGraphFile(run.file, run.read, &report);
   return std::visit(
       [&](auto& graph) {
-        return run.rtr ? solveRtrAndReport(run, graph, report, total)
-                       : solveAndReport(run, graph, report, total);
+        return refine::info(run.solver).certifies
+                   ? solveCertifiableAndReport(run, graph, report, total)
+                   : solveAndReport(run, graph, report, total);
       },
       any);
 }

@@ -69,7 +69,7 @@ template <class G>
 LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettings& settings,
                                    const BatchLoopSettings& loop) {
   refine::RefinerOptions refiner_options;
-  refiner_options.kind = loop.kind;
+  refiner_options.solver = loop.solver;
   refiner_options.every = loop.every;
   refiner_options.reseed = loop.reseed;
   refiner_options.synchronous = loop.synchronous;
@@ -107,7 +107,7 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
 
   const PoseGraph<G> snapshot = smoother.snapshot();
   if (loop.final_run && snapshot.numPoses() > 1 && snapshot.numEdges() > 0) {
-    refine::BatchOutcome<G> last = refine::solveSnapshot(loop.kind, snapshot);
+    refine::BatchOutcome<G> last = refine::solveSnapshot(loop.solver, snapshot);
     last.run.update = static_cast<std::int64_t>(r.rows.size());
     last.run.final_run = true;
     auto toGraphOrder = [&](const std::vector<G>& poses) {

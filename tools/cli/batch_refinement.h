@@ -14,13 +14,12 @@
 
 namespace arbor::cli {
 
-using refine::BatchKind;
 using refine::BatchRun;
-using refine::parseBatchKind;
-using refine::toString;
+using refine::BatchSolver;
 
 struct BatchLoopSettings {
-  BatchKind kind = BatchKind::kLm;
+  /// A row of refine::batchSolvers() marked `refines` (lm, rtr).
+  BatchSolver solver = BatchSolver::kLevenbergMarquardt;
   int every = 0;          ///< a background batch every this many updates (0: only the final one)
   bool reseed = false;    ///< rebuild the smoother from a batch estimate that beats it
   bool final_run = true;  ///< a last (synchronous) batch run on the complete graph
@@ -44,7 +43,8 @@ nlohmann::json batchRunJson(const BatchRun& run);
 std::string batchRunLine(const BatchRun& run);
 
 /// Replays `graph` as runReplay does (settings.batch is ignored: see loop.final_run) with batch
-/// runs per `loop`. Throws std::invalid_argument on loop.every < 0.
+/// runs per `loop`. Throws std::invalid_argument on loop.every < 0 or a solver that does not
+/// refine.
 template <class G>
 LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettings& settings,
                                    const BatchLoopSettings& loop);

@@ -1,6 +1,10 @@
 // arbor replay FILE: feed a file's edges one at a time (in order of max(i, j), then file order)
 // to the incremental smoother, print per-update latency, final F, and F of batch LM started
 // from the incremental estimate.
+#include "tools/cli/replay_command.h"
+
+#include <algorithm>
+#include <cctype>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
@@ -12,19 +16,22 @@
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
 #include "tools/cli/replay_runner.h"
+#include "tools/cli/smoother_flags.h"
 
 namespace arbor::cli {
 namespace {
 
 namespace po = boost::program_options;
 
-struct ReplayRun {
-  std::string file, output, latency_csv, step = "edge", batch;
-  bool json = false, finalize = true, reseed = false;
-  int batch_every = 0;
-  SmootherOptions smoother;
-  ReadOptions read;
-};
+using ReplayRun = ReplayCommandLine;
+
+// "F batch LM    ": the final batch is the --batch solver's, LM without it.
+std::string batchLabel(const ReplayRun& run) {
+  std::string name = refine::toString(run.batch.value_or(refine::BatchSolver::kLevenbergMarquardt));
+  for (char& c : name) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  name.resize(std::max<size_t>(name.size() + 1, 6), ' ');
+  return "F batch " + name;
+}
 
 template <class G>
 int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clock) {
@@ -33,10 +40,10 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   settings.per_pose = run.step == "pose";
   settings.finalize = run.finalize;
   LoopResult<G> loop_result;
-  const bool with_batches = !run.batch.empty();
+  const bool with_batches = run.batch.has_value();
   if (with_batches) {
     BatchLoopSettings loop;
-    loop.kind = parseBatchKind(run.batch);
+    loop.solver = *run.batch;
     loop.every = run.batch_every;
     loop.reseed = run.reseed;
     loop_result = runReplayWithBatches(graph, settings, loop);
@@ -74,7 +81,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"wall_s", total_clock.seconds()},
     });
     if (with_batches) {
-      j["batch"] = run.batch;
+      j["batch"] = refine::toString(*run.batch);
       j["batch_every"] = run.batch_every;
       j["reseed"] = run.reseed;
       j["batches_skipped"] = loop_result.skipped;
@@ -95,9 +102,9 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
             << std::setprecision(10) << "F incremental " << r.F_incremental
             << " (before the final relinearisation)\n"
             << "F final       " << r.F_final << "\n"
-            << (run.batch == "rtr" ? "F batch RTR   " : "F batch LM    ") << r.batch.F_final << " ("
-            << r.batch.iterations << " iterations from the incremental estimate, "
-            << std::setprecision(4) << r.batch.time_s << " s)\n"
+            << batchLabel(run) << r.batch.F_final << " (" << r.batch.iterations
+            << " iterations from the incremental estimate, " << std::setprecision(4)
+            << r.batch.time_s << " s)\n"
             << "gap           " << std::setprecision(3) << 100.0 * gap << " %\n"
             << "relinearized  " << r.relinearized << " variables in total\n";
   if (r.indeterminate) std::cout << "indeterminate " << r.indeterminate << " cliques damped\n";
@@ -106,9 +113,10 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
               << r.pending << " never connected\n";
   }
   if (with_batches) {
-    std::cout << "batch runs    " << loop_result.batches.size() << " (" << run.batch << ", "
-              << loop_result.skipped << " skipped, " << loop_result.reseeds << " reseeds, "
-              << std::setprecision(4) << loop_result.reseed_s << " s rebuilding)\n";
+    std::cout << "batch runs    " << loop_result.batches.size() << " ("
+              << refine::toString(*run.batch) << ", " << loop_result.skipped << " skipped, "
+              << loop_result.reseeds << " reseeds, " << std::setprecision(4) << loop_result.reseed_s
+              << " s rebuilding)\n";
     for (const BatchRun& b : loop_result.batches) std::cout << "  " << batchRunLine(b) << "\n";
   }
   std::cout << "peak RSS      " << peakRssMb() << " MiB\n";
@@ -117,37 +125,17 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
 
 }  // namespace
 
-int replayCommand(const std::vector<std::string>& args) {
-  Stopwatch total;
-  ReplayRun run;
-  std::string information = "refuse";
-  double beta = -1;
+std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args) {
+  ReplayCommandLine run;
+  std::string information = "refuse", batch;
   bool no_finalize = false;
-  bool no_rank_updates = false;
   po::options_description options("arbor replay FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
       "step", po::value(&run.step)->default_value("edge"),
-      "edge: update after every edge; pose: once per new pose with all its edges")(
-      "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
-      "relinearize-threshold-translation",
-      po::value(&run.smoother.relinearize_threshold_translation), "β for translation")(
-      "relinearize-threshold-rotation", po::value(&run.smoother.relinearize_threshold_rotation),
-      "β for rotation")("relinearize-skip",
-                        po::value(&run.smoother.relinearize_skip)->default_value(10),
-                        "check relinearisation every K updates")(
-      "nested-dissection-min", po::value(&run.smoother.nested_dissection_min)->default_value(-1),
-      "order re-eliminated tops of at least N variables by nested dissection (-1: automatic)")(
-      "threads", po::value(&run.smoother.threads)->default_value(0),
-      "threads per update, sharing independent subtrees (0: one per core, at most 4)")(
-      "wildfire", po::value(&run.smoother.wildfire_threshold)->default_value(0.001),
-      "partial back-substitution threshold")("full-backsubstitution",
-                                             po::bool_switch(&run.smoother.full_backsubstitution),
-                                             "solve every clique on each update")(
-      "no-rank-updates", po::bool_switch(&no_rank_updates),
-      "re-eliminate the path of every loop closure (as GTSAM's iSAM2) instead of folding it "
-      "in by rank updates")("dogleg", po::bool_switch(&run.smoother.dogleg),
-                            "Powell's dogleg instead of Gauss-Newton")(
+      "edge: update after every edge; pose: once per new pose with all its edges");
+  addSmootherFlags(options);
+  options.add_options()(
       "no-finalize", po::bool_switch(&no_finalize),
       "skip the final relinearise-all pass (report the raw incremental estimate)")(
       "information", po::value(&information)->default_value("refuse"),
@@ -155,38 +143,45 @@ int replayCommand(const std::vector<std::string>& args) {
       "output,o", po::value(&run.output), "write the final estimate as g2o")(
       "latency-csv", po::value(&run.latency_csv), "one row per update")(
       "json", po::bool_switch(&run.json), "print one JSON object")(
-      "batch", po::value(&run.batch), "lm | rtr: batch runs in the loop and after finalize")(
+      "batch", po::value(&batch),
+      (refine::batchSolverNames(true) + ": batch runs in the loop and after finalize").c_str())(
       "batch-every", po::value(&run.batch_every)->default_value(0),
       "a background batch run every N updates (needs --batch)")(
       "reseed", po::bool_switch(&run.reseed),
       "rebuild the smoother from a batch estimate with lower F");
   po::positional_options_description positional;
   positional.add("file", 1);
-  if (helpRequested(args, options)) return 0;
-  parseArguments(args, options, positional);
+  if (helpRequested(args, options)) return std::nullopt;
+  const po::variables_map vm = parseArguments(args, options, positional);
   if (run.step != "edge" && run.step != "pose") {
     throw UsageError("--step must be edge or pose, not '" + run.step + "'");
   }
-  if (beta >= 0) {
-    run.smoother.relinearize_threshold_translation = beta;
-    run.smoother.relinearize_threshold_rotation = beta;
-  } else if (beta != -1) {
-    throw UsageError("--relinearize-threshold must be >= 0");
-  }
-  if (run.smoother.relinearize_skip < 1) throw UsageError("--relinearize-skip must be >= 1");
+  run.smoother = readSmootherFlags(vm);
   run.finalize = !no_finalize;
-  run.smoother.rank_updates = !no_rank_updates;
-  if (!run.batch.empty() && run.batch != "lm" && run.batch != "rtr") {
-    throw UsageError("--batch must be lm or rtr, not '" + run.batch + "'");
+  if (!batch.empty()) {
+    try {
+      run.batch = refine::parseBatchSolver(batch, "--batch", /*refinement_only=*/true);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(e.what());
+    }
   }
-  if (run.batch_every < 0) throw UsageError("--batch-every must be >= 0");
-  if (run.batch.empty() && (run.batch_every > 0 || run.reseed)) {
-    throw UsageError("--batch-every and --reseed need --batch lm|rtr");
+  if (run.batch_every < 0) {
+    throw UsageError("--batch-every must be >= 0, not '" + std::to_string(run.batch_every) + "'");
+  }
+  if (!run.batch && (run.batch_every > 0 || run.reseed)) {
+    throw UsageError("--batch-every and --reseed need --batch " +
+                     refine::batchSolverNames(true, "|"));
   }
   run.read.information = parseInformationPolicy(information);
+  return run;
+}
 
-  AnyPoseGraph any = readPoseGraphFile(run.file, run.read);
-  return std::visit([&](auto& graph) { return replay(run, graph, total); }, any);
+int replayCommand(const std::vector<std::string>& args) {
+  Stopwatch total;
+  const std::optional<ReplayCommandLine> run = parseReplayCommandLine(args);
+  if (!run) return 0;
+  AnyPoseGraph any = readPoseGraphFile(run->file, run->read);
+  return std::visit([&](auto& graph) { return replay(*run, graph, total); }, any);
 }
 
 }  // namespace arbor::cli

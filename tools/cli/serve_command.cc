@@ -1,8 +1,11 @@
 // arbor serve: ingest edges published over LCM into the incremental smoother and publish the
 // estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
+#include "tools/cli/serve_command.h"
+
 #include <csignal>
 #include <iostream>
 #include <memory>
+#include <sstream>
 
 #include <pthread.h>
 #include <sys/stat.h>
@@ -13,6 +16,7 @@
 #include "tools/cli/batch_refinement.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
+#include "tools/cli/smoother_flags.h"
 #include "tools/serve/lcm_tuning.h"
 #include "tools/serve/serve_service.h"
 
@@ -21,8 +25,8 @@ namespace {
 
 namespace po = boost::program_options;
 
-// The journal file inside --journal DIR (created if missing).
-std::string journalFile(const std::string& dir) {
+// The journal's directory --journal DIR, created if missing.
+void makeJournalDirectory(const std::string& dir) {
   if (::mkdir(dir.c_str(), 0755) != 0 && errno != EEXIST) {
     throw std::runtime_error("cannot create journal directory " + dir);
   }
@@ -30,7 +34,6 @@ std::string journalFile(const std::string& dir) {
   if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {
     throw std::runtime_error("journal " + dir + " is not a directory");
   }
-  return dir + "/journal.lcmlog";
 }
 
 // --fsync: update (once before each update), edge, N ms, never.
@@ -68,17 +71,18 @@ int parsePublishMode(const std::string& text) {
 
 }  // namespace
 
-int serveCommand(const std::vector<std::string>& args) {
-  std::string url, journal_dir, fsync = "update", publish = "changed", output, batch;
-  double beta = -1;
-  bool json = false, no_refine = false;
-  serve::ServeOptions options;
+std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args) {
+  ServeCommandLine line;
+  serve::ServeOptions& options = line.options;
+  std::string fsync = "update", publish = "changed", batch;
+  bool no_refine = false;
   po::options_description desc("arbor serve [options]");
   desc.add_options()("help,h", "show this help")(
-      "lcm-url", po::value(&url), "LCM provider URL (default: LCM_DEFAULT_URL / LCM's default)")(
+      "lcm-url", po::value(&line.url),
+      "LCM provider URL (default: LCM_DEFAULT_URL / LCM's default)")(
       "channel-prefix", po::value(&options.channel_prefix),
       "prefix of ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND")(
-      "journal", po::value(&journal_dir),
+      "journal", po::value(&line.journal_dir),
       "directory of the journal (journal.lcmlog); replayed on start")(
       "fsync", po::value(&fsync)->default_value("update"),
       "journal fsync: update (before each update), edge, N (at most every N ms) or never")(
@@ -86,57 +90,66 @@ int serveCommand(const std::vector<std::string>& args) {
       "estimates: changed (poses that changed), full, or N (full every N updates)")(
       "dim", po::value(&options.dim)->default_value(0), "2 or 3 (0: the first edge's)")(
       "intake-window", po::value(&options.intake_window)->default_value(options.intake_window),
-      "seqs remembered per sender for duplicate detection (older ones are refused as stale)")(
-      "relinearize-threshold", po::value(&beta), "β for rotation and translation (0.1)")(
-      "relinearize-skip", po::value(&options.smoother.relinearize_skip)->default_value(10),
-      "check relinearisation every K updates")(
-      "threads", po::value(&options.smoother.threads)->default_value(0),
-      "threads per update, sharing independent subtrees (0: one per core, at most 4)")(
-      "wildfire", po::value(&options.smoother.wildfire_threshold)->default_value(0.001),
-      "partial back-substitution threshold")(
-      "status-period", po::value(&options.status_period_s)->default_value(1.0),
-      "seconds between status messages")(
+      "seqs remembered per sender for duplicate detection (older ones are refused as stale)");
+  addSmootherFlags(desc);
+  desc.add_options()("status-period", po::value(&options.status_period_s)->default_value(1.0),
+                     "seconds between status messages")(
       "no-refine", po::bool_switch(&no_refine),
       "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
-      "output,o", po::value(&output), "on exit (and for SNAPSHOT), write the estimate as g2o")(
-      "json", po::bool_switch(&json), "on exit, print one JSON object")(
+      "output,o", po::value(&line.output), "on exit (and for SNAPSHOT), write the estimate as g2o")(
+      "json", po::bool_switch(&line.json), "on exit, print one JSON object")(
       "batch", po::value(&batch),
-      "lm | rtr: batch refinement in the background (every --batch-every updates and on "
-      "command BATCH; lm when absent)")(
-      "batch-every", po::value(&options.batch.every)->default_value(0),
-      "a background batch every N updates (needs --batch; 0: only on command BATCH)")(
+      (refine::batchSolverNames(true) +
+       ": batch refinement in the background (every --batch-every updates and on command BATCH; "
+       "lm when absent)")
+          .c_str())("batch-every", po::value(&options.batch.every)->default_value(0),
+                    "a background batch every N updates (needs --batch; 0: only on command BATCH)")(
       "reseed", po::bool_switch(&options.batch.reseed),
       "a batch estimate with lower F becomes the linearisation point (journaled)");
-  if (helpRequested(args, desc)) return 0;
-  parseArguments(args, desc, po::positional_options_description());
-  if (beta >= 0) {
-    options.smoother.relinearize_threshold_translation = beta;
-    options.smoother.relinearize_threshold_rotation = beta;
-  } else if (beta != -1) {
-    throw UsageError("--relinearize-threshold must be >= 0");
-  }
-  if (options.smoother.relinearize_skip < 1) throw UsageError("--relinearize-skip must be >= 1");
+  if (helpRequested(args, desc)) return std::nullopt;
+  const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
+  options.smoother = readSmootherFlags(vm);
   if (options.dim != 0 && options.dim != 2 && options.dim != 3) {
-    throw UsageError("--dim must be 2 or 3");
+    throw UsageError("--dim must be 0, 2 or 3, not '" + std::to_string(options.dim) + "'");
   }
-  if (!(options.status_period_s > 0)) throw UsageError("--status-period must be > 0");
-  if (options.intake_window < 1) throw UsageError("--intake-window must be >= 1");
+  if (!(options.status_period_s > 0)) {
+    std::ostringstream value;
+    value << options.status_period_s;
+    throw UsageError("--status-period must be > 0, not '" + value.str() + "'");
+  }
+  if (options.intake_window < 1) {
+    throw UsageError("--intake-window must be >= 1, not '" + std::to_string(options.intake_window) +
+                     "'");
+  }
   if (!batch.empty()) {
     try {
-      options.batch.kind = parseBatchKind(batch);
+      options.batch.solver = refine::parseBatchSolver(batch, "--batch", /*refinement_only=*/true);
     } catch (const std::invalid_argument& e) {
       throw UsageError(e.what());
     }
   }
-  if (options.batch.every < 0) throw UsageError("--batch-every must be >= 0");
+  if (options.batch.every < 0) {
+    throw UsageError("--batch-every must be >= 0, not '" + std::to_string(options.batch.every) +
+                     "'");
+  }
   if (batch.empty() && options.batch.every > 0)
-    throw UsageError("--batch-every needs --batch lm|rtr");
+    throw UsageError("--batch-every needs --batch " + refine::batchSolverNames(true, "|"));
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
-  options.snapshot_path = output;
+  options.snapshot_path = line.output;
+  if (!line.journal_dir.empty()) options.journal_path = line.journal_dir + "/journal.lcmlog";
+  return line;
+}
+
+int serveCommand(const std::vector<std::string>& args) {
+  std::optional<ServeCommandLine> line = parseServeCommandLine(args);
+  if (!line) return 0;
+  serve::ServeOptions& options = line->options;
+  const std::string& url = line->url;
+  const std::string& output = line->output;
   options.log = &std::cerr;
-  if (!journal_dir.empty()) options.journal_path = journalFile(journal_dir);
+  if (!line->journal_dir.empty()) makeJournalDirectory(line->journal_dir);
 
   // Every thread (LCM's and ours) inherits this mask; only sigwait below sees the signals.
   sigset_t signals;
@@ -167,7 +180,7 @@ int serveCommand(const std::vector<std::string>& args) {
   if (!output.empty() && !service.writeG2o(output)) {
     std::cerr << "arbor serve: no edge was applied; " << output << " not written\n";
   }
-  if (json) {
+  if (line->json) {
     nlohmann::json reasons = nlohmann::json::object();
     for (const auto& [reason, count] : s.intake.rejected_by_reason) reasons[reason] = count;
     if (s.smoother_rejected) reasons["smoother"] = s.smoother_rejected;

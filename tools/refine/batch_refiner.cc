@@ -12,21 +12,18 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include "core/batch_solver.h"
-#include "core/riemannian_staircase.h"
 #include "core/serial_openmp.h"
 
 namespace arbor::refine {
 
-BatchKind parseBatchKind(const std::string& name) {
-  if (name == "lm") return BatchKind::kLm;
-  if (name == "rtr") return BatchKind::kRtr;
-  throw std::invalid_argument("--batch must be lm or rtr, not '" + name + "'");
-}
-
-std::string toString(BatchKind kind) { return kind == BatchKind::kLm ? "lm" : "rtr"; }
-
 namespace {
+
+void requireRefining(BatchSolver solver) {
+  if (!info(solver).refines) {
+    throw std::invalid_argument("batch refinement runs " + batchSolverNames(true, " or ") +
+                                ", not " + toString(solver));
+  }
+}
 
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -67,7 +64,8 @@ Verdict pickWinner(double F_incremental, double F_lm, double F_rtr) {
 }
 
 template <class G>
-BatchOutcome<G> solveSnapshot(BatchKind kind, const PoseGraph<G>& snapshot) {
+BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot) {
+  requireRefining(solver);
   BatchOutcome<G> out;
   BatchRun& run = out.run;
   const std::vector<G>& incremental = snapshot.poses;
@@ -78,7 +76,7 @@ BatchOutcome<G> solveSnapshot(BatchKind kind, const PoseGraph<G>& snapshot) {
   // Plain LM from the incremental estimate: the batch itself for lm, the keep-best rival of RTR.
   auto t0 = std::chrono::steady_clock::now();
   std::vector<G> lm = incremental;
-  const BatchSummary lm_summary = solveBatch(snapshot, &lm);
+  const BatchSolve lm_solve = runBatchSolver(BatchSolver::kLevenbergMarquardt, snapshot, &lm);
   run.lm_time_s = secondsSince(t0);
   run.F_lm = objective(snapshot, lm);
 
@@ -90,19 +88,19 @@ BatchOutcome<G> solveSnapshot(BatchKind kind, const PoseGraph<G>& snapshot) {
   std::vector<Candidate> candidates{{"incremental", run.F_incremental, &incremental},
                                     {"lm", run.F_lm, &lm}};
   std::vector<G> rtr;
-  if (kind == BatchKind::kRtr) {
+  if (solver == BatchSolver::kRtr) {
     t0 = std::chrono::steady_clock::now();
-    const RtrSummary s = solveRtr(snapshot, &rtr);
+    const BatchSolve s = runBatchSolver(BatchSolver::kRtr, snapshot, &rtr);
     run.rtr_time_s = secondsSince(t0);
     run.F_rtr = objective(snapshot, rtr);
-    run.rank = s.rank;
-    run.lambda_min = s.lambda_min;
-    run.certified = s.certified;
-    run.iterations = s.rtr_iterations;
+    run.rank = s.rtr->rank;
+    run.lambda_min = s.rtr->lambda_min;
+    run.certified = s.rtr->certified;
+    run.iterations = s.iterations;
     candidates.push_back({"rtr", run.F_rtr, &rtr});
     out.batch = rtr;
   } else {
-    run.iterations = lm_summary.iterations;
+    run.iterations = lm_solve.iterations;
     out.batch = lm;
   }
   run.time_s = run.lm_time_s + run.rtr_time_s;
@@ -153,9 +151,9 @@ struct BatchRefiner<G>::Flight {
   std::atomic<bool> done{false};
   std::thread thread;
 
-  void solve(BatchKind kind) {
+  void solve(BatchSolver solver) {
     try {
-      outcome = solveSnapshot(kind, snapshot);
+      outcome = solveSnapshot(solver, snapshot);
     } catch (...) {
       error = std::current_exception();
     }
@@ -168,6 +166,7 @@ struct BatchRefiner<G>::Flight {
 
 template <class G>
 BatchRefiner<G>::BatchRefiner(RefinerOptions options) : options_(options) {
+  requireRefining(options_.solver);
   if (options_.every < 0) {
     throw std::invalid_argument("--batch-every must be >= 0, not " +
                                 std::to_string(options_.every));
@@ -204,16 +203,16 @@ bool BatchRefiner<G>::start(const OnlineSmoother<G>& smoother, std::int64_t upda
   flight_->snapshot = std::move(snapshot);
   flight_->update = update;
   Flight* f = flight_.get();
-  const BatchKind kind = options_.kind;
+  const BatchSolver solver = options_.solver;
   if (options_.synchronous) {
-    f->solve(kind);
+    f->solve(solver);
   } else {
-    f->thread = std::thread([f, kind] {
+    f->thread = std::thread([f, solver] {
       // The smoother's latency comes first: this thread runs at a lower priority (Linux nice is
       // per thread) and never fans out into OpenMP threads (Eigen, CHOLMOD).
       setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
       const SerialOpenMP serial;
-      f->solve(kind);
+      f->solve(solver);
     });
   }
   return true;
@@ -273,8 +272,8 @@ std::vector<BatchRun> BatchRefiner<G>::afterUpdate(OnlineSmoother<G>& smoother,
 
 template std::vector<SE2> seedValues(const OnlineSmoother<SE2>&, const BatchOutcome<SE2>&);
 template std::vector<SE3> seedValues(const OnlineSmoother<SE3>&, const BatchOutcome<SE3>&);
-template BatchOutcome<SE2> solveSnapshot(BatchKind, const PoseGraph<SE2>&);
-template BatchOutcome<SE3> solveSnapshot(BatchKind, const PoseGraph<SE3>&);
+template BatchOutcome<SE2> solveSnapshot(BatchSolver, const PoseGraph<SE2>&);
+template BatchOutcome<SE3> solveSnapshot(BatchSolver, const PoseGraph<SE3>&);
 template class BatchRefiner<SE2>;
 template class BatchRefiner<SE3>;
 

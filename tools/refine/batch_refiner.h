@@ -23,16 +23,13 @@
 
 #include "bayestree/online_smoother.h"
 #include "core/pose_graph.h"
+#include "tools/refine/batch_solvers.h"
 
 namespace arbor::refine {
 
-enum class BatchKind { kLm, kRtr };
-/// "lm" or "rtr"; throws std::invalid_argument naming the value.
-BatchKind parseBatchKind(const std::string& name);
-std::string toString(BatchKind kind);
-
 struct RefinerOptions {
-  BatchKind kind = BatchKind::kLm;
+  /// A row of batchSolvers() marked `refines` (lm, rtr).
+  BatchSolver solver = BatchSolver::kLevenbergMarquardt;
   int every = 0;        ///< a batch every this many updates (0: only when asked)
   bool reseed = false;  ///< a winning batch estimate becomes the linearisation point
   /// Solve on the calling thread inside start() (blocking; deterministic, for tests and
@@ -45,7 +42,7 @@ struct BatchRun {
   std::int64_t update = 0;  ///< updates applied when the snapshot was taken
   int poses = 0, edges = 0;
   double F_incremental = 0;  ///< of the incremental estimate on the snapshot
-  double F_batch = 0;        ///< of the --batch kind's estimate (RTR's for rtr)
+  double F_batch = 0;        ///< of the --batch solver's estimate (RTR's for rtr)
   double relative_gap = 0;   ///< (F_incremental − F_batch) / F_batch
   /// Largest per-pose difference between the incremental and the batch estimate, both in the
   /// frame of their first pose: translation (‖·‖) and rotation angle (radians).
@@ -59,7 +56,7 @@ struct BatchRun {
   double margin_relative = 0;  ///< margin / F of the winner
   double time_s = 0;           ///< wall time of the solves (RTR + LM for rtr)
   double lm_time_s = 0, rtr_time_s = 0;
-  int iterations = 0;      ///< of the --batch kind: LM iterations or RTR trust-region iterations
+  int iterations = 0;      ///< of the --batch solver: LM iterations or RTR trust-region iterations
   int updates_during = 0;  ///< updates applied while it ran in the background
   bool final_run = false;  ///< replay: the run on the complete graph after finalize
   bool reseeded = false;   ///< the smoother was rebuilt from the winner's estimate
@@ -90,16 +87,17 @@ Verdict pickWinner(double F_incremental, double F_lm, double F_rtr);
 template <class G>
 struct BatchOutcome {
   BatchRun run;
-  std::vector<G> batch;  ///< the --batch kind's estimate of the snapshot's poses (dense order)
+  std::vector<G> batch;  ///< the --batch solver's estimate of the snapshot's poses (dense order)
   std::vector<G> best;   ///< the winner's estimate; empty when the incremental one won
   std::vector<G> incremental;  ///< the snapshot's incremental estimate (its poses)
 };
 
 /// Solves `snapshot` (its poses: the incremental estimate; gauge = its first fixed pose) and
 /// fills every figure of the run except the loop's (update, updates_during, reseed fields).
-/// Any thread. Throws what the solvers throw.
+/// Any thread. Throws std::invalid_argument for a solver whose row does not refine, and what the
+/// solvers throw.
 template <class G>
-BatchOutcome<G> solveSnapshot(BatchKind kind, const PoseGraph<G>& snapshot);
+BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot);
 
 /// The values a reseed from `outcome` gives the snapshot's poses (the first best.size() in dense
 /// order): the winner's correction of the snapshot's incremental estimate applied on the left
@@ -116,7 +114,7 @@ std::vector<G> seedValues(const OnlineSmoother<G>& smoother, const BatchOutcome<
 template <class G>
 class BatchRefiner {
  public:
-  /// Throws std::invalid_argument on options.every < 0.
+  /// Throws std::invalid_argument on options.every < 0 or a solver whose row does not refine.
   explicit BatchRefiner(RefinerOptions options = {});
   ~BatchRefiner();  ///< waits for a batch still running
   BatchRefiner(const BatchRefiner&) = delete;

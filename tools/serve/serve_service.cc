@@ -372,10 +372,11 @@ bool Service::pollBatch(bool wait, bool publish) {
   if (seed.num_poses > 0) applyReseed(seed, false, &*run);
   {
     std::ostringstream os;
-    os << "batch " << refine::toString(options_.batch.kind) << " of update " << run->update << ": "
-       << run->poses << " poses, F incremental " << run->F_incremental << " batch " << run->F_batch
-       << ", " << run->winner << " wins by " << run->margin << " (" << run->time_s << " s, "
-       << run->updates_during << " updates meanwhile)" << (run->reseeded ? ", reseeded" : "");
+    os << "batch " << refine::toString(options_.batch.solver) << " of update " << run->update
+       << ": " << run->poses << " poses, F incremental " << run->F_incremental << " batch "
+       << run->F_batch << ", " << run->winner << " wins by " << run->margin << " (" << run->time_s
+       << " s, " << run->updates_during << " updates meanwhile)"
+       << (run->reseeded ? ", reseeded" : "");
     logLine(os.str());
   }
   {

@@ -1,0 +1,279 @@
+// The command lines of `arbor replay` and `arbor serve` parsed without running them: every
+// smoother flag (tools/cli/smoother_flags.h) reaches the same SmootherOptions field in both, a
+// value the smoother refuses is refused naming the flag and the value; the batch-solver table
+// (tools/refine/batch_solvers.h) names, parses and runs every solver.
+#include <functional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tools/cli/cli_common.h"
+#include "tools/cli/replay_command.h"
+#include "tools/cli/serve_command.h"
+#include "tools/cli/smoother_flags.h"
+#include "tools/generator/graph_generator.h"
+#include "tools/refine/batch_solvers.h"
+
+namespace arbor::cli {
+namespace {
+
+SmootherOptions replaySmoother(std::vector<std::string> args) {
+  args.insert(args.begin(), "graph.g2o");  // parsed, never read
+  const auto line = parseReplayCommandLine(args);
+  EXPECT_TRUE(line.has_value());
+  return line ? line->smoother : SmootherOptions{};
+}
+
+SmootherOptions serveSmoother(const std::vector<std::string>& args) {
+  const auto line = parseServeCommandLine(args);
+  EXPECT_TRUE(line.has_value());
+  return line ? line->options.smoother : SmootherOptions{};
+}
+
+// Every field of SmootherOptions, by name, for field-by-field comparisons.
+struct Field {
+  const char* name;
+  std::function<double(const SmootherOptions&)> get;
+};
+const std::vector<Field>& fields() {
+  static const std::vector<Field> all = {
+      {"relinearize_threshold_translation",
+       [](const SmootherOptions& o) { return o.relinearize_threshold_translation; }},
+      {"relinearize_threshold_rotation",
+       [](const SmootherOptions& o) { return o.relinearize_threshold_rotation; }},
+      {"relinearize_skip", [](const SmootherOptions& o) { return o.relinearize_skip; }},
+      {"wildfire_threshold", [](const SmootherOptions& o) { return o.wildfire_threshold; }},
+      {"full_backsubstitution", [](const SmootherOptions& o) { return o.full_backsubstitution; }},
+      {"rank_updates", [](const SmootherOptions& o) { return o.rank_updates; }},
+      {"dogleg", [](const SmootherOptions& o) { return o.dogleg; }},
+      {"dogleg_initial_radius", [](const SmootherOptions& o) { return o.dogleg_initial_radius; }},
+      {"dogleg_min_radius", [](const SmootherOptions& o) { return o.dogleg_min_radius; }},
+      {"finalize_relative_tolerance",
+       [](const SmootherOptions& o) { return o.finalize_relative_tolerance; }},
+      {"finalize_max_iterations",
+       [](const SmootherOptions& o) { return o.finalize_max_iterations; }},
+      {"nested_dissection_min", [](const SmootherOptions& o) { return o.nested_dissection_min; }},
+      {"threads", [](const SmootherOptions& o) { return o.threads; }},
+  };
+  return all;
+}
+
+void expectSame(const SmootherOptions& a, const SmootherOptions& b, const std::string& what) {
+  for (const Field& f : fields()) EXPECT_EQ(f.get(a), f.get(b)) << what << ": " << f.name;
+}
+
+TEST(SmootherFlags, WithoutFlagsReplayAndServeRunTheSmootherDefaults) {
+  expectSame(replaySmoother({}), SmootherOptions{}, "replay");
+  expectSame(serveSmoother({}), SmootherOptions{}, "serve");
+}
+
+TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
+  const std::vector<std::string> args = {"--relinearize-threshold-translation",
+                                         "0.3",
+                                         "--relinearize-threshold-rotation",
+                                         "0.2",
+                                         "--relinearize-skip",
+                                         "3",
+                                         "--wildfire",
+                                         "0.01",
+                                         "--full-backsubstitution",
+                                         "--no-rank-updates",
+                                         "--dogleg",
+                                         "--dogleg-radius",
+                                         "2",
+                                         "--dogleg-min-radius",
+                                         "0.0001",
+                                         "--finalize-rel-tol",
+                                         "0.001",
+                                         "--finalize-max-iterations",
+                                         "4",
+                                         "--nested-dissection-min",
+                                         "50",
+                                         "--threads",
+                                         "2"};
+  SmootherOptions expected;
+  expected.relinearize_threshold_translation = 0.3;
+  expected.relinearize_threshold_rotation = 0.2;
+  expected.relinearize_skip = 3;
+  expected.wildfire_threshold = 0.01;
+  expected.full_backsubstitution = true;
+  expected.rank_updates = false;
+  expected.dogleg = true;
+  expected.dogleg_initial_radius = 2;
+  expected.dogleg_min_radius = 1e-4;
+  expected.finalize_relative_tolerance = 1e-3;
+  expected.finalize_max_iterations = 4;
+  expected.nested_dissection_min = 50;
+  expected.threads = 2;
+  // Every field is set away from its default, so a flag that is dropped shows.
+  for (const Field& f : fields()) EXPECT_NE(f.get(expected), f.get(SmootherOptions{})) << f.name;
+  expectSame(replaySmoother(args), expected, "replay");
+  expectSame(serveSmoother(args), expected, "serve");
+}
+
+TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
+  const SmootherOptions o =
+      serveSmoother({"--dogleg", "--no-rank-updates", "--nested-dissection-min", "50"});
+  EXPECT_TRUE(o.dogleg);
+  EXPECT_FALSE(o.rank_updates);
+  EXPECT_EQ(o.nested_dissection_min, 50);
+  EXPECT_EQ(o.relinearize_skip, SmootherOptions{}.relinearize_skip);
+}
+
+TEST(SmootherFlags, OneThresholdSetsBothAndTheSpecificOneWins) {
+  SmootherOptions o = replaySmoother({"--relinearize-threshold", "0.4"});
+  EXPECT_EQ(o.relinearize_threshold_translation, 0.4);
+  EXPECT_EQ(o.relinearize_threshold_rotation, 0.4);
+  o = serveSmoother({"--relinearize-threshold", "0.4", "--relinearize-threshold-rotation", "0.2"});
+  EXPECT_EQ(o.relinearize_threshold_translation, 0.4);
+  EXPECT_EQ(o.relinearize_threshold_rotation, 0.2);
+}
+
+TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"--relinearize-threshold", "-1"},
+      {"--relinearize-threshold-translation", "-0.5"},
+      {"--relinearize-threshold-rotation", "-0.5"},
+      {"--relinearize-skip", "0"},
+      {"--relinearize-skip", "abc"},
+      {"--wildfire", "-0.1"},
+      {"--dogleg-radius", "0"},
+      {"--dogleg-min-radius", "-1"},
+      {"--finalize-rel-tol", "-1"},
+      {"--finalize-max-iterations", "0"},
+      {"--nested-dissection-min", "-2"},
+      {"--threads", "-1"},
+  };
+  for (const auto& [flag, value] : bad) {
+    for (const bool serve : {false, true}) {
+      try {
+        // FLAG=VALUE: program_options would take a separate "-1" for an option.
+        if (serve) {
+          parseServeCommandLine({flag + "=" + value});
+        } else {
+          parseReplayCommandLine({"graph.g2o", flag + "=" + value});
+        }
+        ADD_FAILURE() << (serve ? "serve " : "replay ") << flag << " " << value << " accepted";
+      } catch (const UsageError& e) {
+        const std::string message = e.what();
+        EXPECT_NE(message.find(flag), std::string::npos) << message;
+        EXPECT_NE(message.find(value), std::string::npos) << message;
+      }
+    }
+  }
+}
+
+// The help of replay, serve and a description filled by the binder list every smoother flag
+// with the same text.
+TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
+  boost::program_options::options_description binder;
+  addSmootherFlags(binder);
+  ASSERT_GE(binder.options().size(), fields().size());
+  // Whitespace runs as one space: the help wraps descriptions at its line length.
+  auto squeeze = [](const std::string& text) {
+    std::string out;
+    for (char c : text) {
+      const bool space = c == ' ' || c == '\n' || c == '\t';
+      if (!space || (!out.empty() && out.back() != ' ')) out += space ? ' ' : c;
+    }
+    return out;
+  };
+  auto help = [&](const std::function<void()>& parse) {
+    ::testing::internal::CaptureStdout();
+    parse();
+    return squeeze(::testing::internal::GetCapturedStdout());
+  };
+  const std::string replay = help([] { EXPECT_FALSE(parseReplayCommandLine({"--help"})); });
+  const std::string serve = help([] { EXPECT_FALSE(parseServeCommandLine({"--help"})); });
+  for (const auto& option : binder.options()) {
+    const std::string flag = option->format_name(), text = squeeze(option->description());
+    for (const std::string* h : {&replay, &serve}) {
+      EXPECT_NE(h->find(flag + " "), std::string::npos) << flag;
+      EXPECT_NE(h->find(text), std::string::npos) << flag << ": " << text;
+    }
+  }
+}
+
+TEST(ServeCommandLine, BatchFlagsAndTheJournalPathWithoutStartingTheService) {
+  const auto line = parseServeCommandLine(
+      {"--batch", "rtr", "--batch-every", "7", "--reseed", "--journal", "/nonexistent/j"});
+  ASSERT_TRUE(line.has_value());
+  EXPECT_EQ(line->options.batch.solver, refine::BatchSolver::kRtr);
+  EXPECT_EQ(line->options.batch.every, 7);
+  EXPECT_TRUE(line->options.batch.reseed);
+  EXPECT_EQ(line->options.journal_path, "/nonexistent/j/journal.lcmlog");
+  for (const auto& row : refine::batchSolvers()) {
+    if (row.refines) {
+      EXPECT_EQ(parseServeCommandLine({"--batch", row.name})->options.batch.solver, row.solver);
+      EXPECT_EQ(parseReplayCommandLine({"g.g2o", "--batch", row.name})->batch, row.solver);
+    } else {
+      EXPECT_THROW(parseServeCommandLine({"--batch", row.name}), UsageError) << row.name;
+      EXPECT_THROW(parseReplayCommandLine({"g.g2o", "--batch", row.name}), UsageError) << row.name;
+    }
+  }
+}
+
+TEST(BatchSolverTable, EveryRowRoundTripsThroughParseAndToString) {
+  std::set<std::string> names;
+  for (const auto& row : refine::batchSolvers()) {
+    EXPECT_EQ(refine::toString(row.solver), row.name);
+    EXPECT_EQ(refine::parseBatchSolver(row.name), row.solver);
+    EXPECT_EQ(&refine::info(row.solver), &row);
+    EXPECT_TRUE(names.insert(row.name).second) << row.name << " twice";
+    EXPECT_GT(std::string(row.description).size(), 10u) << row.name;
+    // gn, lm and dogleg are core's BatchMethod under the same name; rtr is not one.
+    const auto method = refine::batchMethod(row.solver);
+    if (method) {
+      EXPECT_EQ(toString(*method), row.name);
+    } else {
+      EXPECT_TRUE(row.certifies) << row.name;
+    }
+  }
+  EXPECT_EQ(names, (std::set<std::string>{"gn", "lm", "dogleg", "rtr"}));
+  EXPECT_EQ(refine::batchSolverNames(), "lm | gn | dogleg | rtr");
+  EXPECT_EQ(refine::batchSolverNames(true), "lm | rtr");
+}
+
+TEST(BatchSolverTable, AnUnknownNameIsRefusedListingTheValidOnes) {
+  try {
+    refine::parseBatchSolver("newton", "--solver");
+    FAIL() << "newton accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "--solver must be lm, gn, dogleg or rtr, not 'newton'");
+  }
+  try {
+    refine::parseBatchSolver("gn", "--batch", /*refinement_only=*/true);
+    FAIL() << "gn accepted as a refinement";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "--batch must be lm or rtr, not 'gn'");
+  }
+}
+
+// Every row runs through the one dispatch on a small noisy graph and lowers F from the
+// odometry start; the certifying row says so.
+TEST(BatchSolverTable, EveryRowRunsThroughTheDispatch) {
+  sim::ManhattanOptions m;
+  m.poses = 150;
+  m.grid = 5;
+  m.seed = 4;
+  const PoseGraph<SE2> graph = sim::manhattanWorld(m).graph;
+  const double F_start = objective(graph, graph.poses);
+  for (const auto& row : refine::batchSolvers()) {
+    std::vector<SE2> poses = graph.poses;
+    const refine::BatchSolve s = refine::runBatchSolver(row.solver, graph, &poses);
+    EXPECT_EQ(s.solver, row.solver);
+    EXPECT_FALSE(s.diverged) << row.name << ": " << s.message;
+    EXPECT_NEAR(s.F_final, objective(graph, poses), 1e-9 * s.F_final) << row.name;
+    EXPECT_LT(s.F_final, F_start) << row.name;
+    EXPECT_EQ(s.rtr.has_value(), row.certifies) << row.name;
+    EXPECT_EQ(s.local.has_value(), refine::batchMethod(row.solver).has_value()) << row.name;
+    if (row.certifies) {
+      EXPECT_EQ(s.termination, "certified") << row.name;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace arbor::cli

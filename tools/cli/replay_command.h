@@ -1,0 +1,27 @@
+// `arbor replay`'s command line, parsed apart from running it (tests read the options it gives).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "bayestree/incremental_smoother.h"
+#include "io/pose_graph_file.h"
+#include "tools/refine/batch_solvers.h"
+
+namespace arbor::cli {
+
+struct ReplayCommandLine {
+  std::string file, output, latency_csv, step = "edge";
+  bool json = false, finalize = true, reseed = false;
+  std::optional<refine::BatchSolver> batch;  ///< --batch: a row that refines; none: no loop
+  int batch_every = 0;
+  SmootherOptions smoother;  ///< tools/cli/smoother_flags.h
+  ReadOptions read;
+};
+
+/// The options of `arbor replay ARGS`; nullopt (after printing the help) on --help. Throws
+/// UsageError on anything unknown, missing or malformed, naming the flag and the value.
+std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args);
+
+}  // namespace arbor::cli

@@ -1,0 +1,27 @@
+// `arbor serve`'s command line, parsed apart from starting the service (tests read the options
+// it gives).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tools/serve/serve_service.h"
+
+namespace arbor::cli {
+
+struct ServeCommandLine {
+  std::string url;          ///< --lcm-url (empty: LCM's default)
+  std::string journal_dir;  ///< --journal; options.journal_path is the file inside it
+  std::string output;       ///< --output
+  bool json = false;
+  /// Everything the service takes (the smoother's by tools/cli/smoother_flags.h), but `log`.
+  serve::ServeOptions options;
+};
+
+/// The options of `arbor serve ARGS`, without touching the journal or LCM; nullopt (after
+/// printing the help) on --help. Throws UsageError on anything unknown, missing or malformed,
+/// naming the flag and the value.
+std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args);
+
+}  // namespace arbor::cli

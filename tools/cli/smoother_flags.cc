@@ -1,0 +1,153 @@
+#include "tools/cli/smoother_flags.h"
+
+#include <sstream>
+
+#include "tools/cli/cli_common.h"
+
+namespace arbor::cli {
+
+namespace po = boost::program_options;
+
+namespace {
+
+// A value as a user would type it: 0.1, 1e-06, 10.
+template <class T>
+std::string text(T value) {
+  std::ostringstream out;
+  out << value;
+  return out.str();
+}
+
+// The value of `flag` in `vm`, or `fallback` when the description did not have it.
+template <class T>
+T valueOf(const po::variables_map& vm, const char* flag, T fallback) {
+  return vm.count(flag) ? vm[flag].as<T>() : fallback;
+}
+
+// Whether `flag` was given on the command line (not only defaulted).
+bool given(const po::variables_map& vm, const char* flag) {
+  return vm.count(flag) && !vm[flag].defaulted();
+}
+
+// Throws UsageError "--FLAG must be CONDITION, not 'VALUE'" unless `ok`.
+template <class T>
+void require(bool ok, const char* flag, const char* condition, T value) {
+  if (!ok) {
+    throw UsageError(std::string("--") + flag + " must be " + condition + ", not '" + text(value) +
+                     "'");
+  }
+}
+
+}  // namespace
+
+void addSmootherFlags(po::options_description& options, const SmootherOptions& d) {
+  options.add_options()(
+      "relinearize-threshold", po::value<double>(),
+      ("β for translation and rotation (default " + text(d.relinearize_threshold_translation) +
+       "; the two flags below win over it)")
+          .c_str())("relinearize-threshold-translation",
+                    po::value<double>()->default_value(d.relinearize_threshold_translation,
+                                                       text(d.relinearize_threshold_translation)),
+                    "β on the translational part of a variable's step")(
+      "relinearize-threshold-rotation",
+      po::value<double>()->default_value(d.relinearize_threshold_rotation,
+                                         text(d.relinearize_threshold_rotation)),
+      "β on the rotational part of a variable's step")(
+      "relinearize-skip", po::value<int>()->default_value(d.relinearize_skip),
+      "check relinearisation every K updates")(
+      "wildfire",
+      po::value<double>()->default_value(d.wildfire_threshold, text(d.wildfire_threshold)),
+      "partial back-substitution threshold")("full-backsubstitution", po::bool_switch(),
+                                             "solve every clique on each update")(
+      "no-rank-updates", po::bool_switch(),
+      "re-eliminate the path of every loop closure (as GTSAM's iSAM2) instead of folding it in "
+      "by rank updates")("dogleg", po::bool_switch(), "Powell's dogleg instead of Gauss-Newton")(
+      "dogleg-radius",
+      po::value<double>()->default_value(d.dogleg_initial_radius, text(d.dogleg_initial_radius)),
+      "dogleg: initial trust-region radius")(
+      "dogleg-min-radius",
+      po::value<double>()->default_value(d.dogleg_min_radius, text(d.dogleg_min_radius)),
+      "dogleg: give up shrinking the radius below this")(
+      "finalize-rel-tol",
+      po::value<double>()->default_value(d.finalize_relative_tolerance,
+                                         text(d.finalize_relative_tolerance)),
+      "final relinearise-all pass: stop when F's relative decrease is below this")(
+      "finalize-max-iterations", po::value<int>()->default_value(d.finalize_max_iterations),
+      "final relinearise-all pass: at most this many iterations")(
+      "nested-dissection-min", po::value<int>()->default_value(d.nested_dissection_min),
+      "order re-eliminated tops of at least N variables by nested dissection (-1: automatic, "
+      "0: always)")(
+      "threads", po::value<int>()->default_value(d.threads),
+      "threads per update, sharing independent subtrees (0: one per core, at most 4)");
+}
+
+SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
+  SmootherOptions o = defaults;
+  if (given(vm, "relinearize-threshold")) {
+    const double beta = vm["relinearize-threshold"].as<double>();
+    require(beta >= 0, "relinearize-threshold", ">= 0", beta);
+    o.relinearize_threshold_translation = beta;
+    o.relinearize_threshold_rotation = beta;
+  }
+  if (given(vm, "relinearize-threshold-translation"))
+    o.relinearize_threshold_translation = vm["relinearize-threshold-translation"].as<double>();
+  if (given(vm, "relinearize-threshold-rotation"))
+    o.relinearize_threshold_rotation = vm["relinearize-threshold-rotation"].as<double>();
+  require(o.relinearize_threshold_translation >= 0, "relinearize-threshold-translation", ">= 0",
+          o.relinearize_threshold_translation);
+  require(o.relinearize_threshold_rotation >= 0, "relinearize-threshold-rotation", ">= 0",
+          o.relinearize_threshold_rotation);
+
+  o.relinearize_skip = valueOf(vm, "relinearize-skip", o.relinearize_skip);
+  require(o.relinearize_skip >= 1, "relinearize-skip", ">= 1", o.relinearize_skip);
+  o.wildfire_threshold = valueOf(vm, "wildfire", o.wildfire_threshold);
+  require(o.wildfire_threshold >= 0, "wildfire", ">= 0", o.wildfire_threshold);
+  o.full_backsubstitution = o.full_backsubstitution || valueOf(vm, "full-backsubstitution", false);
+  o.rank_updates = o.rank_updates && !valueOf(vm, "no-rank-updates", false);
+  o.dogleg = o.dogleg || valueOf(vm, "dogleg", false);
+  o.dogleg_initial_radius = valueOf(vm, "dogleg-radius", o.dogleg_initial_radius);
+  require(o.dogleg_initial_radius > 0, "dogleg-radius", "> 0", o.dogleg_initial_radius);
+  o.dogleg_min_radius = valueOf(vm, "dogleg-min-radius", o.dogleg_min_radius);
+  require(o.dogleg_min_radius > 0, "dogleg-min-radius", "> 0", o.dogleg_min_radius);
+  o.finalize_relative_tolerance = valueOf(vm, "finalize-rel-tol", o.finalize_relative_tolerance);
+  require(o.finalize_relative_tolerance >= 0, "finalize-rel-tol", ">= 0",
+          o.finalize_relative_tolerance);
+  o.finalize_max_iterations = valueOf(vm, "finalize-max-iterations", o.finalize_max_iterations);
+  require(o.finalize_max_iterations >= 1, "finalize-max-iterations", ">= 1",
+          o.finalize_max_iterations);
+  o.nested_dissection_min = valueOf(vm, "nested-dissection-min", o.nested_dissection_min);
+  require(o.nested_dissection_min >= -1, "nested-dissection-min", ">= -1", o.nested_dissection_min);
+  o.threads = valueOf(vm, "threads", o.threads);
+  require(o.threads >= 0, "threads", ">= 0", o.threads);
+  return o;
+}
+
+std::string describeSmoother(const SmootherOptions& o) {
+  const SmootherOptions d;
+  std::ostringstream out;
+  out << (o.dogleg ? "dogleg" : "GN") << ", β = ";
+  if (o.relinearize_threshold_translation == o.relinearize_threshold_rotation) {
+    out << o.relinearize_threshold_translation;
+  } else {
+    out << o.relinearize_threshold_translation << " (translation) / "
+        << o.relinearize_threshold_rotation << " (rotation)";
+  }
+  out << ", skip " << o.relinearize_skip << ", wildfire " << o.wildfire_threshold;
+  if (o.dogleg && (o.dogleg_initial_radius != d.dogleg_initial_radius ||
+                   o.dogleg_min_radius != d.dogleg_min_radius)) {
+    out << ", radius " << o.dogleg_initial_radius << " (min " << o.dogleg_min_radius << ")";
+  }
+  if (o.full_backsubstitution) out << ", full back-substitution";
+  if (!o.rank_updates) out << ", no rank updates";
+  if (o.nested_dissection_min != d.nested_dissection_min)
+    out << ", nested dissection from " << o.nested_dissection_min << " variables";
+  if (o.threads != d.threads) out << ", " << o.threads << " thread(s)";
+  if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
+      o.finalize_max_iterations != d.finalize_max_iterations) {
+    out << ", final pass to " << o.finalize_relative_tolerance << " in at most "
+        << o.finalize_max_iterations << " iterations";
+  }
+  return out.str();
+}
+
+}  // namespace arbor::cli
