@@ -187,8 +187,9 @@ struct Layout<SE3> {
     const double norm = q.norm();
     if (!(norm > 1e-12) || !std::isfinite(norm)) {
       line.fail("quaternion (qx qy qz qw) = (" + formatValue(v[3]) + " " + formatValue(v[4]) + " " +
-                formatValue(v[5]) + " " + formatValue(v[6]) + ") is zero (norm " +
-                formatValue(norm) + ") and cannot be normalised");
+                formatValue(v[5]) + " " + formatValue(v[6]) + ") " +
+                (std::isfinite(norm) ? "is zero" : "overflows") + " (norm " + formatValue(norm) +
+                ") and cannot be normalised");
     }
     if (std::abs(norm - 1.0) > 1e-3) {
       warnings->push_back(line.where() + ": quaternion norm " + formatValue(norm) +

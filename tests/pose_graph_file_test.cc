@@ -308,6 +308,8 @@ TEST(PoseGraphFile, MalformedLinesNameTheLineAndTheProblem) {
       {v2 + "EDGE_SE2 0 1 1 0 0 1 0 0 nan 0 1\n", 3, "('nan') is not finite"},
       {"VERTEX_SE3:QUAT 0 0 0 0 0 0 0 0\n", 1, "quaternion (qx qy qz qw) = (0 0 0 0) is zero"},
       {v3 + "EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 0" + info3 + "\n", 3, "is zero"},
+      {"VERTEX_SE3:QUAT 0 0 0 0 1e308 -1e308 0 1\n", 1,
+       "quaternion (qx qy qz qw) = (1e+308 -1e+308 0 1) overflows (norm inf)"},
       {v3 + "EDGE_SE3:QUAT 0 1 0 0 0 nan 0 0 1" + info3 + "\n", 3, "('nan') is not finite"},
       {v2 + "FIX 9\n", 3, "FIX of unknown id 9"},
       {"EDGE_SE2 0 1 1 0 0" + info2 + "\nFIX 0 2\n", 2, "FIX of unknown id 2"},
