@@ -3,9 +3,9 @@
 //   pose prior      δ = z⁻¹ x o,  e = [t(δ); wrap θ(δ)] (2D), [t(δ); 2·vec q(δ)] (3D), cost eᵀΩe,
 //                   with a sensor offset o (identity unless given: g2o's PARAMS_SE3OFFSET) —
 //                   the relative-pose error of core/relative_pose_factor.h with xᵢ = I and
-//                   xⱼ = x o (g2o's EDGE_SE2_PRIOR / EDGE_SE3_PRIOR, GTSAM's PriorFactor<Pose>);
+//                   xⱼ = x o (g2o's EDGE_PRIOR_SE2 / EDGE_SE3_PRIOR, GTSAM's PriorFactor<Pose>);
 //   position prior  e = t(x) − p (kDim entries: a GPS fix in a local frame), cost eᵀΩe with Ω
-//                   kDim×kDim (GTSAM's GPSFactor, g2o's EDGE_SE2_XYPRIOR / EDGE_SE3_XYZPRIOR).
+//                   kDim×kDim (GTSAM's GPSFactor, g2o's EDGE_PRIOR_SE2_XY / EDGE_SE3_XYZ_PRIOR).
 //
 // Jacobians are taken with respect to the right perturbation x ⊞ τ = x·(Exp(ω), v), so
 // t(x ⊞ τ) = t + R v and ∂e/∂τ = [R 0] for the position prior; for the pose prior

@@ -1,7 +1,8 @@
-// Random corruption of the project's own g2o files (fixed seeds): every corrupted file is either
-// refused with a FileError naming its line, or read and replayed to a finite estimate. Never
-// another exception, a crash or NaN. (A fuzzer of this kind found that an edge of −1e308 m,
-// finite and so once accepted, made a whole replay's estimate NaN; docs/design.md.)
+// Random corruption of the project's own g2o files and of small generated graphs with priors
+// (fixed seeds): every corrupted file is either refused with a FileError naming its line, or
+// read and replayed to a finite estimate. Never another exception, a crash or NaN. (A fuzzer of
+// this kind found that an edge of −1e308 m, finite and so once accepted, made a whole replay's
+// estimate NaN; docs/design.md.)
 #include <cmath>
 #include <fstream>
 #include <random>
@@ -12,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "io/pose_graph_file.h"
+#include "tests/random_graphs.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/replay_runner.h"
 
@@ -72,9 +74,9 @@ std::string corrupt(std::vector<std::string> lines, std::mt19937& rng) {
   return text;
 }
 
-void fuzz(const std::string& file, unsigned seed, int rounds) {
+void fuzzLines(const std::string& file, const std::vector<std::string>& lines, unsigned seed,
+               int rounds) {
   cli::useOneBlasThread();  // as the tools do: the smoother's own threads share the cores
-  const std::vector<std::string> lines = readLines(std::string(ARBOR_SOURCE_DIR) + "/data/" + file);
   ASSERT_FALSE(lines.empty()) << file;
   std::mt19937 rng(seed);
   int read = 0, refused = 0;
@@ -108,6 +110,56 @@ void fuzz(const std::string& file, unsigned seed, int rounds) {
   EXPECT_GT(refused, 0);
 }
 
+void fuzz(const std::string& file, unsigned seed, int rounds) {
+  fuzzLines(file, readLines(std::string(ARBOR_SOURCE_DIR) + "/data/" + file), seed, rounds);
+}
+
+// The lines writeG2o gives for a small graph with priors: a 30-pose chain with loop closures
+// every 10 poses, two pose priors (in 3D with a sensor offset, so PARAMS_SE3OFFSET lines too)
+// and three position priors.
+template <class G>
+std::vector<std::string> linesWithPriors(unsigned seed) {
+  std::mt19937_64 rng(seed);
+  constexpr int kPoses = 30;
+  PoseGraph<G> graph;
+  std::vector<G> truth = {G::Identity()};
+  typename G::Tangent forward = G::Tangent::Zero();
+  forward(0) = 1.0;
+  for (int k = 1; k < kPoses; ++k) {
+    truth.push_back(
+        truth.back().compose(G::Exp(forward + testing::randomTangent<G>(rng, 0.1, 0.2))));
+  }
+  for (int k = 0; k < kPoses; ++k) {
+    graph.ids.push_back(k);
+    graph.index[k] = k;
+    graph.poses.push_back(truth[k].compose(G::Exp(testing::randomTangent<G>(rng, 0.05, 0.02))));
+  }
+  const auto addEdge = [&](int i, int j) {
+    const G z =
+        truth[i].between(truth[j]).compose(G::Exp(testing::randomTangent<G>(rng, 0.02, 0.01)));
+    graph.edges.push_back(RelativePoseEdge<G>::make(i, j, z, testing::randomInformation<G>(rng)));
+  };
+  for (int k = 0; k + 1 < kPoses; ++k) addEdge(k, k + 1);
+  for (int k = 10; k < kPoses; k += 10) addEdge(k - 10, k);
+  const G offset = G::Exp(testing::randomTangent<G>(rng, 0.3, 0.1));
+  for (int k : {0, 20}) {
+    graph.pose_priors.push_back(PosePriorFactor<G>::make(
+        k, truth[k].compose(G::kDim == 3 ? offset : G::Identity()),
+        testing::randomInformation<G>(rng), G::kDim == 3 ? offset : G::Identity()));
+  }
+  for (int k : {5, 15, 25}) {
+    graph.position_priors.push_back(PositionPriorFactor<G>::make(
+        k, truth[k].translation(), 4.0 * PositionPriorFactor<G>::Matrix::Identity()));
+  }
+  graph.has_initial_estimate = true;
+  std::ostringstream out;
+  writeG2o(out, graph, graph.poses);
+  std::vector<std::string> lines;
+  std::istringstream in(out.str());
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
 // Seeds and rounds chosen so that each test meets at least one of the overflowing values
 // (checked by disabling kMaxTranslation and kMaxInformationEntry: each then fails).
 TEST(InputFuzz, CorruptedGridIsRefusedOrReplayedToAFiniteEstimate) { fuzz("grid_3d.g2o", 1, 40); }
@@ -118,6 +170,14 @@ TEST(InputFuzz, CorruptedSphereIsRefusedOrReplayedToAFiniteEstimate) {
 
 TEST(InputFuzz, CorruptedManhattanIsRefusedOrReplayedToAFiniteEstimate) {
   fuzz("manhattan_2d.g2o", 9, 150);
+}
+
+TEST(InputFuzz, CorruptedPriors2DAreRefusedOrReplayedToAFiniteEstimate) {
+  fuzzLines("priors_2d", linesWithPriors<SE2>(3), 5, 300);
+}
+
+TEST(InputFuzz, CorruptedPriors3DAreRefusedOrReplayedToAFiniteEstimate) {
+  fuzzLines("priors_3d", linesWithPriors<SE3>(4), 6, 300);
 }
 
 }  // namespace

@@ -18,58 +18,22 @@
 
 #include "core/information.h"
 #include "io/pose_graph_file.h"
+#include "tests/pose_graph_file_support.h"
 
 namespace arbor {
 namespace {
 
-const char kName[] = "test.g2o";
-
-AnyPoseGraph readText(const std::string& text, const ReadOptions& options = {},
-                      ReadReport* report = nullptr) {
-  std::istringstream in(text);
-  return readPoseGraph(in, kName, options, report);
-}
-
-template <class G>
-PoseGraph<G> readAs(const std::string& text, const ReadOptions& options = {},
-                    ReadReport* report = nullptr) {
-  AnyPoseGraph any = readText(text, options, report);
-  EXPECT_TRUE(std::holds_alternative<PoseGraph<G>>(any));
-  return std::get<PoseGraph<G>>(std::move(any));
-}
-
-// The FileError message of reading `text`, or "" when it reads without error.
-std::string readError(const std::string& text, const ReadOptions& options = {}) {
-  try {
-    readText(text, options);
-  } catch (const FileError& error) {
-    return error.what();
-  }
-  return "";
-}
-
-std::string num(double v) {
-  char buffer[32];
-  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), v);
-  return std::string(buffer, result.ptr);
-}
+using testing::expectSamePose;
+using testing::num;
+using testing::randomPose;
+using testing::readAs;
+using testing::readError;
+using testing::readText;
+constexpr const char* kName = testing::kFileName;
 
 template <int N>
 Eigen::Matrix<double, N, N> randomInformation(std::mt19937_64& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::Matrix<double, N, N> a;
-  for (int k = 0; k < a.size(); ++k) a.data()[k] = n(rng);
-  Eigen::Matrix<double, N, N> omega =
-      a * a.transpose() + 0.1 * Eigen::Matrix<double, N, N>::Identity();
-  return 0.5 * (omega + omega.transpose());  // exactly symmetric
-}
-
-template <class G>
-G randomPose(std::mt19937_64& rng, double scale) {
-  std::normal_distribution<double> n(0.0, scale);
-  typename G::Tangent tau;
-  for (int k = 0; k < G::kDoF; ++k) tau(k) = n(rng);
-  return G::Exp(tau);
+  return testing::randomSpd<N>(rng);
 }
 
 // A graph with non-contiguous ascending ids, a chain plus random loop closures, one fixed pose.
@@ -96,18 +60,6 @@ PoseGraph<G> randomGraph(std::mt19937_64& rng, int num_poses, int num_loops) {
   graph.fixed = {1};
   graph.has_initial_estimate = true;
   return graph;
-}
-
-void expectSamePose(const SE2& a, const SE2& b) {
-  EXPECT_EQ(a.x(), b.x());
-  EXPECT_EQ(a.y(), b.y());
-  EXPECT_NEAR(a.cos(), b.cos(), 1e-15);
-  EXPECT_NEAR(a.sin(), b.sin(), 1e-15);
-}
-
-void expectSamePose(const SE3& a, const SE3& b) {
-  EXPECT_TRUE((a.translation().array() == b.translation().array()).all());
-  EXPECT_LE((a.quaternion().coeffs() - b.quaternion().coeffs()).cwiseAbs().maxCoeff(), 1e-15);
 }
 
 template <class G>
@@ -356,6 +308,8 @@ TEST(PoseGraphFile, MalformedLinesNameTheLineAndTheProblem) {
       {v2 + "EDGE_SE2 0 1 1 0 0 1 0 0 nan 0 1\n", 3, "('nan') is not finite"},
       {"VERTEX_SE3:QUAT 0 0 0 0 0 0 0 0\n", 1, "quaternion (qx qy qz qw) = (0 0 0 0) is zero"},
       {v3 + "EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 0" + info3 + "\n", 3, "is zero"},
+      {"VERTEX_SE3:QUAT 0 0 0 0 1e308 -1e308 0 1\n", 1,
+       "quaternion (qx qy qz qw) = (1e+308 -1e+308 0 1) overflows (norm inf)"},
       {v3 + "EDGE_SE3:QUAT 0 1 0 0 0 nan 0 0 1" + info3 + "\n", 3, "('nan') is not finite"},
       {v2 + "FIX 9\n", 3, "FIX of unknown id 9"},
       {"EDGE_SE2 0 1 1 0 0" + info2 + "\nFIX 0 2\n", 2, "FIX of unknown id 2"},
