@@ -1,9 +1,9 @@
 // Sparse Cholesky LLᵀ of a symmetric positive-definite matrix made of dense kBlock×kBlock
 // blocks (one per pose): right-looking ("fan-out") column Cholesky over block columns (Davis,
 // Rajamanickam & Sid-Lakhdar, "A survey of direct methods for sparse linear systems", Acta
-// Numerica 2016) with fixed-size Eigen kernels. On pose graphs it is 2–3× faster than CHOLMOD
-// below ~2e7 flops per factorisation (where CHOLMOD's simplicial and small-supernode paths pay
-// per-entry and per-BLAS-call overheads), on par around 1e8, slower beyond (normal_equations.h).
+// Numerica 2016) with fixed-size Eigen kernels. On pose graphs it beats CHOLMOD on small
+// factorisations, where CHOLMOD's simplicial and small-supernode paths pay per-entry and
+// per-BLAS-call overheads, and loses on large ones (docs/design.md, "Why CHOLMOD from 1e8 flops").
 #pragma once
 
 #include <vector>

@@ -17,9 +17,8 @@
 namespace arbor {
 
 /// The largest |translation component| accepted in a measurement or a pose. Beyond it,
-/// residuals weighted by Ω (entries up to kMaxInformationEntry) can overflow F = Σ eᵀΩe; an
-/// edge of 1e308 metres, finite as it is, turned a whole estimate into NaN. Real data is far
-/// below (the shared datasets reach 471 m).
+/// residuals weighted by Ω (entries up to kMaxInformationEntry) can overflow F = Σ eᵀΩe
+/// (docs/design.md, "Conventions": input limits).
 inline constexpr double kMaxTranslation = 1e15;
 
 /// Why x cannot be a measurement or a pose, or "" when it can: a translation component beyond

@@ -1,6 +1,6 @@
 // A scope in which OpenMP parallel regions run serially in the calling thread only.
 // CHOLMOD 5 runs some loops of its supernodal factorisation with a hard-wired 4 OpenMP threads;
-// on a small shared machine that oversubscription costs about a third of the time.
+// on a small shared machine that oversubscription costs time (docs/design.md, "Batch solvers").
 // (max-active-levels is a per-task ICV, so other threads are unaffected.)
 #pragma once
 

@@ -47,7 +47,7 @@ void useOneBlasThread() {
   auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
   if (!set) return;
   set(1);
-  // The worker threads OpenBLAS started when it was loaded spin (sched_yield) for about 0.1 s
+  // The worker threads OpenBLAS started when it was loaded spin (sched_yield) for a while
   // before they sleep, on the core the smoother's helper wants; with one thread per call they
   // are never used again, so stop them (OpenBLAS's own fork handler does the same; it would
   // restart them if more threads were asked for).

@@ -64,9 +64,9 @@ double peakRssMb();
 
 /// One BLAS thread per call, when the BLAS in use is OpenBLAS (what scripts/install-deps.sh
 /// installs): it would otherwise fan each large clique factorisation out to every core, no
-/// faster here (torus3D replay 30.8 vs 29.7 s, single-threaded smoother) and fighting the
-/// smoother's own helper threads for the cores (garage replay 2.8 s instead of 1.3 s with two).
-/// A user's OPENBLAS_NUM_THREADS wins. Called first thing by the tools' main functions.
+/// faster on one core and fighting the smoother's own helper threads for the cores (measured:
+/// docs/design.md, "Dense clique kernels and the BLAS"). A user's OPENBLAS_NUM_THREADS wins.
+/// Called first thing by the tools' main functions.
 void useOneBlasThread();
 
 }  // namespace arbor::cli

@@ -104,8 +104,8 @@ BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot);
 /// of the current estimate, x'_k = b_k · s_k⁻¹ · x_k (b: winner, s: incremental at the snapshot,
 /// x: now). With no update since the snapshot this is the winner's estimate; when updates went
 /// on meanwhile (a background batch) it keeps what they changed instead of overwriting it with
-/// a stale value — absolute values of a batch collected 1500 updates late raised F on M3500b
-/// from 2056 to 47159, the correction lowered it to 2055. Poses created after the snapshot then
+/// a stale value (absolute values of a late batch can raise F far above both estimates:
+/// docs/design.md, "Batch refinement in the loop"). Poses created after the snapshot then
 /// follow their creator (OnlineSmoother::seedPoint). Throws std::invalid_argument on sizes
 /// that do not fit.
 template <class G>
