@@ -1,11 +1,14 @@
 // The order in which `arbor replay` and `arbor publish` feed a file's edges: by max(i, j) of
-// the pose ids, then file order.
+// the pose ids, then file order; a pose's priors (pose priors, then position priors, each in
+// file order) right after the edge that makes the pose known, and priors on poses no edge
+// reaches after every edge.
 #pragma once
 
 #include <algorithm>
 #include <numeric>
 #include <vector>
 
+#include "bayestree/online_smoother.h"
 #include "core/pose_graph.h"
 
 namespace arbor::cli {
@@ -28,6 +31,43 @@ std::vector<std::vector<int>> replayGroups(const PoseGraph<G>& graph, bool per_p
     }
   }
   return groups;
+}
+
+/// One prior of a graph: a pose prior (position = false) or a position prior, by index.
+struct PriorRef {
+  bool position = false;
+  int index = 0;
+};
+
+/// The priors of each pose (dense index), pose priors first, each kind in file order.
+class PriorSchedule {
+ public:
+  template <class G>
+  explicit PriorSchedule(const PoseGraph<G>& graph) : by_pose_(graph.ids.size()) {
+    for (int k = 0; k < static_cast<int>(graph.pose_priors.size()); ++k)
+      by_pose_[graph.pose_priors[k].i].push_back({false, k});
+    for (int k = 0; k < static_cast<int>(graph.position_priors.size()); ++k)
+      by_pose_[graph.position_priors[k].i].push_back({true, k});
+    any_ = graph.hasPriors();
+  }
+  bool any() const { return any_; }
+  const std::vector<PriorRef>& of(int pose) const { return by_pose_[pose]; }
+
+ private:
+  std::vector<std::vector<PriorRef>> by_pose_;
+  bool any_ = false;
+};
+
+/// Hands one of the graph's priors to the online smoother (by the pose's id).
+template <class G>
+EdgeResult feedPrior(const PoseGraph<G>& graph, const PriorRef& p, OnlineSmoother<G>& smoother) {
+  if (p.position) {
+    const auto& prior = graph.position_priors[p.index];
+    return smoother.addPositionPrior(graph.ids[prior.i], prior.position, prior.information);
+  }
+  const auto& prior = graph.pose_priors[p.index];
+  return smoother.addPosePrior(graph.ids[prior.i], prior.measurement, prior.information,
+                               prior.offset);
 }
 
 }  // namespace arbor::cli

@@ -17,6 +17,21 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
   ReplayResult<G> result;
   const std::vector<std::vector<int>> groups = replayGroups(graph, settings.per_pose);
   result.rows.reserve(groups.size());
+  // A pose's priors are fed right after the edge that makes the pose known (replay_order.h).
+  const PriorSchedule schedule(graph);
+  std::vector<char> prior_fed(graph.ids.size(), 0);
+  auto feed_priors = [&](int pose) {
+    if (prior_fed[pose] || !smoother.hasPose(graph.ids[pose])) return;
+    prior_fed[pose] = 1;
+    for (const PriorRef& p : schedule.of(pose)) {
+      const EdgeResult r = feedPrior(graph, p, smoother);
+      if (r.status == EdgeStatus::kRejected) {
+        ++result.rejected;
+        result.rejections.push_back("prior on " + std::to_string(graph.ids[pose]) +
+                                    " rejected: " + r.reason);
+      }
+    }
+  };
   int fed = 0;
   for (const auto& group : groups) {
     for (int e : group) {
@@ -29,6 +44,10 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
         result.rejections.push_back("edge " + std::to_string(from) + " -> " + std::to_string(to) +
                                     " rejected: " + r.reason);
       }
+      if (schedule.any()) {
+        feed_priors(edge.i);
+        feed_priors(edge.j);
+      }
     }
     fed += static_cast<int>(group.size());
     Stopwatch clock;
@@ -40,6 +59,17 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
                            s.cliques_reeliminated, s.variables_relinearized, s.cliques_updated,
                            s.cliques_solved});
     if (hooks.after_update) hooks.after_update(smoother, result.rows.back());
+  }
+  // Priors on poses that no edge reaches: each starts a component of its own, in one update.
+  if (schedule.any()) {
+    bool any = false;
+    for (int pose = 0; pose < static_cast<int>(graph.ids.size()); ++pose) {
+      if (prior_fed[pose] || schedule.of(pose).empty()) continue;
+      prior_fed[pose] = 1;
+      any = true;
+      for (const PriorRef& p : schedule.of(pose)) feedPrior(graph, p, smoother);
+    }
+    if (any) smoother.update();
   }
   if (hooks.after_stream) hooks.after_stream(smoother);
   result.F_incremental = smoother.smoother().objective();
