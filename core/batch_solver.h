@@ -32,16 +32,20 @@ struct BatchSummary {
   std::string message;  ///< e.g. why it diverged
 };
 
-/// Minimises F = Σ eᵀΩe over the poses not in graph.gaugeIndices(), starting from and writing to
-/// *poses (one per graph pose). On divergence *poses holds the best estimate seen. Throws
+/// Minimises F = objective(graph, ·) = Σ eᵀΩe over the edges, pose priors and position priors
+/// (a prior on a gauge pose is a constant in F), over the poses not in graph.gaugeIndices(),
+/// starting from and writing to *poses (one per graph pose). A connected component that neither
+/// holds a gauge pose nor is anchored by its priors (gaugeProblem) ends as kDiverged with the
+/// message naming its first pose. On divergence *poses holds the best estimate seen. Throws
 /// std::invalid_argument on a size mismatch, bad indices or bad options; a singular or
 /// indefinite system is reported as Termination::kDiverged with a message.
 template <class G>
 BatchSummary solveBatch(const PoseGraph<G>& graph, std::vector<G>* poses,
                         const BatchOptions& options = {});
 
-/// One Gauss–Newton step from `poses` (the linearisation point): the tangent increment per
-/// pose (zero for gauge poses). Throws std::runtime_error if the normal equations are singular.
+/// One Gauss–Newton step from `poses` (the linearisation point), edges and priors: the tangent
+/// increment per pose (zero for gauge poses). Throws std::runtime_error if the normal equations are
+/// singular.
 template <class G>
 std::vector<typename G::Tangent> gaussNewtonStep(const PoseGraph<G>& graph,
                                                  const std::vector<G>& poses);

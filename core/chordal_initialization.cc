@@ -70,14 +70,6 @@ Eigen::Matrix3d projectToRotation(const Eigen::Matrix3d& M) {
   return U * svd.matrixV().transpose();
 }
 
-SE2 makePose(const Eigen::Matrix2d& R, const Eigen::Vector2d& t) {
-  return SE2(t, std::atan2(R(1, 0), R(0, 0)));
-}
-
-SE3 makePose(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
-  return SE3(Eigen::Quaterniond(R), t);
-}
-
 /// κ = r / tr(Ω_rr⁻¹), the isotropic rotational precision of isotropicInformation.
 template <class G>
 double rotationalPrecision(const PoseGraph<G>& graph, int edge_id) {
@@ -227,18 +219,20 @@ std::vector<G> chordalInitialization(const PoseGraph<G>& graph) {
   const int n = graph.numPoses();
   if (n == 0) return {};
   const init_detail::Adjacency adj = init_detail::buildAdjacency(graph);
-  const std::vector<int> roots = init_detail::gaugeRoots(graph);
+  const init_detail::Roots<G> roots = init_detail::findRoots(graph, where);
   init_detail::requireConnected(graph, adj, roots, where);
 
   // var[k]: the block of pose k among the unknowns, or −1 for a gauge root.
   std::vector<int> var(n, 0);
   std::vector<MatD> R(n, MatD::Identity());
   std::vector<VecD> t(n, VecD::Zero());
-  for (int k : roots) {
+  std::vector<G> x(n);
+  for (std::size_t r = 0; r < roots.poses.size(); ++r) {
+    const int k = roots.poses[r];
     var[k] = -1;
-    const G x = init_detail::rootValue(graph, k);
-    R[k] = x.rotation();
-    t[k] = x.translation();
+    x[k] = roots.values[r];
+    R[k] = x[k].rotation();
+    t[k] = x[k].translation();
   }
   int num_free = 0;
   for (int k = 0; k < n; ++k) {
@@ -252,10 +246,10 @@ std::vector<G> chordalInitialization(const PoseGraph<G>& graph) {
       solveTranslations<d>(graph, var, num_free, R, &t);
     }
   }
-  std::vector<G> x(n);
   for (int k = 0; k < n; ++k) {
-    x[k] = var[k] < 0 ? init_detail::rootValue(graph, k) : makePose(R[k], t[k]);
+    if (var[k] >= 0) x[k] = init_detail::makePose(R[k], t[k]);
   }
+  init_detail::alignToPositionPriors(graph, roots, &x);
   return x;
 }
 

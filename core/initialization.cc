@@ -27,7 +27,7 @@ std::vector<G> breadthFirstPlacement(const PoseGraph<G>& graph, bool follow_chai
   const int n = graph.numPoses();
   if (n == 0) return {};
   const Adjacency adj = init_detail::buildAdjacency(graph);
-  const std::vector<int> roots = init_detail::gaugeRoots(graph);
+  const init_detail::Roots<G> roots = init_detail::findRoots(graph, where);
 
   // chain[k] (k ≥ 1): the first edge in file order between k−1 and k, or −1.
   std::vector<int> chain(n, -1);
@@ -61,8 +61,8 @@ std::vector<G> breadthFirstPlacement(const PoseGraph<G>& graph, bool follow_chai
     }
   };
 
-  for (int r : roots) place(r, init_detail::rootValue(graph, r));
-  for (int r : roots) extendChain(r);
+  for (std::size_t r = 0; r < roots.poses.size(); ++r) place(roots.poses[r], roots.values[r]);
+  for (int r : roots.poses) extendChain(r);
   for (std::size_t head = 0; head < queue.size(); ++head) {
     const int p = queue[head];
     for (int a = adj.offsets[p]; a < adj.offsets[p + 1]; ++a) {
@@ -74,8 +74,9 @@ std::vector<G> breadthFirstPlacement(const PoseGraph<G>& graph, bool follow_chai
     }
   }
   for (int k = 0; k < n; ++k) {
-    if (!placed[k]) throw init_detail::unreachablePose(graph, roots, k, where);
+    if (!placed[k]) throw init_detail::unreachablePose(graph, roots.first_gauge, k, where);
   }
+  init_detail::alignToPositionPriors(graph, roots, &x);
   return x;
 }
 

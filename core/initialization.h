@@ -2,13 +2,25 @@
 // chordal relaxation (Carlone et al., "Initialization techniques for 3D SLAM", ICRA 2015).
 //
 // Common to all methods:
-// - The gauge poses are graph.gaugeIndices(). With graph.has_initial_estimate every gauge pose
-//   is placed at its file value (graph.poses); without one, only the first gauge pose is used
-//   and it is placed at the identity.
-// - Every pose must be reachable from the gauge through the edges (in either direction);
-//   otherwise std::invalid_argument names the first unreachable pose id.
-// - Malformed graphs (edge or gauge index out of range, graph.poses of the wrong size while
-//   has_initial_estimate) give std::invalid_argument. Self-loop edges (i == j) are ignored.
+// - Each connected component (poses linked by edges) grows from its roots, whose values are
+//   given (init_detail::findRoots):
+//   · a component holding gauge poses (graph.gaugeIndices()): with graph.has_initial_estimate
+//     every gauge pose is placed at its file value (graph.poses); without one, its first gauge
+//     pose is placed at the value of a pose prior on it if there is one, else at the identity;
+//   · a component anchored by its priors alone (no gauge pose): its lowest pose with a pose
+//     prior, at that prior's value z·o⁻¹ (the prior is on x·o); without pose priors, its lowest
+//     pose at the identity.
+//   So with priors the guess is in the priors' frame.
+// - A component rooted at the identity that has position priors is then moved rigidly onto them
+//   (priors' frame): the weighted least-squares rigid alignment (Kabsch / Umeyama, weights the
+//   isotropic precisions kDim / tr(Ω⁻¹)) of its poses' guessed positions onto the priors'
+//   positions when those fix the rotation (≥ 2 distinct positions in 2D, ≥ 3 non-collinear in
+//   3D: GaugeInformation), else the weighted mean translation alone.
+// - A component that neither holds a gauge pose nor is anchored by its priors (possible only
+//   when graph.fixed is set) gives std::invalid_argument naming its first pose id ("not
+//   connected"); without graph.fixed every component has an anchor (PoseGraph::gaugeIndices).
+// - Malformed graphs (edge, prior or gauge index out of range, graph.poses of the wrong size
+//   while has_initial_estimate) give std::invalid_argument. Self-loop edges (i == j) are ignored.
 #pragma once
 
 #include <string>

@@ -2,10 +2,19 @@
 // core/chordal_initialization.cc); not part of the public API.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <Eigen/SVD>
+
+#include "core/gauge.h"
 #include "core/pose_graph.h"
 
 namespace arbor::init_detail {
@@ -55,6 +64,17 @@ void validateGraph(const PoseGraph<G>& graph, const std::string& where) {
                                   ") refers to a pose index outside 0.." + std::to_string(n - 1));
     }
   }
+  const auto checkPriors = [&](const auto& priors, const char* what) {
+    for (std::size_t k = 0; k < priors.size(); ++k) {
+      if (priors[k].i < 0 || priors[k].i >= n) {
+        throw std::invalid_argument(where + ": " + what + " " + std::to_string(k) +
+                                    " is on pose index " + std::to_string(priors[k].i) +
+                                    ", outside 0.." + std::to_string(n - 1));
+      }
+    }
+  };
+  checkPriors(graph.pose_priors, "pose prior");
+  checkPriors(graph.position_priors, "position prior");
   for (int k : graph.gaugeIndices()) {
     if (k < 0 || k >= n) {
       throw std::invalid_argument(where + ": gauge (fixed) pose index " + std::to_string(k) +
@@ -63,46 +83,190 @@ void validateGraph(const PoseGraph<G>& graph, const std::string& where) {
   }
 }
 
-/// The poses whose value is given, in order: every gauge pose at its file value when the graph
-/// has an initial estimate, else the first gauge pose at the identity. Empty for an empty graph.
+/// A pose from a rotation matrix and a translation.
+inline SE2 makePose(const Eigen::Matrix2d& R, const Eigen::Vector2d& t) {
+  return SE2(t, std::atan2(R(1, 0), R(0, 0)));
+}
+inline SE3 makePose(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  return SE3(Eigen::Quaterniond(R), t);
+}
+
+/// Where the initial guess starts: the root poses with their values (placed first, in order),
+/// each pose's connected component (by edges; its lowest dense index), and which components are
+/// aligned onto their position priors once the guess is computed.
 template <class G>
-std::vector<int> gaugeRoots(const PoseGraph<G>& graph) {
-  std::vector<int> gauge = graph.gaugeIndices();
-  if (gauge.empty()) return {};
-  if (!graph.has_initial_estimate) return {gauge.front()};
-  std::vector<int> roots;
-  std::vector<char> seen(graph.numPoses(), 0);
+struct Roots {
+  std::vector<int> poses;
+  std::vector<G> values;
+  std::vector<int> component;  ///< per pose
+  std::vector<char> align;     ///< per component (indexed by its lowest pose)
+  int first_gauge = -1;        ///< the first gauge pose (for messages), −1 if none
+};
+
+/// The std::invalid_argument for a pose that no edge path links to the gauge.
+template <class G>
+std::invalid_argument unreachablePose(const PoseGraph<G>& graph, int first_gauge, int k,
+                                      const std::string& where) {
+  const std::string from =
+      first_gauge < 0 ? std::string(
+                            " is not reachable through the edges from a gauge "
+                            "pose nor anchored by priors")
+                      : " is not reachable through the edges from the gauge pose " +
+                            std::to_string(graph.ids[first_gauge]) + " nor anchored by priors";
+  return std::invalid_argument(where + ": the pose graph is not connected: pose " +
+                               std::to_string(graph.ids[k]) + from);
+}
+
+/// The roots of every component, found in this order (core/initialization.h):
+/// - a component holding gauge poses (graph.gaugeIndices()): every one of them at its file value
+///   when the graph has an initial estimate, else its first gauge pose at the value of a pose
+///   prior on it (the first in file order), or at the identity and then aligned;
+/// - a component whose priors fix its gauge: the lowest pose with a pose prior, at that prior's
+///   value z·o⁻¹; without pose priors, its lowest pose at the identity, then aligned;
+/// - any other component: std::invalid_argument naming its lowest pose (unreachablePose).
+template <class G>
+Roots<G> findRoots(const PoseGraph<G>& graph, const std::string& where) {
+  const int n = graph.numPoses();
+  Roots<G> roots;
+  roots.component.resize(n);
+  std::iota(roots.component.begin(), roots.component.end(), 0);
+  auto root = [&](int v) {
+    std::vector<int>& parent = roots.component;
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& e : graph.edges) {
+    const int a = root(e.i), b = root(e.j);
+    if (a != b) roots.component[std::max(a, b)] = std::min(a, b);
+  }
+  for (int v = 0; v < n; ++v) roots.component[v] = root(v);
+  const std::vector<int>& comp = roots.component;
+  roots.align.assign(n, 0);
+
+  // The first pose prior on each pose (file order), −1 if none.
+  std::vector<int> pose_prior(n, -1);
+  for (int k = static_cast<int>(graph.pose_priors.size()) - 1; k >= 0; --k)
+    pose_prior[graph.pose_priors[k].i] = k;
+  auto priorValue = [&](int v) {
+    const auto& p = graph.pose_priors[pose_prior[v]];
+    return p.measurement.compose(p.offset.inverse());
+  };
+
+  std::vector<char> rooted(n, 0);  // per component
+  const std::vector<int> gauge = graph.gaugeIndices();
+  std::vector<char> seen(n, 0);
   for (int k : gauge) {
-    if (!seen[k]) roots.push_back(k);
+    if (seen[k]) continue;
     seen[k] = 1;
+    if (roots.first_gauge < 0) roots.first_gauge = k;
+    const int c = comp[k];
+    if (graph.has_initial_estimate) {
+      roots.poses.push_back(k);
+      roots.values.push_back(graph.poses[k]);
+    } else if (!rooted[c]) {
+      roots.poses.push_back(k);
+      roots.values.push_back(pose_prior[k] >= 0 ? priorValue(k) : G::Identity());
+      roots.align[c] = pose_prior[k] < 0;
+    }
+    rooted[c] = 1;
+  }
+
+  std::vector<GaugeInformation<G>> info(n);
+  for (const auto& p : graph.pose_priors) info[comp[p.i]].addPosePrior();
+  for (const auto& p : graph.position_priors)
+    info[comp[p.i]].addPositionPrior(p.position, p.information);
+  std::vector<int> lowest_with_prior(n, -1);  // per component
+  for (int v = n - 1; v >= 0; --v)
+    if (pose_prior[v] >= 0) lowest_with_prior[comp[v]] = v;
+  for (int c = 0; c < n; ++c) {
+    if (comp[c] != c || rooted[c]) continue;
+    if (!info[c].fixesGauge()) throw unreachablePose(graph, roots.first_gauge, c, where);
+    const int v = lowest_with_prior[c];
+    roots.poses.push_back(v >= 0 ? v : c);
+    roots.values.push_back(v >= 0 ? priorValue(v) : G::Identity());
+    roots.align[c] = v < 0;
+    rooted[c] = 1;
   }
   return roots;
 }
 
+/// Σ w, Σ w q, Σ w p and the gauge information of one component's position priors.
 template <class G>
-G rootValue(const PoseGraph<G>& graph, int k) {
-  return graph.has_initial_estimate ? graph.poses[k] : G::Identity();
-}
+struct AlignmentSums {
+  double w = 0;
+  Eigen::Matrix<double, G::kDim, 1> q = Eigen::Matrix<double, G::kDim, 1>::Zero();
+  Eigen::Matrix<double, G::kDim, 1> p = Eigen::Matrix<double, G::kDim, 1>::Zero();
+  GaugeInformation<G> info;
+};
 
-/// The std::invalid_argument for a pose that no edge path links to the gauge.
+/// Moves every component marked in roots.align rigidly onto its position priors: x ↦ T x with
+/// T = (R, t) minimising Σ wₖ ‖R qₖ + t − pₖ‖² over the priors k of the component, qₖ the
+/// position of its pose in *x, pₖ the prior's position, wₖ = kDim / tr(Ωₖ⁻¹) (the isotropic
+/// precision). When the priors fix the rotation (GaugeInformation: ≥ 2 distinct positions in 2D,
+/// ≥ 3 non-collinear in 3D), R is the weighted Kabsch / Umeyama rotation: with centroids
+/// q̄ = Σ wq / Σ w, p̄ likewise, and C = Σ w (p − p̄)(q − q̄)ᵀ = U Σ Vᵀ,
+/// R = U diag(1, …, 1, det(U Vᵀ)) Vᵀ and t = p̄ − R q̄; otherwise R = I and t = p̄ − q̄.
 template <class G>
-std::invalid_argument unreachablePose(const PoseGraph<G>& graph, const std::vector<int>& roots,
-                                      int k, const std::string& where) {
-  return std::invalid_argument(where + ": the pose graph is not connected: pose " +
-                               std::to_string(graph.ids[k]) +
-                               " is not reachable through the edges from the gauge pose " +
-                               std::to_string(graph.ids[roots.front()]));
+void alignToPositionPriors(const PoseGraph<G>& graph, const Roots<G>& roots, std::vector<G>* x) {
+  constexpr int d = G::kDim;
+  using MatD = Eigen::Matrix<double, d, d>;
+  using VecD = Eigen::Matrix<double, d, 1>;
+  const int n = graph.numPoses();
+  if (graph.position_priors.empty()) return;
+  std::vector<AlignmentSums<G>> sums(n);
+  std::vector<double> weight(graph.position_priors.size());
+  for (std::size_t k = 0; k < graph.position_priors.size(); ++k) {
+    const auto& prior = graph.position_priors[k];
+    const int c = roots.component[prior.i];
+    if (!roots.align[c]) continue;
+    weight[k] = d / prior.information.inverse().trace();
+    AlignmentSums<G>& s = sums[c];
+    s.w += weight[k];
+    s.q += weight[k] * (*x)[prior.i].translation();
+    s.p += weight[k] * prior.position;
+    s.info.addPositionPrior(prior.position, prior.information);
+  }
+  std::vector<MatD> C(n, MatD::Zero());
+  for (std::size_t k = 0; k < graph.position_priors.size(); ++k) {
+    const auto& prior = graph.position_priors[k];
+    const int c = roots.component[prior.i];
+    if (!roots.align[c]) continue;
+    const AlignmentSums<G>& s = sums[c];
+    C[c] += weight[k] * (prior.position - s.p / s.w) *
+            ((*x)[prior.i].translation() - s.q / s.w).transpose();
+  }
+  std::vector<G> transform(n, G::Identity());
+  std::vector<char> moved(n, 0);
+  for (int c = 0; c < n; ++c) {
+    const AlignmentSums<G>& s = sums[c];
+    if (!(s.w > 0)) continue;
+    const VecD q_mean = s.q / s.w, p_mean = s.p / s.w;
+    MatD R = MatD::Identity();
+    if (s.info.fixesGauge()) {
+      const Eigen::JacobiSVD<MatD> svd(C[c], Eigen::ComputeFullU | Eigen::ComputeFullV);
+      MatD D = MatD::Identity();
+      D(d - 1, d - 1) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1;
+      R = svd.matrixU() * D * svd.matrixV().transpose();
+    }
+    transform[c] = makePose(R, VecD(p_mean - R * q_mean));
+    moved[c] = 1;
+  }
+  for (int v = 0; v < n; ++v) {
+    if (!moved[roots.component[v]]) continue;
+    (*x)[v] = transform[roots.component[v]].compose((*x)[v]);
+    (*x)[v].normalize();
+  }
 }
 
 /// Throws unreachablePose for the first pose (dense order) not reachable from the roots.
 template <class G>
-void requireConnected(const PoseGraph<G>& graph, const Adjacency& adj,
-                      const std::vector<int>& roots, const std::string& where) {
+void requireConnected(const PoseGraph<G>& graph, const Adjacency& adj, const Roots<G>& roots,
+                      const std::string& where) {
   const int n = graph.numPoses();
   std::vector<char> seen(n, 0);
   std::vector<int> queue;
   queue.reserve(n);
-  for (int r : roots) {
+  for (int r : roots.poses) {
     seen[r] = 1;
     queue.push_back(r);
   }
@@ -118,7 +282,7 @@ void requireConnected(const PoseGraph<G>& graph, const Adjacency& adj,
     }
   }
   for (int k = 0; k < n; ++k) {
-    if (!seen[k]) throw unreachablePose(graph, roots, k, where);
+    if (!seen[k]) throw unreachablePose(graph, roots.first_gauge, k, where);
   }
 }
 

@@ -19,6 +19,15 @@ void checkIndices(const PoseGraph<G>& graph) {
                                   std::to_string(e.i) + " and " + std::to_string(e.j) +
                                   ", outside 0.." + std::to_string(n - 1));
   }
+  const auto checkPriors = [n](const auto& priors, const char* what) {
+    for (size_t k = 0; k < priors.size(); ++k)
+      if (priors[k].i < 0 || priors[k].i >= n)
+        throw std::invalid_argument(std::string(what) + " " + std::to_string(k) +
+                                    " is on pose index " + std::to_string(priors[k].i) +
+                                    ", outside 0.." + std::to_string(n - 1));
+  };
+  checkPriors(graph.pose_priors, "pose prior");
+  checkPriors(graph.position_priors, "position prior");
   for (int g : graph.gaugeIndices())
     if (g < 0 || g >= n)
       throw std::invalid_argument("fixed pose index " + std::to_string(g) + " outside 0.." +
@@ -49,8 +58,17 @@ std::string gaugeProblem(const PoseGraph<G>& graph) {
   std::vector<int> parent(n);
   std::iota(parent.begin(), parent.end(), 0);
   for (const auto& e : graph.edges) parent[findRoot(parent, e.i)] = findRoot(parent, e.j);
+  // A component is anchored by a gauge pose or by priors that fix its gauge.
   std::vector<char> anchored(n, 0);
   for (int g : graph.gaugeIndices()) anchored[findRoot(parent, g)] = 1;
+  if (graph.hasPriors()) {
+    std::vector<GaugeInformation<G>> gauge(n);
+    for (const auto& p : graph.pose_priors) gauge[findRoot(parent, p.i)].addPosePrior();
+    for (const auto& p : graph.position_priors)
+      gauge[findRoot(parent, p.i)].addPositionPrior(p.position, p.information);
+    for (int p = 0; p < n; ++p)
+      if (parent[p] == p && gauge[p].fixesGauge()) anchored[p] = 1;
+  }
   int first = -1, count = 0;
   for (int p = 0; p < n; ++p) {
     if (anchored[findRoot(parent, p)]) continue;
@@ -61,8 +79,8 @@ std::string gaugeProblem(const PoseGraph<G>& graph) {
   std::string what = poseName(graph, first);
   if (count > 1) what += " and " + std::to_string(count - 1) + " other pose(s)";
   return what +
-         " not connected by edges to any fixed pose: the gauge is free there and the "
-         "normal equations are singular";
+         " not connected by edges to any fixed pose nor anchored by priors: the gauge is free "
+         "there and the normal equations are singular";
 }
 
 template <class G>
@@ -135,6 +153,12 @@ NormalEquations<G>::NormalEquations(const PoseGraph<G>& graph, CholeskyBackend b
     s.i_is_high = s.var_i > s.var_j;
   }
   linearization_.resize(graph.edges.size());
+  pose_prior_linearization_.resize(graph.pose_priors.size());
+  for (size_t k = 0; k < graph.pose_priors.size(); ++k)
+    pose_prior_linearization_[k].var = var_of_pose_[graph.pose_priors[k].i];
+  position_prior_linearization_.resize(graph.position_priors.size());
+  for (size_t k = 0; k < graph.position_priors.size(); ++k)
+    position_prior_linearization_[k].var = var_of_pose_[graph.position_priors[k].i];
   diagonal_blocks_.assign(num_variables_, Block::Zero());
   off_diagonal_blocks_.assign(off_diagonal_.size(), Block::Zero());
   gradient_.setZero(dimension());
@@ -241,8 +265,47 @@ double NormalEquations<G>::linearize(const std::vector<G>& poses) {
         h.noalias() += lin.A_j.transpose() * lin.A_i;
     }
   }
+  f += linearizePriors(graph_.pose_priors, poses, &pose_prior_linearization_);
+  f += linearizePriors(graph_.position_priors, poses, &position_prior_linearization_);
   for (int c = 0; c < num_variables_; ++c)
     hessian_diagonal_.template segment<d>(c * d) = diagonal_blocks_[c].diagonal();
+  return f;
+}
+
+// A unary prior on variable v: H(v, v) += AᵀA, g_v += Aᵀr; on a gauge pose only ‖r‖² (in F).
+template <class G>
+template <class Prior, class Linearization>
+double NormalEquations<G>::linearizePriors(const std::vector<Prior>& priors,
+                                           const std::vector<G>& poses,
+                                           std::vector<Linearization>* out) {
+  constexpr int d = kDoF;
+  double f = 0.0;
+  for (size_t k = 0; k < priors.size(); ++k) {
+    Linearization& lin = (*out)[k];
+    priors[k].linearize(poses[priors[k].i], &lin.A, &lin.r);
+    f += lin.r.squaredNorm();
+    if (lin.var < 0) continue;
+    diagonal_blocks_[lin.var].noalias() += lin.A.transpose() * lin.A;
+    gradient_.template segment<d>(lin.var * d).noalias() += lin.A.transpose() * lin.r;
+  }
+  return f;
+}
+
+// Σ ‖r + A δ_v‖² (with_residual) or Σ ‖A δ_v‖² over one kind of prior.
+template <class G>
+template <class Linearization>
+double NormalEquations<G>::priorModelCost(const std::vector<Linearization>& lin,
+                                          const Eigen::VectorXd& delta, bool with_residual) const {
+  constexpr int d = kDoF;
+  double f = 0.0;
+  for (const Linearization& l : lin) {
+    if (l.var < 0) {
+      if (with_residual) f += l.r.squaredNorm();
+      continue;
+    }
+    const auto w = (l.A * delta.template segment<d>(l.var * d)).eval();
+    f += with_residual ? (w + l.r).squaredNorm() : w.squaredNorm();
+  }
   return f;
 }
 
@@ -329,6 +392,8 @@ double NormalEquations<G>::modelCost(const Eigen::VectorXd& delta) const {
     if (s.var_j >= 0) v.noalias() += lin.A_j * delta.template segment<d>(s.var_j * d);
     f += v.squaredNorm();
   }
+  f += priorModelCost(pose_prior_linearization_, delta, true);
+  f += priorModelCost(position_prior_linearization_, delta, true);
   return f;
 }
 
@@ -344,6 +409,8 @@ double NormalEquations<G>::jacobianSquaredNorm(const Eigen::VectorXd& v) const {
     if (s.var_j >= 0) w.noalias() += lin.A_j * v.template segment<d>(s.var_j * d);
     f += w.squaredNorm();
   }
+  f += priorModelCost(pose_prior_linearization_, v, false);
+  f += priorModelCost(position_prior_linearization_, v, false);
   return f;
 }
 

@@ -1,5 +1,7 @@
 // The Gauss–Newton normal equations H δ = −g of a pose graph, H = Σ AᵀA and g = Aᵀr summed
-// block by block over the whitened edge linearisations, with the block pattern, a
+// block by block over the whitened linearisations of its edges and priors (a prior is unary:
+// its AᵀA goes into one diagonal block and Aᵀr into one segment of g; a prior on a gauge pose
+// adds a constant to F and nothing else), with the block pattern, a
 // fill-reducing block ordering and the symbolic factorisation computed once (Dellaert & Kaess,
 // "Square Root SAM", IJRR 2006, §3–4). The numeric factorisation is BlockCholesky (fixed-size
 // blocks) up to ~1e8 flops and CHOLMOD's supernodal LLᵀ beyond.
@@ -18,8 +20,10 @@
 namespace arbor {
 
 /// Why the gauge leaves the problem singular, or "" when it does not: every connected component
-/// of the graph (poses linked by edges) must hold at least one gauge pose. Also checks the pose
-/// and gauge indices (throws std::invalid_argument when one is out of range).
+/// of the graph (poses linked by edges) must be anchored, by holding a gauge pose
+/// (graph.gaugeIndices()) or by priors that fix its gauge (core/gauge.h GaugeInformation); the
+/// message names the first pose of the first component that is not. Also checks the edge,
+/// prior and gauge indices (throws std::invalid_argument when one is out of range).
 template <class G>
 std::string gaugeProblem(const PoseGraph<G>& graph);
 
@@ -64,7 +68,8 @@ class NormalEquations {
   double hessianNonzeros() const;
   double factorNonzeros() const;
 
-  /// Linearises every edge at `poses` and assembles H and g; returns F = Σ‖r‖² there.
+  /// Linearises every edge and prior at `poses` and assembles H and g; returns F = Σ‖r‖² there
+  /// (priors on gauge poses included).
   double linearize(const std::vector<G>& poses);
 
   /// g = Aᵀr at the last linearisation (F's gradient is 2g).
@@ -79,7 +84,7 @@ class NormalEquations {
   /// x = (H + diag(damping))⁻¹ b with the last successful factorisation.
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x);
 
-  /// The linear model ‖r + A δ‖² at the last linearisation.
+  /// The linear model ‖r + A δ‖² at the last linearisation (edges and priors).
   double modelCost(const Eigen::VectorXd& delta) const;
   /// ‖A v‖² = vᵀ H v at the last linearisation.
   double jacobianSquaredNorm(const Eigen::VectorXd& v) const;
@@ -103,12 +108,27 @@ class NormalEquations {
     Block A_i, A_j;
     Vector r;
   };
+  // A unary prior's whitened linearisation (kRows residual rows) and its variable (−1: gauge).
+  template <int kRows>
+  struct PriorLinearization {
+    Eigen::Matrix<double, kRows, kDoF> A;
+    Eigen::Matrix<double, kRows, 1> r;
+    int var = -1;
+  };
+  using PosePriorLinearization = PriorLinearization<kDoF>;
+  using PositionPriorLinearization = PriorLinearization<G::kDim>;
   struct OffDiagonalBlock {
     int high = 0, low = 0;  // the block H(high, low), high > low
   };
   using Blocks = std::vector<Block, Eigen::aligned_allocator<Block>>;
 
   void setUpCholmod();
+  template <class Prior, class Linearization>
+  double linearizePriors(const std::vector<Prior>& priors, const std::vector<G>& poses,
+                         std::vector<Linearization>* out);
+  template <class Linearization>
+  double priorModelCost(const std::vector<Linearization>& lin, const Eigen::VectorXd& delta,
+                        bool with_residual) const;
   void loadCholmod(const Eigen::VectorXd* damping);
   void loadBlocks(const Eigen::VectorXd* damping);
 
@@ -121,6 +141,8 @@ class NormalEquations {
   std::vector<EdgeSlot> slots_;
   std::vector<OffDiagonalBlock> off_diagonal_;
   std::vector<EdgeLinearization> linearization_;
+  std::vector<PosePriorLinearization> pose_prior_linearization_;
+  std::vector<PositionPriorLinearization> position_prior_linearization_;
   Blocks diagonal_blocks_;      // H(j, j)
   Blocks off_diagonal_blocks_;  // H(row, col), one per OffDiagonalBlock
   Eigen::VectorXd gradient_;

@@ -36,8 +36,9 @@ struct PoseGraph {
   bool hasPriors() const { return numPriors() > 0; }
 
   /// The dense indices held fixed by the batch solvers: `fixed` when it is not empty, else the
-  /// first pose of every connected component that its priors do not anchor (core/gauge.h): the
-  /// first pose of a graph without priors; none when the priors anchor everything. O(n + m).
+  /// first pose of every connected component that its priors do not anchor (core/gauge.h): for a
+  /// connected graph without priors its first pose; none when the priors anchor everything.
+  /// O(n + m).
   std::vector<int> gaugeIndices() const {
     if (!fixed.empty() || ids.empty()) return fixed;
     return anchorPoses<Group>(numPoses(), edges, pose_priors, position_priors);

@@ -320,6 +320,7 @@ RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses, const RtrO
   const auto start = Clock::now();
   const SerialOpenMP serial;
   if (poses == nullptr) throw std::invalid_argument("solveRtr: poses is null");
+  requireRelativePoseEdgesOnly(graph);
   if (options.initial_rank < d || options.max_rank < options.initial_rank) {
     throw std::invalid_argument("solveRtr: need d ≤ initial_rank ≤ max_rank (got " +
                                 std::to_string(options.initial_rank) + ", " +

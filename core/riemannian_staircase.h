@@ -73,8 +73,10 @@ struct RtrSummary {
 /// Solves the pose graph with SE-Sync and writes the estimate (gauge: the first of
 /// graph.gaugeIndices() keeps its file value when graph.has_initial_estimate, else identity;
 /// other fixed poses are set to their file values before the polish). *poses is only written.
-/// Throws std::invalid_argument on bad options, a null `poses`, or a graph that is not
-/// connected (naming a pose id).
+/// Throws std::invalid_argument on bad options, a null `poses`, a graph that is not
+/// connected (naming a pose id), or a graph with priors (requireRelativePoseEdgesOnly in
+/// core/sesync_problem.h: the certificate covers SE-Sync's relative-pose problem only, so
+/// graphs with pose or position priors go to the batch solvers).
 template <class G>
 RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses,
                     const RtrOptions& options = {});

@@ -54,7 +54,20 @@ struct InverseOp {
 }  // namespace
 
 template <class G>
+void requireRelativePoseEdgesOnly(const PoseGraph<G>& graph) {
+  if (!graph.hasPriors()) return;
+  throw std::invalid_argument("the certifiable solver takes relative-pose edges only: " +
+                              std::to_string(graph.pose_priors.size()) + " pose priors, " +
+                              std::to_string(graph.position_priors.size()) +
+                              " position priors; use --solver lm");
+}
+
+template void requireRelativePoseEdgesOnly(const PoseGraph<SE2>&);
+template void requireRelativePoseEdgesOnly(const PoseGraph<SE3>&);
+
+template <class G>
 std::vector<SESyncMeasurement> sesyncMeasurements(const PoseGraph<G>& graph) {
+  requireRelativePoseEdgesOnly(graph);
   constexpr int d = G::kDim;
   const int n = graph.numPoses();
   std::vector<SESyncMeasurement> out;

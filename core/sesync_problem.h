@@ -37,9 +37,19 @@ struct SESyncMeasurement {
 /// 2D the relaxation was not exact on M3500c and needed rank 6 on M3500b; with SE-Sync's κ it is
 /// exact on M3500c. The polish after rounding is in our F either way.) Self-loops are
 /// dropped (their cost does not depend on the poses). Throws std::invalid_argument if the
-/// graph is not connected (naming the first pose id not reached from the first pose).
+/// graph is not connected (naming the first pose id not reached from the first pose) or has
+/// priors (requireRelativePoseEdgesOnly).
 template <class G>
 std::vector<SESyncMeasurement> sesyncMeasurements(const PoseGraph<G>& graph);
+
+/// SE-Sync's model is relative-pose measurements with a free gauge: the certifiable solver
+/// refuses a graph with pose or position priors (std::invalid_argument: "the certifiable solver
+/// takes relative-pose edges only: N pose priors, M position priors; use --solver lm"). Pose
+/// priors could enter as edges to an extra anchor pose held at the identity, but position
+/// priors have no place in the model, and an isotropic anchor edge would certify a problem other
+/// than the one the polish solves; the batch solvers take every factor.
+template <class G>
+void requireRelativePoseEdgesOnly(const PoseGraph<G>& graph);
 
 /// Which matrix the regularised-Cholesky preconditioner factors, P + λI with
 /// λ = ‖P‖ / (max_condition − 1) so that its condition number is at most max_condition (SE-Sync

@@ -13,6 +13,7 @@
 #include "core/block_cholesky.h"
 #include "core/normal_equations.h"
 #include "core/pose_graph.h"
+#include "core/prior_factors.h"
 #include "core/sparse_cholesky.h"
 #include "tests/random_graphs.h"
 
@@ -139,10 +140,18 @@ TYPED_TEST(BatchSolverTest, NoisyMeasurementsAllMethodsReachTheSameMinimum) {
   for (const auto& tau : gaussNewtonStep(s.graph, solutions[1])) EXPECT_LT(tau.norm(), 1e-5);
 }
 
-// H δ = −g assembled densely, with the gauge poses' rows and columns removed.
+// The whitened Jacobian A (rows: edges, then pose priors, then position priors; columns: the
+// non-gauge poses in pose order, var[p]) and residual r, assembled densely from each factor's
+// own linearisation.
 template <class G>
-std::vector<typename G::Tangent> denseGaussNewtonStep(const PoseGraph<G>& graph,
-                                                      const std::vector<G>& poses) {
+struct DenseSystem {
+  Eigen::MatrixXd A;
+  Eigen::VectorXd r;
+  std::vector<int> var;  // −1 for gauge poses
+};
+
+template <class G>
+DenseSystem<G> denseSystem(const PoseGraph<G>& graph, const std::vector<G>& poses) {
   constexpr int d = G::kDoF;
   const int n = graph.numPoses();
   std::vector<int> var(n, 0);
@@ -150,19 +159,48 @@ std::vector<typename G::Tangent> denseGaussNewtonStep(const PoseGraph<G>& graph,
   int m = 0;
   for (int p = 0; p < n; ++p)
     if (var[p] >= 0) var[p] = m++;
-  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(d * graph.numEdges(), d * m);
-  Eigen::VectorXd r(d * graph.numEdges());
-  for (int k = 0; k < graph.numEdges(); ++k) {
+  // Rows: d per edge, d per pose prior, kDim per position prior.
+  const int rows = d * (graph.numEdges() + static_cast<int>(graph.pose_priors.size())) +
+                   G::kDim * static_cast<int>(graph.position_priors.size());
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(rows, d * m);
+  Eigen::VectorXd r(rows);
+  int row = 0;
+  for (int k = 0; k < graph.numEdges(); ++k, row += d) {
     const auto& e = graph.edges[k];
     typename RelativePoseEdge<G>::Matrix Ai, Aj;
     typename RelativePoseEdge<G>::Vector rk;
     e.linearize(poses[e.i], poses[e.j], &Ai, &Aj, &rk);
-    if (var[e.i] >= 0) A.block(d * k, d * var[e.i], d, d) += Ai;
-    if (var[e.j] >= 0) A.block(d * k, d * var[e.j], d, d) += Aj;
-    r.segment(d * k, d) = rk;
+    if (var[e.i] >= 0) A.block(row, d * var[e.i], d, d) += Ai;
+    if (var[e.j] >= 0) A.block(row, d * var[e.j], d, d) += Aj;
+    r.segment(row, d) = rk;
   }
+  const auto addPriors = [&](const auto& priors) {
+    for (const auto& p : priors) {
+      using Prior = std::decay_t<decltype(p)>;
+      typename Prior::Jacobian Ap;
+      typename Prior::Vector rp;
+      p.linearize(poses[p.i], &Ap, &rp);
+      if (var[p.i] >= 0) A.template block<Prior::kRows, d>(row, d * var[p.i]) = Ap;
+      r.template segment<Prior::kRows>(row) = rp;
+      row += Prior::kRows;
+    }
+  };
+  addPriors(graph.pose_priors);
+  addPriors(graph.position_priors);
+  return {A, r, var};
+}
+
+// H δ = −g assembled densely, with the gauge poses' rows and columns removed.
+template <class G>
+std::vector<typename G::Tangent> denseGaussNewtonStep(const PoseGraph<G>& graph,
+                                                      const std::vector<G>& poses) {
+  constexpr int d = G::kDoF;
+  const int n = graph.numPoses();
+  const DenseSystem<G> system = denseSystem(graph, poses);
+  const Eigen::MatrixXd& A = system.A;
+  const std::vector<int>& var = system.var;
   const Eigen::MatrixXd H = A.transpose() * A;
-  const Eigen::VectorXd delta = H.ldlt().solve(-A.transpose() * r);
+  const Eigen::VectorXd delta = H.ldlt().solve(-A.transpose() * system.r);
   std::vector<typename G::Tangent> out(n, G::Tangent::Zero());
   for (int p = 0; p < n; ++p)
     if (var[p] >= 0) out[p] = delta.segment(d * var[p], d);
@@ -191,6 +229,194 @@ TYPED_TEST(BatchSolverTest, GaussNewtonStepMatchesDenseNormalEquations) {
     EXPECT_GT(largest, 1e-2);  // the step is not trivially zero
     for (int g : s.graph.gaugeIndices()) EXPECT_EQ(sparse[g].norm(), 0.0);
   }
+}
+
+// Random information of a prior with m residual rows (dense, positive definite).
+template <int m>
+Eigen::Matrix<double, m, m> priorInformation(std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::Matrix<double, m, m> b;
+  for (int k = 0; k < b.size(); ++k) b.data()[k] = u(rng);
+  return b * b.transpose() + 10.0 * Eigen::Matrix<double, m, m>::Identity();
+}
+
+// The synthetic graph moved rigidly to a random world frame (the priors' frame), so that the
+// first pose is not the identity.
+template <class G>
+void moveToWorld(Synthetic<G>* s, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const G world = G::Exp(randomTangent<G>(rng, 5.0, 1.0));
+  for (G& x : s->truth) x = world.compose(x);
+  s->graph.poses = s->truth;
+}
+
+TYPED_TEST(BatchSolverTest, GaussNewtonStepWithPriorsMatchesDenseNormalEquations) {
+  using G = TypeParam;
+  constexpr int D = G::kDoF, d = G::kDim;
+  Synthetic<G> s = makeGraph<G>(12, 6, 0.05, 24);
+  std::mt19937_64 rng(25);
+  auto& g = s.graph;
+  g.pose_priors.push_back(PosePriorFactor<G>::make(
+      3, s.truth[3].retract(randomTangent<G>(rng, 0.1, 0.1)), priorInformation<D>(rng)));
+  const G offset = G::Exp(randomTangent<G>(rng, 0.5, 0.5));
+  g.pose_priors.push_back(PosePriorFactor<G>::make(
+      0, s.truth[0].compose(offset).retract(randomTangent<G>(rng, 0.1, 0.1)),
+      priorInformation<D>(rng), offset));
+  for (int k : {0, 5, 8, 8})
+    g.position_priors.push_back(PositionPriorFactor<G>::make(
+        k, s.truth[k].translation() + randomTangent<G>(rng, 0.1, 0).template head<d>(),
+        priorInformation<d>(rng)));
+  const std::vector<G> start = perturbed(s, 0.2, 0.1, 26);
+  // No fixed pose (the priors anchor it), one, and two with priors on the gauge pose 0.
+  for (const std::vector<int>& fixed :
+       {std::vector<int>{}, std::vector<int>{4}, std::vector<int>{0, 9}}) {
+    g.fixed = fixed;
+    EXPECT_EQ(g.gaugeIndices(), fixed);
+    EXPECT_EQ(gaugeProblem(g), "");
+    const auto sparse = gaussNewtonStep(g, start);
+    const auto dense = denseGaussNewtonStep(g, start);
+    double largest = 0.0;
+    for (size_t p = 0; p < sparse.size(); ++p) {
+      EXPECT_LT((sparse[p] - dense[p]).template lpNorm<Eigen::Infinity>(), 1e-9) << "pose " << p;
+      largest = std::max(largest, dense[p].norm());
+    }
+    EXPECT_GT(largest, 1e-2);
+    for (int k : fixed) EXPECT_EQ(sparse[k].norm(), 0.0);
+    // F, the model and ‖Av‖² over every factor, the gauge pose's priors as constants.
+    const DenseSystem<G> system = denseSystem(g, start);
+    for (CholeskyBackend backend : {CholeskyBackend::kBlock, CholeskyBackend::kCholmod}) {
+      NormalEquations<G> equations(g, backend);
+      const double F = objective(g, start);
+      EXPECT_NEAR(equations.linearize(start), F, 1e-9 * F);
+      EXPECT_NEAR(system.r.squaredNorm(), F, 1e-9 * F);
+      const Eigen::VectorXd v = Eigen::VectorXd::LinSpaced(equations.dimension(), -0.2, 0.3);
+      // v over the variables in the solver's order, as the dense columns (pose order).
+      Eigen::VectorXd v_dense = Eigen::VectorXd::Zero(system.A.cols());
+      const auto v_pose = equations.perPose(v);
+      for (int p = 0; p < g.numPoses(); ++p)
+        if (system.var[p] >= 0) v_dense.segment(D * system.var[p], D) = v_pose[p];
+      EXPECT_NEAR(equations.modelCost(v), (system.r + system.A * v_dense).squaredNorm(), 1e-9 * F);
+      EXPECT_NEAR(equations.jacobianSquaredNorm(v), (system.A * v_dense).squaredNorm(), 1e-9 * F);
+      ASSERT_TRUE(equations.factorize());
+      Eigen::VectorXd delta;
+      equations.solve(-equations.gradient(), &delta);
+      const auto step = equations.perPose(delta);
+      for (size_t p = 0; p < step.size(); ++p)
+        EXPECT_LT((step[p] - dense[p]).template lpNorm<Eigen::Infinity>(), 1e-9);
+    }
+  }
+}
+
+// Position priors on every 10th pose and no fixed pose: the priors alone fix the gauge.
+TYPED_TEST(BatchSolverTest, PositionPriorsEveryTenthPoseAnchorTheGraph) {
+  using G = TypeParam;
+  constexpr int d = G::kDim;
+  for (const double noise : {0.0, 0.05}) {
+    Synthetic<G> s = makeGraph<G>(60, 20, noise, 33);
+    moveToWorld(&s, 34);
+    std::mt19937_64 rng(35);
+    for (int k = 0; k < 60; k += 10)
+      s.graph.position_priors.push_back(PositionPriorFactor<G>::make(
+          k, s.truth[k].translation() + randomTangent<G>(rng, noise, 0).template head<d>(),
+          priorInformation<d>(rng)));
+    ASSERT_TRUE(s.graph.gaugeIndices().empty());
+    std::vector<G> start = s.truth;
+    for (auto& x : start) x = x.retract(randomTangent<G>(rng, 0.1, 0.05));
+    std::vector<std::vector<G>> solutions;
+    std::vector<double> finals;
+    for (BatchMethod method : kMethods) {
+      std::vector<G> poses = start;
+      BatchOptions options;
+      options.method = method;
+      options.relative_tolerance = 1e-12;
+      options.max_iterations = 200;
+      const BatchSummary summary = solveBatch(s.graph, &poses, options);
+      EXPECT_EQ(summary.termination, Termination::kConverged)
+          << toString(method) << ": " << summary.message;
+      EXPECT_DOUBLE_EQ(summary.F_initial, objective(s.graph, start));
+      EXPECT_NEAR(summary.F_final, objective(s.graph, poses), 1e-9 * summary.F_initial);
+      if (noise == 0.0) {
+        EXPECT_LT(summary.F_final, 1e-12) << toString(method);
+        EXPECT_LT(maxPoseError(poses, s.truth), 1e-6) << toString(method);
+      } else {
+        EXPECT_GT(summary.F_final, 0.0);
+        EXPECT_LT(maxPoseError(poses, s.truth), 0.5) << toString(method);
+      }
+      finals.push_back(summary.F_final);
+      solutions.push_back(poses);
+    }
+    for (size_t m = 1; m < finals.size(); ++m) {
+      EXPECT_NEAR(finals[m], finals[0], 1e-6 * finals[0] + 1e-12) << toString(kMethods[m]);
+      EXPECT_LT(maxPoseError(solutions[m], solutions[0]), 1e-4) << toString(kMethods[m]);
+    }
+    // Moving the solution rigidly raises F: the gauge is not free.
+    if (noise > 0) {
+      const G shift = G::Exp(randomTangent<G>(rng, 0.1, 0.05));
+      std::vector<G> moved = solutions[1];
+      for (auto& x : moved) x = shift.compose(x);
+      EXPECT_GT(objective(s.graph, moved), finals[1] * (1 + 1e-3));
+    }
+  }
+}
+
+// One pose prior (with a sensor offset) and no fixed pose: with exact edges the minimum moves
+// the graph rigidly onto the prior, F = 0 there.
+TYPED_TEST(BatchSolverTest, PosePriorWithoutFixedPoseSolves) {
+  using G = TypeParam;
+  Synthetic<G> s = makeGraph<G>(40, 15, 0.0, 36);
+  moveToWorld(&s, 37);
+  std::mt19937_64 rng(38);
+  const G offset = G::Exp(randomTangent<G>(rng, 0.3, 0.3));
+  const G z = s.truth[7].compose(offset).retract(randomTangent<G>(rng, 0.2, 0.1));
+  s.graph.pose_priors.push_back(
+      PosePriorFactor<G>::make(7, z, priorInformation<G::kDoF>(rng), offset));
+  ASSERT_TRUE(s.graph.gaugeIndices().empty());
+  std::vector<G> start = s.truth;
+  for (auto& x : start) x = x.retract(randomTangent<G>(rng, 0.1, 0.05));
+  for (BatchMethod method : kMethods) {
+    std::vector<G> poses = start;
+    BatchOptions options;
+    options.method = method;
+    options.relative_tolerance = 1e-12;
+    const BatchSummary summary = solveBatch(s.graph, &poses, options);
+    EXPECT_EQ(summary.termination, Termination::kConverged)
+        << toString(method) << ": " << summary.message;
+    EXPECT_LT(summary.F_final, 1e-12) << toString(method);
+    EXPECT_LT(poses[7].compose(offset).localCoordinates(z).norm(), 1e-6) << toString(method);
+    for (int k = 1; k < 40; ++k)
+      EXPECT_LT(poses[k - 1]
+                    .between(poses[k])
+                    .localCoordinates(s.truth[k - 1].between(s.truth[k]))
+                    .norm(),
+                1e-6);
+  }
+}
+
+// A prior on a gauge pose is a constant of F: it shifts F and leaves the solution alone.
+TYPED_TEST(BatchSolverTest, PriorOnAGaugePoseOnlyAddsAConstant) {
+  using G = TypeParam;
+  Synthetic<G> s = makeGraph<G>(30, 10, 0.05, 39);
+  s.graph.fixed = {0};
+  const std::vector<G> start = perturbed(s, 0.1, 0.05, 40);
+  std::vector<G> plain = start;
+  BatchOptions options;
+  options.relative_tolerance = 1e-12;
+  const BatchSummary without = solveBatch(s.graph, &plain, options);
+  std::mt19937_64 rng(41);
+  s.graph.pose_priors.push_back(PosePriorFactor<G>::make(
+      0, start[0].retract(randomTangent<G>(rng, 0.5, 0.2)), priorInformation<G::kDoF>(rng)));
+  s.graph.position_priors.push_back(PositionPriorFactor<G>::make(
+      0, start[0].translation() + randomTangent<G>(rng, 0.5, 0).template head<G::kDim>(),
+      priorInformation<G::kDim>(rng)));
+  const double constant =
+      s.graph.pose_priors[0].cost(start[0]) + s.graph.position_priors[0].cost(start[0]);
+  ASSERT_GT(constant, 1.0);
+  std::vector<G> with_priors = start;
+  const BatchSummary with = solveBatch(s.graph, &with_priors, options);
+  EXPECT_EQ(with.termination, Termination::kConverged) << with.message;
+  EXPECT_NEAR(with.F_initial, without.F_initial + constant, 1e-9 * with.F_initial);
+  EXPECT_NEAR(with.F_final, without.F_final + constant, 1e-6 * with.F_final);
+  EXPECT_LT(maxPoseError(with_priors, plain), 1e-6);
 }
 
 // Both Cholesky backends of NormalEquations against dense (H + diag(damping)) δ = −g.
@@ -232,6 +458,7 @@ TYPED_TEST(BatchSolverTest, CholeskyFailureNamesThePose) {
   Synthetic<G> s = makeGraph<G>(10, 3, 0.05, 91);
   s.graph.ids.push_back(777);  // a pose no edge touches: its block of H is zero
   s.graph.index[777] = 10;
+  s.graph.fixed = {0};  // (without it, the loose pose would anchor itself: gaugeIndices)
   std::vector<G> poses = s.truth;
   poses.push_back(G::Identity());
   for (CholeskyBackend backend : {CholeskyBackend::kBlock, CholeskyBackend::kCholmod}) {
@@ -322,6 +549,19 @@ TYPED_TEST(BatchSolverTest, UnconstrainedPoseIsReportedNotCrashed) {
   s.graph.ids.push_back(999);  // a pose with no edges
   s.graph.index[999] = 20;
   s.truth.push_back(G::Identity());
+  // Without `fixed` the loose pose is a component of its own, anchored at itself: it stays
+  // where it starts and the rest is solved.
+  {
+    std::vector<G> poses = perturbed(s, 0.1, 0.05, 42);
+    std::mt19937_64 loose_rng(43);
+    poses[20] = G::Exp(randomTangent<G>(loose_rng, 1.0, 1.0));
+    const G loose = poses[20];
+    EXPECT_EQ(s.graph.gaugeIndices(), (std::vector<int>{0, 20}));
+    const BatchSummary summary = solveBatch(s.graph, &poses);
+    EXPECT_EQ(summary.termination, Termination::kConverged) << summary.message;
+    EXPECT_EQ(poses[20].localCoordinates(loose).norm(), 0.0);
+  }
+  s.graph.fixed = {0};  // an explicit gauge leaves the loose pose unanchored
   const std::vector<G> start = perturbed(s, 0.1, 0.05, 42);
   for (BatchMethod method : kMethods) {
     std::vector<G> poses = start;
@@ -348,11 +588,48 @@ TYPED_TEST(BatchSolverTest, ComponentWithoutFixedPoseIsReported) {
   for (const auto& e : s.graph.edges)
     if ((e.i < 10) == (e.j < 10)) kept.push_back(e);
   s.graph.edges = kept;
+  // Without `fixed` each component is anchored at its first pose.
+  EXPECT_EQ(s.graph.gaugeIndices(), (std::vector<int>{0, 10}));
+  EXPECT_EQ(gaugeProblem(s.graph), "");
   std::vector<G> poses = perturbed(s, 0.1, 0.05, 52);
+  EXPECT_EQ(solveBatch(s.graph, &poses).termination, Termination::kConverged);
+  // With an explicit gauge in the first half, the second half floats.
+  s.graph.fixed = {0};
+  poses = perturbed(s, 0.1, 0.05, 52);
   const BatchSummary summary = solveBatch(s.graph, &poses);
   EXPECT_EQ(summary.termination, Termination::kDiverged);
   EXPECT_NE(summary.message.find("pose id 110"), std::string::npos) << summary.message;
   EXPECT_NE(summary.message.find("9 other"), std::string::npos) << summary.message;
+  // One position prior leaves it free to rotate about that point (refused); priors at
+  // positions that fix the rotation (2 in 2D, 3 non-collinear in 3D) anchor it.
+  const auto omega = PositionPriorFactor<G>::Matrix::Identity();
+  s.graph.position_priors.push_back(
+      PositionPriorFactor<G>::make(12, s.truth[12].translation(), omega));
+  EXPECT_NE(gaugeProblem(s.graph).find("pose id 110"), std::string::npos);
+  s.graph.position_priors.push_back(
+      PositionPriorFactor<G>::make(15, s.truth[15].translation(), omega));
+  if (G::kDim == 3) {
+    EXPECT_NE(gaugeProblem(s.graph).find("pose id 110"), std::string::npos);
+    s.graph.position_priors.push_back(
+        PositionPriorFactor<G>::make(19, s.truth[19].translation(), omega));
+  }
+  EXPECT_EQ(gaugeProblem(s.graph), "");
+  poses = perturbed(s, 0.1, 0.05, 52);
+  EXPECT_EQ(solveBatch(s.graph, &poses).termination, Termination::kConverged);
+  // A pose prior anchors it too.
+  s.graph.position_priors.clear();
+  s.graph.pose_priors.push_back(
+      PosePriorFactor<G>::make(17, s.truth[17], PosePriorFactor<G>::Matrix::Identity()));
+  EXPECT_EQ(gaugeProblem(s.graph), "");
+  // A prior on an index outside the graph is refused, naming it.
+  s.graph.pose_priors.back().i = 20;
+  try {
+    gaugeProblem(s.graph);
+    ADD_FAILURE() << "no exception";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("pose prior 0 is on pose index 20"), std::string::npos)
+        << e.what();
+  }
 }
 
 TYPED_TEST(BatchSolverTest, NonFiniteStartIsReported) {

@@ -300,6 +300,14 @@ TYPED_TEST(InitializationTest, DisconnectedGraphNamesTheUnreachablePose) {
   graph.edges = {RelativePoseEdge<G>::make(0, 1, G::Identity(), I),
                  RelativePoseEdge<G>::make(2, 3, G::Identity(), I),
                  RelativePoseEdge<G>::make(1, 4, G::Identity(), I)};
+  // Without `fixed` every component is anchored at its first pose (gaugeIndices), at the
+  // identity.
+  for (InitMethod m : kComputedMethods) {
+    const std::vector<G> x = initialize(graph, m);
+    EXPECT_LT(maxPoseError(x, std::vector<G>(5, G::Identity())), 1e-12) << toString(m);
+  }
+  // An explicit gauge in the first component leaves the second one unanchored.
+  graph.fixed = {0};
   for (InitMethod m : kComputedMethods) {
     try {
       initialize(graph, m);
@@ -309,6 +317,123 @@ TYPED_TEST(InitializationTest, DisconnectedGraphNamesTheUnreachablePose) {
       EXPECT_NE(what.find("pose 23 "), std::string::npos) << what;
       EXPECT_NE(what.find("not connected"), std::string::npos) << what;
     }
+  }
+}
+
+template <int m>
+Eigen::Matrix<double, m, m> priorInformation(std::mt19937* rng) {
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  Eigen::Matrix<double, m, m> A;
+  for (int k = 0; k < A.size(); ++k) A.data()[k] = uniform(*rng);
+  return A * A.transpose() + Eigen::Matrix<double, m, m>::Identity();
+}
+
+// A pose prior puts the guess in its frame: on the first pose (the root), or on a later one
+// (then the root of the component), with a sensor offset.
+TYPED_TEST(InitializationTest, PosePriorPutsTheGuessInThePriorsFrame) {
+  using G = TypeParam;
+  auto [graph, truth] = exactRandomGraph<G>(40, 15, 51);
+  std::mt19937 rng(52);
+  const G offset = G::Exp(randomTangent<G>(&rng, 0.5, 0.5));
+  for (int k : {0, 13}) {
+    graph.pose_priors = {PosePriorFactor<G>::make(k, truth[k].compose(offset),
+                                                  priorInformation<G::kDoF>(&rng), offset)};
+    ASSERT_TRUE(graph.gaugeIndices().empty());
+    for (InitMethod m : kComputedMethods) {
+      const std::vector<G> x = initialize(graph, m);
+      EXPECT_LT(maxPoseError(x, truth), 1e-9) << toString(m) << ", prior on pose " << k;
+      EXPECT_LT(objective(graph, x), 1e-12) << toString(m);
+    }
+  }
+  // A gauge pose (fixed, no file values) with a pose prior starts at the prior's value.
+  graph.fixed = {13};
+  for (InitMethod m : kComputedMethods)
+    EXPECT_LT(maxPoseError(initialize(graph, m), truth), 1e-9) << toString(m);
+}
+
+// Position priors alone (every 10th pose): the guess is aligned onto them rigidly; exact
+// measurements and priors give the truth.
+TYPED_TEST(InitializationTest, PositionPriorsAlignTheGuess) {
+  using G = TypeParam;
+  constexpr int d = G::kDim;
+  auto [graph, truth] = exactRandomGraph<G>(50, 20, 53);
+  std::mt19937 rng(54);
+  for (int k = 0; k < 50; k += 10)
+    graph.position_priors.push_back(
+        PositionPriorFactor<G>::make(k, truth[k].translation(), priorInformation<d>(&rng)));
+  ASSERT_TRUE(graph.gaugeIndices().empty());
+  for (InitMethod m : kComputedMethods) {
+    const std::vector<G> x = initialize(graph, m);
+    EXPECT_LT(maxPoseError(x, truth), 1e-9) << toString(m);
+  }
+  // With noisy prior positions the alignment is the weighted least-squares fit: no rigid
+  // motion of the guess lowers the priors' cost Σ wₖ‖R qₖ + t − pₖ‖² with isotropic weights.
+  for (auto& p : graph.position_priors) {
+    p = PositionPriorFactor<G>::make(
+        p.i, p.position + randomTangent<G>(&rng, 0.5, 0.0).template head<d>(),
+        (1.0 + p.i) * Eigen::Matrix<double, d, d>::Identity());
+  }
+  const std::vector<G> x = initialize(graph, InitMethod::kSpanningTree);
+  auto priorsCost = [&](const std::vector<G>& poses) {
+    double f = 0;
+    for (const auto& p : graph.position_priors) f += p.cost(poses[p.i]);
+    return f;
+  };
+  const double aligned = priorsCost(x);
+  for (int trial = 0; trial < 20; ++trial) {
+    const G move = G::Exp(randomTangent<G>(&rng, 0.05, 0.01));
+    std::vector<G> moved = x;
+    for (auto& y : moved) y = move.compose(y);
+    EXPECT_GE(priorsCost(moved), aligned * (1 - 1e-12)) << "trial " << trial;
+  }
+}
+
+// Too few position priors to fix the rotation (one): the component is anchored at its first
+// pose, and the guess (first pose at the identity rotation) is only translated onto them.
+TYPED_TEST(InitializationTest, FewPositionPriorsOnlyTranslateTheGuess) {
+  using G = TypeParam;
+  auto [graph, truth] = exactRandomGraph<G>(30, 10, 55);
+  const typename G::Translation p = truth[20].translation();
+  graph.position_priors = {
+      PositionPriorFactor<G>::make(20, p, Eigen::Matrix<double, G::kDim, G::kDim>::Identity())};
+  ASSERT_EQ(graph.gaugeIndices(), std::vector<int>{0});
+  for (InitMethod m : kComputedMethods) {
+    const std::vector<G> x = initialize(graph, m);
+    EXPECT_LT((x[20].translation() - p).norm(), 1e-9) << toString(m);
+    EXPECT_LT(rotationError(x[0], G::Identity()), 1e-12) << toString(m);
+    // The shape is the truth's: truth relative to its first pose, then translated.
+    const std::vector<G> shape = relativeTo(truth[0], truth);
+    for (int k = 1; k < 30; ++k)
+      EXPECT_LT(maxPoseError<G>({x[0].between(x[k])}, {shape[k]}), 1e-9) << toString(m);
+  }
+}
+
+// A component with priors too weak to fix its gauge and no gauge pose (graph.fixed elsewhere)
+// is refused, naming its first pose.
+TYPED_TEST(InitializationTest, ComponentWithWeakPriorsAndNoGaugeIsRefused) {
+  using G = TypeParam;
+  const auto I = RelativePoseEdge<G>::Matrix::Identity();
+  PoseGraph<G> graph = emptyGraph<G>(4);  // ids 3 13 23 33
+  graph.edges = {RelativePoseEdge<G>::make(0, 1, G::Identity(), I),
+                 RelativePoseEdge<G>::make(2, 3, G::Identity(), I)};
+  graph.fixed = {0};
+  graph.position_priors = {PositionPriorFactor<G>::make(
+      3, G::Translation::Ones(), Eigen::Matrix<double, G::kDim, G::kDim>::Identity())};
+  for (InitMethod m : kComputedMethods) {
+    try {
+      initialize(graph, m);
+      ADD_FAILURE() << toString(m) << " accepted an unanchored component";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("pose 23 "), std::string::npos) << e.what();
+    }
+  }
+  // A pose prior anchors it: the component starts at the prior's value.
+  std::mt19937 rng(5);
+  const G z = G::Exp(randomTangent<G>(&rng, 1.0, 1.0));
+  graph.pose_priors = {PosePriorFactor<G>::make(3, z, I)};
+  for (InitMethod m : kComputedMethods) {
+    const std::vector<G> x = initialize(graph, m);
+    EXPECT_LT(maxPoseError<G>({x[2], x[3]}, {z, z}), 1e-9) << toString(m);
   }
 }
 

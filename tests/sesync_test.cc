@@ -12,6 +12,7 @@
 
 #include "core/batch_solver.h"
 #include "core/initialization.h"
+#include "core/prior_factors.h"
 #include "core/riemannian_staircase.h"
 #include "core/sesync_problem.h"
 #include "io/pose_graph_file.h"
@@ -129,6 +130,47 @@ void checkDataMatrices(std::uint64_t seed) {
 
 TEST(SESyncProblem, QuadraticFormMatchesDirectCost2D) { checkDataMatrices<SE2>(3); }
 TEST(SESyncProblem, QuadraticFormMatchesDirectCost3D) { checkDataMatrices<SE3>(4); }
+
+// SE-Sync's model has relative-pose edges only: a graph with priors is refused with a message
+// that sends it to the batch solvers, which take every factor; without the priors it solves.
+template <class G>
+void checkPriorsRefused() {
+  Synthetic<G> s = randomGraph<G>(8, 3, 0.0, 0.0, 7);
+  const auto omega = RelativePoseEdge<G>::Matrix::Identity();
+  const auto omega_t = PositionPriorFactor<G>::Matrix::Identity();
+  s.graph.pose_priors.push_back(PosePriorFactor<G>::make(2, s.truth[2], omega));
+  for (int k : {0, 5})
+    s.graph.position_priors.push_back(
+        PositionPriorFactor<G>::make(k, s.truth[k].translation(), omega_t));
+  std::vector<G> poses;
+  const std::string expected =
+      "the certifiable solver takes relative-pose edges only: 1 pose priors, 2 position "
+      "priors; use --solver lm";
+  try {
+    solveRtr(s.graph, &poses);
+    ADD_FAILURE() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), expected);
+  }
+  EXPECT_TRUE(poses.empty());  // nothing written
+  EXPECT_THROW(certify(s.graph, s.truth), std::invalid_argument);
+  EXPECT_THROW(sesyncMeasurements(s.graph), std::invalid_argument);
+  // A one-pose graph with a prior is refused too (not the trivial-graph shortcut).
+  PoseGraph<G> single;
+  single.ids = {0};
+  single.index[0] = 0;
+  single.pose_priors.push_back(PosePriorFactor<G>::make(0, G::Identity(), omega));
+  EXPECT_THROW(solveRtr(single, &poses), std::invalid_argument);
+  // The batch solver takes them.
+  poses = s.truth;
+  EXPECT_EQ(solveBatch(s.graph, &poses).termination, Termination::kConverged);
+  s.graph.pose_priors.clear();
+  s.graph.position_priors.clear();
+  EXPECT_NO_THROW(solveRtr(s.graph, &poses));
+}
+
+TEST(SolveRtr, GraphsWithPriorsAreRefused2D) { checkPriorsRefused<SE2>(); }
+TEST(SolveRtr, GraphsWithPriorsAreRefused3D) { checkPriorsRefused<SE3>(); }
 
 TEST(SESyncProblem, DisconnectedGraphIsRejected) {
   Synthetic<SE2> s = randomGraph<SE2>(10, 0, 0.0, 0.0, 5);

@@ -40,6 +40,42 @@ struct RelativePose2Cost {
   Eigen::Matrix3d sqrt_info_t_;
 };
 
+// 2D pose prior: the relative-pose residual with xᵢ = I and xⱼ = x o (core/prior_factors.h).
+struct PosePrior2Cost {
+  PosePrior2Cost(const SE2& z, const SE2& o, const Eigen::Matrix3d& sqrt_info_t)
+      : relative_(z, sqrt_info_t), o_(o) {}
+  template <typename T>
+  bool operator()(const T* t, const T* th, T* residual) const {
+    using std::cos, std::sin;
+    const T c = cos(*th), s = sin(*th);
+    const T xo[2] = {t[0] + c * o_.x() - s * o_.y(), t[1] + s * o_.x() + c * o_.y()};
+    const T tho = *th + T(o_.angle());
+    const T zero[2] = {T(0), T(0)};
+    const T zero_angle = T(0);
+    return relative_(zero, &zero_angle, xo, &tho, residual);
+  }
+  RelativePose2Cost relative_;
+  SE2 o_;
+};
+
+// Position prior: Lᵀ (t(x) − p), kDim residuals, on the translation block alone.
+template <int kDim>
+struct PositionPriorCost {
+  using Vector = Eigen::Matrix<double, kDim, 1>;
+  using Matrix = Eigen::Matrix<double, kDim, kDim>;
+  PositionPriorCost(const Vector& p, const Matrix& sqrt_info_t)
+      : p_(p), sqrt_info_t_(sqrt_info_t) {}
+  template <typename T>
+  bool operator()(const T* t, T* residual) const {
+    Eigen::Map<const Eigen::Matrix<T, kDim, 1>> x(t);
+    Eigen::Map<Eigen::Matrix<T, kDim, 1>> r(residual);
+    r = sqrt_info_t_.template cast<T>() * (x - p_.template cast<T>());
+    return true;
+  }
+  Vector p_;
+  Matrix sqrt_info_t_;
+};
+
 // 3D: parameters t (3) and an Eigen quaternion (x, y, z, w) per pose.
 struct RelativePose3Cost {
   RelativePose3Cost(const SE3& z, const Eigen::Matrix<double, 6, 6>& sqrt_info_t)
@@ -63,6 +99,24 @@ struct RelativePose3Cost {
   }
   SE3 z_;
   Eigen::Matrix<double, 6, 6> sqrt_info_t_;
+};
+
+// 3D pose prior: the relative-pose residual with xᵢ = I and xⱼ = x o.
+struct PosePrior3Cost {
+  PosePrior3Cost(const SE3& z, const SE3& o, const Eigen::Matrix<double, 6, 6>& sqrt_info_t)
+      : relative_(z, sqrt_info_t), o_(o) {}
+  template <typename T>
+  bool operator()(const T* t_p, const T* q_p, T* residual) const {
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(t_p);
+    Eigen::Map<const Eigen::Quaternion<T>> q(q_p);
+    const Eigen::Matrix<T, 3, 1> to = t + q * o_.translation().template cast<T>();
+    const Eigen::Quaternion<T> qo = q * o_.quaternion().template cast<T>();
+    const T zero_t[3] = {T(0), T(0), T(0)};
+    const T identity_q[4] = {T(0), T(0), T(0), T(1)};
+    return relative_(zero_t, identity_q, to.data(), qo.coeffs().data(), residual);
+  }
+  RelativePose3Cost relative_;
+  SE3 o_;
 };
 
 ceres::Solver::Options paperOptions(int max_iterations, double function_tolerance) {
@@ -105,9 +159,19 @@ CeresResult solveWithCeres(const PoseGraph<SE2>& graph, std::vector<SE2>* poses,
         new RelativePose2Cost(e.measurement, e.sqrt_information_t));
     problem.AddResidualBlock(cost, nullptr, &t[2 * e.i], &th[e.i], &t[2 * e.j], &th[e.j]);
   }
-  for (int g : graph.gaugeIndices()) {
-    problem.SetParameterBlockConstant(&t[2 * g]);
-    problem.SetParameterBlockConstant(&th[g]);
+  for (const auto& p : graph.pose_priors) {
+    auto* cost = new ceres::AutoDiffCostFunction<PosePrior2Cost, 3, 2, 1>(
+        new PosePrior2Cost(p.measurement, p.offset, p.sqrt_information_t));
+    problem.AddResidualBlock(cost, nullptr, &t[2 * p.i], &th[p.i]);
+  }
+  for (const auto& p : graph.position_priors) {
+    auto* cost = new ceres::AutoDiffCostFunction<PositionPriorCost<2>, 2, 2>(
+        new PositionPriorCost<2>(p.position, p.sqrt_information_t));
+    problem.AddResidualBlock(cost, nullptr, &t[2 * p.i]);
+  }
+  for (int g : graph.gaugeIndices()) {  // a gauge pose without factors is no block of Ceres'
+    if (problem.HasParameterBlock(&t[2 * g])) problem.SetParameterBlockConstant(&t[2 * g]);
+    if (problem.HasParameterBlock(&th[g])) problem.SetParameterBlockConstant(&th[g]);
   }
   ceres::Solver::Summary summary;
   ceres::Solve(paperOptions(max_iterations, function_tolerance), &problem, &summary);
@@ -132,14 +196,24 @@ CeresResult solveWithCeres(const PoseGraph<SE3>& graph, std::vector<SE3>* poses,
         new RelativePose3Cost(e.measurement, e.sqrt_information_t));
     problem.AddResidualBlock(cost, nullptr, &t[3 * e.i], &q[4 * e.i], &t[3 * e.j], &q[4 * e.j]);
   }
+  for (const auto& p : graph.pose_priors) {
+    auto* cost = new ceres::AutoDiffCostFunction<PosePrior3Cost, 6, 3, 4>(
+        new PosePrior3Cost(p.measurement, p.offset, p.sqrt_information_t));
+    problem.AddResidualBlock(cost, nullptr, &t[3 * p.i], &q[4 * p.i]);
+  }
+  for (const auto& p : graph.position_priors) {
+    auto* cost = new ceres::AutoDiffCostFunction<PositionPriorCost<3>, 3, 3>(
+        new PositionPriorCost<3>(p.position, p.sqrt_information_t));
+    problem.AddResidualBlock(cost, nullptr, &t[3 * p.i]);
+  }
   for (int k = 0; k < n; ++k) {
     if (problem.HasParameterBlock(&q[4 * k])) {
       problem.SetManifold(&q[4 * k], new ceres::EigenQuaternionManifold);
     }
   }
-  for (int g : graph.gaugeIndices()) {
-    problem.SetParameterBlockConstant(&t[3 * g]);
-    problem.SetParameterBlockConstant(&q[4 * g]);
+  for (int g : graph.gaugeIndices()) {  // a gauge pose without factors is no block of Ceres'
+    if (problem.HasParameterBlock(&t[3 * g])) problem.SetParameterBlockConstant(&t[3 * g]);
+    if (problem.HasParameterBlock(&q[4 * g])) problem.SetParameterBlockConstant(&q[4 * g]);
   }
   ceres::Solver::Summary summary;
   ceres::Solve(paperOptions(max_iterations, function_tolerance), &problem, &summary);

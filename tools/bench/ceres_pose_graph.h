@@ -1,6 +1,7 @@
 // The Ceres baseline of the benchmark (never linked into Arbor's libraries): the same
 // objective F = Σ eᵀΩe in our convention (δ = z⁻¹xᵢ⁻¹xⱼ, e = [t(δ); wrap θ(δ)] or
-// [t(δ); 2·vec q(δ)]), autodiff cost functions, solved with the paper's settings:
+// [t(δ); 2·vec q(δ)]; pose priors as that residual with xᵢ = I and xⱼ = x o, position priors
+// t(x) − p, as core/prior_factors.h), autodiff cost functions, solved with the paper's settings:
 // LEVENBERG_MARQUARDT, SPARSE_NORMAL_CHOLESKY, 100 iterations, function tolerance 1e-5, 1 thread.
 #pragma once
 
