@@ -13,8 +13,9 @@ namespace {
 
 // Byte offsets of the length fields that precede variable arrays/strings, after the 8-byte
 // hash (fixed by the field order of io/lcm/*.lcm; tests/lcm_messages_test.cc checks them).
-constexpr int kEdgeInformationSizeOffset = 8 + 5 * 8 + 1 + 3 * 8 + 4 * 8;  // 105
-constexpr int kEstimateNumPosesOffset = 8 + 4 * 8 + 1 + 1 + 4 + 8;         // 54
+constexpr int kEdgeInformationSizeOffset = 8 + 5 * 8 + 1 + 3 * 8 + 4 * 8;             // 105
+constexpr int kPriorInformationSizeOffset = 8 + 4 * 8 + 1 + 1 + 2 * (3 * 8 + 4 * 8);  // 154
+constexpr int kEstimateNumPosesOffset = 8 + 4 * 8 + 1 + 1 + 4 + 8;                    // 54
 constexpr int kEstimateBytesPerPose = 8 + 3 * 8 + 4 * 8;
 constexpr int kCommandPathLengthOffset = 8 + 8 + 1;             // 17
 constexpr int kStatusNumReasonsOffset = 8 + 9 * 8 + 4 + 4 + 8;  // 96
@@ -36,12 +37,14 @@ MessageProblem precheck(const void*, int, std::string*) {
   return MessageProblem::kNone;
 }
 
-template <>
-MessageProblem precheck<edge_t>(const void* data, int size, std::string* detail) {
+// The information_size of edge_t or prior_t at `offset`, checked before the generated decoder
+// allocates that many doubles.
+MessageProblem precheckInformationSize(const void* data, int size, int offset, const char* type,
+                                       std::string* detail) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kEdgeInformationSizeOffset, &n)) {
-    setDetail(detail, std::to_string(size) + " bytes, an edge_t needs at least " +
-                          std::to_string(kEdgeInformationSizeOffset + 4));
+  if (!readInt32(data, size, offset, &n)) {
+    setDetail(detail, std::to_string(size) + " bytes, " + type + " needs at least " +
+                          std::to_string(offset + 4));
     return MessageProblem::kTruncated;
   }
   if (n < 0 || n > kMaxInformationSize) {
@@ -49,6 +52,16 @@ MessageProblem precheck<edge_t>(const void* data, int size, std::string* detail)
     return MessageProblem::kMalformed;
   }
   return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<edge_t>(const void* data, int size, std::string* detail) {
+  return precheckInformationSize(data, size, kEdgeInformationSizeOffset, "an edge_t", detail);
+}
+
+template <>
+MessageProblem precheck<prior_t>(const void* data, int size, std::string* detail) {
+  return precheckInformationSize(data, size, kPriorInformationSizeOffset, "a prior_t", detail);
 }
 
 template <>
@@ -94,6 +107,57 @@ bool allFinite(const double* v, int n) {
   return true;
 }
 
+// Ω from its upper triangle, row by row (as edge_t and prior_t carry it).
+template <int n>
+Eigen::Matrix<double, n, n> fromUpperTriangle(const std::vector<double>& entries) {
+  Eigen::Matrix<double, n, n> omega;
+  int k = 0;
+  for (int r = 0; r < n; ++r) {
+    for (int c = r; c < n; ++c, ++k) omega(r, c) = omega(c, r) = entries[k];
+  }
+  return omega;
+}
+
+template <int n>
+void toUpperTriangle(const Eigen::Matrix<double, n, n>& omega, std::vector<double>* entries) {
+  entries->clear();
+  entries->reserve(n * (n + 1) / 2);
+  for (int r = 0; r < n; ++r) {
+    for (int c = r; c < n; ++c) entries->push_back(omega(r, c));
+  }
+}
+
+// A pose from the fields translation[3], rotation[4] (finite, checked before): 2D needs
+// translation[2] = rotation[1..3] = 0, 3D a unit quaternion (to 1e-3); no translation component
+// beyond kMaxTranslation. `what` names the pose in the detail ("a 2D edge", "the offset", ...).
+template <class G>
+MessageProblem poseFromCheckedFields(const double translation[3], const double rotation[4],
+                                     const std::string& what, G* pose, std::string* detail) {
+  if constexpr (G::kDim == 2) {
+    if (translation[2] != 0 || rotation[1] != 0 || rotation[2] != 0 || rotation[3] != 0) {
+      *detail = what + " has nonzero translation[2] or rotation[1..3] in 2D";
+      return MessageProblem::kDim;
+    }
+    *pose = SE2(translation[0], translation[1], rotation[0]);
+  } else {
+    const Eigen::Quaterniond q(rotation[0], rotation[1], rotation[2], rotation[3]);
+    const double norm = q.norm();
+    if (std::abs(norm - 1.0) > 1e-3) {
+      std::ostringstream os;
+      os << what << ": quaternion norm " << norm << " is not 1";
+      *detail = os.str();
+      return MessageProblem::kRotation;
+    }
+    *pose = SE3(q, Eigen::Vector3d(translation[0], translation[1], translation[2]));
+  }
+  const std::string far = translationProblem(*pose);
+  if (!far.empty()) {
+    *detail = what + ": " + far;
+    return MessageProblem::kMagnitude;
+  }
+  return MessageProblem::kNone;
+}
+
 template <class G>
 EdgeDecoding toStreamEdge(const edge_t& m) {
   constexpr int d = G::kDoF;
@@ -104,29 +168,10 @@ EdgeDecoding toStreamEdge(const edge_t& m) {
   e.seq = m.seq;
   e.from = m.from_id;
   e.to = m.to_id;
-  if constexpr (G::kDim == 2) {
-    if (m.translation[2] != 0 || m.rotation[1] != 0 || m.rotation[2] != 0 || m.rotation[3] != 0) {
-      out.problem = MessageProblem::kDim;
-      out.detail = "a 2D edge has nonzero translation[2] or rotation[1..3]";
-      return out;
-    }
-    e.z = SE2(m.translation[0], m.translation[1], m.rotation[0]);
-  } else {
-    const Eigen::Quaterniond q(m.rotation[0], m.rotation[1], m.rotation[2], m.rotation[3]);
-    const double norm = q.norm();
-    if (std::abs(norm - 1.0) > 1e-3) {
-      std::ostringstream os;
-      os << "quaternion norm " << norm << " is not 1";
-      out.problem = MessageProblem::kRotation;
-      out.detail = os.str();
-      return out;
-    }
-    e.z = SE3(q, Eigen::Vector3d(m.translation[0], m.translation[1], m.translation[2]));
-  }
-  int k = 0;
-  for (int r = 0; r < d; ++r) {
-    for (int c = r; c < d; ++c, ++k) e.omega(r, c) = e.omega(c, r) = m.information[k];
-  }
+  out.problem = poseFromCheckedFields(m.translation, m.rotation,
+                                      G::kDim == 2 ? "a 2D edge" : "the edge", &e.z, &out.detail);
+  if (!out.ok()) return out;
+  e.omega = fromUpperTriangle<d>(m.information);
   const std::string problem = informationProblem(e.omega);
   if (!problem.empty()) {
     out.problem = MessageProblem::kInformation;
@@ -135,6 +180,64 @@ EdgeDecoding toStreamEdge(const edge_t& m) {
   }
   out.edge = e;
   return out;
+}
+
+template <class G>
+PriorDecoding toStreamPrior(const prior_t& m) {
+  PriorDecoding out;
+  auto fail = [&](MessageProblem p, const std::string& what) {
+    out.problem = p;
+    out.detail = what;
+    return out;
+  };
+  if (m.kind == prior_t::POSE) {
+    StreamPosePrior<G> prior;
+    prior.utime = m.utime;
+    prior.sender = m.sender;
+    prior.seq = m.seq;
+    prior.id = m.id;
+    out.problem =
+        poseFromCheckedFields(m.translation, m.rotation, "the pose prior", &prior.z, &out.detail);
+    if (!out.ok()) return out;
+    out.problem = poseFromCheckedFields(m.offset_translation, m.offset_rotation,
+                                        "the pose prior's offset", &prior.offset, &out.detail);
+    if (!out.ok()) return out;
+    prior.omega = fromUpperTriangle<G::kDoF>(m.information);
+    const std::string problem = informationProblem(prior.omega);
+    if (!problem.empty())
+      return fail(MessageProblem::kInformation, "information matrix " + problem);
+    out.prior = prior;
+    return out;
+  }
+  StreamPositionPrior<G> prior;
+  prior.utime = m.utime;
+  prior.sender = m.sender;
+  prior.seq = m.seq;
+  prior.id = m.id;
+  if (G::kDim == 2 && m.translation[2] != 0)
+    return fail(MessageProblem::kDim, "a 2D position prior has nonzero translation[2]");
+  for (int k = 0; k < G::kDim; ++k) prior.p[k] = m.translation[k];
+  const double largest = prior.p.cwiseAbs().maxCoeff();
+  if (largest > kMaxTranslation) {
+    std::ostringstream os;
+    os << "the position prior: component of magnitude " << largest
+       << " beyond the largest accepted (" << kMaxTranslation << ")";
+    return fail(MessageProblem::kMagnitude, os.str());
+  }
+  prior.omega = fromUpperTriangle<G::kDim>(m.information);
+  const std::string problem = informationProblem(prior.omega);
+  if (!problem.empty()) return fail(MessageProblem::kInformation, "information matrix " + problem);
+  out.prior = prior;
+  return out;
+}
+
+template <class G>
+int dimOfPrior(const StreamPosePrior<G>&) {
+  return G::kDim;
+}
+template <class G>
+int dimOfPrior(const StreamPositionPrior<G>&) {
+  return G::kDim;
 }
 
 }  // namespace
@@ -165,6 +268,10 @@ const char* toString(MessageProblem problem) {
       return "id";
     case MessageProblem::kSeq:
       return "seq";
+    case MessageProblem::kMagnitude:
+      return "magnitude";
+    case MessageProblem::kKind:
+      return "kind";
   }
   return "unknown";
 }
@@ -240,6 +347,59 @@ EdgeDecoding decodeEdge(const void* data, int size) {
   return m.dim == 2 ? toStreamEdge<SE2>(m) : toStreamEdge<SE3>(m);
 }
 
+PriorDecoding decodePrior(const void* data, int size) {
+  PriorDecoding out;
+  prior_t m;
+  out.problem = decodeMessage(data, size, &m, &out.detail);
+  if (!out.ok()) return out;
+  auto fail = [&](MessageProblem p, const std::string& what) {
+    out.problem = p;
+    out.detail = what;
+    return out;
+  };
+  const bool pose = m.kind == prior_t::POSE;
+  if (!pose && m.kind != prior_t::POSITION) {
+    return fail(MessageProblem::kKind,
+                "kind " + std::to_string(m.kind) + " is not POSE (1) or POSITION (2)");
+  }
+  if (m.dim != 2 && m.dim != 3)
+    return fail(MessageProblem::kDim, "dim " + std::to_string(m.dim) + " is not 2 or 3");
+  const int n = pose ? (m.dim == 2 ? 3 : 6) : m.dim;  // Ω is n×n
+  const int expected = n * (n + 1) / 2;
+  if (m.information_size != expected) {
+    return fail(MessageProblem::kDim, "a " + std::to_string(m.dim) + "D " +
+                                          (pose ? "pose" : "position") + " prior needs " +
+                                          std::to_string(expected) + " information entries, got " +
+                                          std::to_string(m.information_size));
+  }
+  if (!allFinite(m.translation, 3))
+    return fail(MessageProblem::kNotFinite, "translation is not finite");
+  if (!allFinite(m.rotation, 4)) return fail(MessageProblem::kNotFinite, "rotation is not finite");
+  if (!allFinite(m.offset_translation, 3) || !allFinite(m.offset_rotation, 4))
+    return fail(MessageProblem::kNotFinite, "offset is not finite");
+  if (!allFinite(m.information.data(), m.information_size)) {
+    return fail(MessageProblem::kNotFinite, "information is not finite");
+  }
+  if (m.id < 0) return fail(MessageProblem::kId, "negative pose id " + std::to_string(m.id));
+  if (m.seq < 1) return fail(MessageProblem::kSeq, "seq " + std::to_string(m.seq) + " is not >= 1");
+  if (!pose) {
+    bool unused_zero = true;
+    for (int k = 0; k < 4; ++k)
+      unused_zero = unused_zero && m.rotation[k] == 0 && m.offset_rotation[k] == 0;
+    for (int k = 0; k < 3; ++k) unused_zero = unused_zero && m.offset_translation[k] == 0;
+    if (!unused_zero) {
+      return fail(MessageProblem::kKind,
+                  "a position prior has a nonzero rotation or offset (both must be 0; a prior "
+                  "on the whole pose is kind POSE)");
+    }
+  }
+  return m.dim == 2 ? toStreamPrior<SE2>(m) : toStreamPrior<SE3>(m);
+}
+
+int dimOf(const AnyStreamPrior& prior) {
+  return std::visit([](const auto& p) { return dimOfPrior(p); }, prior);
+}
+
 void poseToFields(const SE2& pose, double translation[3], double rotation[4]) {
   translation[0] = pose.x();
   translation[1] = pose.y();
@@ -287,12 +447,50 @@ edge_t makeEdgeMessage(const StreamEdge<G>& edge) {
   return m;
 }
 
+template <class G>
+prior_t makePriorMessage(const StreamPosePrior<G>& prior) {
+  prior_t m;
+  m.utime = prior.utime;
+  m.sender = prior.sender;
+  m.seq = prior.seq;
+  m.id = prior.id;
+  m.kind = prior_t::POSE;
+  m.dim = G::kDim;
+  poseToFields(prior.z, m.translation, m.rotation);
+  poseToFields(prior.offset, m.offset_translation, m.offset_rotation);
+  toUpperTriangle<G::kDoF>(prior.omega, &m.information);
+  m.information_size = static_cast<std::int32_t>(m.information.size());
+  return m;
+}
+
+template <class G>
+prior_t makePriorMessage(const StreamPositionPrior<G>& prior) {
+  prior_t m;
+  m.utime = prior.utime;
+  m.sender = prior.sender;
+  m.seq = prior.seq;
+  m.id = prior.id;
+  m.kind = prior_t::POSITION;
+  m.dim = G::kDim;
+  for (int k = 0; k < 3; ++k) m.translation[k] = k < G::kDim ? prior.p[k] : 0.0;
+  for (int k = 0; k < 4; ++k) m.rotation[k] = m.offset_rotation[k] = 0;
+  for (int k = 0; k < 3; ++k) m.offset_translation[k] = 0;
+  toUpperTriangle<G::kDim>(prior.omega, &m.information);
+  m.information_size = static_cast<std::int32_t>(m.information.size());
+  return m;
+}
+
 template edge_t makeEdgeMessage(const StreamEdge<SE2>&);
 template edge_t makeEdgeMessage(const StreamEdge<SE3>&);
+template prior_t makePriorMessage(const StreamPosePrior<SE2>&);
+template prior_t makePriorMessage(const StreamPosePrior<SE3>&);
+template prior_t makePriorMessage(const StreamPositionPrior<SE2>&);
+template prior_t makePriorMessage(const StreamPositionPrior<SE3>&);
 template MessageProblem decodeMessage(const void*, int, estimate_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, status_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, command_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, prior_t*, std::string*);
 
 }  // namespace arbor

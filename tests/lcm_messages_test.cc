@@ -1,5 +1,5 @@
-// io/lcm_messages.h and io/lcm_journal.h: checked decoding of edge_t (every bad field,
-// truncated bytes, wrong type hash, random corruption) and the event-log journal.
+// io/lcm_messages.h and io/lcm_journal.h: checked decoding of edge_t and prior_t (every bad
+// field, truncated bytes, wrong type hash, random corruption) and the event-log journal.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -225,6 +225,271 @@ TEST(LcmMessages, RandomCorruptionNeverThrows) {
     if (d.ok()) ++accepted;
   }
   EXPECT_LT(accepted, 3000);  // most corruptions are caught (flips of a value may still be valid)
+}
+
+StreamPosePrior<SE2> samplePosePrior2() {
+  StreamPosePrior<SE2> p;
+  p.utime = 77;
+  p.sender = 5;
+  p.seq = 3;
+  p.id = 12;
+  p.z = SE2(4.5, -1.25, -2.9);
+  p.offset = SE2(0.2, 0.1, 0.05);
+  p.omega << 30, 1, 0, 1, 20, 2, 0, 2, 400;
+  return p;
+}
+
+StreamPosePrior<SE3> samplePosePrior3() {
+  StreamPosePrior<SE3> p;
+  p.sender = 2;
+  p.seq = 1;
+  p.id = 0;
+  p.z = SE3(Eigen::Quaterniond(0.3, -0.5, 0.1, 0.8).normalized(), Eigen::Vector3d(-7, 8, 0.5));
+  p.offset = SE3(Eigen::Quaterniond(0.99, 0.05, 0, 0.1).normalized(), Eigen::Vector3d(0, 0, 1));
+  p.omega = Eigen::Matrix<double, 6, 6>::Identity() * 10;
+  p.omega(1, 4) = p.omega(4, 1) = 2;
+  return p;
+}
+
+StreamPositionPrior<SE2> samplePositionPrior2() {
+  StreamPositionPrior<SE2> p;
+  p.sender = 9;
+  p.seq = 8;
+  p.id = 40;
+  p.p = Eigen::Vector2d(100.5, -20.25);
+  p.omega << 4, 0.5, 0.5, 2;
+  return p;
+}
+
+StreamPositionPrior<SE3> samplePositionPrior3() {
+  StreamPositionPrior<SE3> p;
+  p.sender = 9;
+  p.seq = 9;
+  p.id = 41;
+  p.p = Eigen::Vector3d(1, 2, -3);
+  p.omega << 4, 0.5, 0, 0.5, 2, 0.1, 0, 0.1, 1;
+  return p;
+}
+
+MessageProblem problemOf(const prior_t& m, std::string* detail = nullptr) {
+  const auto bytes = encodeMessage(m);
+  const PriorDecoding d = decodePrior(bytes.data(), static_cast<int>(bytes.size()));
+  if (detail) *detail = d.detail;
+  return d.problem;
+}
+
+template <class P>
+P decodedAs(const P& prior) {
+  const auto bytes = encodeMessage(makePriorMessage(prior));
+  const PriorDecoding d = decodePrior(bytes.data(), static_cast<int>(bytes.size()));
+  EXPECT_TRUE(d.ok()) << d.detail;
+  EXPECT_TRUE(std::holds_alternative<P>(d.prior));
+  return std::holds_alternative<P>(d.prior) ? std::get<P>(d.prior) : P();
+}
+
+TEST(LcmMessages, PriorRoundTrips) {
+  // The offset of information_size that the decoder pre-checks: 158 + 8 n bytes.
+  EXPECT_EQ(encodeMessage(makePriorMessage(samplePosePrior2())).size(), 158u + 8u * 6u);
+  EXPECT_EQ(encodeMessage(makePriorMessage(samplePosePrior3())).size(), 158u + 8u * 21u);
+  EXPECT_EQ(encodeMessage(makePriorMessage(samplePositionPrior2())).size(), 158u + 8u * 3u);
+  EXPECT_EQ(encodeMessage(makePriorMessage(samplePositionPrior3())).size(), 158u + 8u * 6u);
+
+  const StreamPosePrior<SE2> a = samplePosePrior2();
+  const StreamPosePrior<SE2> a2 = decodedAs(a);
+  EXPECT_EQ(a2.utime, 77);
+  EXPECT_EQ(a2.sender, 5);
+  EXPECT_EQ(a2.seq, 3);
+  EXPECT_EQ(a2.id, 12);
+  EXPECT_EQ(a2.z.x(), 4.5);
+  EXPECT_NEAR(a2.z.angle(), -2.9, 1e-15);
+  EXPECT_NEAR(a2.offset.y(), 0.1, 0);
+  EXPECT_NEAR(a2.offset.angle(), 0.05, 1e-15);
+  EXPECT_EQ(a2.omega, a.omega);
+  EXPECT_EQ(dimOf(AnyStreamPrior(a2)), 2);
+
+  const StreamPosePrior<SE3> b = samplePosePrior3();
+  const StreamPosePrior<SE3> b2 = decodedAs(b);
+  EXPECT_EQ(b2.omega, b.omega);
+  EXPECT_LT((b2.z.translation() - b.z.translation()).norm(), 1e-15);
+  EXPECT_NEAR(b2.z.quaternion().angularDistance(b.z.quaternion()), 0, 1e-12);
+  EXPECT_NEAR(b2.offset.quaternion().angularDistance(b.offset.quaternion()), 0, 1e-12);
+  EXPECT_EQ(b2.offset.translation(), b.offset.translation());
+  EXPECT_EQ(dimOf(AnyStreamPrior(b2)), 3);
+
+  const StreamPositionPrior<SE2> c = samplePositionPrior2();
+  const StreamPositionPrior<SE2> c2 = decodedAs(c);
+  EXPECT_EQ(c2.p, c.p);
+  EXPECT_EQ(c2.omega, c.omega);
+  EXPECT_EQ(c2.id, 40);
+  EXPECT_EQ(c2.seq, 8);
+  const StreamPositionPrior<SE3> d = samplePositionPrior3();
+  const StreamPositionPrior<SE3> d2 = decodedAs(d);
+  EXPECT_EQ(d2.p, d.p);
+  EXPECT_EQ(d2.omega, d.omega);
+  EXPECT_EQ(dimOf(AnyStreamPrior(d2)), 3);
+
+  // An edge is not a prior, nor a prior an edge (the type hash tells them apart).
+  const auto edge = encodeMessage(makeEdgeMessage(sampleEdge2()));
+  EXPECT_EQ(decodePrior(edge.data(), static_cast<int>(edge.size())).problem,
+            MessageProblem::kTypeHash);
+  const auto prior = encodeMessage(makePriorMessage(a));
+  EXPECT_EQ(decodeEdge(prior.data(), static_cast<int>(prior.size())).problem,
+            MessageProblem::kTypeHash);
+}
+
+TEST(LcmMessages, EveryPriorTruncationIsRefused) {
+  for (const prior_t& m :
+       {makePriorMessage(samplePosePrior3()), makePriorMessage(samplePositionPrior2())}) {
+    const auto bytes = encodeMessage(m);
+    for (size_t n = 0; n < bytes.size(); ++n) {
+      const PriorDecoding d = decodePrior(bytes.data(), static_cast<int>(n));
+      EXPECT_EQ(d.problem, MessageProblem::kTruncated) << n << " bytes: " << d.detail;
+    }
+    auto longer = bytes;
+    longer.push_back(0);
+    EXPECT_EQ(decodePrior(longer.data(), static_cast<int>(longer.size())).problem,
+              MessageProblem::kTrailingBytes);
+  }
+  // information_size (big-endian int32 at byte 154) huge, then negative: refused before the
+  // decoder allocates.
+  auto bytes = encodeMessage(makePriorMessage(samplePosePrior2()));
+  bytes[154] = 0x7f;
+  bytes[155] = bytes[156] = bytes[157] = 0xff;
+  EXPECT_EQ(decodePrior(bytes.data(), static_cast<int>(bytes.size())).problem,
+            MessageProblem::kMalformed);
+  bytes[154] = 0xff;
+  EXPECT_EQ(decodePrior(bytes.data(), static_cast<int>(bytes.size())).problem,
+            MessageProblem::kMalformed);
+}
+
+TEST(LcmMessages, EachBadPriorFieldHasItsReason) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const prior_t pose2 = makePriorMessage(samplePosePrior2());
+  const prior_t pose3 = makePriorMessage(samplePosePrior3());
+  const prior_t pos2 = makePriorMessage(samplePositionPrior2());
+  const prior_t pos3 = makePriorMessage(samplePositionPrior3());
+  for (const prior_t* m : {&pose2, &pose3, &pos2, &pos3})
+    EXPECT_EQ(problemOf(*m), MessageProblem::kNone);
+  // Each mutation, its reason and a word its detail must contain.
+  auto check = [&](const prior_t& base, auto mutate, MessageProblem expected,
+                   const std::string& word) {
+    prior_t m = base;
+    mutate(m);
+    std::string detail;
+    EXPECT_EQ(problemOf(m, &detail), expected) << toString(expected) << ": " << detail;
+    EXPECT_NE(detail.find(word), std::string::npos) << detail;
+  };
+  // kind
+  check(
+      pose2, [](prior_t& m) { m.kind = 0; }, MessageProblem::kKind, "kind 0");
+  check(
+      pose2, [](prior_t& m) { m.kind = 7; }, MessageProblem::kKind, "kind 7");
+  check(
+      pos3, [](prior_t& m) { m.rotation[0] = 1; }, MessageProblem::kKind, "position prior");
+  check(
+      pos2, [](prior_t& m) { m.offset_translation[1] = 0.5; }, MessageProblem::kKind,
+      "position prior");
+  // A pose prior sent as a position prior: the rotation gives it away (and sizes differ).
+  check(
+      pose3, [](prior_t& m) { m.kind = prior_t::POSITION; }, MessageProblem::kDim,
+      "needs 6 information entries, got 21");
+  // dim and sizes
+  check(
+      pose2, [](prior_t& m) { m.dim = 4; }, MessageProblem::kDim, "dim 4");
+  check(
+      pose2, [](prior_t& m) { m.dim = 3; }, MessageProblem::kDim, "needs 21");
+  check(
+      pos3, [](prior_t& m) { m.dim = 2; }, MessageProblem::kDim, "needs 3");
+  check(
+      pos2,
+      [](prior_t& m) {
+        m.information_size = 6;
+        m.information.resize(6, 0.0);
+      },
+      MessageProblem::kDim, "position prior needs 3");
+  check(
+      pos2, [](prior_t& m) { m.translation[2] = 1; }, MessageProblem::kDim, "translation[2]");
+  check(
+      pose2, [](prior_t& m) { m.rotation[3] = 0.1; }, MessageProblem::kDim, "rotation[1..3]");
+  check(
+      pose2, [](prior_t& m) { m.offset_translation[2] = 0.1; }, MessageProblem::kDim, "offset");
+  // not finite
+  check(
+      pose2, [&](prior_t& m) { m.translation[1] = nan; }, MessageProblem::kNotFinite,
+      "translation");
+  check(
+      pose3, [&](prior_t& m) { m.rotation[0] = inf; }, MessageProblem::kNotFinite, "rotation");
+  check(
+      pose3, [&](prior_t& m) { m.offset_rotation[2] = nan; }, MessageProblem::kNotFinite, "offset");
+  check(
+      pos3, [&](prior_t& m) { m.information[5] = -inf; }, MessageProblem::kNotFinite,
+      "information");
+  // rotation
+  check(
+      pose3, [](prior_t& m) { m.rotation[0] = m.rotation[1] = m.rotation[2] = m.rotation[3] = 0; },
+      MessageProblem::kRotation, "quaternion norm 0");
+  check(
+      pose3,
+      [](prior_t& m) {
+        for (double& q : m.offset_rotation) q = 0;  // the identity offset is 1 0 0 0
+      },
+      MessageProblem::kRotation, "offset");
+  // magnitudes
+  check(
+      pose2, [](prior_t& m) { m.translation[0] = 1e300; }, MessageProblem::kMagnitude,
+      "beyond the largest accepted");
+  check(
+      pose3, [](prior_t& m) { m.offset_translation[2] = -1e16; }, MessageProblem::kMagnitude,
+      "offset");
+  check(
+      pos3, [](prior_t& m) { m.translation[2] = 2e15; }, MessageProblem::kMagnitude,
+      "position prior");
+  check(
+      pos2, [](prior_t& m) { m.information[0] = 1e31; }, MessageProblem::kInformation,
+      "information matrix");
+  // information: not positive definite, not symmetric cannot be written (upper triangle)
+  check(
+      pose2, [](prior_t& m) { m.information[0] = -1; }, MessageProblem::kInformation,
+      "information matrix");
+  check(
+      pos2, [](prior_t& m) { m.information[1] = 10; }, MessageProblem::kInformation,
+      "information matrix");  // |Ω01| > √(Ω00 Ω11)
+  check(
+      pose3, [](prior_t& m) { m.information.assign(21, 0.0); }, MessageProblem::kInformation,
+      "information matrix");
+  // id, seq
+  check(
+      pos2, [](prior_t& m) { m.id = -4; }, MessageProblem::kId, "-4");
+  check(
+      pose2, [](prior_t& m) { m.seq = 0; }, MessageProblem::kSeq, "seq 0");
+}
+
+TEST(LcmMessages, EdgeTranslationBeyondTheLimitIsRefused) {
+  edge_t m = makeEdgeMessage(sampleEdge3());
+  m.translation[1] = 1e200;
+  EXPECT_EQ(problemOf(m), MessageProblem::kMagnitude);
+  EXPECT_STREQ(toString(MessageProblem::kMagnitude), "magnitude");
+  EXPECT_STREQ(toString(MessageProblem::kKind), "kind");
+}
+
+TEST(LcmMessages, RandomPriorCorruptionNeverThrows) {
+  std::mt19937 rng(6);
+  int accepted = 0;
+  for (const prior_t& m :
+       {makePriorMessage(samplePosePrior3()), makePriorMessage(samplePositionPrior2())}) {
+    const auto good = encodeMessage(m);
+    for (int trial = 0; trial < 2000; ++trial) {
+      auto bytes = good;
+      const int flips = 1 + static_cast<int>(rng() % 4);
+      for (int f = 0; f < flips; ++f) bytes[rng() % bytes.size()] = static_cast<uint8_t>(rng());
+      bytes.resize(bytes.size() - rng() % 3);
+      PriorDecoding d;
+      ASSERT_NO_THROW(d = decodePrior(bytes.data(), static_cast<int>(bytes.size())));
+      if (d.ok()) ++accepted;
+    }
+  }
+  EXPECT_LT(accepted, 4000);
 }
 
 TEST(LcmJournal, AppendReadAndTornTail) {

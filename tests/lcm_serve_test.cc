@@ -1,7 +1,10 @@
 // arbor serve in process over memq:// (tools/serve/serve_service.h): the stream gives the same
 // estimate as replay-style feeding, a burst is fully applied in few updates, bad messages are
 // counted by reason while good ones keep being applied, gaps are reported, commands work, and
-// a restart from the journal reproduces the estimate exactly.
+// a restart from the journal reproduces the estimate exactly; priors (prior_t on ARBOR_PRIORS)
+// streamed with the edges give the estimate of an OnlineSmoother fed directly, are journaled
+// and replayed in their order among the edges, and hostile ones are refused with their reason.
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -457,6 +460,364 @@ TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
   const OnlineSmoother2 replay = finalizedReplay(graph, order);
   EXPECT_NEAR(s.F_final, replay.smoother().objective(), 1e-9 * replay.smoother().objective());
   std::remove(journal.c_str());
+}
+
+TEST(EdgeIntake, PriorsHaveTheirOwnSeqsAndShareTheStreamsDim) {
+  const PoseGraph2 graph = smallGraph();
+  EdgeIntake intake;
+  auto prior = [](std::int64_t seq, std::int64_t sender = 1) {
+    StreamPositionPrior<SE2> p;
+    p.sender = sender;
+    p.seq = seq;
+    p.id = 3;
+    p.p = Eigen::Vector2d(1, 2);
+    return encodeMessage(makePriorMessage(p));
+  };
+  auto admitPrior = [&](const std::vector<std::uint8_t>& b) {
+    return intake.admitPrior(b.data(), static_cast<int>(b.size()));
+  };
+  const auto edge1 = edgeBytes(streamEdge(graph, 0, 1));
+  EXPECT_EQ(intake.admit(edge1.data(), static_cast<int>(edge1.size())).verdict, Intake::kAccepted);
+  // The same (sender, seq) as the edge: another stream, so not "seq reused".
+  const IntakeResult p1 = admitPrior(prior(1));
+  EXPECT_EQ(p1.verdict, Intake::kAccepted);
+  EXPECT_TRUE(p1.is_prior);
+  EXPECT_TRUE(std::holds_alternative<StreamPositionPrior<SE2>>(p1.prior));
+  EXPECT_EQ(admitPrior(prior(1)).verdict, Intake::kDuplicate);
+  EXPECT_EQ(admitPrior(prior(4)).skipped, 2);
+  EXPECT_EQ(intake.priorCounts().gaps, 2);
+  EXPECT_EQ(intake.counts().gaps, 0);
+  StreamPosePrior<SE3> p3;
+  p3.seq = 5;
+  const IntakeResult wrong = admitPrior(encodeMessage(makePriorMessage(p3)));
+  EXPECT_EQ(wrong.reason, "dim");
+  EXPECT_NE(wrong.detail.find("3D prior on a 2D stream"), std::string::npos) << wrong.detail;
+  const IntakeResult six = admitPrior(prior(6));
+  intake.revoke(six, "journal");
+  EXPECT_EQ(admitPrior(prior(6)).verdict, Intake::kAccepted);
+  const IntakeCounts& c = intake.priorCounts();
+  EXPECT_EQ(c.received, 6);
+  EXPECT_EQ(c.accepted, 3);
+  EXPECT_EQ(c.duplicates, 1);
+  EXPECT_EQ(c.rejected, 2);
+  EXPECT_EQ(c.rejected_by_reason.at("dim"), 1);
+  EXPECT_EQ(c.rejected_by_reason.at("journal"), 1);
+  EXPECT_EQ(intake.counts().received, 1);  // the edge counts are the edges'
+  EXPECT_EQ(intake.counts().rejected, 0);
+  // A prior first fixes the stream's dimension for the edges too.
+  EdgeIntake fresh;
+  EXPECT_EQ(fresh
+                .admitPrior(encodeMessage(makePriorMessage(p3)).data(),
+                            static_cast<int>(encodeMessage(makePriorMessage(p3)).size()))
+                .verdict,
+            Intake::kAccepted);
+  EXPECT_EQ(fresh.dim(), 3);
+  EXPECT_EQ(fresh.admit(edge1.data(), static_cast<int>(edge1.size())).reason, "dim");
+}
+
+TEST(StreamOrder, EachPriorFollowsTheEdgeThatIntroducesItsPose) {
+  const PoseGraph2 graph = testing::manhattanGraphWithPriors(150, 3);
+  const std::vector<cli::StreamStep> order = cli::streamOrder(graph);
+  ASSERT_EQ(order.size(),
+            graph.edges.size() + graph.pose_priors.size() + graph.position_priors.size());
+  std::vector<bool> known(graph.ids.size(), false);
+  int last_edge = -1, priors = 0;
+  for (const cli::StreamStep& step : order) {
+    if (step.kind == cli::StreamStep::Kind::kEdge) {
+      const auto& e = graph.edges[step.index];
+      known[e.i] = known[e.j] = true;
+      last_edge = step.index;
+      continue;
+    }
+    ++priors;
+    const int pose = step.kind == cli::StreamStep::Kind::kPosePrior
+                         ? graph.pose_priors[step.index].i
+                         : graph.position_priors[step.index].i;
+    ASSERT_GE(last_edge, 0);
+    EXPECT_TRUE(known[pose]) << "a prior on pose " << pose << " before its pose";
+    // The edge just before it (or before the priors just before it) touches the pose first.
+    const auto& e = graph.edges[last_edge];
+    EXPECT_TRUE(e.i == pose || e.j == pose) << "pose " << pose;
+  }
+  EXPECT_EQ(priors, graph.numPriors());
+  // --count K then --skip K: every message once, each prior with its edge's part.
+  cli::StreamSelection a, b;
+  const auto first = cli::streamMessages(graph, 1, 0, 40, &a);
+  const auto rest = cli::streamMessages(graph, 1, 40, -1, &b);
+  EXPECT_EQ(a.edges + b.edges, graph.numEdges());
+  EXPECT_EQ(a.priors + b.priors, graph.numPriors());
+  EXPECT_GT(a.priors, 0);
+  EXPECT_EQ(first.size() + rest.size(), order.size());
+  EXPECT_EQ(b.first_seq, 41);
+  // Prior seqs continue across the two parts.
+  auto seqOf = [](const cli::StreamMessage<SE2>& m) {
+    return std::visit([](const auto& p) { return p.seq; }, m.prior);
+  };
+  std::int64_t expected = 1;
+  for (const auto* part : {&first, &rest}) {
+    for (const auto& m : *part) {
+      if (m.is_prior) {
+        EXPECT_EQ(seqOf(m), expected++);
+      }
+    }
+  }
+}
+
+// Publishes a message and a STATUS command, and waits for the status that counts `applied`
+// edges and priors: one update per message, as the reference is fed.
+void publishAndWait(lcm::LCM& lcm, const Service& service, Collector& collector,
+                    const testing::StreamBytes& m, std::int64_t applied) {
+  const std::string& ch = m.is_prior ? service.channels().priors : service.channels().edges;
+  lcm.publish(ch, m.bytes.data(), static_cast<unsigned>(m.bytes.size()));
+  command_t c;
+  c.command = command_t::STATUS;
+  const auto cb = encodeMessage(c);
+  lcm.publish(service.channels().command, cb.data(), static_cast<unsigned>(cb.size()));
+  ASSERT_TRUE(collector.waitStatus([&](const status_t& s) {
+    return s.applied + s.priors_applied == applied;
+  })) << "message "
+      << applied;
+}
+
+TEST(LcmServe, EdgesAndPriorsInLockstepEqualTheSmootherFedDirectly) {
+  SE2 world;
+  const PoseGraph2 graph = testing::manhattanGraphWithPriors(150, 3, &world);
+  cli::StreamSelection selection;
+  const std::vector<testing::StreamBytes> messages = testing::streamBytes(graph, &selection);
+  ASSERT_EQ(selection.priors, graph.numPriors());
+  lcm::LCM lcm("memq://");
+  ASSERT_TRUE(lcm.good());
+  ServeOptions options;
+  options.refine_on_exit = false;
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  OnlineSmoother2 reference;
+  for (size_t k = 0; k < messages.size(); ++k) {
+    publishAndWait(lcm, service, collector, messages[k], static_cast<std::int64_t>(k) + 1);
+    ASSERT_TRUE(testing::feed(reference, messages[k])) << "message " << k;
+    reference.update();
+  }
+  const status_t status = collector.status();
+  service.stop();
+  const ServeSummary& s = service.summary();
+  EXPECT_EQ(s.applied, graph.numEdges());
+  EXPECT_EQ(s.priors_applied, graph.numPriors());
+  EXPECT_EQ(s.updates, static_cast<std::int64_t>(messages.size()));
+  EXPECT_EQ(s.prior_intake.received, graph.numPriors());
+  EXPECT_EQ(s.prior_intake.rejected + s.smoother_priors_rejected, 0);
+  EXPECT_EQ(s.prior_intake.gaps, 0);
+  EXPECT_EQ(status.priors_received, graph.numPriors());
+  EXPECT_EQ(status.priors_accepted, graph.numPriors());
+  EXPECT_EQ(status.priors_applied, graph.numPriors());
+  EXPECT_EQ(status.queue_depth, 0);
+  EXPECT_EQ(s.components, reference.stats().components);
+  EXPECT_EQ(status.components, reference.stats().components);
+  // Same inputs, same grouping: the very same estimate.
+  expectSamePoses(s.final_estimate, reference.estimates(), 0.0);
+  // The priors were applied: the estimate is in their frame, not the first pose's.
+  const auto& ids = s.final_estimate.ids;
+  const size_t first = static_cast<size_t>(std::find(ids.begin(), ids.end(), 0) - ids.begin());
+  ASSERT_LT(first, ids.size());
+  const Eigen::Vector2d x0(s.final_estimate.translation[first][0],
+                           s.final_estimate.translation[first][1]);
+  EXPECT_LT((x0 - world.translation()).norm(), 0.5) << x0.transpose();
+  EXPECT_GT(world.translation().norm(), 5);
+}
+
+TEST(LcmServe, JournalRestartReplaysPriorsInTheirOrderAmongTheEdges) {
+  const PoseGraph2 graph = testing::manhattanGraphWithPriors(150, 5);
+  const std::vector<testing::StreamBytes> messages = testing::streamBytes(graph);
+  const size_t half = messages.size() / 2;
+  std::int64_t half_edges = 0, half_priors = 0;
+  for (size_t k = 0; k < half; ++k) ++(messages[k].is_prior ? half_priors : half_edges);
+  ASSERT_GT(half_priors, 3);
+  const std::string journal = tempJournal("priors.lcmlog");
+  estimate_t before;
+  {
+    lcm::LCM lcm("memq://");
+    ServeOptions options;
+    options.refine_on_exit = false;
+    options.journal_path = journal;
+    Service service(lcm, options);
+    Collector collector(lcm, service.channels());
+    service.start();
+    for (size_t k = 0; k < half; ++k) {
+      if (k % 9 == 0) {  // mixed grouping: some updates of one message, some of several
+        publishAndWait(lcm, service, collector, messages[k], static_cast<std::int64_t>(k) + 1);
+      } else {
+        const auto& m = messages[k];
+        lcm.publish(m.is_prior ? service.channels().priors : service.channels().edges,
+                    m.bytes.data(), static_cast<unsigned>(m.bytes.size()));
+      }
+    }
+    publishAndWait(lcm, service, collector, messages[half - 1], static_cast<std::int64_t>(half));
+    service.stop();
+    EXPECT_EQ(service.summary().intake.duplicates + service.summary().prior_intake.duplicates, 1);
+    before = service.summary().final_estimate;
+  }
+  // The journal holds the messages in the order sent (its edge and prior events, with marks).
+  {
+    const EventLogContents log = readEventLog(journal);
+    std::vector<std::vector<std::uint8_t>> journaled;
+    for (const LogEvent& e : log.events) {
+      if (e.channel == Channels::withPrefix("").edges ||
+          e.channel == Channels::withPrefix("").priors)
+        journaled.push_back(e.data);
+    }
+    ASSERT_EQ(journaled.size(), half);
+    for (size_t k = 0; k < half; ++k) EXPECT_EQ(journaled[k], messages[k].bytes) << k;
+  }
+  lcm::LCM lcm("memq://");
+  ServeOptions options;
+  options.journal_path = journal;
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  command_t c;
+  c.command = command_t::PUBLISH_FULL;
+  const auto cb = encodeMessage(c);
+  lcm.publish(service.channels().command, cb.data(), static_cast<unsigned>(cb.size()));
+  ASSERT_TRUE(collector.waitFull(1));
+  const estimate_t after = collector.fullEstimates().back();
+  // Bit for bit: the same ids and the same numbers on the wire.
+  EXPECT_EQ(after.ids, before.ids);
+  EXPECT_EQ(after.translation, before.translation);
+  EXPECT_EQ(after.rotation, before.rotation);
+  for (size_t k = half; k < messages.size(); ++k) {
+    const auto& m = messages[k];
+    lcm.publish(m.is_prior ? service.channels().priors : service.channels().edges, m.bytes.data(),
+                static_cast<unsigned>(m.bytes.size()));
+  }
+  publishAndWait(lcm, service, collector, messages.back(),
+                 static_cast<std::int64_t>(messages.size()));
+  service.stop();
+  const ServeSummary& s = service.summary();
+  EXPECT_EQ(s.journal_edges, half_edges);
+  EXPECT_EQ(s.journal_priors, half_priors);
+  EXPECT_EQ(s.applied, graph.numEdges());
+  EXPECT_EQ(s.priors_applied, graph.numPriors());
+  EXPECT_EQ(s.intake.gaps + s.prior_intake.gaps, 0);
+  // Refined on exit: F as the smoother fed directly and finalized.
+  OnlineSmoother2 reference;
+  for (const auto& m : messages) {
+    ASSERT_TRUE(testing::feed(reference, m));
+    reference.update();
+  }
+  reference.finalize();
+  const double F = reference.smoother().objective();
+  EXPECT_NEAR(s.F_final, F, 1e-9 * F);
+  std::remove(journal.c_str());
+}
+
+TEST(LcmServe, HostilePriorsAreRefusedWithTheirReasonAndNothingElseIsLost) {
+  const PoseGraph2 graph = testing::manhattanGraphWithPriors(150, 3);
+  const std::vector<testing::StreamBytes> messages = testing::streamBytes(graph);
+  lcm::LCM lcm("memq://");
+  std::ostringstream log;
+  ServeOptions options;  // refine on exit, as the reference finalizes
+  options.log = &log;
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  const Channels& ch = service.channels();
+  auto send = [&](const std::string& channel, const std::vector<std::uint8_t>& b) {
+    lcm.publish(channel, b.data(), static_cast<unsigned>(b.size()));
+  };
+  StreamPosePrior<SE2> base;
+  base.sender = 2;
+  base.id = 7;
+  base.z = SE2(1, 2, 0.3);
+  std::int64_t seq = 0;
+  auto hostile = [&](auto mutate) {
+    prior_t m = makePriorMessage(base);
+    m.seq = ++seq;
+    mutate(m);
+    return encodeMessage(m);
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::map<std::string, int> expected;
+  for (size_t k = 0; k < messages.size(); ++k) {
+    send(messages[k].is_prior ? ch.priors : ch.edges, messages[k].bytes);
+    switch (k % 10) {
+      case 1:
+        send(ch.priors, hostile([&](prior_t& m) { m.translation[0] = nan; }));
+        ++expected["not finite"];
+        break;
+      case 2:
+        send(ch.priors, hostile([](prior_t& m) {
+               m.information_size = 5;
+               m.information.resize(5);
+             }));
+        ++expected["dim"];
+        break;
+      case 3:
+        send(ch.priors, hostile([](prior_t& m) { m.information[0] = -m.information[0]; }));
+        ++expected["information"];
+        break;
+      case 4:
+        send(ch.priors, hostile([](prior_t& m) { m.kind = 9; }));
+        ++expected["kind"];
+        break;
+      case 5: {  // a 3D prior on this 2D stream
+        StreamPositionPrior<SE3> p3;
+        p3.sender = 2;
+        p3.seq = ++seq;
+        send(ch.priors, encodeMessage(makePriorMessage(p3)));
+        ++expected["dim"];
+        break;
+      }
+      case 6: {
+        const auto b = hostile([](prior_t&) {});
+        send(ch.priors, std::vector<std::uint8_t>(b.begin(), b.begin() + 100));
+        ++expected["truncated"];
+        break;
+      }
+      case 7:  // an edge on the priors channel
+        send(ch.priors, edgeBytes(streamEdge(graph, 0, 1, 3)));
+        ++expected["type hash"];
+        break;
+      case 8:
+        send(ch.priors, hostile([](prior_t& m) { m.translation[1] = -1e200; }));
+        ++expected["magnitude"];
+        break;
+      default:
+        break;
+    }
+  }
+  publishAndWait(lcm, service, collector, messages.back(),
+                 static_cast<std::int64_t>(messages.size()));  // a duplicate, then the count
+  service.stop();
+  const ServeSummary& s = service.summary();
+  EXPECT_EQ(s.applied, graph.numEdges());
+  EXPECT_EQ(s.priors_applied, graph.numPriors());
+  EXPECT_EQ(s.intake.rejected, 0);
+  int total = 0;
+  for (const auto& [reason, n] : expected) {
+    const auto& by = s.prior_intake.rejected_by_reason;
+    EXPECT_EQ(by.count(reason) ? by.at(reason) : 0, n) << reason;
+    total += n;
+  }
+  EXPECT_EQ(s.prior_intake.rejected, total);
+  EXPECT_EQ(s.prior_intake.accepted, graph.numPriors());
+  const status_t st = service.status();
+  EXPECT_EQ(st.priors_rejected, total);
+  const auto at = std::find(st.reason.begin(), st.reason.end(), "prior kind");
+  ASSERT_NE(at, st.reason.end());
+  EXPECT_EQ(st.reason_count[static_cast<size_t>(at - st.reason.begin())], expected["kind"]);
+  EXPECT_NE(log.str().find("rejected prior (sender 2 seq"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("kind 9 is not POSE (1) or POSITION (2)"), std::string::npos);
+  // Nothing accepted was lost: the estimate is that of the good messages alone (fed directly
+  // with the grouping of a burst, so compared after finalizing both).
+  OnlineSmoother2 reference;
+  for (const auto& m : messages) {
+    ASSERT_TRUE(testing::feed(reference, m));
+    reference.update();
+  }
+  reference.finalize();
+  const double F = reference.smoother().objective();
+  EXPECT_NEAR(s.F_final, F, 1e-9 * F);
+  EXPECT_EQ(s.final_estimate.num_poses, graph.numPoses());
 }
 
 // A journal damaged in the middle (one edge event's header overwritten) loses that edge only:

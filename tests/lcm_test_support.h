@@ -1,5 +1,6 @@
 // Shared by the in-process `arbor serve` tests over memq://: the edges of a generated graph in
-// replay order as edge_t bytes, and a Collector of the estimates and status on the bus.
+// replay order as edge_t bytes, a generated graph with priors and its stream (edges and priors
+// as `arbor publish` sends them), and a Collector of the estimates and status on the bus.
 #pragma once
 
 #include <algorithm>
@@ -20,6 +21,7 @@
 
 #include "bayestree/online_smoother.h"
 #include "io/lcm_messages.h"
+#include "tools/cli/publish_stream.h"
 #include "tools/cli/replay_order.h"
 #include "tools/generator/graph_generator.h"
 #include "tools/serve/serve_service.h"
@@ -75,6 +77,60 @@ inline std::vector<std::uint8_t> edgeBytes(const StreamEdge<SE2>& e) {
 
 inline std::vector<std::uint8_t> edgeBytes(const PoseGraph2& graph, int e, std::int64_t seq) {
   return edgeBytes(streamEdge(graph, e, seq));
+}
+
+/// A generated Manhattan world (grid 4, default noise) with priors in a world frame W (not the
+/// first pose's): a pose prior with a sensor offset on pose 0 and a position prior (GPS) on
+/// every 10th pose from pose 5, each from the ground truth (moved into W).
+inline PoseGraph2 manhattanGraphWithPriors(int poses, std::uint64_t seed, SE2* world = nullptr) {
+  sim::ManhattanOptions o;
+  o.poses = poses;
+  o.grid = 4;
+  o.seed = seed;
+  const sim::Simulation<SE2> sim = sim::manhattanWorld(o);
+  PoseGraph2 graph = sim.graph;
+  const SE2 w(5.0, -3.0, 0.4);
+  const SE2 offset(0.1, -0.05, 0.02);
+  const Eigen::Vector3d pose_sigma(0.05, 0.05, 0.02);
+  graph.pose_priors.push_back(PosePriorFactor<SE2>::make(
+      0, w.compose(sim.truth[0]).compose(offset),
+      pose_sigma.cwiseInverse().cwiseAbs2().asDiagonal().toDenseMatrix(), offset));
+  for (int k = 5; k < graph.numPoses(); k += 10) {
+    graph.position_priors.push_back(PositionPriorFactor<SE2>::make(
+        k, w.compose(sim.truth[k]).translation(), 25.0 * Eigen::Matrix2d::Identity()));
+  }
+  if (world) *world = w;
+  return graph;
+}
+
+/// The messages `arbor publish` sends for `graph` (every edge and prior, sender 1), encoded.
+struct StreamBytes {
+  bool is_prior = false;
+  std::vector<std::uint8_t> bytes;
+};
+inline std::vector<StreamBytes> streamBytes(const PoseGraph2& graph,
+                                            cli::StreamSelection* selection = nullptr) {
+  std::vector<StreamBytes> out;
+  for (const auto& m : cli::streamMessages(graph, 1, 0, -1, selection))
+    out.push_back({m.is_prior, cli::encodeStreamMessage(m, 0)});
+  return out;
+}
+
+/// Feeds one message's bytes (as decoded on the wire) to `smoother`; false if it is refused.
+inline bool feed(OnlineSmoother2& smoother, const StreamBytes& m) {
+  const int size = static_cast<int>(m.bytes.size());
+  if (!m.is_prior) {
+    const EdgeDecoding d = decodeEdge(m.bytes.data(), size);
+    if (!d.ok()) return false;
+    const auto& e = std::get<StreamEdge<SE2>>(d.edge);
+    return smoother.addEdge(e.from, e.to, e.z, e.omega).status == EdgeStatus::kAccepted;
+  }
+  const PriorDecoding d = decodePrior(m.bytes.data(), size);
+  if (!d.ok()) return false;
+  if (const auto* p = std::get_if<StreamPosePrior<SE2>>(&d.prior))
+    return smoother.addPosePrior(p->id, p->z, p->omega, p->offset).status == EdgeStatus::kAccepted;
+  const auto& p = std::get<StreamPositionPrior<SE2>>(d.prior);
+  return smoother.addPositionPrior(p.id, p.p, p.omega).status == EdgeStatus::kAccepted;
 }
 
 /// A path in the temp directory unique to this process, removed if it exists.

@@ -1,6 +1,8 @@
 // arbor publish FILE: stream a pose-graph file's edges over LCM as edge_t, in the order `arbor
-// replay` feeds them (seq = position in that order, from 1), at a rate or as a burst; optionally
-// wait for the estimate that covers the last edge and report publish → estimate latency.
+// replay` feeds them (seq = position in that order, from 1), and its priors as prior_t, each
+// right after the edge that introduces its pose (tools/cli/publish_stream.h), at a rate or as a
+// burst; optionally wait for the estimate that covers the last edge and report publish →
+// estimate latency.
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -17,7 +19,7 @@
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
 #include "tools/cli/latency.h"
-#include "tools/cli/replay_order.h"
+#include "tools/cli/publish_stream.h"
 #include "tools/serve/lcm_tuning.h"
 #include "tools/serve/serve_service.h"
 
@@ -126,15 +128,15 @@ class Listener {
 
 template <class G>
 int publish(const PublishRun& run, const PoseGraph<G>& graph) {
-  std::vector<int> order;
-  for (const auto& group : replayGroups(graph, false))
-    order.insert(order.end(), group.begin(), group.end());
-  const long total = static_cast<long>(order.size());
+  const long total = static_cast<long>(graph.edges.size());
   if (run.skip > total)
     throw UsageError("--skip " + std::to_string(run.skip) + " exceeds the " +
                      std::to_string(total) + " edges");
-  const long end = run.count < 0 ? total : std::min(total, run.skip + run.count);
-  const size_t n = static_cast<size_t>(end - run.skip);
+  StreamSelection selection;
+  const std::vector<StreamMessage<G>> messages =
+      streamMessages(graph, run.sender, run.skip, run.count, &selection);
+  const long end = static_cast<long>(selection.last_seq);
+  const size_t n = static_cast<size_t>(selection.edges);
 
   lcm::LCM lcm(run.url);
   if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + run.url + "'");
@@ -156,25 +158,23 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     return 1;
   }
 
+  // --rate paces the edges; a prior goes out right after the edge it follows.
   const auto start = Clock::now();
-  for (size_t k = 0; k < n; ++k) {
-    if (run.rate > 0)
+  size_t k = 0;  // edges sent
+  for (const StreamMessage<G>& m : messages) {
+    if (!m.is_prior && run.rate > 0)
       std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(
                                                 std::chrono::duration<double>(k / run.rate)));
-    const auto& edge = graph.edges[order[run.skip + static_cast<long>(k)]];
-    StreamEdge<G> e;
-    e.utime = serve::nowMicros();
-    e.sender = run.sender;
-    e.seq = run.skip + static_cast<long>(k) + 1;
-    e.from = graph.ids[edge.i];
-    e.to = graph.ids[edge.j];
-    e.z = edge.measurement;
-    e.omega = edge.information;
-    const auto bytes = encodeMessage(makeEdgeMessage(e));
-    if (listener) listener->sent(k);
-    if (lcm.publish(channels.edges, bytes.data(), static_cast<unsigned>(bytes.size())) != 0) {
-      throw std::runtime_error("LCM publish failed at seq " + std::to_string(e.seq));
+    const auto bytes = encodeStreamMessage(m, serve::nowMicros());
+    if (!m.is_prior && listener) listener->sent(k);
+    const std::string& channel = m.is_prior ? channels.priors : channels.edges;
+    if (lcm.publish(channel, bytes.data(), static_cast<unsigned>(bytes.size())) != 0) {
+      const std::int64_t seq =
+          m.is_prior ? std::visit([](const auto& p) { return p.seq; }, m.prior) : m.edge.seq;
+      throw std::runtime_error(std::string("LCM publish failed at ") +
+                               (m.is_prior ? "prior" : "edge") + " seq " + std::to_string(seq));
     }
+    if (!m.is_prior) ++k;
   }
   const double publish_s = std::chrono::duration<double>(Clock::now() - start).count();
   bool complete = true;
@@ -183,11 +183,15 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   std::vector<double> latencies = listener ? listener->latencies() : std::vector<double>();
   const LatencySummary lat = summarizeLatency(latencies);
   if (run.json) {
-    nlohmann::json j = {
-        {"file", run.file},          {"sent", n},
-        {"first_seq", run.skip + 1}, {"last_seq", end},
-        {"sender", run.sender},      {"publish_s", publish_s},
-        {"total_s", total_s},        {"edges_per_s", publish_s > 0 ? n / publish_s : 0.0}};
+    nlohmann::json j = {{"file", run.file},
+                        {"sent", n},
+                        {"priors_sent", selection.priors},
+                        {"first_seq", run.skip + 1},
+                        {"last_seq", end},
+                        {"sender", run.sender},
+                        {"publish_s", publish_s},
+                        {"total_s", total_s},
+                        {"edges_per_s", publish_s > 0 ? n / publish_s : 0.0}};
     if (run.wait) {
       j["acknowledged"] = latencies.size();
       j["complete"] = complete;
@@ -196,7 +200,9 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     std::cout << j.dump() << std::endl;
   } else {
     std::cout << std::setprecision(4) << "sent          " << n << " edges (seq " << run.skip + 1
-              << ".." << end << ", sender " << run.sender << ") in " << publish_s << " s\n";
+              << ".." << end << ", sender " << run.sender << ")";
+    if (selection.priors > 0) std::cout << " and " << selection.priors << " priors";
+    std::cout << " in " << publish_s << " s\n";
     if (run.wait) {
       std::cout << "estimated     " << latencies.size() << " of " << n << " edges, " << total_s
                 << " s in all\n"
@@ -223,8 +229,8 @@ int publishCommand(const std::vector<std::string>& args) {
                                                  "g2o or TORO file")(
       "lcm-url", po::value(&run.url), "LCM provider URL (default: LCM's default)")(
       "channel-prefix", po::value(&run.prefix), "prefix of the ARBOR_* channels")(
-      "rate", po::value(&run.rate), "edges per second")("burst", po::bool_switch(&burst),
-                                                        "as fast as possible (the default)")(
+      "rate", po::value(&run.rate), "edges per second (priors go with their edges)")(
+      "burst", po::bool_switch(&burst), "as fast as possible (the default)")(
       "sender", po::value(&run.sender)->default_value(1), "sender id")(
       "skip", po::value(&run.skip)->default_value(0), "start after the first K edges")(
       "count", po::value(&run.count)->default_value(-1), "publish N edges (-1: all)")(

@@ -1,7 +1,8 @@
 // The order in which `arbor replay` and `arbor publish` feed a file's edges: by max(i, j) of
 // the pose ids, then file order; a pose's priors (pose priors, then position priors, each in
 // file order) right after the edge that makes the pose known, and priors on poses no edge
-// reaches after every edge.
+// reaches after every edge: streamOrder for a publisher's flat stream, PriorSchedule for the
+// replay, which feeds edges in update groups.
 #pragma once
 
 #include <algorithm>
@@ -68,6 +69,46 @@ EdgeResult feedPrior(const PoseGraph<G>& graph, const PriorRef& p, OnlineSmoothe
   const auto& prior = graph.pose_priors[p.index];
   return smoother.addPosePrior(graph.ids[prior.i], prior.measurement, prior.information,
                                prior.offset);
+}
+
+/// One message of a file's stream: an edge, a pose prior or a position prior, by its index in
+/// graph.edges, graph.pose_priors or graph.position_priors.
+struct StreamStep {
+  enum class Kind { kEdge, kPosePrior, kPositionPrior };
+  Kind kind = Kind::kEdge;
+  int index = 0;
+};
+
+/// The edges in replay order (replayGroups), each prior right after the first edge of that
+/// order that touches its pose (the edge that introduces the pose to an online smoother);
+/// after one edge its pose priors, then its position priors, each in file order. Priors on
+/// poses that no edge touches come last, pose priors then position priors, in file order.
+template <class G>
+std::vector<StreamStep> streamOrder(const PoseGraph<G>& graph) {
+  std::vector<int> edges;
+  for (const auto& group : replayGroups(graph, false))
+    edges.insert(edges.end(), group.begin(), group.end());
+  // introduced[v]: the position in `edges` of the first edge touching pose v, −1 if none.
+  std::vector<int> introduced(graph.ids.size(), -1);
+  for (int k = static_cast<int>(edges.size()) - 1; k >= 0; --k) {
+    introduced[graph.edges[edges[k]].i] = k;
+    introduced[graph.edges[edges[k]].j] = k;
+  }
+  // after[k + 1]: the priors that follow edge k; after[0]: those no edge introduces.
+  std::vector<std::vector<StreamStep>> after(edges.size() + 1);
+  for (int p = 0; p < static_cast<int>(graph.pose_priors.size()); ++p)
+    after[introduced[graph.pose_priors[p].i] + 1].push_back({StreamStep::Kind::kPosePrior, p});
+  for (int p = 0; p < static_cast<int>(graph.position_priors.size()); ++p)
+    after[introduced[graph.position_priors[p].i] + 1].push_back(
+        {StreamStep::Kind::kPositionPrior, p});
+  std::vector<StreamStep> order;
+  order.reserve(edges.size() + graph.pose_priors.size() + graph.position_priors.size());
+  for (size_t k = 0; k < edges.size(); ++k) {
+    order.push_back({StreamStep::Kind::kEdge, edges[k]});
+    order.insert(order.end(), after[k + 1].begin(), after[k + 1].end());
+  }
+  order.insert(order.end(), after[0].begin(), after[0].end());
+  return order;
 }
 
 }  // namespace arbor::cli

@@ -1,5 +1,5 @@
-// arbor serve: ingest edges published over LCM into the incremental smoother and publish the
-// estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
+// arbor serve: ingest edges and priors published over LCM into the incremental smoother and publish
+// the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
 #include "tools/cli/serve_command.h"
 
 #include <csignal>
@@ -81,7 +81,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "lcm-url", po::value(&line.url),
       "LCM provider URL (default: LCM_DEFAULT_URL / LCM's default)")(
       "channel-prefix", po::value(&options.channel_prefix),
-      "prefix of ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND")(
+      "prefix of ARBOR_EDGES, ARBOR_PRIORS, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND")(
       "journal", po::value(&line.journal_dir),
       "directory of the journal (journal.lcmlog); replayed on start")(
       "fsync", po::value(&fsync)->default_value("update"),
@@ -206,6 +206,21 @@ int serveCommand(const std::vector<std::string>& args) {
         {"transport_ms",
          {{"p50", s.transport.p50}, {"p99", s.transport.p99}, {"max", s.transport.max}}},
     };
+    nlohmann::json prior_reasons = nlohmann::json::object();
+    for (const auto& [reason, count] : s.prior_intake.rejected_by_reason)
+      prior_reasons[reason] = count;
+    if (s.smoother_priors_rejected) prior_reasons["smoother"] = s.smoother_priors_rejected;
+    j["priors"] = {
+        {"received", s.prior_intake.received},
+        {"accepted", s.prior_intake.accepted},
+        {"applied", s.priors_applied},
+        {"rejected", s.prior_intake.rejected + s.smoother_priors_rejected},
+        {"rejected_by_reason", prior_reasons},
+        {"duplicates", s.prior_intake.duplicates},
+        {"gaps", s.prior_intake.gaps},
+        {"journal_priors", s.journal_priors},
+    };
+    j["components"] = s.components;
     j["batches"] = nlohmann::json::array();
     for (const auto& b : s.batches) j["batches"].push_back(batchRunJson(b));
     std::cout << j.dump() << std::endl;

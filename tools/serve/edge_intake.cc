@@ -23,8 +23,8 @@ EdgeIntake::EdgeIntake(int dim, std::int64_t window) : dim_(dim), window_(window
 }
 
 std::size_t EdgeIntake::trackedSeqs(std::int64_t sender) const {
-  const auto it = senders_.find(sender);
-  return it == senders_.end() ? 0 : it->second.ring.size();
+  const auto it = edges_.senders.find(sender);
+  return it == edges_.senders.end() ? 0 : it->second.ring.size();
 }
 
 std::uint64_t* EdgeIntake::slot(Sender& s, std::int64_t seq, bool grow) const {
@@ -52,76 +52,104 @@ void EdgeIntake::advance(Sender& s, std::int64_t seq) const {
   s.highest = seq;
 }
 
-IntakeResult EdgeIntake::reject(IntakeResult r, const std::string& reason,
+IntakeResult EdgeIntake::reject(Stream& stream, IntakeResult r, const std::string& reason,
                                 const std::string& detail) {
   r.verdict = Intake::kRejected;
   r.reason = reason;
   r.detail = detail;
-  ++counts_.rejected;
-  ++counts_.rejected_by_reason[reason];
+  ++stream.counts.rejected;
+  ++stream.counts.rejected_by_reason[reason];
   return r;
 }
 
 void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason) {
   if (accepted.verdict != Intake::kAccepted) return;
-  Sender& s = senders_[accepted.sender];
+  Stream& stream = accepted.is_prior ? priors_ : edges_;
+  Sender& s = stream.senders[accepted.sender];
   if (accepted.seq > s.highest - window_) {
     if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
   }
-  --counts_.accepted;
-  ++counts_.gaps;  // its seq is missing now, until it is sent again
-  ++counts_.rejected;
-  ++counts_.rejected_by_reason[reason];
+  IntakeCounts& c = stream.counts;
+  --c.accepted;
+  ++c.gaps;  // its seq is missing now, until it is sent again
+  ++c.rejected;
+  ++c.rejected_by_reason[reason];
 }
 
 IntakeResult EdgeIntake::admit(const void* data, int size) {
-  ++counts_.received;
+  ++edges_.counts.received;
   IntakeResult r;
   EdgeDecoding d = decodeEdge(data, size);
-  if (!d.ok()) return reject(std::move(r), toString(d.problem), d.detail);
-  const int dim = d.edge.index() == 0 ? 2 : 3;
+  if (!d.ok()) return reject(edges_, std::move(r), toString(d.problem), d.detail);
   std::visit(
       [&](const auto& e) {
         r.sender = e.sender;
         r.seq = e.seq;
       },
       d.edge);
+  const int dim = d.edge.index() == 0 ? 2 : 3;
+  r = admitSeq(edges_, std::move(r), dim, data, size);
+  if (r.verdict == Intake::kAccepted) r.edge = std::move(d.edge);
+  return r;
+}
+
+IntakeResult EdgeIntake::admitPrior(const void* data, int size) {
+  ++priors_.counts.received;
+  IntakeResult r;
+  r.is_prior = true;
+  PriorDecoding d = decodePrior(data, size);
+  if (!d.ok()) return reject(priors_, std::move(r), toString(d.problem), d.detail);
+  std::visit(
+      [&](const auto& p) {
+        r.sender = p.sender;
+        r.seq = p.seq;
+      },
+      d.prior);
+  r = admitSeq(priors_, std::move(r), dimOf(d.prior), data, size);
+  if (r.verdict == Intake::kAccepted) r.prior = std::move(d.prior);
+  return r;
+}
+
+IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, const void* data,
+                                  int size) {
+  const char* what = r.is_prior ? "prior" : "edge";
   if (dim_ != 0 && dim != dim_) {
-    return reject(std::move(r), "dim",
-                  "a " + std::to_string(dim) + "D edge on a " + std::to_string(dim_) + "D stream");
+    return reject(
+        stream, std::move(r), "dim",
+        "a " + std::to_string(dim) + "D " + what + " on a " + std::to_string(dim_) + "D stream");
   }
-  Sender& s = senders_[r.sender];
+  Sender& s = stream.senders[r.sender];
   const std::uint64_t fp = std::max<std::uint64_t>(fingerprint(data, size), 1);  // 0: empty slot
   if (r.seq <= s.highest - window_) {
-    return reject(std::move(r), "stale",
+    return reject(stream, std::move(r), "stale",
                   "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
                       " is " + std::to_string(window_) + " or more below its highest seq " +
-                      std::to_string(s.highest) + ": too old to tell a late edge from a repeat");
+                      std::to_string(s.highest) + ": too old to tell a late " + what +
+                      " from a repeat");
   }
   if (r.seq <= s.highest) {
     const std::uint64_t* seen = slot(s, r.seq, false);
     if (seen != nullptr && *seen == fp) {
       r.verdict = Intake::kDuplicate;
       r.reason = "duplicate";
-      ++counts_.duplicates;
+      ++stream.counts.duplicates;
       return r;
     }
     if (seen != nullptr && *seen != 0) {
-      return reject(std::move(r), "seq reused",
+      return reject(stream, std::move(r), "seq reused",
                     "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
                         " was already received with other contents");
     }
-    --counts_.gaps;  // a late edge fills a gap reported before
+    --stream.counts.gaps;  // a late message fills a gap reported before
   } else {
     r.skipped = r.seq - s.highest - 1;
-    counts_.gaps += r.skipped;
+    stream.counts.gaps += r.skipped;
     advance(s, r.seq);
   }
   *slot(s, r.seq, true) = fp;
   if (dim_ == 0) dim_ = dim;
   r.verdict = Intake::kAccepted;
-  r.edge = std::move(d.edge);
-  ++counts_.accepted;
+  ++stream.counts.accepted;
   return r;
 }
 

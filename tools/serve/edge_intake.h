@@ -1,5 +1,8 @@
-// The receive side of `arbor serve`: decodes and validates each edge_t, tracks every sender's
-// seq numbers (gaps, exact duplicates, reused seq numbers) and counts what it refused and why.
+// The receive side of `arbor serve`: decodes and validates each edge_t and prior_t, tracks every
+// sender's seq numbers (gaps, exact duplicates, reused seq numbers) and counts what it refused
+// and why. Edges and priors are two streams: each has its own per-sender seq numbers and its own
+// counts (a front-end numbering both from one counter shows gaps in each, never a "seq reused"
+// refusal); they share the stream's dimension.
 // Memory is bounded: per sender only the last `window` seq numbers are remembered (the highest
 // seen and the W − 1 below it). A seq below that window is refused as "stale": it may be a late
 // edge or a repeat of one applied long ago, and we cannot tell, so we never apply it (a repeat
@@ -27,11 +30,13 @@ enum class Intake {
 
 struct IntakeResult {
   Intake verdict = Intake::kRejected;
-  std::string reason;  ///< short reason ("truncated", "type hash", "nan", "seq reused", ...)
-  std::string detail;  ///< the full explanation, for the log line
-  AnyStreamEdge edge;  ///< when accepted
+  std::string reason;     ///< short reason ("truncated", "type hash", "nan", "seq reused", ...)
+  std::string detail;     ///< the full explanation, for the log line
+  bool is_prior = false;  ///< came through admitPrior
+  AnyStreamEdge edge;     ///< when an accepted edge
+  AnyStreamPrior prior;   ///< when an accepted prior
   std::int64_t sender = 0, seq = 0;  ///< when decoded
-  std::int64_t skipped = 0;          ///< seq numbers of this sender jumped over by this edge
+  std::int64_t skipped = 0;          ///< seq numbers of this sender jumped over by this message
 };
 
 struct IntakeCounts {
@@ -47,18 +52,23 @@ class EdgeIntake {
  public:
   static constexpr std::int64_t kDefaultWindow = 65536;
 
-  /// `dim` 2 or 3 fixes the stream's dimension; 0 takes it from the first accepted edge.
-  /// `window` (>= 1): how many of each sender's latest seq numbers are remembered exactly.
+  /// `dim` 2 or 3 fixes the stream's dimension; 0 takes it from the first accepted edge or
+  /// prior. `window` (>= 1): how many of each sender's latest seq numbers are remembered
+  /// exactly (per stream).
   explicit EdgeIntake(int dim = 0, std::int64_t window = kDefaultWindow);
 
+  /// An edge_t's bytes.
   IntakeResult admit(const void* data, int size);
-  /// Takes back an accepted edge that could not be kept (the journal write failed): counted as
-  /// rejected under `reason`, and its (sender, seq) may be sent again.
+  /// A prior_t's bytes.
+  IntakeResult admitPrior(const void* data, int size);
+  /// Takes back an accepted edge or prior that could not be kept (the journal write failed):
+  /// counted as rejected under `reason`, and its (sender, seq) may be sent again.
   void revoke(const IntakeResult& accepted, const std::string& reason);
-  const IntakeCounts& counts() const { return counts_; }
+  const IntakeCounts& counts() const { return edges_.counts; }        ///< edges
+  const IntakeCounts& priorCounts() const { return priors_.counts; }  ///< priors
   int dim() const { return dim_; }
   std::int64_t window() const { return window_; }
-  /// Seq slots held for `sender` (0 if unknown): never more than window().
+  /// Edge seq slots held for `sender` (0 if unknown): never more than window().
   std::size_t trackedSeqs(std::int64_t sender) const;
 
  private:
@@ -68,14 +78,22 @@ class EdgeIntake {
     /// received. Grown on demand up to W slots.
     std::vector<std::uint64_t> ring;
   };
-  IntakeResult reject(IntakeResult r, const std::string& reason, const std::string& detail);
+  /// One kind of message: its senders' seq tables and its counts.
+  struct Stream {
+    std::unordered_map<std::int64_t, Sender> senders;
+    IntakeCounts counts;
+  };
+  IntakeResult reject(Stream& stream, IntakeResult r, const std::string& reason,
+                      const std::string& detail);
+  /// The seq accounting of a decoded message of `dim` (r.sender, r.seq set): accepted,
+  /// duplicate or rejected ("dim", "stale", "seq reused").
+  IntakeResult admitSeq(Stream& stream, IntakeResult r, int dim, const void* data, int size);
   std::uint64_t* slot(Sender& s, std::int64_t seq, bool grow) const;
   void advance(Sender& s, std::int64_t seq) const;
 
   int dim_;
   std::int64_t window_;
-  std::unordered_map<std::int64_t, Sender> senders_;
-  IntakeCounts counts_;
+  Stream edges_, priors_;
 };
 
 }  // namespace arbor::serve

@@ -29,6 +29,14 @@ class EngineImpl final : public Engine {
     return smoother_.addEdge(e->from, e->to, e->z, e->omega);
   }
 
+  EdgeResult addPrior(const AnyStreamPrior& any) override {
+    if (const auto* p = std::get_if<StreamPosePrior<G>>(&any))
+      return smoother_.addPosePrior(p->id, p->z, p->omega, p->offset);
+    if (const auto* p = std::get_if<StreamPositionPrior<G>>(&any))
+      return smoother_.addPositionPrior(p->id, p->p, p->omega);
+    return {EdgeStatus::kRejected, "prior of another dimension than the stream"};
+  }
+
   UpdateStats update() override { return smoother_.update(); }
   UpdateStats refine() override { return smoother_.finalize(); }
   double objective() const override { return smoother_.smoother().objective(); }

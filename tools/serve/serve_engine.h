@@ -22,6 +22,9 @@ class Engine {
   virtual int dim() const = 0;
   /// Hands one validated edge to the smoother (the dimension must match).
   virtual EdgeResult add(const AnyStreamEdge& edge) = 0;
+  /// Hands one validated prior to the smoother (OnlineSmoother::addPosePrior /
+  /// addPositionPrior; the dimension must match).
+  virtual EdgeResult addPrior(const AnyStreamPrior& prior) = 0;
   virtual UpdateStats update() = 0;
   /// Relinearises everything and iterates to convergence (OnlineSmoother::finalize).
   virtual UpdateStats refine() = 0;

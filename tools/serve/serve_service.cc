@@ -35,7 +35,7 @@ std::int64_t nowMicros() {
 
 Channels Channels::withPrefix(const std::string& prefix) {
   return {prefix + "ARBOR_EDGES", prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
-          prefix + "ARBOR_COMMAND"};
+          prefix + "ARBOR_COMMAND", prefix + "ARBOR_PRIORS"};
 }
 
 Service::Service(lcm::LCM& lcm, ServeOptions options) : Service(lcm, lcm, std::move(options)) {}
@@ -76,6 +76,7 @@ void Service::start() {
   if (engine_) publishEstimate(true);
   last_status_ = std::chrono::steady_clock::now();
   subscriptions_.push_back(lcm_.subscribe(channels_.edges, &Service::onEdge, this));
+  subscriptions_.push_back(lcm_.subscribe(channels_.priors, &Service::onPrior, this));
   subscriptions_.push_back(lcm_.subscribe(channels_.command, &Service::onCommand, this));
   for (auto* s : subscriptions_) s->setQueueCapacity(0);  // never drop: the queue is ours
   receive_stop_ = false;
@@ -112,6 +113,7 @@ void Service::stop() {
   {
     std::lock_guard<std::mutex> lock(intake_mutex_);
     summary_.intake = intake_.counts();
+    summary_.prior_intake = intake_.priorCounts();
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
   summary_.applied = applied_;
@@ -121,6 +123,10 @@ void Service::stop() {
   summary_.smoother_rejected = smoother_rejected_;
   summary_.smoother_duplicates = smoother_duplicates_;
   summary_.journal_edges = journal_edges_;
+  summary_.priors_applied = priors_applied_;
+  summary_.smoother_priors_rejected = smoother_priors_rejected_;
+  summary_.journal_priors = journal_priors_;
+  summary_.components = components_;
   summary_.journal_updates = journal_updates_;
   summary_.refinements = refinements_;
   summary_.batches = batch_runs_;
@@ -156,9 +162,17 @@ void Service::receiveLoop() {
 void Service::onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   // Nothing may unwind through liblcm's C frames.
   try {
-    receiveEdge(rbuf, channel);
+    receiveMeasurement(rbuf, channel, false);
   } catch (const std::exception& e) {
     logLine(std::string("error while receiving an edge: ") + e.what());
+  }
+}
+
+void Service::onPrior(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  try {
+    receiveMeasurement(rbuf, channel, true);
+  } catch (const std::exception& e) {
+    logLine(std::string("error while receiving a prior: ") + e.what());
   }
 }
 
@@ -170,45 +184,65 @@ void Service::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& chann
   }
 }
 
-void Service::receiveEdge(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+Service::Queued Service::queued(IntakeResult accepted,
+                                std::chrono::steady_clock::time_point received) {
+  Queued q;
+  q.is_prior = accepted.is_prior;
+  q.sender = accepted.sender;
+  q.seq = accepted.seq;
+  q.received = received;
+  const auto utime = [](const auto& m) { return m.utime; };
+  const std::int64_t sent =
+      q.is_prior ? std::visit(utime, accepted.prior) : std::visit(utime, accepted.edge);
+  q.transport_ms = (nowMicros() - sent) / 1e3;
+  q.edge = std::move(accepted.edge);
+  q.prior = std::move(accepted.prior);
+  return q;
+}
+
+void Service::receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                                 bool prior) {
   const auto received = std::chrono::steady_clock::now();
+  const char* what = prior ? "prior" : "edge";
   IntakeResult r;
   {
     std::lock_guard<std::mutex> lock(intake_mutex_);
-    r = intake_.admit(rbuf->data, static_cast<int>(rbuf->data_size));
+    const int size = static_cast<int>(rbuf->data_size);
+    r = prior ? intake_.admitPrior(rbuf->data, size) : intake_.admit(rbuf->data, size);
     if (r.verdict == Intake::kRejected) {
-      const int n = ++logged_by_reason_[r.reason];
+      const std::string key = prior ? "prior " + r.reason : r.reason;
+      const int n = ++logged_by_reason_[key];
       if (n <= options_.log_limit_per_reason) {
         std::ostringstream os;
-        os << "rejected edge";
+        os << "rejected " << what;
         if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
         os << ": " << r.reason << ": " << r.detail;
-        if (n == options_.log_limit_per_reason) os << " (further '" << r.reason << "' not logged)";
+        if (n == options_.log_limit_per_reason) os << " (further '" << key << "' not logged)";
         logLine(os.str());
       }
       return;
     }
     if (r.verdict == Intake::kDuplicate) return;
     if (r.skipped > 0) {
-      logLine("gap: sender " + std::to_string(r.sender) + " skipped " + std::to_string(r.skipped) +
-              " seq numbers before " + std::to_string(r.seq));
+      logLine(std::string("gap: sender ") + std::to_string(r.sender) + " skipped " +
+              std::to_string(r.skipped) + " " + what + " seq numbers before " +
+              std::to_string(r.seq));
     }
-    // Journal before it can be applied: an accepted edge is never lost.
+    // Journal before it can be applied: an accepted edge or prior is never lost. Both kinds go
+    // into the one log in the order received, which is the order they are queued in.
     if (journal_) {
       try {
-        journal_->append(channels_.edges, nowMicros(), rbuf->data,
-                         static_cast<int>(rbuf->data_size));
+        journal_->append(channel, nowMicros(), rbuf->data, size);
       } catch (const std::exception& e) {
         intake_.revoke(r, "journal");
-        logLine(std::string("edge refused, the journal cannot take it: ") + e.what());
+        logLine(std::string(what) + " refused, the journal cannot take it: " + e.what());
         return;
       }
     }
   }
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
-    const std::int64_t utime = std::visit([](const auto& e) { return e.utime; }, r.edge);
-    queue_.push_back({std::move(r.edge), r.sender, r.seq, received, (nowMicros() - utime) / 1e3});
+    queue_.push_back(queued(std::move(r), received));
   }
   queue_cv_.notify_one();
 }
@@ -278,25 +312,33 @@ void Service::writeMark(std::int8_t kind, int edges) {
 }
 
 void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
-  ensureEngine(batch.front().edge.index() == 0 ? 2 : 3);
+  const Queued& first = batch.front();
+  ensureEngine(first.is_prior ? dimOf(first.prior) : (first.edge.index() == 0 ? 2 : 3));
   if (!from_journal) {
     writeMark(journal_mark_t::UPDATE, static_cast<int>(batch.size()));
-    // Group commit: every edge of the batch is on disk before any of it is applied.
+    // Group commit: every edge and prior of the batch is on disk before any of it is applied.
     if (journal_ && options_.fsync_before_update) journal_->sync();
   }
-  std::int64_t rejected = 0, duplicates = 0;
+  // In the order received (and journaled): edges and priors interleaved as they came.
+  std::int64_t edges = 0, rejected = 0, duplicates = 0, priors_rejected = 0;
+  const Queued* last_edge = nullptr;
   for (const auto& q : batch) {
-    const EdgeResult r = engine_->add(q.edge);
+    const EdgeResult r = q.is_prior ? engine_->addPrior(q.prior) : engine_->add(q.edge);
+    if (!q.is_prior) {
+      ++edges;
+      last_edge = &q;
+    }
     if (r.status == EdgeStatus::kRejected) {
-      ++rejected;
+      ++(q.is_prior ? priors_rejected : rejected);
       if (!from_journal) {
-        logLine("smoother refused edge (sender " + std::to_string(q.sender) + " seq " +
-                std::to_string(q.seq) + "): " + r.reason);
+        logLine(std::string("smoother refused ") + (q.is_prior ? "prior" : "edge") + " (sender " +
+                std::to_string(q.sender) + " seq " + std::to_string(q.seq) + "): " + r.reason);
       }
     } else if (r.status == EdgeStatus::kDuplicate) {
       ++duplicates;
     }
   }
+  const std::int64_t priors = static_cast<std::int64_t>(batch.size()) - edges;
   try {
     engine_->update();
   } catch (const std::exception& e) {
@@ -305,16 +347,22 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
   const OnlineStats stats = engine_->stats();
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
-    applied_ += static_cast<std::int64_t>(batch.size());
+    applied_ += edges;
+    priors_applied_ += priors;
     ++updates_;
     poses_ = stats.poses;
     pending_ = stats.edges_pending;
+    components_ = stats.components;
     smoother_rejected_ += rejected;
     smoother_duplicates_ += duplicates;
-    last_sender_ = batch.back().sender;
-    last_seq_ = batch.back().seq;
+    smoother_priors_rejected_ += priors_rejected;
+    if (last_edge != nullptr) {
+      last_sender_ = last_edge->sender;
+      last_seq_ = last_edge->seq;
+    }
     if (from_journal) {
-      journal_edges_ += static_cast<std::int64_t>(batch.size());
+      journal_edges_ += edges;
+      journal_priors_ += priors;
       ++journal_updates_;
     }
   }
@@ -512,6 +560,16 @@ status_t Service::status() const {
       s.reason.push_back(reason);
       s.reason_count.push_back(count);
     }
+    const IntakeCounts& p = intake_.priorCounts();
+    s.priors_received = p.received;
+    s.priors_accepted = p.accepted;
+    s.priors_rejected = p.rejected;
+    s.priors_duplicates = p.duplicates;
+    s.priors_gaps = p.gaps;
+    for (const auto& [reason, count] : p.rejected_by_reason) {
+      s.reason.push_back("prior " + reason);
+      s.reason_count.push_back(count);
+    }
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
   s.applied = applied_;
@@ -520,10 +578,17 @@ status_t Service::status() const {
     s.reason.push_back("smoother");
     s.reason_count.push_back(smoother_rejected_);
   }
+  s.priors_applied = priors_applied_;
+  s.priors_rejected += smoother_priors_rejected_;
+  if (smoother_priors_rejected_ > 0) {
+    s.reason.push_back("prior smoother");
+    s.reason_count.push_back(smoother_priors_rejected_);
+  }
+  s.components = components_;
   s.duplicates += smoother_duplicates_;
   s.pending = pending_;
   s.updates = updates_;
-  s.queue_depth = static_cast<int32_t>(s.accepted - applied_);
+  s.queue_depth = static_cast<int32_t>(s.accepted + s.priors_accepted - applied_ - priors_applied_);
   s.poses = static_cast<int32_t>(poses_);
   s.F = F_;
   s.num_reasons = static_cast<int32_t>(s.reason.size());
@@ -588,20 +653,26 @@ void Service::replayJournal() {
   }
   std::deque<Queued> unmarked;
   const std::int64_t edge_hash = edge_t::getHash();
+  const std::int64_t prior_hash = prior_t::getHash();
   const std::int64_t mark_hash = journal_mark_t::getHash();
   const std::int64_t reseed_hash = estimate_t::getHash();
   const auto now = std::chrono::steady_clock::now();
+  // In file order: edges and priors re-enter the intake and the queue in the order they were
+  // received, and each mark takes the next N of them, whichever kind.
   for (const LogEvent& event : log.events) {
     const std::int64_t hash = leadingHash(event.data);
     const int size = static_cast<int>(event.data.size());
-    if (hash == edge_hash) {
-      IntakeResult r = intake_.admit(event.data.data(), size);
+    if (hash == edge_hash || hash == prior_hash) {
+      const bool prior = hash == prior_hash;
+      IntakeResult r = prior ? intake_.admitPrior(event.data.data(), size)
+                             : intake_.admit(event.data.data(), size);
       if (r.verdict != Intake::kAccepted) {
-        logLine("journal: edge (sender " + std::to_string(r.sender) + " seq " +
-                std::to_string(r.seq) + ") skipped on replay: " + r.reason);
+        logLine(std::string("journal: ") + (prior ? "prior" : "edge") + " (sender " +
+                std::to_string(r.sender) + " seq " + std::to_string(r.seq) +
+                ") skipped on replay: " + r.reason);
         continue;
       }
-      unmarked.push_back({std::move(r.edge), r.sender, r.seq, now});
+      unmarked.push_back(queued(std::move(r), now));
     } else if (hash == mark_hash) {
       journal_mark_t m;
       if (decodeMessage(event.data.data(), size, &m) != MessageProblem::kNone) continue;
@@ -630,8 +701,9 @@ void Service::replayJournal() {
   queue_.assign(std::make_move_iterator(unmarked.begin()), std::make_move_iterator(unmarked.end()));
   if (!log.events.empty()) {
     logLine("journal " + options_.journal_path + ": replayed " + std::to_string(journal_edges_) +
-            " edges in " + std::to_string(journal_updates_) + " updates; " +
-            std::to_string(queue_.size()) + " edges to apply");
+            " edges and " + std::to_string(journal_priors_) + " priors in " +
+            std::to_string(journal_updates_) + " updates; " + std::to_string(queue_.size()) +
+            " edges and priors to apply");
   }
 }
 

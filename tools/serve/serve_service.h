@@ -1,9 +1,10 @@
-// `arbor serve` as a library: edges in over LCM, estimates and status out. One thread receives
-// and validates (EdgeIntake), journals each accepted edge and queues it; one thread runs the
-// smoother and, when it falls behind, takes every queued edge into a single update, so latency
-// stays bounded under bursts. With a journal (an LCM event log) every accepted edge is written
-// before it is applied, with marks of the update grouping; start() replays an existing journal
-// with the same grouping, so a restart after kill -9 reproduces the estimate exactly.
+// `arbor serve` as a library: edges and priors in over LCM, estimates and status out. One thread
+// receives and validates (EdgeIntake), journals each accepted edge or prior and queues it; one
+// thread runs the smoother and, when it falls behind, takes everything queued into a single
+// update (in the order received), so latency stays bounded under bursts. With a journal (an LCM
+// event log) every accepted edge and prior is written before it is applied, with marks of the
+// update grouping; start() replays an existing journal in file order with the same grouping, so
+// a restart after kill -9 reproduces the estimate exactly.
 //
 // Batch refinement (tools/refine/batch_refiner.h): every `batch.every` updates, or on command
 // BATCH, a snapshot is solved in the background while edges keep flowing; the smoother thread
@@ -35,8 +36,9 @@
 namespace arbor::serve {
 
 struct Channels {
-  std::string edges, estimate, status, command;
-  /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, each after `prefix`.
+  std::string edges, estimate, status, command, priors;
+  /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS, each after
+  /// `prefix`.
   static Channels withPrefix(const std::string& prefix);
 };
 
@@ -60,8 +62,13 @@ struct ServeOptions {
 };
 
 struct ServeSummary {
-  IntakeCounts intake;
-  std::int64_t applied = 0;  ///< edges taken into updates
+  IntakeCounts intake;        ///< edges
+  IntakeCounts prior_intake;  ///< priors
+  std::int64_t applied = 0;   ///< edges taken into updates
+  std::int64_t priors_applied = 0;
+  std::int64_t smoother_priors_rejected = 0;  ///< priors the smoother refused
+  std::int64_t journal_priors = 0;            ///< replayed from the journal at start
+  int components = 0;                         ///< connected components at the end
   std::int64_t updates = 0;
   std::int64_t poses = 0;
   std::int64_t pending = 0;
@@ -105,15 +112,21 @@ class Service {
 
  private:
   struct Queued {
-    AnyStreamEdge edge;
+    bool is_prior = false;
+    AnyStreamEdge edge;    ///< when !is_prior
+    AnyStreamPrior prior;  ///< when is_prior
     std::int64_t sender = 0, seq = 0;
     std::chrono::steady_clock::time_point received;
-    double transport_ms = 0;  ///< receipt − the edge's utime (wall clocks; same host: transport)
+    double transport_ms = 0;  ///< receipt − the message's utime (wall clocks; same host: transport)
   };
+  /// An accepted edge or prior as queued, received at `received` (transport_ms from now).
+  static Queued queued(IntakeResult accepted, std::chrono::steady_clock::time_point received);
 
   void onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
-  void receiveEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  void onPrior(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  /// Admits, journals and queues one edge_t (`prior` false) or prior_t.
+  void receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel, bool prior);
   void receiveCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void receiveLoop();
   void smootherLoop();
@@ -157,15 +170,17 @@ class Service {
   mutable std::mutex state_mutex_;
   std::int64_t applied_ = 0, updates_ = 0, poses_ = 0, pending_ = 0;
   std::int64_t smoother_rejected_ = 0, smoother_duplicates_ = 0;
-  std::int64_t last_sender_ = 0, last_seq_ = 0;
-  std::int64_t journal_edges_ = 0, journal_updates_ = 0;
+  std::int64_t priors_applied_ = 0, smoother_priors_rejected_ = 0;
+  int components_ = 0;
+  std::int64_t last_sender_ = 0, last_seq_ = 0;  ///< of the last edge applied
+  std::int64_t journal_edges_ = 0, journal_updates_ = 0, journal_priors_ = 0;
   int refinements_ = 0;
   double refine_F_before_ = 0, refine_F_after_ = 0, refine_time_s_ = 0;
   std::vector<refine::BatchRun> batch_runs_;
   int batches_skipped_ = 0, reseeds_ = 0, journal_reseeds_ = 0;
   double F_ = 0;
-  std::vector<double> latencies_ms_;  ///< every applied edge
-  std::vector<double> transport_ms_;  ///< every applied edge
+  std::vector<double> latencies_ms_;  ///< every applied edge and prior
+  std::vector<double> transport_ms_;  ///< every applied edge and prior
   std::chrono::steady_clock::time_point last_status_;
 
   std::mutex log_mutex_;
