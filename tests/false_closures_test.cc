@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
@@ -393,6 +394,43 @@ TEST(FalseClosures, EveryFreePairCanBeTaken) {
   ASSERT_EQ(sim::falseClosureCount(o.fraction, 3), 52);
   const auto out = sim::addFalseClosures(twelve, o);
   expectCommonProperties(twelve, out, o.fraction);
+}
+
+// data/'s graphs with false closures are what `arbor generate … --outliers` makes (the commands
+// are in data/README.md): the clean file's bytes, then the false edges; the labels name them.
+TEST(FalseClosures, CommittedRobustDataMatchesGenerator) {
+  const std::string dir = std::string(ARBOR_SOURCE_DIR) + "/data/";
+  auto fileText = [](const std::string& path) {
+    std::ifstream in(path);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+  };
+  auto expectFiles = [&](const auto& graph, const OutlierOptions& o, const std::string& clean,
+                         const std::string& name) {
+    SCOPED_TRACE(name);
+    const auto out = sim::addFalseClosures(graph, o);
+    std::vector<LabelPair> labels;
+    for (const auto& [i, j] : out.pairs) labels.emplace_back(graph.ids[i], graph.ids[j]);
+    std::ostringstream labels_text;
+    writeLabels(labels_text, labels);
+    const std::string text = fileText(dir + name + ".g2o");
+    EXPECT_TRUE(text == g2oText(out.graph)) << "regenerate " << name << " (data/README.md)";
+    EXPECT_EQ(text.rfind(fileText(dir + clean + ".g2o"), 0), 0u) << "starts with " << clean;
+    EXPECT_EQ(fileText(dir + name + ".labels"), labels_text.str());
+  };
+  sim::ManhattanOptions m;
+  m.poses = 1500;
+  m.grid = 20;
+  m.seed = 1;
+  expectFiles(sim::manhattanWorld(m).graph, {0.1, OutlierPolicy::kGroup, 1}, "manhattan_2d",
+              "manhattan_2d_group_0.1");
+  sim::SphereOptions sp;
+  sp.rings = 10;
+  sp.poses_per_ring = 25;
+  sp.seed = 1;
+  expectFiles(sim::sphereWorld(sp).graph, {0.1, OutlierPolicy::kRandom, 1}, "sphere_3d",
+              "sphere_3d_random_0.1");
 }
 
 // The shared robust files were made by the same rules: their counts are round_half_even(f · L)
