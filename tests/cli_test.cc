@@ -1,7 +1,9 @@
 // The `arbor` command line as a user runs it: exit codes, one-line errors, JSON keys.
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -10,6 +12,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "io/labels_file.h"
+#include "io/pose_graph_file.h"
 #include "tools/refine/batch_solvers.h"
 
 namespace {
@@ -164,6 +168,99 @@ TEST(Cli, MalformedFileNamesLine) {
   EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.out.find(":3:"), std::string::npos) << r.out;
   std::filesystem::remove(file);
+}
+
+// `arbor generate outliers` on a graph of data/: OUT.g2o is the input's edges followed by the
+// false closures, OUT.labels names those, one per line in file ids, as many as round(f · L) of
+// its L loop closures; the same seed writes the same bytes. Bad values exit 2 naming the flag.
+TEST(Cli, GenerateOutliersWritesTheGraphAndItsLabels) {
+  const std::string input = std::string(ARBOR_SOURCE_DIR) + "/data/manhattan_2d.g2o";
+  const std::string out = tempPath("robust.g2o"), labels = tempPath("robust.labels");
+  const std::string args = "generate outliers --input " + input + " -o " + out +
+                           " --outliers 0.1 --outlier-policy group --seed 3";
+  const Result r = run(args);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("false loop closures (group, 0.1 of"), std::string::npos) << r.out;
+  const auto base = std::get<arbor::PoseGraph2>(arbor::readPoseGraphFile(input));
+  const auto robust = std::get<arbor::PoseGraph2>(arbor::readPoseGraphFile(out));
+  const auto pairs = arbor::readLabelsFile(labels);
+  const int closures = static_cast<int>(std::count_if(
+      base.edges.begin(), base.edges.end(), [](const auto& e) { return std::abs(e.i - e.j) > 1; }));
+  EXPECT_EQ(static_cast<double>(pairs.size()), std::nearbyint(0.1 * closures));
+  ASSERT_EQ(robust.numEdges(), base.numEdges() + static_cast<int>(pairs.size()));
+  EXPECT_EQ(robust.numPoses(), base.numPoses());
+  for (int k = 0; k < base.numEdges(); ++k) {
+    ASSERT_EQ(robust.edges[k].i, base.edges[k].i);
+    ASSERT_EQ(robust.edges[k].j, base.edges[k].j);
+    ASSERT_EQ(robust.edges[k].information, base.edges[k].information);
+  }
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    const auto& e = robust.edges[base.numEdges() + k];
+    EXPECT_EQ(std::make_pair(robust.ids[e.i], robust.ids[e.j]), pairs[k]);
+    if (k % 10) {  // groups of ten: (i + 1, j + 1) after (i, j), the same measurement
+      EXPECT_EQ(pairs[k].first, pairs[k - 1].first + 1);
+      EXPECT_EQ(pairs[k].second, pairs[k - 1].second + 1);
+      EXPECT_EQ(e.measurement.x(), robust.edges[base.numEdges() + k - 1].measurement.x());
+    }
+  }
+  auto text = [](const std::string& path) {
+    std::FILE* f = std::fopen(path.c_str(), "r");
+    std::string s;
+    for (int c; f && (c = std::fgetc(f)) != EOF;) s.push_back(static_cast<char>(c));
+    if (f) std::fclose(f);
+    return s;
+  };
+  const std::string first = text(out), first_labels = text(labels);
+  ASSERT_EQ(run(args).status, 0);
+  EXPECT_TRUE(text(out) == first);  // (not EXPECT_EQ: a failure would print the whole graph)
+  EXPECT_TRUE(text(labels) == first_labels);
+  ASSERT_EQ(run("generate outliers --input " + input + " -o " + out +
+                " --outliers 0.1 --outlier-policy group --seed 4")
+                .status,
+            0);
+  EXPECT_TRUE(text(labels) != first_labels);
+
+  // A generated graph takes --outliers too; without it nothing else is written (as before).
+  const std::string gen = tempPath("gen.g2o"), gen_labels = tempPath("gen.labels");
+  std::filesystem::remove(gen_labels);
+  ASSERT_EQ(run("generate manhattan --poses 200 --grid 5 -o " + gen).status, 0);
+  EXPECT_FALSE(std::filesystem::exists(gen_labels));
+  const std::string plain = text(gen);
+  ASSERT_EQ(run("generate manhattan --poses 200 --grid 5 -o " + gen +
+                " --outliers 0.5 --outlier-policy local")
+                .status,
+            0);
+  EXPECT_EQ(text(gen).rfind(plain, 0), 0u);  // the same graph, false closures after it
+  const auto local = arbor::readLabelsFile(gen_labels);
+  EXPECT_FALSE(local.empty());
+  for (const auto& [i, j] : local) {
+    EXPECT_GE(j - i, 10);
+    EXPECT_LE(j - i, 50);
+  }
+
+  struct Case {
+    std::string args, words;
+    int status;
+  };
+  const std::vector<Case> cases = {
+      {"generate outliers --input " + input + " -o " + out + " --outliers=-0.1",
+       "--outliers must be a finite fraction >= 0, not '-0.1'", 2},
+      {"generate outliers --input " + input + " -o " + out + " --outliers 0.1 --outlier-policy x",
+       "--outlier-policy must be random, local or group, not 'x'", 2},
+      {"generate outliers -o " + out + " --outliers 0.1", "needs --input FILE", 2},
+      {"generate outliers --input " + input + " -o " + out, "needs --outliers FRACTION", 2},
+      {"generate manhattan -o " + gen + " --outlier-policy group", "needs --outliers", 2},
+      {"generate outliers --input " + input + " -o " + out + " --outliers 0.1 --poses 5",
+       "--poses does not apply", 2},
+      {"generate outliers --input /no/such.g2o -o " + out + " --outliers 0.1", "/no/such.g2o", 1},
+  };
+  for (const Case& c : cases) {
+    const Result bad = run(c.args);
+    EXPECT_EQ(bad.status, c.status) << c.args << ": " << bad.out;
+    EXPECT_EQ(std::count(bad.out.begin(), bad.out.end(), '\n'), 1) << c.args << ": " << bad.out;
+    EXPECT_NE(bad.out.find(c.words), std::string::npos) << c.args << ": " << bad.out;
+  }
+  for (const auto& path : {out, labels, gen, gen_labels}) std::filesystem::remove(path);
 }
 
 // `arbor bench replay` on a shared folder of its own: one generated dataset and an anchors table

@@ -20,7 +20,9 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
       {"replay",
        {arbor::cli::replayCommand, "feed a file edge by edge to the incremental smoother"}},
       {"generate",
-       {arbor::cli::generateCommand, "write a synthetic pose graph (manhattan, sphere, grid)"}},
+       {arbor::cli::generateCommand,
+        "write a synthetic pose graph (manhattan, sphere, grid) or add false loop closures "
+        "to one (outliers)"}},
       {"serve",
        {arbor::cli::serveCommand, "run the smoother as an LCM service (edges in, estimates out)"}},
       {"publish", {arbor::cli::publishCommand, "stream a file's edges over LCM to arbor serve"}},

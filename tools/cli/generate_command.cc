@@ -1,26 +1,78 @@
-// arbor generate KIND: write a synthetic pose graph (deterministic by seed) as g2o.
+// arbor generate KIND: write a synthetic pose graph (deterministic by seed) as g2o, optionally
+// with false loop closures appended (tools/generator/false_closures.h) and their labels;
+// `arbor generate outliers --input FILE` appends them to an existing graph.
+#include <cmath>
+#include <filesystem>
 #include <iostream>
+#include <sstream>
+#include <stdexcept>
 
+#include "core/initialization.h"
+#include "io/labels_file.h"
 #include "io/pose_graph_file.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
+#include "tools/generator/false_closures.h"
 #include "tools/generator/graph_generator.h"
 
 namespace arbor::cli {
+namespace {
 
 namespace po = boost::program_options;
 
+// What --outliers asked for, and where the labels go.
+struct OutlierRequest {
+  bool on = false;
+  sim::OutlierOptions options;
+  std::string labels;  ///< NAME.labels beside NAME.g2o unless --labels says otherwise
+};
+
+// Appends the requested false closures to `graph` (when asked), writes the labels, and returns
+// the words the summary line ends with.
+template <class G>
+std::string plantOutliers(const OutlierRequest& request, const std::string& input,
+                          PoseGraph<G>* graph) {
+  if (!request.on) return "";
+  sim::FalseClosures<G> planted;
+  try {
+    planted = sim::addFalseClosures(*graph, request.options);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(input + ": " + e.what());
+  }
+  std::vector<LabelPair> labels;
+  for (const auto& [i, j] : planted.pairs) labels.emplace_back(graph->ids[i], graph->ids[j]);
+  const int loop_closures = sim::countLoopClosures(*graph);
+  *graph = std::move(planted.graph);
+  writeLabelsFile(request.labels, labels);
+  std::ostringstream os;
+  os << "; " << labels.size() << " false loop closures (" << toString(request.options.policy)
+     << ", " << request.options.fraction << " of " << loop_closures << " loop closures, seed "
+     << request.options.seed << ") appended, listed in " << request.labels;
+  return os.str();
+}
+
+template <class G>
+void printWritten(const std::string& output, const PoseGraph<G>& graph, const std::string& tail) {
+  std::cout << "wrote " << output << ": " << graph.numPoses() << " poses, " << graph.numEdges()
+            << " edges" << tail << "\n";
+}
+
+}  // namespace
+
 int generateCommand(const std::vector<std::string>& args) {
-  std::string kind, output, truth_output;
+  std::string kind, output, truth_output, input, policy = "random", labels, information = "refuse";
   int poses = 0, rings = 0, per_ring = 0, size = 0, grid = 0;
   std::uint64_t seed = 1;
-  double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1;
-  po::options_description options("arbor generate manhattan|sphere|grid [options]");
+  double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1, fraction = 0;
+  po::options_description options(
+      "arbor generate manhattan|sphere|grid [options]\n"
+      "arbor generate outliers --input FILE -o OUT.g2o --outliers FRACTION [options]");
   options.add_options()("help,h", "show this help")("kind", po::value(&kind)->required(),
-                                                    "manhattan | sphere | grid")(
+                                                    "manhattan | sphere | grid | outliers")(
       "output,o", po::value(&output)->required(), "g2o file to write")(
       "truth", po::value(&truth_output), "also write the ground truth poses as g2o")(
-      "seed", po::value(&seed)->default_value(1), "random seed")(
+      "seed", po::value(&seed)->default_value(1),
+      "random seed (of the graph and of its false loop closures)")(
       "poses", po::value(&poses), "number of poses (manhattan: 3500, grid: 1000)")(
       "grid", po::value(&grid), "manhattan: world size in cells (10)")(
       "size", po::value(&size), "grid: lattice size per axis (6)")(
@@ -29,22 +81,88 @@ int generateCommand(const std::vector<std::string>& args) {
       "closure-probability", po::value(&closure_probability),
       "manhattan, grid: chance of a loop closure on a revisit (0.3 / 0.5)")(
       "sigma-t", po::value(&sigma_t)->default_value(0.05), "translation noise (m)")(
-      "sigma-r", po::value(&sigma_r)->default_value(0.01), "rotation noise (rad)");
+      "sigma-r", po::value(&sigma_r)->default_value(0.01), "rotation noise (rad)")(
+      "input", po::value(&input), "outliers: the g2o or TORO graph to add false loop closures to")(
+      "outliers", po::value(&fraction),
+      "append round(FRACTION × loop closures) false loop closures (|i − j| > 1; half to even), "
+      "each copying a real closure's information, measuring a random pose (translation within "
+      "3 × the largest loop-closure translation component, at least 3; uniform rotation); "
+      "also writes their labels ('i j' a line, file ids)")(
+      "outlier-policy", po::value(&policy)->default_value("random"),
+      "random: pose pairs drawn at random; local: pairs 10-50 poses apart; group: groups of 10 "
+      "consecutive pairs (i+k, j+k) that all measure one false transform, so they agree")(
+      "labels", po::value(&labels), "where the labels go (default: the output with .labels)")(
+      "information", po::value(&information)->default_value("refuse"),
+      "outliers: Ω of the input that are not positive definite: refuse | repair | isotropic");
   po::positional_options_description positional;
   positional.add("kind", 1);
   if (helpRequested(args, options)) return 0;
-  parseArguments(args, options, positional);
+  const po::variables_map vm = parseArguments(args, options, positional);
   if (!(sigma_t > 0) || !(sigma_r > 0)) throw UsageError("noise sigmas must be positive");
   if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1))
     throw UsageError("--closure-probability must be in [0, 1]");
   const sim::NoiseModel noise{sigma_t, sigma_r};
 
+  OutlierRequest request;
+  request.on = vm.count("outliers") > 0;
+  if (!request.on) {
+    for (const char* flag : {"outlier-policy", "labels"}) {
+      if (!vm[flag].defaulted() && vm.count(flag)) {
+        throw UsageError(std::string("--") + flag + " needs --outliers FRACTION");
+      }
+    }
+  } else {
+    if (!std::isfinite(fraction) || fraction < 0) {
+      std::ostringstream os;
+      os << "--outliers must be a finite fraction >= 0, not '" << fraction << "'";
+      throw UsageError(os.str());
+    }
+    const auto parsed = sim::parseOutlierPolicy(policy);
+    if (!parsed)
+      throw UsageError("--outlier-policy must be random, local or group, not '" + policy + "'");
+    request.options.fraction = fraction;
+    request.options.policy = *parsed;
+    request.options.seed = seed;
+    request.labels = labels.empty()
+                         ? std::filesystem::path(output).replace_extension(".labels").string()
+                         : labels;
+    if (request.labels == output) {
+      throw UsageError("the labels would overwrite the output '" + output + "' (use --labels)");
+    }
+  }
+
   auto write = [&](const auto& simulation) {
-    writeG2oFile(output, simulation.graph, simulation.graph.poses);
-    if (!truth_output.empty()) writeG2oFile(truth_output, simulation.graph, simulation.truth);
-    std::cout << "wrote " << output << ": " << simulation.graph.numPoses() << " poses, "
-              << simulation.graph.numEdges() << " edges\n";
+    auto graph = simulation.graph;
+    const std::string tail = plantOutliers(request, kind, &graph);
+    writeG2oFile(output, graph, graph.poses);
+    if (!truth_output.empty()) writeG2oFile(truth_output, graph, simulation.truth);
+    printWritten(output, graph, tail);
   };
+  if (kind == "outliers") {
+    if (input.empty()) throw UsageError("generate outliers needs --input FILE");
+    if (!request.on) throw UsageError("generate outliers needs --outliers FRACTION");
+    for (const char* flag :
+         {"truth", "poses", "grid", "size", "rings", "per-ring", "closure-probability"}) {
+      if (vm.count(flag))
+        throw UsageError(std::string("--") + flag + " does not apply to outliers");
+    }
+    ReadOptions read;
+    read.information = parseInformationPolicy(information);
+    std::visit(
+        [&](auto graph) {
+          // A file without VERTEX lines gets its odometry chain as the written estimate (what
+          // `arbor batch` would start from), not the identity poses of the read graph.
+          const bool had_vertices = graph.has_initial_estimate;
+          if (!had_vertices) graph.poses = odometryInitialization(graph);
+          const std::string tail = plantOutliers(request, input, &graph);
+          writeG2oFile(output, graph, graph.poses);
+          printWritten(output, graph,
+                       tail + (had_vertices ? "" : "; VERTEX lines: the odometry chain"));
+        },
+        readPoseGraphFile(input, read));
+    return 0;
+  }
+  if (vm.count("input")) throw UsageError("--input applies to generate outliers only");
   if (kind == "manhattan") {
     sim::ManhattanOptions o;
     o.seed = seed;
@@ -72,7 +190,7 @@ int generateCommand(const std::vector<std::string>& args) {
     if (o.poses < 2 || o.size < 2) throw UsageError("--poses and --size must be at least 2");
     write(sim::gridWorld(o));
   } else {
-    throw UsageError("unknown kind '" + kind + "' (manhattan, sphere or grid)");
+    throw UsageError("unknown kind '" + kind + "' (manhattan, sphere, grid or outliers)");
   }
   return 0;
 }
