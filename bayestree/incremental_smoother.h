@@ -25,12 +25,13 @@
 namespace arbor {
 
 struct SmootherOptions {
-  /// Fluid relinearisation thresholds β (Kaess 2012 Alg. 2) on |Δ|∞ of the translational and the
-  /// rotational part of a variable's tangent; GTSAM's default is 0.1 for both.
+  /// Fluid relinearisation thresholds β (Kaess et al., IJRR 2012, Alg. 5) on |Δ|∞ of the
+  /// translational and the rotational part of a variable's tangent; GTSAM's default is 0.1 for
+  /// both.
   double relinearize_threshold_translation = 0.1;
   double relinearize_threshold_rotation = 0.1;
   int relinearize_skip = 10;  ///< check for relinearisation every this many updates
-  /// Wildfire threshold α of the partial state update (Kaess 2012 Alg. 3): a clique not
+  /// Wildfire threshold α of the partial state update (IJRR 2012 Alg. 7): a clique not
   /// re-eliminated is re-solved only if a separator variable moved by at least this (|·|∞)
   /// since the value the clique was last solved with.
   double wildfire_threshold = 0.001;
@@ -123,8 +124,9 @@ class IncrementalSmoother {
   /// bad index or a non-finite T.
   void transformPoses(const std::vector<int>& indices, const G& T);
 
-  /// Kaess 2012 Alg. 1: adds the queued factors and poses, relinearises, re-eliminates the
-  /// affected top of the Bayes tree and updates Δ. The estimate is current on return.
+  /// One step of iSAM2 (IJRR 2012 Alg. 6): adds the queued factors and poses, relinearises,
+  /// re-eliminates the affected top of the Bayes tree (or folds the new factors in) and updates
+  /// Δ. The estimate is current on return.
   UpdateStats update();
   /// Relinearises every variable, re-eliminates the whole tree and back-substitutes fully,
   /// repeated until F changes by less than finalize_relative_tolerance (relative) or

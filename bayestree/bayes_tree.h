@@ -1,0 +1,94 @@
+// The Bayes tree's structure (Kaess et al., IJRR 2012, §3): the cliques (bayestree/clique.h) with
+// their allocation and free list, the roots, the clique where each variable is frontal; removing
+// the top (IJRR 2012 Alg. 4 step 1: the marked cliques and all their ancestors, leaving the
+// orphaned subtrees), re-attaching an orphan, the invariants, and the memory held.
+#pragma once
+
+#include <functional>
+#include <vector>
+
+#include "bayestree/clique.h"
+#include "bayestree/incremental_smoother.h"
+
+namespace arbor::bayestree {
+
+/// D: the dimension of one variable (3 for SE(2), 6 for SE(3)).
+template <int D>
+class BayesTree {
+ public:
+  using CliqueD = Clique<D>;
+
+  /// The removed top: its variables (the caller's new ones first, then the removed cliques'
+  /// frontals in the order they were removed) and the orphans (subtrees below it, which keep
+  /// their cached factors).
+  struct Top {
+    std::vector<int> variables;
+    std::vector<int> orphans;
+  };
+
+  std::vector<CliqueD> cliques;   ///< indexed by clique id; in use or free
+  std::vector<int> roots;         ///< cliques without a parent
+  std::vector<int> clique_of;     ///< variable → clique where it is frontal (−1: fixed / new)
+  std::vector<int> free_cliques;  ///< ids of cliques not in use, to recycle
+  int num_cliques = 0;            ///< cliques in use
+
+  /// slots[v] = v's position (in variables) among clique c's frontals then separator, until
+  /// clearSlots.
+  static void setSlots(const CliqueD& c, std::vector<int>* slots) {
+    const int nf = static_cast<int>(c.frontals.size());
+    for (int a = 0; a < nf; ++a) (*slots)[c.frontals[a]] = a;
+    for (int b = 0; b < static_cast<int>(c.separator.size()); ++b)
+      (*slots)[c.separator[b]] = nf + b;
+  }
+  static void clearSlots(const CliqueD& c, std::vector<int>* slots) {
+    for (int v : c.frontals) (*slots)[v] = -1;
+    for (int v : c.separator) (*slots)[v] = -1;
+  }
+
+  /// A new variable (not yet in any clique).
+  void addVariable() { clique_of.push_back(-1); }
+
+  /// A clique in use (a recycled one keeps its storage), with no variables and no links.
+  int allocClique();
+  /// Returns clique `id` to the free list (its storage kept for recycling).
+  void freeClique(int id);
+  /// Frees the storage of the cliques left on the free list (those not recycled hold none).
+  void releaseFreeStorage();
+
+  bool isAncestorOrSelf(int ancestor, int c) const;
+
+  /// Adds to `marked` every clique that holds v (frontal or separator), for each v of `vars`:
+  /// the subtree below v's frontal clique where v appears in the separator.
+  void cliquesContaining(const std::vector<int>& vars, std::vector<int>* marked);
+
+  /// IJRR 2012 Alg. 4 step 1, "Remove top of Bayes tree: (a) For each affected variable in J
+  /// remove the corresponding clique and all parents up to the root. (b) Store orphaned
+  /// sub-trees T_O of removed cliques." Removes `marked` and all their ancestors (each once),
+  /// appends their frontals to top->variables and their children not removed to top->orphans
+  /// (both in removal order), takes them off the roots and frees them.
+  void removeTop(const std::vector<int>& marked, Top* top);
+
+  /// Hangs subtree `orphan` below clique `parent` (IJRR 2012 Alg. 4 step 6).
+  void attachOrphan(int orphan, int parent);
+
+  /// Throws std::logic_error naming the first violated invariant: every clique in use has a
+  /// frontal, matrices of its variables' size, frontals that are not fixed, frontal once and
+  /// pointed to by clique_of, none also in its separator; a root has an empty separator and is
+  /// among the roots, a non-root a live parent that lists it, a non-empty separator inside the
+  /// parent's variables (running intersection); children point back; no parent cycle; the
+  /// count of cliques; every variable not fixed and not `awaiting(v)` (about to be eliminated)
+  /// frontal exactly once, fixed ones never; every factor (arity(), key(k)) held by the clique
+  /// of one of its variables.
+  template <class Factor>
+  void checkInvariants(const std::vector<Factor>& factors, const std::vector<char>& fixed,
+                       const std::function<bool(int)>& awaiting) const;
+
+  /// The cliques' share of TreeMemory (all but scratch_bytes).
+  TreeMemory memory() const;
+
+ private:
+  int remove_stamp_ = 0;
+  std::vector<int> removed_, stack_;
+};
+
+}  // namespace arbor::bayestree

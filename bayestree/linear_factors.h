@@ -1,0 +1,73 @@
+// The smoother's factors and their linearisations: every factor added (core/factor.h), the
+// factors of each variable, each factor's whitened linearisation in Hessian form, the threaded
+// (re)linearisation, and the one rule of where a factor's terms enter the Bayes tree
+// (assembledAt).
+#pragma once
+
+#include <array>
+#include <functional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "bayestree/update_threads.h"
+#include "core/factor.h"
+
+namespace arbor::bayestree {
+
+template <class G>
+class LinearizedFactors {
+ public:
+  static constexpr int D = G::kDoF;
+  static constexpr int kMaxKeys = Factor<G>::kMaxKeys;
+  using Mat = Eigen::Matrix<double, D, D>;
+  using Vec = typename G::Tangent;
+
+  /// One whitened factor ‖Σ_k A_k τ_k + r‖² over its keys in Hessian form: τᵀHτ − 2gᵀτ + rᵀr,
+  /// H_kl = A_kᵀA_l, g_k = −A_kᵀr. H is kept as its lower triangle of blocks, H(k, l) for k ≥ l
+  /// at block(k, l).
+  struct LinearFactor {
+    std::array<Mat, kMaxKeys*(kMaxKeys + 1) / 2> H;
+    std::array<Vec, kMaxKeys> g;
+    static int block(int k, int l) { return k * (k + 1) / 2 + l; }
+    /// H(k, l) for any k, l.
+    Mat at(int k, int l) const { return k >= l ? H[block(k, l)] : H[block(l, k)].transpose(); }
+  };
+
+  std::vector<Factor<G>> factors;             ///< in the order added
+  std::vector<std::vector<int>> var_factors;  ///< variable → its factors
+  std::vector<LinearFactor> lin;              ///< factor → its linearisation
+  std::vector<int> stamp;                     ///< factor → last update that listed it
+
+  int numFactors() const { return static_cast<int>(factors.size()); }
+  /// A new variable (no factors yet).
+  void addVariable() { var_factors.emplace_back(); }
+  /// Adds a factor (not yet linearised); returns its index.
+  int add(const Factor<G>& f);
+
+  /// lin[f] from factor f linearised at θ.
+  void linearize(int f, const std::vector<G>& theta);
+  /// linearize(f, θ) for every f of `fs`, in chunks shared among the threads when many, side by
+  /// side with `alongside` (if any: a task that does not read the linearised factors).
+  void linearizeAll(const std::vector<int>& fs, const std::vector<G>& theta, UpdateThreads* threads,
+                    const std::function<void()>& alongside = {});
+
+  /// Whether factor f is assembled into the clique whose slots are `slot` at its frontal v:
+  /// every non-fixed key of f lies in the clique, and v is the first of them (the others were
+  /// not eliminated before v). The one rule of where a factor's terms enter the tree.
+  static bool assembledAt(const Factor<G>& f, int v, const std::vector<int>& slot,
+                          const std::vector<char>& fixed) {
+    const int a = slot[v];
+    for (int k = 0; k < f.arity(); ++k) {
+      const int o = f.key(k);
+      if (o == v || fixed[o]) continue;
+      if (slot[o] <= a) return false;  // below (in a child's cached factor), or added from o
+    }
+    return true;
+  }
+};
+
+extern template class LinearizedFactors<SE2>;
+extern template class LinearizedFactors<SE3>;
+
+}  // namespace arbor::bayestree
