@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 
 #include "core/normal_equations.h"
@@ -29,14 +30,15 @@ bool isFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
 template <class G>
 class Minimizer {
  public:
-  Minimizer(const PoseGraph<G>& graph, std::vector<G>* poses, const BatchOptions& options,
-            BatchSummary* summary, Clock::time_point start)
+  // `equations` are the graph's, with its edge weights set or not (then F is the plain one).
+  Minimizer(const PoseGraph<G>& graph, NormalEquations<G>& equations, std::vector<G>* poses,
+            const BatchOptions& options, BatchSummary* summary, Clock::time_point start)
       : graph_(graph),
         poses_(*poses),
         options_(options),
         summary_(*summary),
         start_(start),
-        equations_(graph) {
+        equations_(equations) {
     double norm2 = 0.0;
     for (const G& x : poses_) norm2 += x.translation().squaredNorm() + 1.0;
     parameter_norm_ = std::sqrt(norm2);
@@ -73,7 +75,7 @@ class Minimizer {
       equations_.solve(-equations_.gradient(), &delta);
       equations_.retract(poses_, delta, &trial_);
       const double F_new =
-          isFinite(delta) ? objective(graph_, trial_) : std::numeric_limits<double>::quiet_NaN();
+          isFinite(delta) ? cost(trial_) : std::numeric_limits<double>::quiet_NaN();
       log("gn", F_new, 1.0, 0.0, delta.norm(), true);
       if (!std::isfinite(F_new) || F_new > 10.0 * best.F) {
         restore(best);
@@ -229,7 +231,7 @@ class Minimizer {
     s.tiny = tinyStep(delta);
     const double model_decrease = F_ - equations_.modelCost(delta);
     equations_.retract(poses_, delta, &trial_);
-    s.F_new = objective(graph_, trial_);
+    s.F_new = cost(trial_);
     s.rho = (F_ - s.F_new) / model_decrease;
     s.accepted = std::isfinite(s.F_new) &&
                  ((model_decrease > 0 && s.rho > kMinStepQuality) || (s.tiny && s.F_new <= F_));
@@ -309,12 +311,18 @@ class Minimizer {
                  accepted ? "accepted" : "rejected", seconds);
   }
 
+  // The objective the equations linearise: F, or Σ w eᵀΩe over the edges with weights set.
+  double cost(const std::vector<G>& poses) const {
+    const std::vector<double>* w = equations_.edgeWeights();
+    return w ? weightedObjective(graph_, *w, poses) : objective(graph_, poses);
+  }
+
   const PoseGraph<G>& graph_;
   std::vector<G>& poses_;
   const BatchOptions& options_;
   BatchSummary& summary_;
   Clock::time_point start_;
-  NormalEquations<G> equations_;
+  NormalEquations<G>& equations_;
   std::vector<G> trial_;
   double F_ = 0.0;
   double parameter_norm_ = 0.0;
@@ -362,23 +370,33 @@ BatchMethod parseBatchMethod(const std::string& name) {
   throw std::invalid_argument("unknown batch method '" + name + "' (expected gn, lm or dogleg)");
 }
 
+namespace {
+
+// solveBatch and WeightedBatchSolver::solve: `equations` null makes the graph's own (unweighted).
 template <class G>
-BatchSummary solveBatch(const PoseGraph<G>& graph, std::vector<G>* poses,
-                        const BatchOptions& options) {
+BatchSummary minimize(const PoseGraph<G>& graph, NormalEquations<G>* equations,
+                      std::vector<G>* poses, const BatchOptions& options, const char* caller) {
   const Clock::time_point start = Clock::now();
   checkOptions(options);
-  if (!poses) throw std::invalid_argument("solveBatch: null pose vector");
+  if (!poses) throw std::invalid_argument(std::string(caller) + ": null pose vector");
   if (static_cast<int>(poses->size()) != graph.numPoses())
-    throw std::invalid_argument("solveBatch: " + std::to_string(poses->size()) +
+    throw std::invalid_argument(std::string(caller) + ": " + std::to_string(poses->size()) +
                                 " poses for a graph of " + std::to_string(graph.numPoses()));
   BatchSummary summary;
   const std::string problem = gaugeProblem(graph);
   if (!problem.empty()) {
-    summary.F_initial = summary.F_final = objective(graph, *poses);
+    const std::vector<double>* w = equations ? equations->edgeWeights() : nullptr;
+    summary.F_initial = summary.F_final =
+        w ? weightedObjective(graph, *w, *poses) : objective(graph, *poses);
     summary.termination = Termination::kDiverged;
     summary.message = problem;
   } else {
-    Minimizer<G> minimizer(graph, poses, options, &summary, start);
+    std::unique_ptr<NormalEquations<G>> own;
+    if (!equations) {
+      own = std::make_unique<NormalEquations<G>>(graph);
+      equations = own.get();
+    }
+    Minimizer<G> minimizer(graph, *equations, poses, options, &summary, start);
     if (minimizer.start()) {
       switch (options.method) {
         case BatchMethod::kGaussNewton:
@@ -402,6 +420,36 @@ BatchSummary solveBatch(const PoseGraph<G>& graph, std::vector<G>* poses,
   return summary;
 }
 
+}  // namespace
+
+template <class G>
+BatchSummary solveBatch(const PoseGraph<G>& graph, std::vector<G>* poses,
+                        const BatchOptions& options) {
+  return minimize<G>(graph, nullptr, poses, options, "solveBatch");
+}
+
+template <class G>
+WeightedBatchSolver<G>::WeightedBatchSolver(const PoseGraph<G>& graph)
+    : graph_(graph), equations_(std::make_unique<NormalEquations<G>>(graph)) {}
+
+template <class G>
+WeightedBatchSolver<G>::~WeightedBatchSolver() = default;
+
+template <class G>
+BatchSummary WeightedBatchSolver<G>::solve(const std::vector<double>& edge_weights,
+                                           std::vector<G>* poses, const BatchOptions& options) {
+  for (size_t k = 0; k < edge_weights.size(); ++k)
+    if (!(edge_weights[k] >= 0.0) || !std::isfinite(edge_weights[k]))
+      throw std::invalid_argument("WeightedBatchSolver: weight of edge " + std::to_string(k) +
+                                  " must be finite and >= 0, got " +
+                                  std::to_string(edge_weights[k]));
+  equations_->setEdgeWeights(&edge_weights);  // checks the size
+  BatchSummary summary =
+      minimize<G>(graph_, equations_.get(), poses, options, "WeightedBatchSolver");
+  equations_->setEdgeWeights(nullptr);
+  return summary;
+}
+
 template <class G>
 std::vector<typename G::Tangent> gaussNewtonStep(const PoseGraph<G>& graph,
                                                  const std::vector<G>& poses) {
@@ -419,6 +467,8 @@ std::vector<typename G::Tangent> gaussNewtonStep(const PoseGraph<G>& graph,
   return equations.perPose(delta);
 }
 
+template class WeightedBatchSolver<SE2>;
+template class WeightedBatchSolver<SE3>;
 template BatchSummary solveBatch(const PoseGraph<SE2>&, std::vector<SE2>*, const BatchOptions&);
 template BatchSummary solveBatch(const PoseGraph<SE3>&, std::vector<SE3>*, const BatchOptions&);
 template std::vector<SE2::Tangent> gaussNewtonStep(const PoseGraph<SE2>&, const std::vector<SE2>&);

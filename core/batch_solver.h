@@ -2,6 +2,8 @@
 // trust-region form) and Powell's dogleg, over the sparse Cholesky normal equations.
 #pragma once
 
+#include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -42,6 +44,53 @@ struct BatchSummary {
 template <class G>
 BatchSummary solveBatch(const PoseGraph<G>& graph, std::vector<G>* poses,
                         const BatchOptions& options = {});
+
+/// Σ w_k e_kᵀΩ_k e_k over the edges (one weight per edge, in edge order) plus the priors'
+/// Σ eᵀΩe: the objective of the weighted (IRLS) problem. Throws std::invalid_argument on a size
+/// mismatch.
+template <class G>
+double weightedObjective(const PoseGraph<G>& graph, const std::vector<double>& edge_weights,
+                         const std::vector<G>& poses) {
+  if (edge_weights.size() != graph.edges.size())
+    throw std::invalid_argument("weightedObjective: " + std::to_string(edge_weights.size()) +
+                                " weights for " + std::to_string(graph.edges.size()) + " edges");
+  double f = 0.0;
+  for (size_t k = 0; k < graph.edges.size(); ++k) {
+    if (edge_weights[k] == 0.0) continue;
+    const auto& e = graph.edges[k];
+    f += edge_weights[k] * e.cost(poses[e.i], poses[e.j]);
+  }
+  for (const auto& p : graph.pose_priors) f += p.cost(poses[p.i]);
+  for (const auto& p : graph.position_priors) f += p.cost(poses[p.i]);
+  return f;
+}
+
+template <class G>
+class NormalEquations;
+
+/// solveBatch on the weighted objective weightedObjective(graph, w, ·) (edge k's whitened A and
+/// r scaled by √w_k: one iteratively reweighted least-squares solve), for a solver that solves
+/// the same graph many times with new weights (core/gnc_solver.h): the ordering and symbolic
+/// factorisation are computed once, here. A weight of 0 keeps the edge's place in the pattern
+/// and removes its terms. The graph must outlive this object.
+template <class G>
+class WeightedBatchSolver {
+ public:
+  explicit WeightedBatchSolver(const PoseGraph<G>& graph);
+  ~WeightedBatchSolver();
+  WeightedBatchSolver(const WeightedBatchSolver&) = delete;
+  WeightedBatchSolver& operator=(const WeightedBatchSolver&) = delete;
+
+  /// As solveBatch, with F the weighted objective (F_initial, F_final in the summary are it).
+  /// Throws std::invalid_argument on a weight that is negative or not finite, or a size
+  /// mismatch.
+  BatchSummary solve(const std::vector<double>& edge_weights, std::vector<G>* poses,
+                     const BatchOptions& options = {});
+
+ private:
+  const PoseGraph<G>& graph_;
+  std::unique_ptr<NormalEquations<G>> equations_;
+};
 
 /// One Gauss–Newton step from `poses` (the linearisation point), edges and priors: the tangent
 /// increment per pose (zero for gauge poses). Throws std::runtime_error if the normal equations are

@@ -7,9 +7,16 @@
 // where a factor whose residual has fewer than kDoF entries (the position prior: kDim) fills the
 // remaining rows with zeros; zero rows change neither AᵀA nor Aᵀr, so the Bayes tree can treat
 // every factor alike (docs/design.md, "Factors"; how to add one: "Adding a factor").
+//
+// A factor may carry a robust kernel (core/robust_kernel.h; default none) and an inlier weight
+// w ∈ [0, 1] (default 1) that an iteratively reweighted solver sets from the kernel, w = ρ′(s)
+// at s = eᵀΩe: linearizeWeighted() scales the whitened A and r by √w, so ‖√w (A τ + r)‖² =
+// w‖A τ + r‖² is the IRLS model (docs/design.md, "Robust kernels and GNC"). cost() stays the
+// plain eᵀΩe (the clean objective every report uses); robustCost() is ρ(eᵀΩe).
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <type_traits>
 #include <variant>
 #include <vector>
@@ -19,6 +26,7 @@
 #include "core/pose_graph.h"
 #include "core/prior_factors.h"
 #include "core/relative_pose_factor.h"
+#include "core/robust_kernel.h"
 
 namespace arbor {
 
@@ -84,6 +92,33 @@ class Factor {
         f_);
   }
 
+  /// The kernel on eᵀΩe (none by default) and the inlier weight the solvers use (1 by default).
+  const RobustKernel& kernel() const { return kernel_; }
+  void setKernel(const RobustKernel& kernel) { kernel_ = kernel; }
+  double inlierWeight() const { return inlier_weight_; }
+  void setInlierWeight(double w) { inlier_weight_ = w; }
+
+  /// ρ(eᵀΩe) at the poses x: the kernel's cost (= cost() without a kernel).
+  template <class Poses>
+  double robustCost(const Poses& x) const {
+    return kernel_.rho(cost(x));
+  }
+  /// w = ρ′(eᵀΩe) at the poses x: the IRLS weight the kernel gives there (1 without a kernel).
+  template <class Poses>
+  double kernelWeight(const Poses& x) const {
+    return kernel_.isNone() ? 1.0 : kernel_.weight(cost(x));
+  }
+
+  /// The whitened linearisation scaled by √inlierWeight(): the IRLS model w‖Σ A τ + r‖².
+  template <class Poses>
+  void linearizeWeighted(const Poses& x, Linearization* out) const {
+    linearize(x, out);
+    if (inlier_weight_ == 1.0) return;
+    const double root = std::sqrt(inlier_weight_);
+    for (int k = 0; k < arity(); ++k) out->A[k] *= root;
+    out->r *= root;
+  }
+
   /// The whitened linearisation at the poses x (indexed by key).
   template <class Poses>
   void linearize(const Poses& x, Linearization* out) const {
@@ -113,6 +148,8 @@ class Factor {
 
  private:
   Variant f_;
+  RobustKernel kernel_;
+  double inlier_weight_ = 1.0;
 };
 
 /// Appends f to the graph's edges, pose priors or position priors, by its kind.

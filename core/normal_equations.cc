@@ -1,6 +1,7 @@
 #include "core/normal_equations.h"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -242,6 +243,12 @@ double NormalEquations<G>::linearize(const std::vector<G>& poses) {
     const EdgeSlot& s = slots_[k];
     EdgeLinearization& lin = linearization_[k];
     edge.linearize(poses[edge.i], poses[edge.j], &lin.A_i, &lin.A_j, &lin.r);
+    if (edge_weights_) {
+      const double root = std::sqrt((*edge_weights_)[k]);
+      lin.A_i *= root;
+      lin.A_j *= root;
+      lin.r *= root;
+    }
     f += lin.r.squaredNorm();
     if (s.var_i >= 0 && s.var_i == s.var_j) {  // an edge from a pose to itself
       const Block a = lin.A_i + lin.A_j;
@@ -270,6 +277,15 @@ double NormalEquations<G>::linearize(const std::vector<G>& poses) {
   for (int c = 0; c < num_variables_; ++c)
     hessian_diagonal_.template segment<d>(c * d) = diagonal_blocks_[c].diagonal();
   return f;
+}
+
+template <class G>
+void NormalEquations<G>::setEdgeWeights(const std::vector<double>* weights) {
+  if (weights && weights->size() != graph_.edges.size())
+    throw std::invalid_argument(
+        "NormalEquations::setEdgeWeights: " + std::to_string(weights->size()) + " weights for " +
+        std::to_string(graph_.edges.size()) + " edges");
+  edge_weights_ = weights;
 }
 
 // A unary prior on variable v: H(v, v) += AᵀA, g_v += Aᵀr; on a gauge pose only ‖r‖² (in F).

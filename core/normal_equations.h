@@ -69,8 +69,16 @@ class NormalEquations {
   double factorNonzeros() const;
 
   /// Linearises every edge and prior at `poses` and assembles H and g; returns F = Σ‖r‖² there
-  /// (priors on gauge poses included).
+  /// (priors on gauge poses included). With edge weights set, edge k's whitened A and r are
+  /// scaled by √w_k first (iteratively reweighted least squares), so H = Σ w AᵀA, g = Σ w Aᵀr
+  /// and the value returned is Σ w_k ‖r_k‖² + the priors' Σ‖r‖².
   double linearize(const std::vector<G>& poses);
+
+  /// Per-edge weights w_k ≥ 0 (one per graph edge, in edge order; the vector must outlive this
+  /// object's use of it), or null for none: the unweighted path, bit for bit. Priors are never
+  /// weighted. Throws std::invalid_argument on a size mismatch.
+  void setEdgeWeights(const std::vector<double>* weights);
+  const std::vector<double>* edgeWeights() const { return edge_weights_; }
 
   /// g = Aᵀr at the last linearisation (F's gradient is 2g).
   const Eigen::VectorXd& gradient() const { return gradient_; }
@@ -133,6 +141,7 @@ class NormalEquations {
   void loadBlocks(const Eigen::VectorXd* damping);
 
   const PoseGraph<G>& graph_;
+  const std::vector<double>* edge_weights_ = nullptr;
   CholeskyBackend backend_ = CholeskyBackend::kBlock;
   double flops_ = 0.0;
   int num_variables_ = 0;

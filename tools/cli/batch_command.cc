@@ -1,9 +1,14 @@
 // arbor batch FILE: solve a pose graph in batch and print a summary (or one JSON object).
+#include <cmath>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <optional>
+#include <sstream>
 
 #include <nlohmann/json.hpp>
 
+#include "core/gnc_solver.h"
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
 #include "tools/cli/cli_common.h"
@@ -25,6 +30,9 @@ struct BatchRun {
   std::string output;
   bool json = false;
   ReadOptions read;
+  bool robust = false;
+  GncOptions gnc;            // --kernel, --inlier-threshold
+  std::string rejected_out;  // --rejected-out
 };
 
 // arbor batch --solver rtr: the certifiable solver; it starts from its own chordal relaxation
@@ -130,6 +138,134 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
   return summary.termination == Termination::kDiverged ? 3 : 0;
 }
 
+// arbor batch --robust: GNC over LM from --init (core/gnc_solver.h); with --solver rtr, then the
+// certifiable solver on the graph without the rejected edges, whose certificate is of that
+// inlier problem.
+template <class G>
+int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
+                         const Stopwatch& total) {
+  const InitMethod init = parseInitMethod(
+      run.init.empty() ? (graph.has_initial_estimate ? "file" : "odometry") : run.init);
+  std::vector<G> poses = initialize(graph, init);
+  GncOptions options = run.gnc;
+  options.outer.max_iterations = run.settings.max_iterations;
+  options.outer.relative_tolerance = run.settings.relative_tolerance;
+  options.verbose = run.settings.verbose;
+  const GncResult gncFirst = solveGnc(graph, &poses, options);
+
+  // rtr: the certifiable path on the inlier set (core/gnc_solver.h certifyInliers), which may
+  // take rejected edges back; the counts below are after it.
+  GncResult gnc = gncFirst;
+  std::optional<CertifiedInliers> certified;
+  if (run.solver == BatchSolver::kRtr) {
+    RtrOptions rtr = run.settings.rtr;
+    rtr.verbose = run.settings.verbose;
+    certified = certifyInliers(graph, &gnc, &poses, rtr);
+  }
+  const double F_all = gnc.F_all, F_inliers = gnc.F_inliers;
+
+  int rejected_loops = 0, loops = 0;
+  std::ostringstream rejected;
+  for (int k = 0; k < graph.numEdges(); ++k) {
+    if (gnc.trusted[k]) continue;
+    ++loops;
+    if (gnc.inlier[k]) continue;
+    ++rejected_loops;
+    rejected << graph.ids[graph.edges[k].i] << " " << graph.ids[graph.edges[k].j] << "\n";
+  }
+  if (!run.rejected_out.empty()) {
+    std::ofstream out(run.rejected_out);
+    out << rejected.str();
+    if (!out) throw std::runtime_error("cannot write " + run.rejected_out);
+  }
+  if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
+  const double total_s = total.seconds();
+  const char* certificate_scope =
+      "the certificate covers the inlier problem (the graph without the rejected edges), not the "
+      "choice of inliers";
+
+  if (run.json) {
+    nlohmann::json j = graphJson(run.file, graph);
+    j.update({
+        {"solver", refine::toString(run.solver)},
+        {"robust", true},
+        {"kernel", toString(run.gnc.kernel)},
+        {"init", toString(init)},
+        {"inlier_threshold", gnc.threshold},
+        {"variance_factor", gnc.scale},
+        {"threshold_rule",
+         run.gnc.threshold > 0 ? "given" : (run.gnc.estimate_scale ? "auto" : "chi2")},
+        {"F_least_squares", gnc.F_least_squares},
+        {"F_final", F_all},
+        {"F_inliers", F_inliers},
+        {"robust_cost", gnc.robust_cost},
+        {"loop_closures", loops},
+        {"rejected", rejected_loops},
+        {"gnc_rounds", gnc.rounds},
+        {"gnc_iterations", gnc.iterations},
+        {"lm_iterations", gnc.lm_iterations},
+        {"gnc_converged", gnc.converged},
+        {"gnc_message", gnc.message},
+        {"gnc_time_s", gnc.time_s},
+        {"total_s", total_s},
+        {"information_repaired", report.repaired},
+        {"information_isotropic", report.made_isotropic},
+    });
+    if (certified) {
+      const RtrSummary& r = certified->rtr;
+      j.update({{"termination",
+                 r.certified ? "certified"
+                             : (r.relaxation_solved ? "relaxation_not_exact" : "not_certified")},
+                {"readmitted", certified->readmitted},
+                {"rtr_passes", certified->passes},
+                {"rank", r.rank},
+                {"lambda_min", r.lambda_min},
+                {"certified", r.certified},
+                {"certificate_scope", certificate_scope},
+                {"rtr_time_s", r.time_s}});
+    }
+    if (!run.rejected_out.empty()) j["rejected_out"] = run.rejected_out;
+    std::cout << j.dump() << "\n";
+    return 0;
+  }
+  std::cout << std::setprecision(10) << "file         " << graphLine(run.file, graph) << "\n";
+  if (report.repaired) std::cout << "information  " << report.repaired << " repaired\n";
+  if (report.made_isotropic)
+    std::cout << "information  " << report.made_isotropic << " made isotropic\n";
+  std::cout << "init         " << toString(init) << "\n"
+            << "robust       GNC-" << toString(run.gnc.kernel) << " over LM, c² " << gnc.threshold
+            << (run.gnc.threshold > 0 ? std::string(" (given)")
+                : run.gnc.estimate_scale
+                    ? " (χ² " + std::to_string(run.gnc.confidence) + " quantile × σ̂² " +
+                          std::to_string(gnc.scale) + ")"
+                    : " (χ² " + std::to_string(run.gnc.confidence) + " quantile)")
+            << "\n"
+            << "F least sq.  " << gnc.F_least_squares << " (every edge, weight 1)\n"
+            << "F final      " << F_all << " (every edge)\n"
+            << "F inliers    " << F_inliers << " (without the rejected edges)\n"
+            << "rejected     " << rejected_loops << " of " << loops << " loop closures ("
+            << graph.numEdges() - loops << " odometry edges trusted)\n"
+            << "gnc          " << gnc.rounds << " round(s), " << gnc.iterations << " steps, "
+            << gnc.lm_iterations << " LM iterations (" << gnc.message << ")\n";
+  if (certified) {
+    const RtrSummary& r = certified->rtr;
+    std::cout << "readmitted   " << certified->readmitted
+              << " rejected edge(s) fit at the certified optimum (" << certified->passes
+              << " staircase run(s))\n"
+              << "certificate  "
+              << (r.certified ? "certified"
+                              : (r.relaxation_solved ? "relaxation_not_exact" : "not_certified"))
+              << (r.message.empty() ? "" : ": " + r.message) << " (rank " << r.rank << ", λ_min "
+              << r.lambda_min << "); " << certificate_scope << "\n";
+  }
+  std::cout << std::setprecision(4) << "time         " << gnc.time_s << " s GNC"
+            << (certified ? ", " + std::to_string(certified->rtr.time_s) + " s RTR" : "") << ", "
+            << total_s << " s total\n";
+  if (!run.rejected_out.empty()) std::cout << "rejected out " << run.rejected_out << "\n";
+  if (!run.output.empty()) std::cout << "output       " << run.output << "\n";
+  return 0;
+}
+
 // "lm | gn | dogleg | rtr", then one line per row of the table.
 std::string solverHelp() {
   std::string help = refine::batchSolverNames();
@@ -145,6 +281,7 @@ int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
+  std::string kernel = "tls", threshold = "chi2";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -160,11 +297,21 @@ int batchCommand(const std::vector<std::string>& args) {
       "what to do with information matrices that are not positive definite: refuse | repair | "
       "isotropic")("output,o", po::value(&run.output), "write the estimate as g2o")(
       "json", po::bool_switch(&run.json), "print one JSON object")(
-      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr");
+      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr")(
+      "robust", po::bool_switch(&run.robust),
+      "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| = 1) "
+      "trusted; with --solver rtr, then the certifiable solver on the edges kept")(
+      "kernel", po::value(&kernel)->default_value(kernel),
+      "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
+      "inlier-threshold", po::value(&threshold)->default_value(threshold),
+      "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
+      "at its word); auto: that quantile times the variance factor estimated over the inliers")(
+      "rejected-out", po::value(&run.rejected_out),
+      "with --robust: write the rejected edges, `i j` (file ids) a line");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return 0;
-  parseArguments(args, options, positional);
+  const po::variables_map given = parseArguments(args, options, positional);
   try {
     run.solver = refine::parseBatchSolver(solver, "--solver");
     if (!run.init.empty()) parseInitMethod(run.init);
@@ -172,6 +319,39 @@ int batchCommand(const std::vector<std::string>& args) {
     throw UsageError(e.what());
   }
   if (run.settings.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
+  if (run.robust) {
+    try {
+      run.gnc.kernel = parseKernelKind(kernel);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("--kernel: ") + e.what());
+    }
+    if (run.gnc.kernel == KernelKind::kNone)
+      throw UsageError("--kernel must be tls, gm, cauchy or huber with --robust, not none");
+    if (threshold == "auto") {
+      run.gnc.estimate_scale = true;
+    } else if (threshold != "chi2") {
+      std::size_t used = 0;
+      double value = 0;
+      try {
+        value = std::stod(threshold, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used != threshold.size() || !(value > 0) || !std::isfinite(value))
+        throw UsageError("--inlier-threshold must be chi2, auto or a number > 0, not '" +
+                         threshold + "'");
+      run.gnc.threshold = value;
+    }
+    if (run.solver != BatchSolver::kLevenbergMarquardt && run.solver != BatchSolver::kRtr)
+      throw UsageError(
+          "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
+          "rtr, not '" +
+          solver + "'");
+  } else {
+    for (const char* flag : {"kernel", "inlier-threshold", "rejected-out"})
+      if (given.count(flag) && !given[flag].defaulted())
+        throw UsageError(std::string("--") + flag + " needs --robust");
+  }
   if (!(run.settings.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
   run.read.information = parseInformationPolicy(information);
 
@@ -179,6 +359,7 @@ int batchCommand(const std::vector<std::string>& args) {
   AnyPoseGraph any = readPoseGraphFile(run.file, run.read, &report);
   return std::visit(
       [&](auto& graph) {
+        if (run.robust) return solveRobustAndReport(run, graph, report, total);
         return refine::info(run.solver).certifies
                    ? solveCertifiableAndReport(run, graph, report, total)
                    : solveAndReport(run, graph, report, total);
