@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "core/information.h"
+#include "core/rigid_alignment.h"
 
 namespace arbor {
 namespace {
@@ -78,9 +79,23 @@ int OnlineSmoother<G>::root(int v) const {
 }
 
 template <class G>
+G OnlineSmoother<G>::moveOntoPriors(const Component& c) const {
+  if (c.pose_prior_pose >= 0)
+    return c.pose_prior_target.compose(smoother_.estimate(c.pose_prior_pose).inverse());
+  std::vector<typename G::Translation> estimated;
+  for (int v : c.position_prior_poses) estimated.push_back(smoother_.estimate(v).translation());
+  return rigidAlignment<G>(estimated, c.position_prior_values, c.position_prior_weights);
+}
+
+// When priors come to fix a component's gauge, the component first moves rigidly into their
+// frame (a pose prior's pose onto its value, or the weighted Kabsch fit of its estimated
+// positions onto the position priors), so that the first update without the anchor starts near
+// the priors instead of wherever the anchor held it; then the anchor is released.
+template <class G>
 void OnlineSmoother<G>::releaseAnchorIfFixed(int c) {
   Component& comp = components_[c];
   if (comp.anchor < 0 || !comp.gauge.fixesGauge()) return;
+  smoother_.transformPoses(comp.members, moveOntoPriors(comp));
   smoother_.releaseFixedPose(comp.anchor);
   comp.anchor = -1;
   ++stats_.anchors_released;
@@ -117,6 +132,19 @@ void OnlineSmoother<G>::join(int from, int to, const G& z) {
   if (kept.members.size() < moved.members.size()) kept.members.swap(moved.members);
   kept.members.insert(kept.members.end(), moved.members.begin(), moved.members.end());
   kept.gauge.add(moved.gauge);
+  if (kept.pose_prior_pose < 0) {
+    kept.pose_prior_pose = moved.pose_prior_pose;
+    kept.pose_prior_target = moved.pose_prior_target;
+  }
+  kept.position_prior_poses.insert(kept.position_prior_poses.end(),
+                                   moved.position_prior_poses.begin(),
+                                   moved.position_prior_poses.end());
+  kept.position_prior_values.insert(kept.position_prior_values.end(),
+                                    moved.position_prior_values.begin(),
+                                    moved.position_prior_values.end());
+  kept.position_prior_weights.insert(kept.position_prior_weights.end(),
+                                     moved.position_prior_weights.begin(),
+                                     moved.position_prior_weights.end());
   kept.first = std::min(kept.first, moved.first);
   component_parent_[move] = keep;
   --stats_.components;
@@ -185,10 +213,22 @@ EdgeResult OnlineSmoother<G>::addPrior(Key id, const Factor<G>& prior, const G& 
   smoother_.addFactor(f);
   queued_.push_back(f);
   Component& c = components_[root(v)];
-  if (const auto* p = f.positionPrior())
+  if (const auto* p = f.positionPrior()) {
     c.gauge.addPositionPrior(p->position, p->information);
-  else
+    c.position_prior_poses.push_back(v);
+    c.position_prior_values.push_back(p->position);
+    c.position_prior_weights.push_back(G::kDim / p->information.inverse().trace());
+  } else {
     c.gauge.addPosePrior();
+    if (c.pose_prior_pose < 0) {
+      c.pose_prior_pose = v;
+      c.pose_prior_target = start;
+    }
+  }
+  // A component still held by its anchor moves onto its priors as far as they say (a
+  // translation for one position, a rotation too for more), so that the anchor and the priors
+  // do not pull the estimate far apart while the gauge is not yet fixed.
+  if (c.anchor >= 0) smoother_.transformPoses(c.members, moveOntoPriors(c));
   releaseAnchorIfFixed(root(v));
   ++stats_.priors_accepted;
   return EdgeResult{EdgeStatus::kAccepted, ""};

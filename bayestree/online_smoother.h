@@ -183,7 +183,17 @@ class OnlineSmoother {
     int first = 0;  ///< its first pose (the older component has the lower one)
     int anchor = -1;
     GaugeInformation<G> gauge;
+    // Its priors, for the move into their frame when they come to fix the gauge: the pose of
+    // a pose prior and the value it asks for (z o⁻¹); the poses, positions and weights
+    // (kDim / tr Ω⁻¹) of its position priors.
+    int pose_prior_pose = -1;
+    G pose_prior_target;
+    std::vector<int> position_prior_poses;
+    std::vector<typename G::Translation> position_prior_values;
+    std::vector<double> position_prior_weights;
   };
+  /// The rigid move that takes component c's estimate into its priors' frame.
+  G moveOntoPriors(const Component& c) const;
   mutable std::vector<int> component_parent_;
   std::vector<Component> components_;
   std::vector<Factor<G>> queued_;  ///< handed to the smoother since the last update
