@@ -112,7 +112,7 @@ int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
   for (int c : path_) cliques[c].extendSeparator(later, &extend_buf_);
   // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
   typename Factor<G>::Linearization A;
-  e.linearize(ctx.theta, &A);
+  e.linearizeWeighted(ctx.theta, &A);
   using MatMap = Eigen::Map<Eigen::MatrixXd>;
   int rows = cliques[start].F + cliques[start].Sn + 1;
   {

@@ -213,6 +213,24 @@ struct IncrementalSmoother<G>::Impl {
     for (int v : poses) mark[v] = 0;
   }
 
+  // Extension (robust layers): a new inlier weight is a relinearisation of the factor, so its
+  // keys' cliques are re-eliminated by the next update.
+  void setFactorWeight(int f, double w) {
+    if (f < 0 || f >= factors.numFactors())
+      throw std::invalid_argument("IncrementalSmoother::setFactorWeight: factor " +
+                                  std::to_string(f) + " out of range (" +
+                                  std::to_string(factors.numFactors()) + " factors)");
+    if (!(w >= 0 && w <= 1))
+      throw std::invalid_argument("IncrementalSmoother::setFactorWeight(" + std::to_string(f) +
+                                  "): weight " + std::to_string(w) + " not in [0, 1]");
+    Factor<G>& e = factors.factors[f];
+    if (e.inlierWeight() == w) return;
+    e.setInlierWeight(w);
+    to_relinearize.push_back(f);
+    for (int k = 0; k < e.arity(); ++k)
+      if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
+  }
+
   TreeMemory memory() const {
     TreeMemory m = tree.memory();
     m.scratch_bytes =
@@ -435,13 +453,15 @@ struct IncrementalSmoother<G>::Impl {
     if (opt.dogleg && tree_changed) doglegStep();
   }
 
-  // F at θ ⊞ x for every pose.
-  double objectiveAt(const std::vector<Vec>& x) const {
+  // Σ w eᵀΩe at θ ⊞ x for every pose (w = 1 for every factor unless `weighted`): the dogleg and
+  // relinearizeAll judge steps by the weighted objective, the one the linear system models.
+  double objectiveAt(const std::vector<Vec>& x, bool weighted = true) const {
     std::vector<G> poses(theta.size());
     for (size_t v = 0; v < theta.size(); ++v)
       poses[v] = fixed[v] ? theta[v] : theta[v].retract(x[v]);
     double f = 0;
-    for (const Factor<G>& e : factors.factors) f += e.cost(poses);
+    for (const Factor<G>& e : factors.factors)
+      f += weighted ? e.inlierWeight() * e.cost(poses) : e.cost(poses);
     return f;
   }
 
@@ -532,6 +552,10 @@ void IncrementalSmoother<G>::transformPoses(const std::vector<int>& indices, con
   impl_->transformPoses(indices, T);
 }
 template <class G>
+void IncrementalSmoother<G>::setFactorWeight(int index, double w) {
+  impl_->setFactorWeight(index, w);
+}
+template <class G>
 UpdateStats IncrementalSmoother<G>::update() {
   return impl_->update();
 }
@@ -563,7 +587,11 @@ const std::vector<typename G::Tangent>& IncrementalSmoother<G>::delta() const {
 }
 template <class G>
 double IncrementalSmoother<G>::objective() const {
-  return impl_->objectiveAt(impl_->delta);
+  return impl_->objectiveAt(impl_->delta, false);
+}
+template <class G>
+double IncrementalSmoother<G>::weightedObjective() const {
+  return impl_->objectiveAt(impl_->delta, true);
 }
 template <class G>
 void IncrementalSmoother<G>::checkInvariants() const {

@@ -124,6 +124,16 @@ class IncrementalSmoother {
   /// bad index or a non-finite T.
   void transformPoses(const std::vector<int>& indices, const G& T);
 
+  /// Sets the inlier weight w ∈ [0, 1] of factor `index` (factors() order): the seam a robust
+  /// layer reweights through (online GNC, taking an edge back). Every factor enters the linear
+  /// system scaled by √w (Factor::linearizeWeighted; w = 1 changes nothing, bit for bit), so a
+  /// new weight is a relinearisation of that factor: the next update() relinearises it and
+  /// re-eliminates the cliques of its keys (with their ancestors), as Alg. 4 does for the
+  /// factors of a relinearised variable. w = 0 leaves the factor in the graph without effect on
+  /// the estimate. No-op when w is its weight already. Throws std::invalid_argument on a bad
+  /// index or w ∉ [0, 1].
+  void setFactorWeight(int index, double w);
+
   /// One step of iSAM2 (IJRR 2012 Alg. 6): adds the queued factors and poses, relinearises,
   /// re-eliminates the affected top of the Bayes tree (or folds the new factors in) and updates
   /// Δ. The estimate is current on return.
@@ -138,6 +148,9 @@ class IncrementalSmoother {
   const std::vector<G>& linearizationPoint() const;
   const std::vector<Tangent>& delta() const;  ///< Δ per pose (zero for fixed poses)
   double objective() const;                   ///< F = Σ eᵀΩe at estimate() (O(m))
+  /// Σ w eᵀΩe at estimate(), w each factor's inlier weight: the objective the linear system
+  /// models (= objective() while every weight is 1). O(m).
+  double weightedObjective() const;
   /// Throws std::logic_error describing the first violated Bayes-tree invariant.
   void checkInvariants() const;
 

@@ -17,7 +17,7 @@ int LinearizedFactors<G>::add(const Factor<G>& e) {
 template <class G>
 void LinearizedFactors<G>::linearize(int f, const std::vector<G>& theta) {
   typename Factor<G>::Linearization A;
-  factors[f].linearize(theta, &A);
+  factors[f].linearizeWeighted(theta, &A);
   LinearFactor& L = lin[f];
   const int n = factors[f].arity();
   for (int k = 0; k < n; ++k) {

@@ -45,7 +45,7 @@ class LinearizedFactors {
   /// Adds a factor (not yet linearised); returns its index.
   int add(const Factor<G>& f);
 
-  /// lin[f] from factor f linearised at θ.
+  /// lin[f] from factor f linearised at θ, scaled by its inlier weight (Factor::linearizeWeighted).
   void linearize(int f, const std::vector<G>& theta);
   /// linearize(f, θ) for every f of `fs`, in chunks shared among the threads when many, side by
   /// side with `alongside` (if any: a task that does not read the linearised factors).

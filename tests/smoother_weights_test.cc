@@ -1,0 +1,261 @@
+// The smoother's weight seam (IncrementalSmoother::setFactorWeight): a factor enters the linear
+// system scaled by √w, a new weight is a relinearisation of that factor, w = 0 is the factor's
+// absence.
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include "bayestree/incremental_smoother.h"
+#include "core/factor.h"
+
+namespace arbor {
+namespace {
+
+template <class G>
+typename RelativePoseEdge<G>::Matrix information(double t, double r) {
+  typename RelativePoseEdge<G>::Matrix m = RelativePoseEdge<G>::Matrix::Zero();
+  for (int k = 0; k < G::kDoF; ++k) m(k, k) = k < G::kDim ? t : r;
+  return m;
+}
+
+template <class G>
+typename G::Tangent noise(std::mt19937& rng, double sigma) {
+  std::normal_distribution<double> n(0.0, sigma);
+  typename G::Tangent t;
+  for (int k = 0; k < G::kDoF; ++k) t(k) = n(rng);
+  return t;
+}
+
+/// A noisy trajectory of n poses with odometry and loop closures every 7 poses back to the
+/// start region, plus one wrong closure (the last factor): off by `error` metres and a fifth of
+/// that in radians.
+template <class G>
+std::vector<Factor<G>> loopGraph(int n, unsigned seed, std::vector<G>* truth, double error = 5.0) {
+  std::mt19937 rng(seed);
+  truth->assign(n, G::Identity());
+  for (int k = 1; k < n; ++k) {
+    typename G::Tangent t = noise<G>(rng, 0.2);
+    t(0) += 1.0;
+    (*truth)[k] = (*truth)[k - 1].compose(G::Exp(t));
+  }
+  const auto omega = information<G>(50.0, 400.0);
+  std::vector<Factor<G>> fs;
+  auto edge = [&](int i, int j, double sigma) {
+    const G z = (*truth)[i].inverse().compose((*truth)[j]).compose(G::Exp(noise<G>(rng, sigma)));
+    fs.emplace_back(RelativePoseEdge<G>::make(i, j, z, omega));
+  };
+  for (int k = 1; k < n; ++k) edge(k - 1, k, 0.02);
+  for (int k = 9; k < n; k += 7) edge(k - 9, k, 0.02);
+  typename G::Tangent wrong = G::Tangent::Zero();
+  wrong(0) = error;
+  wrong(G::kDoF - 1) = 0.2 * error;
+  const G z_bad = G::Exp(wrong);
+  fs.emplace_back(RelativePoseEdge<G>::make(2, n - 3, z_bad, omega));
+  return fs;
+}
+
+/// A smoother fed the factors one pose at a time (dead-reckoned initial values), then
+/// converged.
+/// Options that let relinearizeAll run Gauss–Newton to convergence (a wrong closure makes it
+/// converge linearly, not quadratically).
+SmootherOptions converging() {
+  SmootherOptions o;
+  o.finalize_relative_tolerance = 1e-14;
+  o.finalize_max_iterations = 100;
+  return o;
+}
+
+template <class G>
+IncrementalSmoother<G> smootherOf(const std::vector<Factor<G>>& fs, int n,
+                                  SmootherOptions options = converging()) {
+  IncrementalSmoother<G> s(options);
+  s.addFixedPose(G::Identity());
+  std::vector<G> x(1, G::Identity());
+  for (int k = 1; k < n; ++k) {
+    for (const Factor<G>& f : fs) {
+      const auto* e = f.relativePose();
+      if (e && e->j == k && e->i == k - 1) {
+        x.push_back(x[k - 1].compose(e->measurement));
+        s.addPose(x[k]);
+      }
+    }
+    for (const Factor<G>& f : fs)
+      if (std::max(f.key(0), f.key(1)) == k) s.addFactor(f);
+    s.update();
+  }
+  return s;
+}
+
+/// The smoother's index of the factor between i and j (smootherOf adds factors in order of
+/// their later pose, not in the order given).
+template <class G>
+int indexOf(const IncrementalSmoother<G>& s, int i, int j) {
+  for (int f = 0; f < s.numFactors(); ++f)
+    if (s.factors()[f].arity() == 2 && s.factors()[f].key(0) == i && s.factors()[f].key(1) == j)
+      return f;
+  return -1;
+}
+
+template <class G>
+void converge(IncrementalSmoother<G>* s) {
+  s->relinearizeAll();
+}
+
+template <class G>
+double maxDifference(const std::vector<G>& a, const std::vector<G>& b) {
+  double d = 0;
+  for (size_t v = 0; v < a.size(); ++v) d = std::max(d, a[v].localCoordinates(b[v]).norm());
+  return d;
+}
+
+// w = 0 on the wrong closure after it was eliminated equals never having added it (a closure
+// wrong by 1 m: Gauss–Newton from either state reaches the same minimum).
+template <class G>
+void expectZeroWeightIsAbsence(unsigned seed) {
+  constexpr int n = 40;
+  std::vector<G> truth;
+  const std::vector<Factor<G>> fs = loopGraph<G>(n, seed, &truth, 1.0);
+  IncrementalSmoother<G> with = smootherOf(fs, n);
+  const double F_with = with.objective();
+  const int bad = indexOf(with, 2, n - 3);
+  ASSERT_GE(bad, 0);
+  with.setFactorWeight(bad, 0.0);
+  with.update();
+  with.checkInvariants();
+  converge(&with);
+  with.checkInvariants();
+  std::vector<Factor<G>> clean(fs.begin(), fs.end() - 1);
+  IncrementalSmoother<G> without = smootherOf(clean, n);
+  converge(&without);
+  EXPECT_LT(maxDifference(with.estimate(), without.estimate()), 1e-6);
+  EXPECT_NEAR(with.weightedObjective(), without.objective(), 1e-9 * without.objective());
+  // The weighted objective leaves the wrong closure out; the plain objective still counts it.
+  EXPECT_GT(with.objective(), with.weightedObjective() + 1.0);
+  EXPECT_LT(with.weightedObjective(), 0.1 * F_with);
+  // And back: w = 1 again returns to the estimate with the closure in full.
+  IncrementalSmoother<G> full = smootherOf(fs, n);
+  converge(&full);
+  with.setFactorWeight(bad, 1.0);
+  with.update();
+  converge(&with);
+  with.checkInvariants();
+  EXPECT_LT(maxDifference(with.estimate(), full.estimate()), 1e-6);
+}
+
+TEST(SmootherWeights, ZeroWeightEqualsTheFactorsAbsence2D) { expectZeroWeightIsAbsence<SE2>(1); }
+TEST(SmootherWeights, ZeroWeightEqualsTheFactorsAbsence3D) { expectZeroWeightIsAbsence<SE3>(2); }
+
+/// Dense Gauss–Newton step of Σ w‖Σ A τ + r‖² at x (every pose but 0 free).
+template <class G>
+std::vector<typename G::Tangent> denseWeightedStep(const std::vector<Factor<G>>& fs,
+                                                   const std::vector<G>& x) {
+  constexpr int D = G::kDoF;
+  const int n = static_cast<int>(x.size()) - 1;
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n * D, n * D);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(n * D);
+  for (const Factor<G>& f : fs) {
+    typename Factor<G>::Linearization L;
+    f.linearizeWeighted(x, &L);
+    for (int a = 0; a < f.arity(); ++a) {
+      const int va = f.key(a) - 1;
+      if (va < 0) continue;
+      g.segment<D>(va * D) -= L.A[a].transpose() * L.r;
+      for (int b = 0; b < f.arity(); ++b) {
+        const int vb = f.key(b) - 1;
+        if (vb >= 0) H.block<D, D>(va * D, vb * D) += L.A[a].transpose() * L.A[b];
+      }
+    }
+  }
+  const Eigen::VectorXd tau = H.llt().solve(g);
+  std::vector<typename G::Tangent> out(n + 1, G::Tangent::Zero());
+  for (int v = 0; v < n; ++v) out[v + 1] = tau.segment<D>(v * D);
+  return out;
+}
+
+// With nothing relinearised, Δ after a weight change is the exact Gauss–Newton step of the
+// weighted system at θ: the Bayes tree holds the √w-scaled factor, not the old one.
+template <class G>
+void expectExactWeightedStep(unsigned seed) {
+  constexpr int n = 30;
+  std::vector<G> truth;
+  const std::vector<Factor<G>> fs = loopGraph<G>(n, seed, &truth);
+  SmootherOptions o;
+  o.relinearize_skip = 1000000;  // θ stays where each pose was added
+  o.full_backsubstitution = true;
+  IncrementalSmoother<G> s = smootherOf(fs, n, o);
+  std::vector<Factor<G>> weighted = s.factors();
+  const int bad = indexOf(s, 2, n - 3);
+  for (int f : {bad, bad - 1, 3}) {
+    const double w = f == bad ? 0.01 : 0.5;
+    s.setFactorWeight(f, w);
+    weighted[f].setInlierWeight(w);
+  }
+  const UpdateStats st = s.update();
+  EXPECT_GT(st.cliques_reeliminated, 0);
+  s.checkInvariants();
+  const auto expected = denseWeightedStep(weighted, s.linearizationPoint());
+  for (int v = 1; v < n; ++v)
+    EXPECT_LT((s.delta()[v] - expected[v]).norm(), 1e-8 * (1 + expected[v].norm())) << v;
+  double F = 0;
+  const std::vector<G> x = s.estimate();
+  for (const Factor<G>& f : weighted) F += f.inlierWeight() * f.cost(x);
+  EXPECT_NEAR(s.weightedObjective(), F, 1e-12 * F);
+}
+
+TEST(SmootherWeights, ExactWeightedGaussNewtonStep2D) { expectExactWeightedStep<SE2>(3); }
+TEST(SmootherWeights, ExactWeightedGaussNewtonStep3D) { expectExactWeightedStep<SE3>(4); }
+
+// A factor added with a weight and one reweighted later reach the same estimate.
+TEST(SmootherWeights, AddedWithWeightEqualsReweighted) {
+  constexpr int n = 30;
+  std::vector<SE2> truth;
+  std::vector<Factor2> fs = loopGraph<SE2>(n, 5, &truth, 1.0);
+  IncrementalSmoother2 later = smootherOf(fs, n);
+  later.setFactorWeight(indexOf(later, 2, n - 3), 0.05);
+  later.update();
+  converge(&later);
+  fs.back().setInlierWeight(0.05);
+  IncrementalSmoother2 from_start = smootherOf(fs, n);
+  converge(&from_start);
+  EXPECT_EQ(later.factors()[indexOf(later, 2, n - 3)].inlierWeight(), 0.05);
+  EXPECT_LT(maxDifference(later.estimate(), from_start.estimate()), 1e-6);
+}
+
+// Unit weights set explicitly change nothing, bit for bit.
+TEST(SmootherWeights, UnitWeightsChangeNothing) {
+  constexpr int n = 30;
+  std::vector<SE3> truth;
+  const std::vector<Factor3> fs = loopGraph<SE3>(n, 6, &truth);
+  IncrementalSmoother3 a = smootherOf(fs, n);
+  IncrementalSmoother3 b = smootherOf(fs, n);
+  for (int f = 0; f < b.numFactors(); ++f) b.setFactorWeight(f, 1.0);  // no-op: already 1
+  const UpdateStats sa = a.update(), sb = b.update();
+  EXPECT_EQ(sa.cliques_reeliminated, sb.cliques_reeliminated);
+  for (int v = 0; v < n; ++v)
+    EXPECT_EQ(a.estimate(v).translation(), b.estimate(v).translation()) << v;
+  EXPECT_EQ(a.objective(), b.weightedObjective());
+}
+
+TEST(SmootherWeights, BadWeightOrIndexIsRefusedAndChangesNothing) {
+  constexpr int n = 20;
+  std::vector<SE2> truth;
+  const std::vector<Factor2> fs = loopGraph<SE2>(n, 7, &truth);
+  IncrementalSmoother2 s = smootherOf(fs, n);
+  IncrementalSmoother2 untouched = s;
+  EXPECT_THROW(s.setFactorWeight(-1, 0.5), std::invalid_argument);
+  EXPECT_THROW(s.setFactorWeight(s.numFactors(), 0.5), std::invalid_argument);
+  EXPECT_THROW(s.setFactorWeight(0, std::nan("")), std::invalid_argument);
+  EXPECT_THROW(s.setFactorWeight(0, 1.5), std::invalid_argument);
+  EXPECT_THROW(s.setFactorWeight(0, -0.1), std::invalid_argument);
+  s.update();
+  untouched.update();
+  EXPECT_EQ(maxDifference(untouched.estimate(), s.estimate()), 0.0);
+  for (const Factor2& f : s.factors()) EXPECT_EQ(f.inlierWeight(), 1.0);
+}
+
+}  // namespace
+}  // namespace arbor
