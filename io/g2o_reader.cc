@@ -24,6 +24,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <sstream>
@@ -630,6 +631,9 @@ AnyPoseGraph readPoseGraph(std::istream& in, const std::string& name, const Read
 
 AnyPoseGraph readPoseGraphFile(const std::string& path, const ReadOptions& options,
                                ReadReport* report) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw FileError(path + ": is a directory, not a g2o or TORO file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(path + ": cannot open: " + std::strerror(errno));
   return readPoseGraph(in, path, options, report);

@@ -234,6 +234,43 @@ TEST(Cli, MalformedFileNamesLine) {
   std::filesystem::remove(file);
 }
 
+// The version printed is project(VERSION) of CMakeLists.txt, its one home; -h is --help.
+TEST(Cli, VersionAndShortHelp) {
+  std::ifstream cmake(std::string(ARBOR_SOURCE_DIR) + "/CMakeLists.txt");
+  std::string text((std::istreambuf_iterator<char>(cmake)), std::istreambuf_iterator<char>());
+  const auto at = text.find("project(arbor VERSION ");
+  ASSERT_NE(at, std::string::npos);
+  const std::string version = text.substr(at + 22, text.find(' ', at + 22) - (at + 22));
+  const Result v = run("--version");
+  EXPECT_EQ(v.status, 0);
+  EXPECT_EQ(v.out, "arbor " + version + "\n");
+  const Result h = run("-h");
+  EXPECT_EQ(h.status, 0);
+  EXPECT_NE(h.out.find("usage: arbor"), std::string::npos) << h.out;
+  EXPECT_NE(h.out.find("3 a batch solve that diverged"), std::string::npos) << h.out;
+  EXPECT_EQ(run("batch -h").status, 0);
+}
+
+// A directory is named as one; the reader's warnings reach stderr with file and line.
+TEST(Cli, DirectoryRefusedAndReaderWarningsPrinted) {
+  const std::string dir = tempPath("dir.g2o");
+  std::filesystem::create_directories(dir);
+  const Result d = run("batch " + dir);
+  EXPECT_EQ(d.status, 1);
+  EXPECT_NE(d.out.find("is a directory"), std::string::npos) << d.out;
+  std::filesystem::remove(dir);
+  const std::string file = tempPath("warn.g2o");
+  {
+    std::ofstream f(file);
+    f << "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nVERTEX_SE3:QUAT 1 1 0 0 0 0 0 2\n"
+         "EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 1 0 0 0 0 0 1 0 0 0 0 1 0 0 0 1 0 0 1 0 1\n";
+  }
+  const Result w = run("batch " + file);
+  EXPECT_EQ(w.status, 0) << w.out;
+  EXPECT_NE(w.out.find("warning: " + file + ":2: quaternion norm"), std::string::npos) << w.out;
+  std::filesystem::remove(file);
+}
+
 // `arbor generate outliers` on a graph of data/: OUT.g2o is the input's edges followed by the
 // false closures, OUT.labels names those, one per line in file ids, as many as round(f · L) of
 // its L loop closures; the same seed writes the same bytes. Bad values exit 2 naming the flag.

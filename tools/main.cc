@@ -31,15 +31,23 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
 }
 
 void printUsage(std::ostream& out) {
-  out << "usage: arbor <command> [options]   (arbor <command> --help for its options)\n";
+  out << "usage: arbor <command> [options]   (arbor <command> --help for its options)\n"
+         "       arbor --version\n";
   for (const auto& [name, entry] : commands()) out << "  " << name << "\t" << entry.second << "\n";
+  out << "exit codes: 0 done, 1 error (unreadable or malformed input, a failed run), 2 bad "
+         "arguments, 3 a batch solve that diverged\n";
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   arbor::cli::useOneBlasThread();
-  if (argc < 2 || std::string(argv[1]) == "help" || std::string(argv[1]) == "--help") {
+  if (argc >= 2 && std::string(argv[1]) == "--version") {
+    std::cout << "arbor " << ARBOR_VERSION << "\n";
+    return 0;
+  }
+  if (argc < 2 || std::string(argv[1]) == "help" || std::string(argv[1]) == "--help" ||
+      std::string(argv[1]) == "-h") {
     printUsage(argc < 2 ? std::cerr : std::cout);
     return argc < 2 ? 2 : 0;
   }

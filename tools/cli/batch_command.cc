@@ -356,7 +356,7 @@ int batchCommand(const std::vector<std::string>& args) {
   run.read.information = parseInformationPolicy(information);
 
   ReadReport report;
-  AnyPoseGraph any = readPoseGraphFile(run.file, run.read, &report);
+  AnyPoseGraph any = readGraphFile(run.file, run.read, &report);
   return std::visit(
       [&](auto& graph) {
         if (run.robust) return solveRobustAndReport(run, graph, report, total);

@@ -22,8 +22,18 @@ int benchCommand(const std::vector<std::string>& args) {
   for (auto& a : copy) argv.push_back(a.data());
   argv.push_back(nullptr);
   execv(bench.c_str(), argv.data());
-  throw std::runtime_error("cannot run " + bench + ": " + std::strerror(errno) +
-                           " (configure with -DARBOR_BUILD_BENCHMARKS=ON)");
+  const std::string why = std::strerror(errno);
+#if ARBOR_BENCHMARKS_CONFIGURED
+  // Configured with the benchmarks (the default), but only `arbor` was built (as
+  // scripts/run-demo.sh does).
+  const std::string how =
+      "build it: cmake --build " +
+      (ec ? std::string("BUILD_DIR") : self.parent_path().parent_path().string()) +
+      " --target arbor-bench";
+#else
+  const std::string how = "configure with -DARBOR_BUILD_BENCHMARKS=ON, then build arbor-bench";
+#endif
+  throw std::runtime_error("cannot run " + bench + ": " + why + " (" + how + ")");
 }
 
 }  // namespace arbor::cli

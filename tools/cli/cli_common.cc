@@ -2,6 +2,7 @@
 
 #include <dlfcn.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
@@ -10,6 +11,19 @@
 namespace arbor::cli {
 
 namespace po = boost::program_options;
+
+AnyPoseGraph readGraphFile(const std::string& path, const ReadOptions& options,
+                           ReadReport* report) {
+  ReadReport own;
+  ReadReport* r = report ? report : &own;
+  AnyPoseGraph graph = readPoseGraphFile(path, options, r);
+  const int n = static_cast<int>(r->warnings.size());
+  for (int k = 0; k < std::min(n, kMaxWarningsPrinted); ++k)
+    std::cerr << "warning: " << r->warnings[k] << "\n";
+  if (n > kMaxWarningsPrinted)
+    std::cerr << "warning: " << path << ": " << n - kMaxWarningsPrinted << " more warnings\n";
+  return graph;
+}
 
 bool helpRequested(const std::vector<std::string>& args, const po::options_description& options) {
   for (const auto& a : args) {

@@ -11,6 +11,7 @@
 
 #include "core/information.h"
 #include "core/pose_graph.h"
+#include "io/pose_graph_file.h"
 
 namespace arbor::cli {
 
@@ -33,6 +34,13 @@ bool helpRequested(const std::vector<std::string>& args,
                    const boost::program_options::options_description& options);
 
 InformationPolicy parseInformationPolicy(const std::string& name);
+
+/// readPoseGraphFile (io/pose_graph_file.h), then the reader's warnings (a renormalised
+/// quaternion, say) on stderr, "warning: path:line: …" one a line: the first
+/// kMaxWarningsPrinted, then how many more.
+AnyPoseGraph readGraphFile(const std::string& path, const ReadOptions& options,
+                           ReadReport* report = nullptr);
+inline constexpr int kMaxWarningsPrinted = 20;
 
 /// The keys every command's --json shares about its input: file, nodes, edges, dim.
 template <class G>

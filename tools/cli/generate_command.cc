@@ -159,7 +159,7 @@ int generateCommand(const std::vector<std::string>& args) {
           printWritten(output, graph,
                        tail + (had_vertices ? "" : "; VERTEX lines: the odometry chain"));
         },
-        readPoseGraphFile(input, read));
+        readGraphFile(input, read));
     return 0;
   }
   if (vm.count("input")) throw UsageError("--input applies to generate outliers only");

@@ -252,7 +252,7 @@ int publishCommand(const std::vector<std::string>& args) {
   if (run.count < -1) throw UsageError("--count must be >= 0 (or -1: all)");
   if (!(run.timeout_s > 0)) throw UsageError("--timeout must be > 0");
   run.read.information = parseInformationPolicy(information);
-  const AnyPoseGraph any = readPoseGraphFile(run.file, run.read);
+  const AnyPoseGraph any = readGraphFile(run.file, run.read);
   return std::visit([&](const auto& graph) { return publish(run, graph); }, any);
 }
 

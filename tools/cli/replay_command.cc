@@ -180,7 +180,7 @@ int replayCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   const std::optional<ReplayCommandLine> run = parseReplayCommandLine(args);
   if (!run) return 0;
-  AnyPoseGraph any = readPoseGraphFile(run->file, run->read);
+  AnyPoseGraph any = readGraphFile(run->file, run->read);
   return std::visit([&](auto& graph) { return replay(*run, graph, total); }, any);
 }
 
