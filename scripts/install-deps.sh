@@ -7,6 +7,7 @@ packages=(
   build-essential cmake pkg-config git clang-format
   libeigen3-dev libsuitesparse-dev libboost-program-options-dev
   liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless
+  default-jdk-headless libjchart2d-java
   libgtest-dev libgmock-dev libbenchmark-dev libspectra-dev
   libceres-dev nlohmann-json3-dev
   libopenblas0-pthread libopenblas-pthread-dev

@@ -251,6 +251,32 @@ TEST(Cli, VersionAndShortHelp) {
   EXPECT_EQ(run("batch -h").status, 0);
 }
 
+// `arbor spy` runs lcm-spy with lcm.jar, jchart2d and the jar of our types on its class path:
+// headless (as here) it loads every one of our types, then stops where it would open its window.
+TEST(Cli, SpyLoadsEveryArborType) {
+  const Result p = run("spy --print-command --lcm-url memq://");
+  ASSERT_EQ(p.status, 0) << p.out;
+  EXPECT_NE(p.out.find("jchart2d.jar"), std::string::npos) << p.out;
+  EXPECT_NE(p.out.find("arbor_lcm_types.jar"), std::string::npos) << p.out;
+  EXPECT_NE(p.out.find("--lcm-url=memq://"), std::string::npos) << p.out;
+  int types = 0;
+  for (const auto& f :
+       std::filesystem::directory_iterator(std::string(ARBOR_SOURCE_DIR) + "/io/lcm"))
+    types += f.path().extension() == ".lcm";
+  const std::string cmd = "env -u DISPLAY JAVA_TOOL_OPTIONS=-Djava.awt.headless=true timeout 60 " +
+                          std::string(ARBOR_EXE) + " spy --lcm-url memq:// 2>&1";
+  std::string out;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) out.append(buf.data(), n);
+  pclose(pipe);
+  EXPECT_NE(out.find("Found " + std::to_string(types) + " LCM types"), std::string::npos) << out;
+  EXPECT_EQ(out.find("ClassNotFound"), std::string::npos) << out;
+  EXPECT_EQ(out.find("Unrecognized option"), std::string::npos) << out;
+}
+
 // A directory is named as one; the reader's warnings reach stderr with file and line.
 TEST(Cli, DirectoryRefusedAndReaderWarningsPrinted) {
   const std::string dir = tempPath("dir.g2o");

@@ -26,6 +26,7 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
       {"serve",
        {arbor::cli::serveCommand, "run the smoother as an LCM service (edges in, estimates out)"}},
       {"publish", {arbor::cli::publishCommand, "stream a file's edges over LCM to arbor serve"}},
+      {"spy", {arbor::cli::spyCommand, "lcm-spy with Arbor's message types (a GUI)"}},
   };
   return table;
 }
