@@ -176,9 +176,9 @@ class OnlineSmoother {
   /// re-added with its weight (disabled edges stay disabled) and one update eliminates the whole
   /// tree, so the estimate afterwards is one Gauss–Newton step from the seed (equal to it when
   /// the seed is the optimum). With `only_if_lower` the rebuilt smoother is kept only when its F
-  /// over every factor is lower than the current one (objective(): disabled edges left out; a batch estimate of an older
-  /// snapshot can be worse for the poses and edges that came since). Throws as seedPoint(); on a
-  /// throw nothing changed.
+  /// over every factor is lower than the current one (objective(): disabled edges left out; a batch
+  /// estimate of an older snapshot can be worse for the poses and edges that came since). Throws as
+  /// seedPoint(); on a throw nothing changed.
   ReseedResult reseed(const std::map<Key, G>& values, bool only_if_lower = false);
   ReseedResult reseed(const std::vector<G>& prefix, bool only_if_lower = false);
 

@@ -13,5 +13,6 @@ int benchCommand(const std::vector<std::string>& args);
 int replayCommand(const std::vector<std::string>& args);
 int serveCommand(const std::vector<std::string>& args);
 int publishCommand(const std::vector<std::string>& args);
+int commandCommand(const std::vector<std::string>& args);
 
 }  // namespace arbor::cli
