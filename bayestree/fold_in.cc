@@ -190,7 +190,9 @@ std::vector<Factor<G>> FoldIn<G>::splitOffIntroducing(std::vector<Factor<G>>* qu
       const bool ki = known(e.key(0)), kj = e.arity() < 2 || known(e.key(1));
       if (ki && kj) {
         rest.push_back(e);
-      } else if (e.arity() == 2 && (ki || kj)) {
+      } else if (e.arity() == 2 && (ki || kj) && e.inlierWeight() > 0) {
+        // (A factor of weight 0 brings no information: it never introduces a pose, whose
+        // clique would be singular in the first pass; it waits for the pose to be known.)
         const int v = ki ? e.key(1) : e.key(0);
         (*slot)[v] = 1;
         joined.push_back(v);

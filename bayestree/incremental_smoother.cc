@@ -215,14 +215,22 @@ struct IncrementalSmoother<G>::Impl {
 
   // Extension (robust layers): a new inlier weight is a relinearisation of the factor, so its
   // keys' cliques are re-eliminated by the next update.
+  // A queued factor (index numFactors() + k, k in addFactor order) takes the weight before it
+  // enters: its first linearisation is weighted, nothing is relinearised.
   void setFactorWeight(int f, double w) {
-    if (f < 0 || f >= factors.numFactors())
+    const int added = factors.numFactors();
+    const int all = added + static_cast<int>(queued.size());
+    if (f < 0 || f >= all)
       throw std::invalid_argument("IncrementalSmoother::setFactorWeight: factor " +
-                                  std::to_string(f) + " out of range (" +
-                                  std::to_string(factors.numFactors()) + " factors)");
+                                  std::to_string(f) + " out of range (" + std::to_string(all) +
+                                  " factors, queued included)");
     if (!(w >= 0 && w <= 1))
       throw std::invalid_argument("IncrementalSmoother::setFactorWeight(" + std::to_string(f) +
                                   "): weight " + std::to_string(w) + " not in [0, 1]");
+    if (f >= added) {
+      queued[static_cast<size_t>(f - added)].setInlierWeight(w);
+      return;
+    }
     Factor<G>& e = factors.factors[f];
     if (e.inlierWeight() == w) return;
     e.setInlierWeight(w);

@@ -130,8 +130,9 @@ class IncrementalSmoother {
   /// new weight is a relinearisation of that factor: the next update() relinearises it and
   /// re-eliminates the cliques of its keys (with their ancestors), as Alg. 4 does for the
   /// factors of a relinearised variable. w = 0 leaves the factor in the graph without effect on
-  /// the estimate. No-op when w is its weight already. Throws std::invalid_argument on a bad
-  /// index or w ∉ [0, 1].
+  /// the estimate. No-op when w is its weight already. Index numFactors() + k names the k-th
+  /// factor queued since the last update() (addFactor order): it enters with weight w. Throws
+  /// std::invalid_argument on a bad index or w ∉ [0, 1].
   void setFactorWeight(int index, double w);
 
   /// One step of iSAM2 (IJRR 2012 Alg. 6): adds the queued factors and poses, relinearises,

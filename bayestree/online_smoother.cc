@@ -34,6 +34,24 @@ const char* toString(EdgeStatus status) {
   return "unknown";
 }
 
+const char* toString(EdgeSwitchStatus status) {
+  switch (status) {
+    case EdgeSwitchStatus::kApplied:
+      return "applied";
+    case EdgeSwitchStatus::kUnknownPose:
+      return "unknown pose";
+    case EdgeSwitchStatus::kNoSuchEdge:
+      return "no such edge";
+    case EdgeSwitchStatus::kAlreadyDisabled:
+      return "already disabled";
+    case EdgeSwitchStatus::kAlreadyEnabled:
+      return "already enabled";
+    case EdgeSwitchStatus::kBridge:
+      return "bridge";
+  }
+  return "unknown";
+}
+
 template <class G>
 OnlineSmoother<G>::OnlineSmoother(OnlineSmootherOptions<G> options)
     : options_(options), smoother_(options.smoother) {
@@ -166,7 +184,9 @@ void OnlineSmoother<G>::apply(const Measurement& m) {
   } else if (root(from->second) != root(to->second)) {
     join(from->second, to->second, m.z);
   }
-  const auto edge = RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega);
+  Factor<G> edge(RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega));
+  if (!disabled_pairs_.empty() && disabled_pairs_.count(idPair(m.from, m.to)))
+    edge.setInlierWeight(0.0);  // between a pair taken back: disabled until enableEdge
   smoother_.addFactor(edge);
   queued_.push_back(edge);
   ++stats_.edges_accepted;
@@ -290,6 +310,9 @@ std::optional<Key> OnlineSmoother<G>::anchorOf(Key id) const {
 
 template <class G>
 UpdateStats OnlineSmoother<G>::update() {
+  // Hook for the online GNC (bayestree/online_gnc.*), which reweights loop closures around
+  // this update: it must skip every factor with factorDisabled(f) (weight 0, set by
+  // disableEdge, until enableEdge), so a disabled edge is never reweighted.
   return recordUpdate(smoother_.update());
 }
 
@@ -305,6 +328,7 @@ UpdateStats OnlineSmoother<G>::recordUpdate(const UpdateStats& s) {
   ++stats_.updates;
   stats_.total_update_time_s += s.time_s;
   stats_.last_update = s;
+  indexEdgeFactors();
   return s;
 }
 
@@ -317,7 +341,8 @@ PoseGraph<G> OnlineSmoother<G>::snapshot() const {
   for (int k = 0; k < n; ++k) graph.index.emplace(ids_[k], k);
   graph.poses = smoother_.estimate();
   graph.poses.resize(static_cast<size_t>(n));
-  for (const auto& f : smoother_.factors()) addToGraph(f, &graph);  // only poses known then
+  for (const auto& f : smoother_.factors())  // only poses known then
+    if (!disabledFactor(f)) addToGraph(f, &graph);
   for (int k = 0; k < n; ++k)
     if (smoother_.isFixed(k)) graph.fixed.push_back(k);
   graph.has_initial_estimate = true;
@@ -411,11 +436,19 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
     const std::vector<G> current = smoother_.estimate();
     for (const auto& f : queued_) result.F_before += f.cost(current);
   }
+  if (!disabled_pairs_.empty()) {  // F over what is solved: the disabled edges left out
+    const std::vector<G> current = smoother_.estimate();
+    result.F_rebuilt = enabledCost(fresh.estimate(), fresh.factors());
+    result.F_before = enabledCost(current, smoother_.factors()) + enabledCost(current, queued_);
+  }
   result.applied = !only_if_lower || result.F_rebuilt < result.F_before;
   if (result.applied) {
     smoother_ = std::move(fresh);
     queued_.clear();
     poses_at_update_ = static_cast<int>(ids_.size());
+    pair_factors_.clear();  // the rebuild numbers the factors anew
+    factors_indexed_ = 0;
+    indexEdgeFactors();
   }
   result.stats.time_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -459,7 +492,152 @@ std::map<Key, G> OnlineSmoother<G>::estimates() const {
 
 template <class G>
 OnlineStats OnlineSmoother<G>::stats() const {
-  return stats_;
+  OnlineStats s = stats_;
+  s.pairs_disabled = static_cast<int>(disabled_pairs_.size());
+  for (const IdPair& p : disabled_pairs_) s.edges_disabled += edgesBetween(p);
+  return s;
+}
+
+// ---- Taking an edge back ---------------------------------------------------------------------
+
+template <class G>
+int OnlineSmoother<G>::edgesBetween(const IdPair& p) const {
+  if (p.first == p.second) return 0;  // no self-loops are accepted
+  int n = 0;
+  for (const auto& key : {p, IdPair{p.second, p.first}}) {
+    auto it = seen_.find(key);
+    if (it != seen_.end()) n += static_cast<int>(it->second.size());
+  }
+  return n;
+}
+
+template <class G>
+std::optional<EdgeSwitchResult> OnlineSmoother<G>::switchProblem(Key from, Key to,
+                                                                 const char* what) const {
+  const std::string edge =
+      std::string(what) + " edge " + std::to_string(from) + " - " + std::to_string(to) + ": ";
+  for (Key id : {from, to})
+    if (!hasPose(id))
+      return EdgeSwitchResult{EdgeSwitchStatus::kUnknownPose, 0,
+                              edge + "unknown pose id " + std::to_string(id)};
+  if (from == to || edgesBetween(idPair(from, to)) == 0)
+    return EdgeSwitchResult{EdgeSwitchStatus::kNoSuchEdge, 0,
+                            edge + "no accepted edge between these poses"};
+  return std::nullopt;
+}
+
+// Whether the two poses of p stay connected by the enabled edges without p's: a breadth-first
+// search from one to the other over every accepted edge of another pair not disabled, O(n + m).
+template <class G>
+bool OnlineSmoother<G>::connectedWithout(const IdPair& p) const {
+  std::vector<std::vector<int>> adjacent(ids_.size());
+  for (const auto& [key, measurements] : seen_) {
+    const IdPair q = idPair(key.first, key.second);
+    if (measurements.empty() || q == p || disabled_pairs_.count(q)) continue;
+    const int a = index_.at(key.first), b = index_.at(key.second);
+    adjacent[a].push_back(b);
+    adjacent[b].push_back(a);
+  }
+  const int source = index_.at(p.first), target = index_.at(p.second);
+  std::vector<char> seen(ids_.size(), 0);
+  std::vector<int> frontier = {source};
+  seen[source] = 1;
+  while (!frontier.empty()) {
+    const int v = frontier.back();
+    frontier.pop_back();
+    if (v == target) return true;
+    for (int w : adjacent[v])
+      if (!seen[w]) {
+        seen[w] = 1;
+        frontier.push_back(w);
+      }
+  }
+  return false;
+}
+
+template <class G>
+void OnlineSmoother<G>::setPairWeight(const IdPair& p, double w) {
+  auto it = pair_factors_.find(p);
+  if (it != pair_factors_.end())
+    for (int f : it->second) smoother_.setFactorWeight(f, w);
+  const int added = smoother_.numFactors();  // queued_ mirrors the smoother's queue
+  for (size_t k = 0; k < queued_.size(); ++k) {
+    const auto* e = queued_[k].relativePose();
+    if (e == nullptr || idPair(ids_[e->i], ids_[e->j]) != p) continue;
+    smoother_.setFactorWeight(added + static_cast<int>(k), w);
+    queued_[k].setInlierWeight(w);
+  }
+}
+
+template <class G>
+void OnlineSmoother<G>::indexEdgeFactors() {
+  const std::vector<Factor<G>>& fs = smoother_.factors();
+  for (int f = factors_indexed_; f < static_cast<int>(fs.size()); ++f)
+    if (const auto* e = fs[f].relativePose())
+      pair_factors_[idPair(ids_[e->i], ids_[e->j])].push_back(f);
+  factors_indexed_ = static_cast<int>(fs.size());
+}
+
+template <class G>
+bool OnlineSmoother<G>::disabledFactor(const Factor<G>& f) const {
+  if (disabled_pairs_.empty()) return false;
+  const auto* e = f.relativePose();
+  return e != nullptr && disabled_pairs_.count(idPair(ids_[e->i], ids_[e->j])) > 0;
+}
+
+template <class G>
+bool OnlineSmoother<G>::factorDisabled(int index) const {
+  const std::vector<Factor<G>>& fs = smoother_.factors();
+  return index >= 0 && index < static_cast<int>(fs.size()) && disabledFactor(fs[index]);
+}
+
+template <class G>
+double OnlineSmoother<G>::enabledCost(const std::vector<G>& x,
+                                      const std::vector<Factor<G>>& fs) const {
+  double F = 0;
+  for (const Factor<G>& f : fs)
+    if (!disabledFactor(f)) F += f.cost(x);
+  return F;
+}
+
+template <class G>
+double OnlineSmoother<G>::objective() const {
+  if (disabled_pairs_.empty()) return smoother_.objective();
+  return enabledCost(smoother_.estimate(), smoother_.factors());
+}
+
+template <class G>
+EdgeSwitchResult OnlineSmoother<G>::disableEdge(Key from, Key to) {
+  if (auto refusal = switchProblem(from, to, "disable")) return *refusal;
+  const IdPair p = idPair(from, to);
+  const int n = edgesBetween(p);
+  const std::string edge = "edge " + std::to_string(from) + " - " + std::to_string(to) + " (" +
+                           std::to_string(n) + (n == 1 ? " accepted edge)" : " accepted edges)");
+  if (disabled_pairs_.count(p))
+    return {EdgeSwitchStatus::kAlreadyDisabled, n, "disable " + edge + ": disabled already"};
+  if (!connectedWithout(p)) {
+    return {EdgeSwitchStatus::kBridge, n,
+            "disable " + edge + ": refused, a bridge: without it poses " + std::to_string(from) +
+                " and " + std::to_string(to) +
+                " are not connected by enabled edges and one side would lose its gauge"};
+  }
+  disabled_pairs_.insert(p);
+  setPairWeight(p, 0.0);
+  return {EdgeSwitchStatus::kApplied, n, "disabled " + edge + " from the next update on"};
+}
+
+template <class G>
+EdgeSwitchResult OnlineSmoother<G>::enableEdge(Key from, Key to) {
+  if (auto refusal = switchProblem(from, to, "enable")) return *refusal;
+  const IdPair p = idPair(from, to);
+  const int n = edgesBetween(p);
+  const std::string edge = "edge " + std::to_string(from) + " - " + std::to_string(to) + " (" +
+                           std::to_string(n) + (n == 1 ? " accepted edge)" : " accepted edges)");
+  if (!disabled_pairs_.count(p))
+    return {EdgeSwitchStatus::kAlreadyEnabled, n, "enable " + edge + ": not disabled"};
+  disabled_pairs_.erase(p);
+  setPairWeight(p, 1.0);
+  return {EdgeSwitchStatus::kApplied, n, "enabled " + edge + " from the next update on"};
 }
 
 template class OnlineSmoother<SE2>;

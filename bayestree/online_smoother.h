@@ -12,6 +12,13 @@
 // move) and its anchor is released. When priors come to fix a component's gauge, its anchor is
 // released.
 //
+// Taking an edge back (disableEdge / enableEdge; docs/design.md, "Taking an edge back"): every
+// accepted edge between two ids gets smoother weight 0 (IncrementalSmoother::setFactorWeight),
+// sticky until enableEdge restores weight 1; an edge between them accepted meanwhile enters
+// disabled too. A disable that would split a component (its edges are a bridge of the graph of
+// enabled edges) is refused, so every component stays connected by enabled edges and keeps its
+// gauge.
+//
 // Reseeding (reseed()) makes given values — typically a batch solver's estimate of a snapshot()
 // — the linearisation point and rebuilds the Bayes tree from scratch; incremental updates then
 // continue from there.
@@ -21,8 +28,10 @@
 // const methods.
 #pragma once
 
+#include <algorithm>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -48,6 +57,25 @@ const char* toString(EdgeStatus status);
 struct EdgeResult {
   EdgeStatus status = EdgeStatus::kAccepted;
   std::string reason;  ///< why it was rejected (or which edge it duplicates)
+};
+
+/// What disableEdge / enableEdge did.
+enum class EdgeSwitchStatus {
+  kApplied,          ///< done: the next update() applies the new weights
+  kUnknownPose,      ///< an id is not a known pose: nothing changed
+  kNoSuchEdge,       ///< no accepted edge between the two ids: nothing changed
+  kAlreadyDisabled,  ///< disableEdge of a pair disabled already: nothing changed
+  kAlreadyEnabled,   ///< enableEdge of a pair not disabled: nothing changed
+  kBridge,           ///< disableEdge refused: without these edges a component falls apart
+};
+
+const char* toString(EdgeSwitchStatus status);
+
+struct EdgeSwitchResult {
+  EdgeSwitchStatus status = EdgeSwitchStatus::kApplied;
+  int edges = 0;       ///< accepted edges between the two ids (either direction)
+  std::string reason;  ///< what happened, or why not, naming the ids
+  bool applied() const { return status == EdgeSwitchStatus::kApplied; }
 };
 
 template <class G>
@@ -79,6 +107,8 @@ struct OnlineStats {
   double total_update_time_s = 0;
   int reseeds = 0;  ///< rebuilds by reseed() that were kept
   double total_reseed_time_s = 0;
+  int edges_disabled = 0;  ///< accepted edges disabled now (disableEdge), weight 0
+  int pairs_disabled = 0;  ///< id pairs disabled now
   UpdateStats last_update;
 };
 
@@ -101,14 +131,32 @@ class OnlineSmoother {
   /// unknown id starts a component there (at p, identity rotation).
   EdgeResult addPositionPrior(Key id, const typename G::Translation& p,
                               const PositionMatrix& omega);
+  /// Takes back every accepted edge between `from` and `to` (either direction): smoother weight
+  /// 0 from the next update() on, until enableEdge; an edge between them accepted meanwhile
+  /// enters disabled. Refused, changing nothing, for an unknown id, no edge between them, a pair
+  /// disabled already, and a bridge: when the two would not be connected by the enabled edges
+  /// left (a breadth-first search, O(n + m)), the component would fall apart and one part lose
+  /// its gauge.
+  EdgeSwitchResult disableEdge(Key from, Key to);
+  /// Gives the edges between `from` and `to` weight 1 again from the next update() on. Refused,
+  /// changing nothing, for an unknown id, no edge between them, or a pair not disabled.
+  EdgeSwitchResult enableEdge(Key from, Key to);
+  /// Whether factor `index` of smoother().factors() is an edge taken back by disableEdge. A
+  /// robust layer (online GNC) must leave such a factor at weight 0.
+  bool factorDisabled(int index) const;
+  /// F = Σ eᵀΩe at the estimate over every factor not disabled (= smoother().objective() while
+  /// no edge is disabled). O(m).
+  double objective() const;
+
   /// Runs one incremental update over the edges accepted since the last one.
   UpdateStats update();
   /// Relinearises everything and iterates to convergence (the end of a replay).
   UpdateStats finalize();
 
   /// The poses known at the last update() (the first ones in dense order; the anchors listed in
-  /// `fixed`), every edge and prior taken in by the smoother so far, and the current estimate as
-  /// `poses`: a problem for a batch solver with the same gauge (ids in dense order, not sorted).
+  /// `fixed`), every edge and prior taken in by the smoother so far but the disabled edges, and
+  /// the current estimate as `poses`: a problem for a batch solver with the same gauge (ids in
+  /// dense order, not sorted).
   PoseGraph<G> snapshot() const;
 
   /// The complete linearisation point reseed(values) would use, in dense order:
@@ -125,11 +173,12 @@ class OnlineSmoother {
   std::vector<G> seedPoint(const std::vector<G>& prefix) const;
   /// Rebuilds the smoother with seedPoint(values) as its linearisation point (the gauge pose keeps
   /// its fixed value): every factor, including those accepted since the last update(), is
-  /// re-added and one update eliminates the whole tree, so the estimate afterwards is one
-  /// Gauss–Newton step from the seed (equal to it when the seed is the optimum). With
-  /// `only_if_lower` the rebuilt smoother is kept only when its F over every factor is lower
-  /// than the current one (a batch estimate of an older snapshot can be worse for the poses
-  /// and edges that came since). Throws as seedPoint(); on a throw nothing changed.
+  /// re-added with its weight (disabled edges stay disabled) and one update eliminates the whole
+  /// tree, so the estimate afterwards is one Gauss–Newton step from the seed (equal to it when
+  /// the seed is the optimum). With `only_if_lower` the rebuilt smoother is kept only when its F
+  /// over every factor is lower than the current one (objective(): disabled edges left out; a batch
+  /// estimate of an older snapshot can be worse for the poses and edges that came since). Throws as
+  /// seedPoint(); on a throw nothing changed.
   ReseedResult reseed(const std::map<Key, G>& values, bool only_if_lower = false);
   ReseedResult reseed(const std::vector<G>& prefix, bool only_if_lower = false);
 
@@ -171,6 +220,23 @@ class OnlineSmoother {
   std::vector<G> completeSeed(std::vector<G> values, const std::vector<char>& given) const;
   ReseedResult rebuild(const std::vector<G>& seed, bool only_if_lower);
 
+  // Taking an edge back.
+  using IdPair = std::pair<Key, Key>;  ///< {min, max} of two ids
+  static IdPair idPair(Key a, Key b) { return {std::min(a, b), std::max(a, b)}; }
+  /// Accepted edges between the two ids, either direction.
+  int edgesBetween(const IdPair& p) const;
+  /// The refusal of a disable/enable of (from, to) for an unknown id or no edge, if any.
+  std::optional<EdgeSwitchResult> switchProblem(Key from, Key to, const char* what) const;
+  /// Whether a and b (known ids) stay connected by the enabled edges other than p's (BFS).
+  bool connectedWithout(const IdPair& p) const;
+  /// Sets weight w on every edge factor of p, added or queued.
+  void setPairWeight(const IdPair& p, double w);
+  /// Lists the edge factors of smoother_.factors() from factors_indexed_ on in pair_factors_.
+  void indexEdgeFactors();
+  bool disabledFactor(const Factor<G>& f) const;
+  /// Σ eᵀΩe at x over the factors of fs not disabled.
+  double enabledCost(const std::vector<G>& x, const std::vector<Factor<G>>& fs) const;
+
   OnlineSmootherOptions<G> options_;
   IncrementalSmoother<G> smoother_;
   std::unordered_map<Key, int> index_;
@@ -200,6 +266,9 @@ class OnlineSmoother {
   int poses_at_update_ = 0;        ///< poses known at the last update
   std::map<std::pair<Key, Key>, std::vector<Measurement>> seen_;  ///< accepted edges
   OnlineStats stats_;
+  std::set<IdPair> disabled_pairs_;                  ///< pairs taken back by disableEdge
+  std::map<IdPair, std::vector<int>> pair_factors_;  ///< per pair: its edges' smoother factors
+  int factors_indexed_ = 0;                          ///< smoother factors in pair_factors_
 };
 
 using OnlineSmoother2 = OnlineSmoother<SE2>;

@@ -396,6 +396,56 @@ PriorDecoding decodePrior(const void* data, int size) {
   return m.dim == 2 ? toStreamPrior<SE2>(m) : toStreamPrior<SE3>(m);
 }
 
+const char* toString(StreamEdgeCommand::Kind kind) {
+  return kind == StreamEdgeCommand::Kind::kDisable ? "disable" : "enable";
+}
+
+EdgeCommandDecoding decodeEdgeCommand(const void* data, int size) {
+  EdgeCommandDecoding out;
+  edge_command_t m;
+  out.problem = decodeMessage(data, size, &m, &out.detail);
+  if (!out.ok()) return out;
+  auto fail = [&](MessageProblem p, const std::string& what) {
+    out.problem = p;
+    out.detail = what;
+    return out;
+  };
+  if (m.command != edge_command_t::DISABLE_EDGE && m.command != edge_command_t::ENABLE_EDGE) {
+    return fail(MessageProblem::kKind, "command " + std::to_string(m.command) +
+                                           " is not DISABLE_EDGE (1) or ENABLE_EDGE (2)");
+  }
+  if (m.from_id < 0)
+    return fail(MessageProblem::kId, "from_id " + std::to_string(m.from_id) + " is negative");
+  if (m.to_id < 0)
+    return fail(MessageProblem::kId, "to_id " + std::to_string(m.to_id) + " is negative");
+  if (m.from_id == m.to_id) {
+    return fail(MessageProblem::kSelfLoop,
+                "from_id and to_id are both " + std::to_string(m.from_id) + ": no such edge");
+  }
+  if (m.seq < 1) return fail(MessageProblem::kSeq, "seq " + std::to_string(m.seq) + " is not >= 1");
+  StreamEdgeCommand& c = out.command;
+  c.utime = m.utime;
+  c.sender = m.sender;
+  c.seq = m.seq;
+  c.kind = m.command == edge_command_t::DISABLE_EDGE ? StreamEdgeCommand::Kind::kDisable
+                                                     : StreamEdgeCommand::Kind::kEnable;
+  c.from = m.from_id;
+  c.to = m.to_id;
+  return out;
+}
+
+edge_command_t makeEdgeCommandMessage(const StreamEdgeCommand& command) {
+  edge_command_t m;
+  m.utime = command.utime;
+  m.sender = command.sender;
+  m.seq = command.seq;
+  m.command = command.kind == StreamEdgeCommand::Kind::kDisable ? edge_command_t::DISABLE_EDGE
+                                                                : edge_command_t::ENABLE_EDGE;
+  m.from_id = command.from;
+  m.to_id = command.to;
+  return m;
+}
+
 int dimOf(const AnyStreamPrior& prior) {
   return std::visit([](const auto& p) { return dimOfPrior(p); }, prior);
 }
@@ -492,5 +542,6 @@ template MessageProblem decodeMessage(const void*, int, command_t*, std::string*
 template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, prior_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, edge_command_t*, std::string*);
 
 }  // namespace arbor

@@ -1,5 +1,6 @@
-// io/lcm_messages.h and io/lcm_journal.h: checked decoding of edge_t and prior_t (every bad
-// field, truncated bytes, wrong type hash, random corruption) and the event-log journal.
+// io/lcm_messages.h and io/lcm_journal.h: checked decoding of edge_t, prior_t and
+// edge_command_t (every bad field, truncated bytes, wrong type hash, random corruption) and the
+// event-log journal.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -487,6 +488,112 @@ TEST(LcmMessages, RandomPriorCorruptionNeverThrows) {
       PriorDecoding d;
       ASSERT_NO_THROW(d = decodePrior(bytes.data(), static_cast<int>(bytes.size())));
       if (d.ok()) ++accepted;
+    }
+  }
+  EXPECT_LT(accepted, 4000);
+}
+
+StreamEdgeCommand sampleCommand() {
+  StreamEdgeCommand c;
+  c.utime = 99;
+  c.sender = 4;
+  c.seq = 17;
+  c.kind = StreamEdgeCommand::Kind::kDisable;
+  c.from = 130;
+  c.to = 105;
+  return c;
+}
+
+MessageProblem problemOf(const edge_command_t& m, std::string* detail) {
+  const auto bytes = encodeMessage(m);
+  const EdgeCommandDecoding d = decodeEdgeCommand(bytes.data(), static_cast<int>(bytes.size()));
+  *detail = d.detail;
+  return d.problem;
+}
+
+TEST(LcmMessages, EdgeCommandRoundTrips) {
+  for (const auto kind : {StreamEdgeCommand::Kind::kDisable, StreamEdgeCommand::Kind::kEnable}) {
+    StreamEdgeCommand c = sampleCommand();
+    c.kind = kind;
+    const edge_command_t m = makeEdgeCommandMessage(c);
+    EXPECT_EQ(m.command, kind == StreamEdgeCommand::Kind::kDisable ? edge_command_t::DISABLE_EDGE
+                                                                   : edge_command_t::ENABLE_EDGE);
+    const auto bytes = encodeMessage(m);
+    EXPECT_EQ(bytes.size(), 8u + 3 * 8 + 1 + 2 * 8);  // hash, utime sender seq, command, ids
+    const EdgeCommandDecoding d = decodeEdgeCommand(bytes.data(), static_cast<int>(bytes.size()));
+    ASSERT_TRUE(d.ok()) << d.detail;
+    EXPECT_EQ(d.command.utime, 99);
+    EXPECT_EQ(d.command.sender, 4);
+    EXPECT_EQ(d.command.seq, 17);
+    EXPECT_EQ(d.command.kind, kind);
+    EXPECT_EQ(d.command.from, 130);
+    EXPECT_EQ(d.command.to, 105);
+  }
+  // The largest ids and seq are valid messages (an unknown pose is the smoother's to refuse).
+  StreamEdgeCommand big = sampleCommand();
+  big.from = big.seq = std::numeric_limits<std::int64_t>::max();
+  big.to = 0;
+  const auto bytes = encodeMessage(makeEdgeCommandMessage(big));
+  EXPECT_TRUE(decodeEdgeCommand(bytes.data(), static_cast<int>(bytes.size())).ok());
+}
+
+TEST(LcmMessages, EachBadEdgeCommandFieldHasItsReason) {
+  const edge_command_t good = makeEdgeCommandMessage(sampleCommand());
+  auto check = [&](auto mutate, MessageProblem expected, const std::string& words) {
+    edge_command_t m = good;
+    mutate(m);
+    std::string detail;
+    EXPECT_EQ(problemOf(m, &detail), expected) << toString(expected) << ": " << detail;
+    EXPECT_NE(detail.find(words), std::string::npos) << detail;
+  };
+  check([](edge_command_t& m) { m.command = 0; }, MessageProblem::kKind, "command 0");
+  check([](edge_command_t& m) { m.command = 3; }, MessageProblem::kKind, "command 3");
+  check([](edge_command_t& m) { m.command = -128; }, MessageProblem::kKind, "command -128");
+  check([](edge_command_t& m) { m.from_id = -1; }, MessageProblem::kId, "from_id -1");
+  check([](edge_command_t& m) { m.to_id = std::numeric_limits<std::int64_t>::min(); },
+        MessageProblem::kId, "to_id -9223372036854775808");
+  check([](edge_command_t& m) { m.to_id = m.from_id; }, MessageProblem::kSelfLoop, "both 130");
+  check([](edge_command_t& m) { m.seq = 0; }, MessageProblem::kSeq, "seq 0");
+  check([](edge_command_t& m) { m.seq = -5; }, MessageProblem::kSeq, "seq -5");
+  // Bytes: every truncation, trailing bytes, another type's bytes.
+  const auto bytes = encodeMessage(good);
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    const EdgeCommandDecoding d = decodeEdgeCommand(bytes.data(), static_cast<int>(n));
+    EXPECT_EQ(d.problem, MessageProblem::kTruncated) << n << " bytes: " << d.detail;
+  }
+  auto longer = bytes;
+  longer.push_back(0);
+  EXPECT_EQ(decodeEdgeCommand(longer.data(), static_cast<int>(longer.size())).problem,
+            MessageProblem::kTrailingBytes);
+  const auto edge = encodeMessage(makeEdgeMessage(sampleEdge2()));
+  const EdgeCommandDecoding d = decodeEdgeCommand(edge.data(), static_cast<int>(edge.size()));
+  EXPECT_EQ(d.problem, MessageProblem::kTypeHash);
+  EXPECT_NE(d.detail.find("edge_command_t"), std::string::npos) << d.detail;
+  command_t service;  // the service's own commands are another type
+  service.command = command_t::REFINE;
+  const auto other = encodeMessage(service);
+  EXPECT_EQ(decodeEdgeCommand(other.data(), static_cast<int>(other.size())).problem,
+            MessageProblem::kTypeHash);
+  EXPECT_EQ(decodeEdgeCommand(nullptr, 0).problem, MessageProblem::kTruncated);
+}
+
+TEST(LcmMessages, RandomEdgeCommandCorruptionNeverThrows) {
+  std::mt19937 rng(8);
+  const auto good = encodeMessage(makeEdgeCommandMessage(sampleCommand()));
+  int accepted = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    auto bytes = good;
+    const int flips = 1 + static_cast<int>(rng() % 4);
+    for (int f = 0; f < flips; ++f) bytes[rng() % bytes.size()] = static_cast<uint8_t>(rng());
+    bytes.resize(bytes.size() - rng() % 3);
+    EdgeCommandDecoding d;
+    ASSERT_NO_THROW(d = decodeEdgeCommand(bytes.data(), static_cast<int>(bytes.size())));
+    if (d.ok()) {
+      ++accepted;
+      EXPECT_GE(d.command.from, 0);
+      EXPECT_GE(d.command.to, 0);
+      EXPECT_NE(d.command.from, d.command.to);
+      EXPECT_GE(d.command.seq, 1);
     }
   }
   EXPECT_LT(accepted, 4000);

@@ -3,7 +3,8 @@
 // replay`'s, kill -9 and a restart from the journal lose nothing and reproduce the estimate
 // exactly, bad messages are counted while good ones are applied, background batches with
 // reseeding run while edges flow, a burst of the largest shared 2D dataset is fully applied, and
-// priors streamed with the edges survive kill -9 (the restart replays them in their order).
+// priors streamed with the edges survive kill -9 (the restart replays them in their order), and
+// so does an edge taken back with `arbor command disable`.
 // Every process a test starts is stopped, pass or fail.
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -499,6 +500,106 @@ TEST_F(LcmProcess, KillNineWithPriorsAndRestartReplaysThemInOrder) {
   reference.finalize();
   const double F = reference.smoother().objective();
   EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+}
+
+// A false closure streamed with a graph's edges, taken back with `arbor command disable ...
+// --wait` (its result read back from the status), then serve is killed with -9 and restarted
+// from its journal: the replayed estimate is the one it had after the disable, bit for bit, the
+// closure stays disabled for the rest of the stream, and F at the end is that of the smoother
+// fed the same directly.
+TEST_F(LcmProcess, KillNineAfterADisableCommandAndRestartKeepsTheEdgeDisabled) {
+  const PoseGraph2 graph = serve::testing::manhattanGraph(300, 4, -1, 6);
+  std::vector<std::vector<std::uint8_t>> edges;
+  size_t cut = 0;
+  std::int64_t cut_seq = 0;
+  const Key bad_from = 10, bad_to = 150;
+  for (const auto& m : serve::testing::streamBytes(graph)) {
+    const auto e = std::get<StreamEdge<SE2>>(
+        decodeEdge(m.bytes.data(), static_cast<int>(m.bytes.size())).edge);
+    ASSERT_FALSE(std::min(e.from, e.to) == bad_from && std::max(e.from, e.to) == bad_to);
+    edges.push_back(m.bytes);
+    if (cut == 0 && std::max(e.from, e.to) == bad_to) {
+      StreamEdge<SE2> bad;
+      bad.sender = 2;
+      bad.seq = 1;
+      bad.from = bad_from;
+      bad.to = bad_to;
+      bad.z = SE2(1.0, 0.0, 0.0);
+      bad.omega = e.omega;
+      edges.push_back(serve::testing::edgeBytes(bad));
+      cut = edges.size() + 15;
+      cut_seq = e.seq + 15;
+    }
+  }
+  ASSERT_GT(cut, 0u);
+  const std::string prefix = "P7_";
+  auto send = [&](lcm::LCM& lcm, size_t from, size_t to) {
+    for (size_t k = from; k < to; ++k)
+      lcm.publish(prefix + "ARBOR_EDGES", edges[k].data(), static_cast<unsigned>(edges[k].size()));
+    command_t c;
+    c.command = command_t::PUBLISH_FULL;
+    const auto cb = encodeMessage(c);
+    lcm.publish(prefix + "ARBOR_COMMAND", cb.data(), static_cast<unsigned>(cb.size()));
+  };
+  const std::string journal = path("journal_commands");
+  std::vector<std::string> args = serveArgs(prefix);
+  args.insert(args.end(), {"--journal", journal, "--fsync", "never"});
+  estimate_t before, after;
+  EstimateListener listener(url(), prefix);
+  ASSERT_TRUE(listener.good());
+  {
+    Process serve(args, path("serve7a.out"), path("serve7a.err"));
+    ASSERT_TRUE(listener.waitStatus()) << serve.err();
+    send(listener.lcm(), 0, cut);
+    ASSERT_TRUE(listener.waitFull(cut_seq, &before)) << serve.err();
+    const RunResult r = run({ARBOR_EXE, "command", "disable", std::to_string(bad_to),
+                             std::to_string(bad_from), "--lcm-url", url(), "--channel-prefix",
+                             prefix, "--sender", "3", "--seq", "1", "--wait", "--json"},
+                            path("command7"));
+    ASSERT_EQ(r.status, 0) << r.out << r.err;
+    const nlohmann::json answer = nlohmann::json::parse(r.out);
+    EXPECT_TRUE(answer.at("answered").get<bool>());
+    EXPECT_FALSE(answer.at("refused").get<bool>());
+    EXPECT_EQ(answer.at("edges_disabled").get<int>(), 1);
+    EXPECT_NE(answer.at("result").get<std::string>().find("disabled edge 150 - 10"),
+              std::string::npos)
+        << r.out;
+    listener.clear();
+    send(listener.lcm(), 0, 0);  // PUBLISH_FULL: the estimate after the disable's update
+    ASSERT_TRUE(listener.waitFull(cut_seq, &before)) << serve.err();
+    serve.signal(SIGKILL);
+    EXPECT_EQ(serve.wait(10), -SIGKILL);
+  }
+  listener.clear();
+  Process serve(args, path("serve7b.out"), path("serve7b.err"));
+  ASSERT_TRUE(listener.waitFull(cut_seq, &after)) << serve.err();
+  EXPECT_EQ(after.ids, before.ids);
+  EXPECT_EQ(after.translation, before.translation);
+  EXPECT_EQ(after.rotation, before.rotation);
+  ASSERT_TRUE(listener.waitStatus()) << serve.err();
+  send(listener.lcm(), cut, edges.size());
+  estimate_t last;
+  ASSERT_TRUE(listener.waitFull(graph.numEdges(), &last)) << serve.err();
+  const nlohmann::json j = stopServe(serve);
+  EXPECT_EQ(j.at("applied").get<int>(), graph.numEdges() + 1);
+  EXPECT_EQ(j.at("edges_disabled").get<int>(), 1);
+  const nlohmann::json& commands = j.at("commands");
+  EXPECT_EQ(commands.at("journal_commands").get<int>(), 1);
+  EXPECT_EQ(commands.at("applied").get<int>(), 1);
+  EXPECT_EQ(commands.at("refused").get<int>(), 0);
+  OnlineSmoother2 reference;
+  for (size_t k = 0; k < edges.size(); ++k) {
+    if (k == cut) {
+      ASSERT_TRUE(reference.disableEdge(bad_to, bad_from).applied());
+      reference.update();
+    }
+    ASSERT_TRUE(serve::testing::feed(reference, {false, edges[k]}));
+    reference.update();
+  }
+  reference.finalize();
+  const double F = reference.objective();
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+  EXPECT_LT(F, 0.5 * reference.smoother().objective());  // the closure would cost much
 }
 
 TEST_F(LcmProcess, BadMessagesAreCountedWhileGoodTrafficIsApplied) {

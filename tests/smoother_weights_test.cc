@@ -240,6 +240,29 @@ TEST(SmootherWeights, UnitWeightsChangeNothing) {
   EXPECT_EQ(a.objective(), b.weightedObjective());
 }
 
+// A queued factor (index numFactors() + k) takes its weight before it enters: the wrong closure
+// queued with w = 0 gives exactly the estimate of never adding it, and it is kept at w = 0.
+TEST(SmootherWeights, QueuedFactorTakesItsWeightBeforeItEnters) {
+  constexpr int n = 30;
+  std::vector<SE2> truth;
+  const std::vector<Factor2> fs = loopGraph<SE2>(n, 5, &truth, 1.0);
+  const std::vector<Factor2> clean(fs.begin(), fs.end() - 1);
+  IncrementalSmoother2 with = smootherOf(clean, n);
+  IncrementalSmoother2 without = with;
+  with.addFactor(fs.back());
+  EXPECT_THROW(with.setFactorWeight(with.numFactors() + 1, 0.0), std::invalid_argument);
+  with.setFactorWeight(with.numFactors(), 0.0);
+  with.update();
+  with.checkInvariants();
+  ASSERT_EQ(with.numFactors(), without.numFactors() + 1);
+  EXPECT_EQ(with.factors().back().inlierWeight(), 0.0);
+  converge(&with);
+  converge(&without);
+  EXPECT_LT(maxDifference(with.estimate(), without.estimate()), 1e-9);
+  EXPECT_NEAR(with.weightedObjective(), without.objective(), 1e-9 * without.objective());
+  EXPECT_GT(with.objective(), with.weightedObjective() + 1.0);  // the closure is still held
+}
+
 TEST(SmootherWeights, BadWeightOrIndexIsRefusedAndChangesNothing) {
   constexpr int n = 20;
   std::vector<SE2> truth;

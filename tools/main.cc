@@ -27,6 +27,9 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
        {arbor::cli::serveCommand, "run the smoother as an LCM service (edges in, estimates out)"}},
       {"publish", {arbor::cli::publishCommand, "stream a file's edges over LCM to arbor serve"}},
       {"spy", {arbor::cli::spyCommand, "lcm-spy with Arbor's message types (a GUI)"}},
+      {"command",
+       {arbor::cli::commandCommand,
+        "take an edge back from arbor serve, or give it back (disable|enable FROM TO)"}},
   };
   return table;
 }

@@ -14,5 +14,6 @@ int replayCommand(const std::vector<std::string>& args);
 int serveCommand(const std::vector<std::string>& args);
 int publishCommand(const std::vector<std::string>& args);
 int spyCommand(const std::vector<std::string>& args);
+int commandCommand(const std::vector<std::string>& args);
 
 }  // namespace arbor::cli

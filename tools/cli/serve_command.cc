@@ -1,5 +1,5 @@
-// arbor serve: ingest edges and priors published over LCM into the incremental smoother and publish
-// the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
+// arbor serve: ingest edges, priors and edge commands published over LCM into the incremental
+// smoother and publish the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
 #include "tools/cli/serve_command.h"
 
 #include <csignal>
@@ -220,6 +220,20 @@ int serveCommand(const std::vector<std::string>& args) {
         {"gaps", s.prior_intake.gaps},
         {"journal_priors", s.journal_priors},
     };
+    nlohmann::json command_reasons = nlohmann::json::object();
+    for (const auto& [reason, count] : s.command_intake.rejected_by_reason)
+      command_reasons[reason] = count;
+    nlohmann::json refused = nlohmann::json::object();
+    for (const auto& [reason, count] : s.commands_refused_by_reason) refused[reason] = count;
+    j["commands"] = {
+        {"received", s.command_intake.received},  {"accepted", s.command_intake.accepted},
+        {"applied", s.commands_applied},          {"rejected", s.command_intake.rejected},
+        {"rejected_by_reason", command_reasons},  {"refused", s.commands_refused},
+        {"refused_by_reason", refused},           {"duplicates", s.command_intake.duplicates},
+        {"journal_commands", s.journal_commands},
+    };
+    j["edges_disabled"] = s.edges_disabled;
+    j["pairs_disabled"] = s.pairs_disabled;
     j["components"] = s.components;
     j["batches"] = nlohmann::json::array();
     for (const auto& b : s.batches) j["batches"].push_back(batchRunJson(b));

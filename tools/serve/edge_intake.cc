@@ -64,7 +64,7 @@ IntakeResult EdgeIntake::reject(Stream& stream, IntakeResult r, const std::strin
 
 void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason) {
   if (accepted.verdict != Intake::kAccepted) return;
-  Stream& stream = accepted.is_prior ? priors_ : edges_;
+  Stream& stream = accepted.is_command ? commands_ : accepted.is_prior ? priors_ : edges_;
   Sender& s = stream.senders[accepted.sender];
   if (accepted.seq > s.highest - window_) {
     if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
@@ -110,9 +110,22 @@ IntakeResult EdgeIntake::admitPrior(const void* data, int size) {
   return r;
 }
 
+IntakeResult EdgeIntake::admitCommand(const void* data, int size) {
+  ++commands_.counts.received;
+  IntakeResult r;
+  r.is_command = true;
+  EdgeCommandDecoding d = decodeEdgeCommand(data, size);
+  if (!d.ok()) return reject(commands_, std::move(r), toString(d.problem), d.detail);
+  r.sender = d.command.sender;
+  r.seq = d.command.seq;
+  r = admitSeq(commands_, std::move(r), dim_, data, size);  // a command has no dimension
+  if (r.verdict == Intake::kAccepted) r.command = d.command;
+  return r;
+}
+
 IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, const void* data,
                                   int size) {
-  const char* what = r.is_prior ? "prior" : "edge";
+  const char* what = r.is_command ? "edge command" : r.is_prior ? "prior" : "edge";
   if (dim_ != 0 && dim != dim_) {
     return reject(
         stream, std::move(r), "dim",

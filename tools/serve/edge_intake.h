@@ -1,8 +1,9 @@
-// The receive side of `arbor serve`: decodes and validates each edge_t and prior_t, tracks every
-// sender's seq numbers (gaps, exact duplicates, reused seq numbers) and counts what it refused
-// and why. Edges and priors are two streams: each has its own per-sender seq numbers and its own
-// counts (a front-end numbering both from one counter shows gaps in each, never a "seq reused"
-// refusal); they share the stream's dimension.
+// The receive side of `arbor serve`: decodes and validates each edge_t, prior_t and
+// edge_command_t, tracks every sender's seq numbers (gaps, exact duplicates, reused seq numbers)
+// and counts what it refused and why. Edges, priors and edge commands are three streams: each
+// has its own per-sender seq numbers and its own counts (a front-end numbering them from one
+// counter shows gaps in each, never a "seq reused" refusal); edges and priors share the stream's
+// dimension (a command has none).
 // Memory is bounded: per sender only the last `window` seq numbers are remembered (the highest
 // seen and the W − 1 below it). A seq below that window is refused as "stale": it may be a late
 // edge or a repeat of one applied long ago, and we cannot tell, so we never apply it (a repeat
@@ -30,11 +31,13 @@ enum class Intake {
 
 struct IntakeResult {
   Intake verdict = Intake::kRejected;
-  std::string reason;     ///< short reason ("truncated", "type hash", "nan", "seq reused", ...)
-  std::string detail;     ///< the full explanation, for the log line
-  bool is_prior = false;  ///< came through admitPrior
-  AnyStreamEdge edge;     ///< when an accepted edge
-  AnyStreamPrior prior;   ///< when an accepted prior
+  std::string reason;         ///< short reason ("truncated", "type hash", "nan", "seq reused", ...)
+  std::string detail;         ///< the full explanation, for the log line
+  bool is_prior = false;      ///< came through admitPrior
+  bool is_command = false;    ///< came through admitCommand
+  AnyStreamEdge edge;         ///< when an accepted edge
+  AnyStreamPrior prior;       ///< when an accepted prior
+  StreamEdgeCommand command;  ///< when an accepted edge command
   std::int64_t sender = 0, seq = 0;  ///< when decoded
   std::int64_t skipped = 0;          ///< seq numbers of this sender jumped over by this message
 };
@@ -61,11 +64,14 @@ class EdgeIntake {
   IntakeResult admit(const void* data, int size);
   /// A prior_t's bytes.
   IntakeResult admitPrior(const void* data, int size);
-  /// Takes back an accepted edge or prior that could not be kept (the journal write failed):
-  /// counted as rejected under `reason`, and its (sender, seq) may be sent again.
+  /// An edge_command_t's bytes.
+  IntakeResult admitCommand(const void* data, int size);
+  /// Takes back an accepted edge, prior or command that could not be kept (the journal write
+  /// failed): counted as rejected under `reason`, and its (sender, seq) may be sent again.
   void revoke(const IntakeResult& accepted, const std::string& reason);
-  const IntakeCounts& counts() const { return edges_.counts; }        ///< edges
-  const IntakeCounts& priorCounts() const { return priors_.counts; }  ///< priors
+  const IntakeCounts& counts() const { return edges_.counts; }            ///< edges
+  const IntakeCounts& priorCounts() const { return priors_.counts; }      ///< priors
+  const IntakeCounts& commandCounts() const { return commands_.counts; }  ///< edge commands
   int dim() const { return dim_; }
   std::int64_t window() const { return window_; }
   /// Edge seq slots held for `sender` (0 if unknown): never more than window().
@@ -93,7 +99,7 @@ class EdgeIntake {
 
   int dim_;
   std::int64_t window_;
-  Stream edges_, priors_;
+  Stream edges_, priors_, commands_;
 };
 
 }  // namespace arbor::serve

@@ -37,9 +37,14 @@ class EngineImpl final : public Engine {
     return {EdgeStatus::kRejected, "prior of another dimension than the stream"};
   }
 
+  EdgeSwitchResult command(const StreamEdgeCommand& c) override {
+    return c.kind == StreamEdgeCommand::Kind::kDisable ? smoother_.disableEdge(c.from, c.to)
+                                                       : smoother_.enableEdge(c.from, c.to);
+  }
+
   UpdateStats update() override { return smoother_.update(); }
   UpdateStats refine() override { return smoother_.finalize(); }
-  double objective() const override { return smoother_.smoother().objective(); }
+  double objective() const override { return smoother_.objective(); }
   OnlineStats stats() const override { return smoother_.stats(); }
 
   estimate_t estimate(bool full) override {
@@ -123,7 +128,10 @@ class EngineImpl final : public Engine {
       graph.index[ids[order[g]]] = g;
       graph.poses.push_back(poses[order[g]]);
     }
-    for (auto f : smoother_.smoother().factors()) {
+    const auto& factors = smoother_.smoother().factors();
+    for (int index = 0; index < static_cast<int>(factors.size()); ++index) {
+      if (smoother_.factorDisabled(index)) continue;
+      Factor<G> f = factors[index];
       f.setKeys(dense_to_graph[f.key(0)], f.arity() > 1 ? dense_to_graph[f.key(1)] : -1);
       addToGraph(f, &graph);
     }

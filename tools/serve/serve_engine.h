@@ -25,15 +25,20 @@ class Engine {
   /// Hands one validated prior to the smoother (OnlineSmoother::addPosePrior /
   /// addPositionPrior; the dimension must match).
   virtual EdgeResult addPrior(const AnyStreamPrior& prior) = 0;
+  /// Hands one validated edge command to the smoother (OnlineSmoother::disableEdge /
+  /// enableEdge; the next update applies it).
+  virtual EdgeSwitchResult command(const StreamEdgeCommand& command) = 0;
   virtual UpdateStats update() = 0;
   /// Relinearises everything and iterates to convergence (OnlineSmoother::finalize).
   virtual UpdateStats refine() = 0;
+  /// F over every factor not disabled (OnlineSmoother::objective).
   virtual double objective() const = 0;
   virtual OnlineStats stats() const = 0;
   /// The estimate: every pose (`full`) or the poses whose value changed since the last call.
   /// F is filled (the objective) only for a full estimate, else NaN.
   virtual estimate_t estimate(bool full) = 0;
-  /// Writes the estimate and the edges applied so far as g2o (the first pose is FIXed).
+  /// Writes the estimate and the edges applied so far but the disabled ones as g2o (the first
+  /// pose is FIXed).
   virtual void writeG2o(const std::string& path) const = 0;
 
   // Batch refinement (tools/refine/batch_refiner.h).

@@ -34,8 +34,8 @@ std::int64_t nowMicros() {
 }
 
 Channels Channels::withPrefix(const std::string& prefix) {
-  return {prefix + "ARBOR_EDGES", prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
-          prefix + "ARBOR_COMMAND", prefix + "ARBOR_PRIORS"};
+  return {prefix + "ARBOR_EDGES",   prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
+          prefix + "ARBOR_COMMAND", prefix + "ARBOR_PRIORS",   prefix + "ARBOR_EDGE_COMMANDS"};
 }
 
 Service::Service(lcm::LCM& lcm, ServeOptions options) : Service(lcm, lcm, std::move(options)) {}
@@ -78,6 +78,7 @@ void Service::start() {
   subscriptions_.push_back(lcm_.subscribe(channels_.edges, &Service::onEdge, this));
   subscriptions_.push_back(lcm_.subscribe(channels_.priors, &Service::onPrior, this));
   subscriptions_.push_back(lcm_.subscribe(channels_.command, &Service::onCommand, this));
+  subscriptions_.push_back(lcm_.subscribe(channels_.edge_commands, &Service::onEdgeCommand, this));
   for (auto* s : subscriptions_) s->setQueueCapacity(0);  // never drop: the queue is ours
   receive_stop_ = false;
   smoother_stop_ = false;
@@ -114,6 +115,7 @@ void Service::stop() {
     std::lock_guard<std::mutex> lock(intake_mutex_);
     summary_.intake = intake_.counts();
     summary_.prior_intake = intake_.priorCounts();
+    summary_.command_intake = intake_.commandCounts();
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
   summary_.applied = applied_;
@@ -127,6 +129,12 @@ void Service::stop() {
   summary_.smoother_priors_rejected = smoother_priors_rejected_;
   summary_.journal_priors = journal_priors_;
   summary_.components = components_;
+  summary_.commands_applied = commands_applied_;
+  summary_.commands_refused = commands_refused_;
+  summary_.commands_refused_by_reason = command_refusals_;
+  summary_.journal_commands = journal_commands_;
+  summary_.edges_disabled = edges_disabled_;
+  summary_.pairs_disabled = pairs_disabled_;
   summary_.journal_updates = journal_updates_;
   summary_.refinements = refinements_;
   summary_.batches = batch_runs_;
@@ -162,7 +170,7 @@ void Service::receiveLoop() {
 void Service::onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   // Nothing may unwind through liblcm's C frames.
   try {
-    receiveMeasurement(rbuf, channel, false);
+    receiveMeasurement(rbuf, channel, Incoming::kEdge);
   } catch (const std::exception& e) {
     logLine(std::string("error while receiving an edge: ") + e.what());
   }
@@ -170,9 +178,17 @@ void Service::onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel)
 
 void Service::onPrior(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   try {
-    receiveMeasurement(rbuf, channel, true);
+    receiveMeasurement(rbuf, channel, Incoming::kPrior);
   } catch (const std::exception& e) {
     logLine(std::string("error while receiving a prior: ") + e.what());
+  }
+}
+
+void Service::onEdgeCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  try {
+    receiveMeasurement(rbuf, channel, Incoming::kCommand);
+  } catch (const std::exception& e) {
+    logLine(std::string("error while receiving an edge command: ") + e.what());
   }
 }
 
@@ -188,29 +204,37 @@ Service::Queued Service::queued(IntakeResult accepted,
                                 std::chrono::steady_clock::time_point received) {
   Queued q;
   q.is_prior = accepted.is_prior;
+  q.is_command = accepted.is_command;
   q.sender = accepted.sender;
   q.seq = accepted.seq;
   q.received = received;
   const auto utime = [](const auto& m) { return m.utime; };
-  const std::int64_t sent =
-      q.is_prior ? std::visit(utime, accepted.prior) : std::visit(utime, accepted.edge);
+  const std::int64_t sent = q.is_command ? accepted.command.utime
+                            : q.is_prior ? std::visit(utime, accepted.prior)
+                                         : std::visit(utime, accepted.edge);
   q.transport_ms = (nowMicros() - sent) / 1e3;
   q.edge = std::move(accepted.edge);
   q.prior = std::move(accepted.prior);
+  q.command = accepted.command;
   return q;
 }
 
 void Service::receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
-                                 bool prior) {
+                                 Incoming kind) {
   const auto received = std::chrono::steady_clock::now();
-  const char* what = prior ? "prior" : "edge";
+  const bool prior = kind == Incoming::kPrior, command = kind == Incoming::kCommand;
+  const char* what = command ? "edge command" : prior ? "prior" : "edge";
   IntakeResult r;
   {
     std::lock_guard<std::mutex> lock(intake_mutex_);
     const int size = static_cast<int>(rbuf->data_size);
-    r = prior ? intake_.admitPrior(rbuf->data, size) : intake_.admit(rbuf->data, size);
+    r = command ? intake_.admitCommand(rbuf->data, size)
+        : prior ? intake_.admitPrior(rbuf->data, size)
+                : intake_.admit(rbuf->data, size);
     if (r.verdict == Intake::kRejected) {
-      const std::string key = prior ? "prior " + r.reason : r.reason;
+      const std::string key = command ? "command " + r.reason
+                              : prior ? "prior " + r.reason
+                                      : r.reason;
       const int n = ++logged_by_reason_[key];
       if (n <= options_.log_limit_per_reason) {
         std::ostringstream os;
@@ -228,8 +252,8 @@ void Service::receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::stri
               std::to_string(r.skipped) + " " + what + " seq numbers before " +
               std::to_string(r.seq));
     }
-    // Journal before it can be applied: an accepted edge or prior is never lost. Both kinds go
-    // into the one log in the order received, which is the order they are queued in.
+    // Journal before it can be applied: an accepted edge, prior or edge command is never lost.
+    // All go into the one log in the order received, which is the order they are queued in.
     if (journal_) {
       try {
         journal_->append(channel, nowMicros(), rbuf->data, size);
@@ -312,17 +336,26 @@ void Service::writeMark(std::int8_t kind, int edges) {
 }
 
 void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
-  const Queued& first = batch.front();
-  ensureEngine(first.is_prior ? dimOf(first.prior) : (first.edge.index() == 0 ? 2 : 3));
+  // The stream's dimension comes with its first edge or prior (a command has none).
+  for (const Queued& q : batch) {
+    if (q.is_command) continue;
+    ensureEngine(q.is_prior ? dimOf(q.prior) : (q.edge.index() == 0 ? 2 : 3));
+    break;
+  }
   if (!from_journal) {
     writeMark(journal_mark_t::UPDATE, static_cast<int>(batch.size()));
     // Group commit: every edge and prior of the batch is on disk before any of it is applied.
     if (journal_ && options_.fsync_before_update) journal_->sync();
   }
   // In the order received (and journaled): edges and priors interleaved as they came.
-  std::int64_t edges = 0, rejected = 0, duplicates = 0, priors_rejected = 0;
+  std::int64_t edges = 0, rejected = 0, duplicates = 0, priors_rejected = 0, commands = 0;
   const Queued* last_edge = nullptr;
   for (const auto& q : batch) {
+    if (q.is_command) {
+      applyEdgeCommand(q, from_journal);
+      ++commands;
+      continue;
+    }
     const EdgeResult r = q.is_prior ? engine_->addPrior(q.prior) : engine_->add(q.edge);
     if (!q.is_prior) {
       ++edges;
@@ -338,7 +371,16 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
       ++duplicates;
     }
   }
-  const std::int64_t priors = static_cast<std::int64_t>(batch.size()) - edges;
+  const std::int64_t priors = static_cast<std::int64_t>(batch.size()) - edges - commands;
+  if (!engine_) {  // only commands, before any pose: each was refused as naming no known pose
+    if (from_journal) {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      journal_commands_ += commands;
+    } else {
+      publishStatus();
+    }
+    return;
+  }
   try {
     engine_->update();
   } catch (const std::exception& e) {
@@ -353,6 +395,8 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
     poses_ = stats.poses;
     pending_ = stats.edges_pending;
     components_ = stats.components;
+    edges_disabled_ = stats.edges_disabled;
+    pairs_disabled_ = stats.pairs_disabled;
     smoother_rejected_ += rejected;
     smoother_duplicates_ += duplicates;
     smoother_priors_rejected_ += priors_rejected;
@@ -363,6 +407,7 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
     if (from_journal) {
       journal_edges_ += edges;
       journal_priors_ += priors;
+      journal_commands_ += commands;
       ++journal_updates_;
     }
   }
@@ -372,6 +417,7 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
   const bool full =
       options_.full_every == 1 || (options_.full_every > 1 && updates_ % options_.full_every == 0);
   publishEstimate(full);
+  if (commands > 0) publishStatus();  // the command's result, for a sender waiting on it
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
     for (const auto& q : batch) {
@@ -381,6 +427,31 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
   }
   const int every = options_.batch.every;
   if (every > 0 && updates_ % every == 0) startBatch(false);
+}
+
+void Service::applyEdgeCommand(const Queued& q, bool from_journal) {
+  const StreamEdgeCommand& c = q.command;
+  EdgeSwitchResult r;
+  if (engine_) {
+    r = engine_->command(c);
+  } else {
+    r.status = EdgeSwitchStatus::kUnknownPose;
+    r.reason = std::string(toString(c.kind)) + " edge " + std::to_string(c.from) + " - " +
+               std::to_string(c.to) + ": no pose is known yet";
+  }
+  if (!from_journal) {
+    logLine("edge command (sender " + std::to_string(q.sender) + " seq " + std::to_string(q.seq) +
+            "): " + (r.applied() ? "" : "refused: ") + r.reason);
+  }
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  ++commands_applied_;
+  if (!r.applied()) {
+    ++commands_refused_;
+    ++command_refusals_[toString(r.status)];
+  }
+  last_command_sender_ = q.sender;
+  last_command_seq_ = q.seq;
+  last_command_result_ = (r.applied() ? "" : std::string("refused: ")) + r.reason;
 }
 
 void Service::startBatch(bool on_command) {
@@ -570,6 +641,15 @@ status_t Service::status() const {
       s.reason.push_back("prior " + reason);
       s.reason_count.push_back(count);
     }
+    const IntakeCounts& c2 = intake_.commandCounts();
+    s.commands_received = c2.received;
+    s.commands_accepted = c2.accepted;
+    s.commands_rejected = c2.rejected;
+    s.commands_duplicates = c2.duplicates;
+    for (const auto& [reason, count] : c2.rejected_by_reason) {
+      s.reason.push_back("command " + reason);
+      s.reason_count.push_back(count);
+    }
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
   s.applied = applied_;
@@ -585,10 +665,22 @@ status_t Service::status() const {
     s.reason_count.push_back(smoother_priors_rejected_);
   }
   s.components = components_;
+  s.commands_applied = commands_applied_;
+  s.commands_refused = commands_refused_;
+  for (const auto& [reason, count] : command_refusals_) {
+    s.reason.push_back("command refused " + reason);
+    s.reason_count.push_back(count);
+  }
+  s.edges_disabled = edges_disabled_;
+  s.pairs_disabled = pairs_disabled_;
+  s.last_command_sender = last_command_sender_;
+  s.last_command_seq = last_command_seq_;
+  s.last_command_result = last_command_result_;
   s.duplicates += smoother_duplicates_;
   s.pending = pending_;
   s.updates = updates_;
-  s.queue_depth = static_cast<int32_t>(s.accepted + s.priors_accepted - applied_ - priors_applied_);
+  s.queue_depth = static_cast<int32_t>(s.accepted + s.priors_accepted + s.commands_accepted -
+                                       applied_ - priors_applied_ - commands_applied_);
   s.poses = static_cast<int32_t>(poses_);
   s.F = F_;
   s.num_reasons = static_cast<int32_t>(s.reason.size());
@@ -654,6 +746,7 @@ void Service::replayJournal() {
   std::deque<Queued> unmarked;
   const std::int64_t edge_hash = edge_t::getHash();
   const std::int64_t prior_hash = prior_t::getHash();
+  const std::int64_t command_hash = edge_command_t::getHash();
   const std::int64_t mark_hash = journal_mark_t::getHash();
   const std::int64_t reseed_hash = estimate_t::getHash();
   const auto now = std::chrono::steady_clock::now();
@@ -662,13 +755,17 @@ void Service::replayJournal() {
   for (const LogEvent& event : log.events) {
     const std::int64_t hash = leadingHash(event.data);
     const int size = static_cast<int>(event.data.size());
-    if (hash == edge_hash || hash == prior_hash) {
-      const bool prior = hash == prior_hash;
-      IntakeResult r = prior ? intake_.admitPrior(event.data.data(), size)
-                             : intake_.admit(event.data.data(), size);
+    if (hash == edge_hash || hash == prior_hash || hash == command_hash) {
+      const bool prior = hash == prior_hash, command = hash == command_hash;
+      IntakeResult r = command ? intake_.admitCommand(event.data.data(), size)
+                       : prior ? intake_.admitPrior(event.data.data(), size)
+                               : intake_.admit(event.data.data(), size);
       if (r.verdict != Intake::kAccepted) {
-        logLine(std::string("journal: ") + (prior ? "prior" : "edge") + " (sender " +
-                std::to_string(r.sender) + " seq " + std::to_string(r.seq) +
+        logLine(std::string("journal: ") +
+                (command ? "edge command"
+                 : prior ? "prior"
+                         : "edge") +
+                " (sender " + std::to_string(r.sender) + " seq " + std::to_string(r.seq) +
                 ") skipped on replay: " + r.reason);
         continue;
       }
@@ -701,9 +798,10 @@ void Service::replayJournal() {
   queue_.assign(std::make_move_iterator(unmarked.begin()), std::make_move_iterator(unmarked.end()));
   if (!log.events.empty()) {
     logLine("journal " + options_.journal_path + ": replayed " + std::to_string(journal_edges_) +
-            " edges and " + std::to_string(journal_priors_) + " priors in " +
+            " edges, " + std::to_string(journal_priors_) + " priors and " +
+            std::to_string(journal_commands_) + " edge commands in " +
             std::to_string(journal_updates_) + " updates; " + std::to_string(queue_.size()) +
-            " edges and priors to apply");
+            " to apply");
   }
 }
 

@@ -1,5 +1,6 @@
-// `arbor serve` as a library: edges and priors in over LCM, estimates and status out. One thread
-// receives and validates (EdgeIntake), journals each accepted edge or prior and queues it; one
+// `arbor serve` as a library: edges, priors and edge commands in over LCM, estimates and status
+// out. One thread receives and validates (EdgeIntake), journals each accepted edge, prior or edge
+// command and queues it; one
 // thread runs the smoother and, when it falls behind, takes everything queued into a single
 // update (in the order received), so latency stays bounded under bursts. With a journal (an LCM
 // event log) every accepted edge and prior is written before it is applied, with marks of the
@@ -36,9 +37,9 @@
 namespace arbor::serve {
 
 struct Channels {
-  std::string edges, estimate, status, command, priors;
-  /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS, each after
-  /// `prefix`.
+  std::string edges, estimate, status, command, priors, edge_commands;
+  /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS,
+  /// ARBOR_EDGE_COMMANDS, each after `prefix`.
   static Channels withPrefix(const std::string& prefix);
 };
 
@@ -69,6 +70,12 @@ struct ServeSummary {
   std::int64_t smoother_priors_rejected = 0;  ///< priors the smoother refused
   std::int64_t journal_priors = 0;            ///< replayed from the journal at start
   int components = 0;                         ///< connected components at the end
+  IntakeCounts command_intake;                ///< edge commands
+  std::int64_t commands_applied = 0;          ///< handed to the smoother
+  std::int64_t commands_refused = 0;          ///< refused by the smoother (by reason below)
+  std::map<std::string, std::int64_t> commands_refused_by_reason;
+  std::int64_t journal_commands = 0;  ///< replayed from the journal at start
+  int edges_disabled = 0, pairs_disabled = 0;
   std::int64_t updates = 0;
   std::int64_t poses = 0;
   std::int64_t pending = 0;
@@ -113,8 +120,10 @@ class Service {
  private:
   struct Queued {
     bool is_prior = false;
-    AnyStreamEdge edge;    ///< when !is_prior
-    AnyStreamPrior prior;  ///< when is_prior
+    bool is_command = false;
+    AnyStreamEdge edge;         ///< when neither
+    AnyStreamPrior prior;       ///< when is_prior
+    StreamEdgeCommand command;  ///< when is_command
     std::int64_t sender = 0, seq = 0;
     std::chrono::steady_clock::time_point received;
     double transport_ms = 0;  ///< receipt − the message's utime (wall clocks; same host: transport)
@@ -125,8 +134,13 @@ class Service {
   void onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void onPrior(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
-  /// Admits, journals and queues one edge_t (`prior` false) or prior_t.
-  void receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel, bool prior);
+  void onEdgeCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  enum class Incoming { kEdge, kPrior, kCommand };
+  /// Admits, journals and queues one edge_t, prior_t or edge_command_t.
+  void receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                          Incoming kind);
+  /// Hands an edge command to the smoother (counted, logged live).
+  void applyEdgeCommand(const Queued& q, bool from_journal);
   void receiveCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void receiveLoop();
   void smootherLoop();
@@ -172,6 +186,11 @@ class Service {
   std::int64_t smoother_rejected_ = 0, smoother_duplicates_ = 0;
   std::int64_t priors_applied_ = 0, smoother_priors_rejected_ = 0;
   int components_ = 0;
+  std::int64_t commands_applied_ = 0, commands_refused_ = 0, journal_commands_ = 0;
+  std::map<std::string, std::int64_t> command_refusals_;  ///< by EdgeSwitchStatus
+  int edges_disabled_ = 0, pairs_disabled_ = 0;
+  std::int64_t last_command_sender_ = 0, last_command_seq_ = 0;
+  std::string last_command_result_;
   std::int64_t last_sender_ = 0, last_seq_ = 0;  ///< of the last edge applied
   std::int64_t journal_edges_ = 0, journal_updates_ = 0, journal_priors_ = 0;
   int refinements_ = 0;

@@ -1,0 +1,178 @@
+// arbor command disable|enable FROM TO: takes an edge back from `arbor serve`, or gives it back,
+// with one edge_command_t on ARBOR_EDGE_COMMANDS (docs/lcm.md); with --wait, waits for the
+// service's status naming this command and prints what the smoother did.
+#include <chrono>
+#include <condition_variable>
+#include <iostream>
+#include <mutex>
+#include <thread>
+
+#include <lcm/lcm-cpp.hpp>
+#include <nlohmann/json.hpp>
+
+#include "io/lcm_messages.h"
+#include "tools/cli/cli_common.h"
+#include "tools/cli/commands.h"
+#include "tools/serve/lcm_tuning.h"
+#include "tools/serve/serve_service.h"
+
+namespace arbor::cli {
+namespace {
+
+namespace po = boost::program_options;
+
+// Waits on ARBOR_STATUS for the status whose last command is (sender, seq).
+class CommandWatcher {
+ public:
+  CommandWatcher(lcm::LCM& lcm, const std::string& channel, std::int64_t sender, std::int64_t seq)
+      : lcm_(lcm), sender_(sender), seq_(seq) {
+    sub_ = lcm_.subscribe(channel, &CommandWatcher::onStatus, this);
+    sub_->setQueueCapacity(0);
+    thread_ = std::thread([this] {
+      while (!stop_) {
+        serve::armQuickAck(lcm_);
+        lcm_.handleTimeout(20);
+      }
+    });
+  }
+  ~CommandWatcher() {
+    stop_ = true;
+    thread_.join();
+    lcm_.unsubscribe(sub_);
+  }
+  CommandWatcher(const CommandWatcher&) = delete;
+  CommandWatcher& operator=(const CommandWatcher&) = delete;
+  bool waitStatus(double timeout_s) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return seen_; });
+  }
+  bool waitResult(double timeout_s, status_t* out) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const bool done =
+        cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return answered_; });
+    if (done) *out = answer_;
+    return done;
+  }
+
+ private:
+  void onStatus(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    status_t s;
+    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &s) != MessageProblem::kNone)
+      return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    seen_ = true;
+    if (s.last_command_sender == sender_ && s.last_command_seq == seq_ && !answered_) {
+      answered_ = true;
+      answer_ = s;
+    }
+    cv_.notify_all();
+  }
+  lcm::LCM& lcm_;
+  std::int64_t sender_, seq_;
+  lcm::Subscription* sub_ = nullptr;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool seen_ = false, answered_ = false;
+  status_t answer_;
+  volatile bool stop_ = false;
+  std::thread thread_;
+};
+
+}  // namespace
+
+int commandCommand(const std::vector<std::string>& args) {
+  std::string kind, url, prefix;
+  Key from = 0, to = 0;
+  std::int64_t sender = 1, seq = 0;
+  bool wait = false, json = false;
+  double timeout_s = 10;
+  po::options_description desc("arbor command disable|enable FROM TO [options]");
+  desc.add_options()("help,h", "show this help")(
+      "kind", po::value(&kind)->required(),
+      "disable (take back every edge between FROM and TO) or enable (give them back)")(
+      "from", po::value(&from)->required(), "pose id")("to", po::value(&to)->required(), "pose id")(
+      "lcm-url", po::value(&url), "LCM provider URL (default: LCM's default)")(
+      "channel-prefix", po::value(&prefix), "prefix of the ARBOR_* channels")(
+      "sender", po::value(&sender)->default_value(1), "sender id")(
+      "seq", po::value(&seq),
+      "this sender's command seq, >= 1 and rising (default: milliseconds since the epoch)")(
+      "wait", po::bool_switch(&wait),
+      "wait for the service's status naming this command; print its result, exit 1 if refused")(
+      "timeout", po::value(&timeout_s)->default_value(10), "seconds for --wait")(
+      "json", po::bool_switch(&json), "print one JSON object");
+  po::positional_options_description positional;
+  positional.add("kind", 1).add("from", 1).add("to", 1);
+  if (helpRequested(args, desc)) return 0;
+  const auto vm = parseArguments(args, desc, positional);
+  StreamEdgeCommand c;
+  if (kind == "disable") {
+    c.kind = StreamEdgeCommand::Kind::kDisable;
+  } else if (kind == "enable") {
+    c.kind = StreamEdgeCommand::Kind::kEnable;
+  } else {
+    throw UsageError("'" + kind + "' is not disable or enable");
+  }
+  if (from < 0 || to < 0) throw UsageError("pose ids must be >= 0");
+  if (from == to) throw UsageError("FROM and TO are both " + std::to_string(from));
+  if (!vm.count("seq")) seq = serve::nowMicros() / 1000;
+  if (seq < 1) throw UsageError("--seq must be >= 1");
+  if (!(timeout_s > 0)) throw UsageError("--timeout must be > 0");
+  c.utime = serve::nowMicros();
+  c.sender = sender;
+  c.seq = seq;
+  c.from = from;
+  c.to = to;
+
+  lcm::LCM lcm(url);
+  if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
+  serve::tuneLcmTransport(lcm, url);
+  const serve::Channels channels = serve::Channels::withPrefix(prefix);
+  // The watcher has its own instance (liblcm 1.3 delays what an instance receives while another
+  // thread publishes on it) and sees a status before the command goes out: the service is up.
+  std::unique_ptr<lcm::LCM> listen;
+  std::unique_ptr<CommandWatcher> watcher;
+  if (wait) {
+    listen = std::make_unique<lcm::LCM>(url);
+    if (!listen->good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
+    serve::tuneLcmTransport(*listen, url);
+    watcher = std::make_unique<CommandWatcher>(*listen, channels.status, sender, seq);
+    if (!watcher->waitStatus(timeout_s)) {
+      std::cerr << "arbor command: no status from a server on " << channels.status << " within "
+                << timeout_s << " s\n";
+      return 1;
+    }
+  }
+  const auto bytes = encodeMessage(makeEdgeCommandMessage(c));
+  if (lcm.publish(channels.edge_commands, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
+    throw std::runtime_error("LCM publish failed on " + channels.edge_commands);
+  status_t answer;
+  const bool answered = wait && watcher->waitResult(timeout_s, &answer);
+  const bool refused = answered && answer.last_command_result.rfind("refused", 0) == 0;
+  if (json) {
+    nlohmann::json j = {{"command", kind},  {"from", from}, {"to", to},
+                        {"sender", sender}, {"seq", seq},   {"channel", channels.edge_commands}};
+    if (wait) {
+      j["answered"] = answered;
+      if (answered) {
+        j["result"] = answer.last_command_result;
+        j["refused"] = refused;
+        j["edges_disabled"] = answer.edges_disabled;
+      }
+    }
+    std::cout << j.dump() << std::endl;
+  } else {
+    std::cout << "sent          " << kind << " " << from << " " << to << " (sender " << sender
+              << " seq " << seq << ") on " << channels.edge_commands << "\n";
+    if (answered)
+      std::cout << "result        " << answer.last_command_result << " (" << answer.edges_disabled
+                << " edges disabled now)\n";
+  }
+  if (wait && !answered) {
+    std::cerr << "arbor command: no status naming sender " << sender << " seq " << seq << " within "
+              << timeout_s << " s (refused by validation? see the service's log)\n";
+    return 1;
+  }
+  return refused ? 1 : 0;
+}
+
+}  // namespace arbor::cli
