@@ -26,6 +26,7 @@
 #include "bayestree/dogleg_step.h"
 #include "bayestree/fold_in.h"
 #include "bayestree/linear_factors.h"
+#include "bayestree/marginals.h"
 #include "bayestree/partial_solve.h"
 #include "bayestree/top_elimination.h"
 #include "bayestree/update_threads.h"
@@ -120,6 +121,8 @@ struct IncrementalSmoother<G>::Impl {
   bayestree::FoldIn<G> fold_in;
   bayestree::PartialSolve<D> partial_solve;  // Δ_newton
   bayestree::UpdateThreads threads;
+  // Marginal covariances, cached per clique for the tree as of `stamp` (changed by every pass).
+  mutable bayestree::TreeMarginals<D> marginals;
   // Waiting for the next update.
   std::vector<Factor<G>> queued;
   std::vector<int> new_vars;
@@ -633,6 +636,49 @@ const std::vector<Factor<G>>& IncrementalSmoother<G>::factors() const {
 template <class G>
 const SmootherOptions& IncrementalSmoother<G>::options() const {
   return impl_->opt;
+}
+
+template <class G>
+auto IncrementalSmoother<G>::marginalCovariance(int index) const
+    -> Eigen::Matrix<double, kDoF, kDoF> {
+  return jointMarginalCovariance(index, index).template topLeftCorner<kDoF, kDoF>();
+}
+template <class G>
+auto IncrementalSmoother<G>::jointMarginalCovariance(int a, int b) const
+    -> Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> {
+  const Impl& m = *impl_;
+  for (int v : {a, b}) {
+    if (v < 0 || v >= m.numPoses())
+      throw std::out_of_range("IncrementalSmoother: covariance of pose index " + std::to_string(v) +
+                              ": out of range (" + std::to_string(m.numPoses()) + " poses)");
+    if (!m.fixed[v] && m.tree.clique_of[v] < 0)
+      throw std::logic_error("IncrementalSmoother: covariance of pose index " + std::to_string(v) +
+                             ": not in the Bayes tree yet (call update() first)");
+  }
+  if (a == b) {
+    Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> out =
+        Eigen::Matrix<double, 2 * kDoF, 2 * kDoF>::Zero();
+    if (!m.fixed[a]) {
+      const Eigen::Matrix<double, kDoF, kDoF> s = m.marginals.marginal(m.tree, m.stamp, a);
+      out << s, s, s, s;
+    }
+    return out;
+  }
+  return m.marginals.joint(m.tree, m.stamp, a, b);
+}
+
+template <class G>
+auto IncrementalSmoother<G>::marginalCovariances() const
+    -> std::vector<Eigen::Matrix<double, kDoF, kDoF>> {
+  const Impl& m = *impl_;
+  for (int v = 0; v < m.numPoses(); ++v)
+    if (!m.fixed[v] && m.tree.clique_of[v] < 0)
+      throw std::logic_error("IncrementalSmoother: covariance of pose index " + std::to_string(v) +
+                             ": not in the Bayes tree yet (call update() first)");
+  std::vector<Eigen::Matrix<double, kDoF, kDoF>> out(m.numPoses(),
+                                                     Eigen::Matrix<double, kDoF, kDoF>::Zero());
+  bayestree::TreeMarginals<kDoF>::all(m.tree, &out);
+  return out;
 }
 
 template class IncrementalSmoother<SE2>;

@@ -163,6 +163,22 @@ class IncrementalSmoother {
   const std::vector<Factor<G>>& factors() const;  ///< added by update(), in order
   const SmootherOptions& options() const;
 
+  /// Marginal covariances (bayestree/marginals.h; docs/design.md, "Marginal covariances"): of the
+  /// linear system the Bayes tree holds after the last update(), i.e. of the tangent τ at the
+  /// linearisation point θ (x = θ ⊞ τ, linearizationPoint(); the tangent at estimate() to first
+  /// order in Δ), in the gauge of the fixed poses; a fixed pose's is zero. Computed on the path
+  /// from the pose's clique to the root and cached until the next update(), so further queries
+  /// on that path are cheap. Throws std::out_of_range for a bad index, std::logic_error for a
+  /// pose that has not been through update() yet.
+  Eigen::Matrix<double, kDoF, kDoF> marginalCovariance(int index) const;
+  /// The joint covariance [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] of poses a and b (as marginalCovariance;
+  /// Σ_ab = 0 between components), e.g. for a Mahalanobis gate on a candidate edge a → b.
+  Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> jointMarginalCovariance(int a, int b) const;
+  /// Every pose's marginal covariance (as marginalCovariance), in one walk down the tree that
+  /// holds the joints of one path at a time (not the cache). Throws std::logic_error if a pose
+  /// has not been through update() yet.
+  std::vector<Eigen::Matrix<double, kDoF, kDoF>> marginalCovariances() const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

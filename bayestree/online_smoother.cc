@@ -640,6 +640,32 @@ EdgeSwitchResult OnlineSmoother<G>::enableEdge(Key from, Key to) {
   return {EdgeSwitchStatus::kApplied, n, "enabled " + edge + " from the next update on"};
 }
 
+template <class G>
+typename OnlineSmoother<G>::Matrix OnlineSmoother<G>::marginalCovariance(Key id) const {
+  return jointMarginalCovariance(id, id).template topLeftCorner<kDoF, kDoF>();
+}
+
+template <class G>
+auto OnlineSmoother<G>::jointMarginalCovariance(Key a, Key b) const
+    -> Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> {
+  int index[2];
+  for (int k = 0; k < 2; ++k) {
+    const Key id = k == 0 ? a : b;
+    auto it = index_.find(id);
+    if (it == index_.end())
+      throw std::out_of_range("OnlineSmoother: covariance of unknown pose id " +
+                              std::to_string(id));
+    index[k] = it->second;
+    try {  // its own marginal first (cached: the joint below reuses it) names the pose
+      smoother_.marginalCovariance(index[k]);
+    } catch (const std::logic_error&) {
+      throw std::logic_error("OnlineSmoother: covariance of pose id " + std::to_string(id) +
+                             ": not in the Bayes tree yet (call update() first)");
+    }
+  }
+  return smoother_.jointMarginalCovariance(index[0], index[1]);
+}
+
 template class OnlineSmoother<SE2>;
 template class OnlineSmoother<SE3>;
 

@@ -197,6 +197,16 @@ class OnlineSmoother {
   /// its gauge.
   std::optional<Key> anchorOf(Key id) const;
 
+  /// The marginal covariance of pose `id` (IncrementalSmoother::marginalCovariance): of the
+  /// tangent at its linearisation point after the last update(), relative to its component's
+  /// anchor (zero for the anchor itself) or, when priors fix the component's gauge, to the
+  /// priors. Throws std::out_of_range for an unknown id, std::logic_error for a pose that has not
+  /// been through update() yet.
+  Matrix marginalCovariance(Key id) const;
+  /// The joint covariance of poses a and b, [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] (Σ_ab = 0 between
+  /// components); throws as marginalCovariance.
+  Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> jointMarginalCovariance(Key a, Key b) const;
+
  private:
   /// Bookkeeping after an update() or finalize() of the smoother.
   UpdateStats recordUpdate(const UpdateStats& s);

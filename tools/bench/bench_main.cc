@@ -9,11 +9,16 @@
 //   arbor-bench paper [--shared DIR] [--only NAME,...] [--out-dir DIR] [--markdown FILE] [--plots]
 //     every solver (replay, LM, GN, dogleg, RTR, Ceres) on every shared dataset with the settings
 //     of the paper's Table II; estimates, latency CSVs, results.tsv/json and a Markdown report.
+//   arbor-bench covariance [--shared DIR] [--only NAME,...] [--samples K] [--no-ceres]
+//     marginal covariances at the end of a replay: one pose's cost beside an update's p50, and
+//     (2D) the agreement with ceres::Covariance.
 //   arbor-bench micro [--sizes=N,...] [--benchmark_* flags]
 //     the Google Benchmark microbenchmarks: runs `arbor-microbench` built beside this program.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -21,6 +26,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <type_traits>
 
 #include <boost/program_options.hpp>
 
@@ -214,6 +220,118 @@ int batch(const std::vector<std::string>& args, const std::string& default_share
   return 0;
 }
 
+// `arbor bench covariance`: at the end of a replay (after its final pass), the cost of one
+// pose's marginal covariance from the Bayes tree beside one update's p50 (issue 15's goal:
+// ≤ 10×), and in 2D its agreement with ceres::Covariance at the same linearisation point.
+template <class G>
+void benchCovariance(const std::string& name, const PoseGraph<G>& graph,
+                     const cli::ReplaySettings& settings, int samples, bool ceres) {
+  using Clock = std::chrono::steady_clock;
+  auto ms = [](Clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  };
+  OnlineSmootherOptions<G> options;
+  options.smoother = settings.smoother;
+  OnlineSmoother<G> online(options);
+  const cli::ReplayResult<G> r = cli::replayInto(graph, settings, online);
+  const IncrementalSmoother<G>& s = online.smoother();
+  const int n = s.numPoses();
+  // Cold: each sample on a copy of the smoother (a copy starts with an empty cache), poses
+  // spread over the dense order; warm: the neighbouring pose next, on the same copy.
+  std::vector<double> cold, warm, joint;
+  double checksum = 0;
+  for (int k = 0; k < samples; ++k) {
+    const int v = static_cast<int>((static_cast<long>(k) * (n - 1)) / std::max(1, samples - 1));
+    if (s.isFixed(v)) continue;
+    IncrementalSmoother<G> copy = s;
+    auto t0 = Clock::now();
+    checksum += copy.marginalCovariance(v).trace();
+    cold.push_back(ms(t0));
+    const int w = v > 0 ? v - 1 : v + 1;
+    t0 = Clock::now();
+    checksum += copy.marginalCovariance(w).trace();
+    warm.push_back(ms(t0));
+    IncrementalSmoother<G> other = s;
+    t0 = Clock::now();
+    checksum += other.jointMarginalCovariance(v, (v + n / 2) % n).trace();
+    joint.push_back(ms(t0));
+  }
+  auto t0 = Clock::now();
+  const auto all = s.marginalCovariances();
+  const double all_ms = ms(t0);
+  const auto c = cli::summarizeLatency(cold), wm = cli::summarizeLatency(warm),
+             j = cli::summarizeLatency(joint);
+  const TreeMemory mem = s.memory();
+  std::cout << "| " << name << " | " << n << " | " << fmt("%.3f", r.latency.p50) << " | "
+            << fmt("%.3f", c.p50) << " | " << fmt("%.3f", c.max) << " | "
+            << fmt("%.2f", c.p50 / r.latency.p50) << " | " << fmt("%.3f", wm.p50) << " | "
+            << fmt("%.3f", j.p50) << " | " << fmt("%.1f", all_ms) << " | " << mem.max_frontal_dim
+            << " | ";
+  if constexpr (std::is_same_v<G, SE2>) {
+    if (ceres) {
+      // θ and the fixed poses in the graph's dense order.
+      std::vector<SE2> theta(graph.numPoses());
+      std::vector<int> fixed;
+      std::vector<int> at(n);
+      for (int v = 0; v < n; ++v) {
+        at[v] = graph.index.at(online.ids()[v]);
+        theta[at[v]] = s.linearizationPoint()[v];
+        if (s.isFixed(v)) fixed.push_back(at[v]);
+      }
+      double ceres_s = 0;
+      const auto theirs = bench::ceresCovariances(graph, theta, fixed, &ceres_s);
+      std::vector<double> rel;
+      for (int v = 0; v < n; ++v)
+        if (!s.isFixed(v)) rel.push_back((all[v] - theirs[at[v]]).norm() / theirs[at[v]].norm());
+      std::sort(rel.begin(), rel.end());
+      std::cout << fmt("%.1e", rel[rel.size() / 2]) << " | " << fmt("%.1e", rel.back()) << " | "
+                << fmt("%.2f", ceres_s) << " |";
+    } else {
+      std::cout << "— | — | — |";
+    }
+  } else {
+    std::cout << "— | — | — |";
+  }
+  std::cout << (checksum > 0 ? "" : " (non-positive trace!)") << std::endl;
+}
+
+int covariance(const std::vector<std::string>& args, const std::string& default_shared) {
+  DatasetOptions data;
+  int samples = 20;
+  bool no_ceres = false;
+  po::options_description options =
+      datasetOptions("arbor bench covariance [options]", &data, default_shared);
+  options.add_options()("samples", po::value(&samples)->default_value(20),
+                        "poses timed (spread over the graph), each on a fresh cache")(
+      "no-ceres", po::bool_switch(&no_ceres), "skip the comparison with ceres::Covariance");
+  cli::addSmootherFlags(options);
+  po::variables_map vm;
+  if (!parseOptions(args, options, &vm)) return 0;
+  if (samples < 1) throw cli::UsageError("--samples must be >= 1");
+  cli::ReplaySettings settings;
+  settings.smoother = cli::readSmootherFlags(vm);
+  settings.batch = false;
+  const auto files =
+      bench::selectDatasets(data.shared, data.only.empty() ? "M3500,intel" : data.only);
+  std::cout << "Edge-by-edge replay (" << cli::describeSmoother(settings.smoother)
+            << ", final relinearise-all pass), then marginal covariances from its Bayes tree. "
+               "cold: one pose on an empty cache ("
+            << samples
+            << " poses spread over the graph); warm: its neighbour next; joint: two poses half "
+               "the graph apart, cold; all: every pose in one walk. Ceres: ceres::Covariance "
+               "(SPARSE_QR) at the same linearisation point, relative Frobenius difference per "
+               "pose.\n\n"
+            << "| dataset | poses | update p50 ms | marginal cold p50 ms | cold max ms | "
+               "cold p50 / update p50 | warm p50 ms | joint cold p50 ms | all ms | max frontal "
+               "dim | vs Ceres median | vs Ceres max | Ceres s |\n"
+            << "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
+    std::visit([&](const auto& g) { benchCovariance(d.name, g, settings, samples, !no_ceres); },
+               d.graph);
+  });
+  return 0;
+}
+
 // `arbor bench growth`: the replay's latency slice by slice as the graph grows, beside the cost
 // of one batch factorisation of the graph so far (tools/bench/growth.h).
 int growth(const std::vector<std::string>& args, const std::string& default_shared) {
@@ -398,6 +516,8 @@ int main(int argc, char** argv) {
            "edge|pose] [smoother flags]\n"
            "  smoother flags: as arbor replay (--relinearize-threshold B, --relinearize-skip K, "
            "--dogleg, ...; arbor bench replay --help lists them)\n"
+           "       arbor bench covariance [--shared DIR] [--only NAMES] [--samples K] "
+           "[--no-ceres] [smoother flags]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
@@ -407,6 +527,7 @@ int main(int argc, char** argv) {
     if (args[0] == "replay") return replay(rest, ARBOR_SHARED_DIR);
     if (args[0] == "paper") return paper(rest, ARBOR_SHARED_DIR);
     if (args[0] == "growth") return growth(rest, ARBOR_SHARED_DIR);
+    if (args[0] == "covariance") return covariance(rest, ARBOR_SHARED_DIR);
     if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";
     return 2;

@@ -1,6 +1,8 @@
 #include "tools/bench/ceres_pose_graph.h"
 
 #include <chrono>
+#include <stdexcept>
+#include <utility>
 
 #include <ceres/ceres.h>
 
@@ -143,17 +145,14 @@ CeresResult toResult(const ceres::Solver::Summary& s) {
 
 }  // namespace
 
-template <>
-CeresResult solveWithCeres(const PoseGraph<SE2>& graph, std::vector<SE2>* poses, int max_iterations,
-                           double function_tolerance) {
-  const int n = graph.numPoses();
-  std::vector<double> t(2 * n), th(n);
-  for (int k = 0; k < n; ++k) {
-    t[2 * k] = (*poses)[k].x();
-    t[2 * k + 1] = (*poses)[k].y();
-    th[k] = (*poses)[k].angle();
-  }
-  ceres::Problem problem;
+namespace {
+
+// The 2D problem over t (2 per pose) and th (1 per pose), the gauge poses `fixed` constant.
+void add2D(const PoseGraph<SE2>& graph, const std::vector<int>& fixed, std::vector<double>* t_p,
+           std::vector<double>* th_p, ceres::Problem* problem_p) {
+  std::vector<double>& t = *t_p;
+  std::vector<double>& th = *th_p;
+  ceres::Problem& problem = *problem_p;
   for (const auto& e : graph.edges) {
     auto* cost = new ceres::AutoDiffCostFunction<RelativePose2Cost, 3, 2, 1, 2, 1>(
         new RelativePose2Cost(e.measurement, e.sqrt_information_t));
@@ -169,14 +168,74 @@ CeresResult solveWithCeres(const PoseGraph<SE2>& graph, std::vector<SE2>* poses,
         new PositionPriorCost<2>(p.position, p.sqrt_information_t));
     problem.AddResidualBlock(cost, nullptr, &t[2 * p.i]);
   }
-  for (int g : graph.gaugeIndices()) {  // a gauge pose without factors is no block of Ceres'
+  for (int g : fixed) {  // a gauge pose without factors is no block of Ceres'
     if (problem.HasParameterBlock(&t[2 * g])) problem.SetParameterBlockConstant(&t[2 * g]);
     if (problem.HasParameterBlock(&th[g])) problem.SetParameterBlockConstant(&th[g]);
   }
+}
+
+}  // namespace
+
+template <>
+CeresResult solveWithCeres(const PoseGraph<SE2>& graph, std::vector<SE2>* poses, int max_iterations,
+                           double function_tolerance) {
+  const int n = graph.numPoses();
+  std::vector<double> t(2 * n), th(n);
+  for (int k = 0; k < n; ++k) {
+    t[2 * k] = (*poses)[k].x();
+    t[2 * k + 1] = (*poses)[k].y();
+    th[k] = (*poses)[k].angle();
+  }
+  ceres::Problem problem;
+  add2D(graph, graph.gaugeIndices(), &t, &th, &problem);
   ceres::Solver::Summary summary;
   ceres::Solve(paperOptions(max_iterations, function_tolerance), &problem, &summary);
   for (int k = 0; k < n; ++k) (*poses)[k] = SE2(t[2 * k], t[2 * k + 1], th[k]);
   return toResult(summary);
+}
+
+std::vector<Eigen::Matrix3d> ceresCovariances(const PoseGraph<SE2>& graph,
+                                              const std::vector<SE2>& poses,
+                                              const std::vector<int>& fixed, double* time_s) {
+  const int n = graph.numPoses();
+  std::vector<double> t(2 * n), th(n);
+  for (int k = 0; k < n; ++k) {
+    t[2 * k] = poses[k].x();
+    t[2 * k + 1] = poses[k].y();
+    th[k] = poses[k].angle();
+  }
+  ceres::Problem problem;
+  add2D(graph, fixed, &t, &th, &problem);
+  std::vector<char> is_fixed(n, 0);
+  for (int g : fixed) is_fixed[g] = 1;
+  std::vector<std::pair<const double*, const double*>> blocks;
+  for (int k = 0; k < n; ++k) {
+    if (is_fixed[k]) continue;
+    blocks.emplace_back(&t[2 * k], &t[2 * k]);
+    blocks.emplace_back(&t[2 * k], &th[k]);
+    blocks.emplace_back(&th[k], &th[k]);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  ceres::Covariance::Options options;
+  options.num_threads = 1;
+  ceres::Covariance covariance(options);
+  if (!covariance.Compute(blocks, &problem))
+    throw std::runtime_error("ceres::Covariance::Compute failed");
+  std::vector<Eigen::Matrix3d> out(n, Eigen::Matrix3d::Zero());
+  for (int k = 0; k < n; ++k) {
+    if (is_fixed[k]) continue;
+    double tt[4], tth[2], thth[1];
+    covariance.GetCovarianceBlock(&t[2 * k], &t[2 * k], tt);
+    covariance.GetCovarianceBlock(&t[2 * k], &th[k], tth);
+    covariance.GetCovarianceBlock(&th[k], &th[k], thth);
+    Eigen::Matrix3d world;  // of (t, θ), row-major blocks
+    world << tt[0], tt[1], tth[0], tt[2], tt[3], tth[1], tth[0], tth[1], thth[0];
+    Eigen::Matrix3d J = Eigen::Matrix3d::Identity();
+    J.topLeftCorner<2, 2>() = poses[k].rotation().transpose();
+    out[k] = J * world * J.transpose();
+  }
+  *time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
 }
 
 template <>

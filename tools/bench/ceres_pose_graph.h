@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "core/pose_graph.h"
 
 namespace arbor::bench {
@@ -19,6 +21,15 @@ struct CeresResult {
   std::string termination;  ///< CONVERGENCE, NO_CONVERGENCE or FAILURE
   double time_s = 0;        ///< Ceres' total time (problem set-up excluded)
 };
+
+/// Ceres' ceres::Covariance (SPARSE_QR) of every pose of a 2D graph at `poses`, the poses of
+/// `fixed` held constant (zero covariance), in Arbor's tangent x ⊞ τ = (t + R v, θ + ω): Ceres'
+/// parameters are (t, θ) in the world frame, so Σ = J Σ_Ceres Jᵀ with J = diag(Rᵀ, 1), exact
+/// for the linearised system. *time_s: Ceres' Compute and the block reads. Throws
+/// std::runtime_error if Ceres cannot compute it (a rank-deficient system).
+std::vector<Eigen::Matrix3d> ceresCovariances(const PoseGraph<SE2>& graph,
+                                              const std::vector<SE2>& poses,
+                                              const std::vector<int>& fixed, double* time_s);
 
 template <class G>
 CeresResult solveWithCeres(const PoseGraph<G>& graph, std::vector<G>* poses,

@@ -11,8 +11,10 @@
 #include "core/gnc_solver.h"
 #include "core/initialization.h"
 #include "io/pose_graph_file.h"
+#include "io/trajectory_writer.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
+#include "tools/cli/covariance_output.h"
 #include "tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
@@ -28,12 +30,36 @@ struct BatchRun {
   refine::BatchSolveSettings settings;
   std::string init;  // empty: "file" when the file has VERTEX lines, else "odometry"
   std::string output;
+  TrajectoryFormat format = TrajectoryFormat::kG2o;  // --format
+  std::string covariances;                           // --covariances
   bool json = false;
   ReadOptions read;
   bool robust = false;
   GncOptions gnc;            // --kernel, --inlier-threshold
   std::string rejected_out;  // --rejected-out
 };
+
+// -o in --format, --covariances: the marginal covariances at the final estimate.
+template <class G>
+void writeOutputs(const BatchRun& run, const PoseGraph<G>& graph, const std::vector<G>& poses) {
+  if (!run.output.empty()) writeEstimateFile(run.output, run.format, graph, poses);
+  if (!run.covariances.empty()) writeBatchCovariancesFile(run.covariances, graph, poses);
+}
+
+// Where the outputs went: text lines, or JSON fields.
+void reportOutputs(const BatchRun& run, std::ostream& out) {
+  if (!run.output.empty())
+    out << "output       " << run.output
+        << (run.format == TrajectoryFormat::kG2o ? ""
+                                                 : std::string(" (") + toString(run.format) + ")")
+        << "\n";
+  if (!run.covariances.empty()) out << "covariances  " << run.covariances << "\n";
+}
+void reportOutputs(const BatchRun& run, nlohmann::json* j) {
+  if (!run.output.empty())
+    (*j)["output"] = {{"path", run.output}, {"format", toString(run.format)}};
+  if (!run.covariances.empty()) (*j)["covariances"] = run.covariances;
+}
 
 // arbor batch --solver rtr: the certifiable solver; it starts from its own chordal relaxation
 // (F chordal is reported as the start).
@@ -44,7 +70,7 @@ int solveCertifiableAndReport(const BatchRun& run, PoseGraph<G>& graph, const Re
   const double F_initial = objective(graph, poses);
   const refine::BatchSolve solve = refine::runBatchSolver(run.solver, graph, &poses, run.settings);
   const RtrSummary& s = *solve.rtr;
-  if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
+  writeOutputs(run, graph, poses);
   const std::string& termination = solve.termination;
   if (run.json) {
     nlohmann::json j = graphJson(run.file, graph);
@@ -71,6 +97,7 @@ int solveCertifiableAndReport(const BatchRun& run, PoseGraph<G>& graph, const Re
         {"information_repaired", report.repaired},
         {"information_isotropic", report.made_isotropic},
     });
+    reportOutputs(run, &j);
     std::cout << j.dump() << "\n";
     return 0;
   }
@@ -87,7 +114,7 @@ int solveCertifiableAndReport(const BatchRun& run, PoseGraph<G>& graph, const Re
             << s.time_problem_s << ", optimisation " << s.time_optimization_s << ", certificate "
             << s.time_certificate_s << ", rounding " << s.time_rounding_s << ", polish "
             << s.time_polish_s << "), " << total.seconds() << " s total\n";
-  if (!run.output.empty()) std::cout << "output       " << run.output << "\n";
+  reportOutputs(run, std::cout);
   return 0;
 }
 
@@ -100,7 +127,7 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
   std::vector<G> poses = initialize(graph, init);
   const refine::BatchSolve solve = refine::runBatchSolver(run.solver, graph, &poses, run.settings);
   const BatchSummary& summary = *solve.local;
-  if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
+  writeOutputs(run, graph, poses);
   const double total_s = total.seconds();
 
   if (run.json) {
@@ -117,6 +144,7 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
         {"information_repaired", report.repaired},
         {"information_isotropic", report.made_isotropic},
     });
+    reportOutputs(run, &j);
     std::cout << j.dump() << "\n";
   } else {
     std::cout << std::setprecision(10);
@@ -133,7 +161,7 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
               << (summary.message.empty() ? "" : ": " + summary.message) << ")\n"
               << std::setprecision(4) << "time         " << summary.time_s << " s solve, "
               << total_s << " s total\n";
-    if (!run.output.empty()) std::cout << "output       " << run.output << "\n";
+    reportOutputs(run, std::cout);
   }
   return summary.termination == Termination::kDiverged ? 3 : 0;
 }
@@ -178,7 +206,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     out << rejected.str();
     if (!out) throw std::runtime_error("cannot write " + run.rejected_out);
   }
-  if (!run.output.empty()) writeG2oFile(run.output, graph, poses);
+  writeOutputs(run, graph, poses);
   const double total_s = total.seconds();
   const char* certificate_scope =
       "the certificate covers the inlier problem (the graph without the rejected edges), not the "
@@ -225,6 +253,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
                 {"rtr_time_s", r.time_s}});
     }
     if (!run.rejected_out.empty()) j["rejected_out"] = run.rejected_out;
+    reportOutputs(run, &j);
     std::cout << j.dump() << "\n";
     return 0;
   }
@@ -262,7 +291,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
             << (certified ? ", " + std::to_string(certified->rtr.time_s) + " s RTR" : "") << ", "
             << total_s << " s total\n";
   if (!run.rejected_out.empty()) std::cout << "rejected out " << run.rejected_out << "\n";
-  if (!run.output.empty()) std::cout << "output       " << run.output << "\n";
+  reportOutputs(run, std::cout);
   return 0;
 }
 
@@ -281,7 +310,7 @@ int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
-  std::string kernel = "tls", threshold = "chi2";
+  std::string kernel = "tls", threshold = "chi2", format = "g2o";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -295,8 +324,13 @@ int batchCommand(const std::vector<std::string>& args) {
       "stop when the relative decrease of F is below this (gn, lm, dogleg)")(
       "information", po::value(&information)->default_value("refuse"),
       "what to do with information matrices that are not positive definite: refuse | repair | "
-      "isotropic")("output,o", po::value(&run.output), "write the estimate as g2o")(
-      "json", po::bool_switch(&run.json), "print one JSON object")(
+      "isotropic")("output,o", po::value(&run.output), "write the estimate (as --format)")(
+      "format", po::value(&format)->default_value("g2o"),
+      "of -o: g2o (the graph with the estimate) | tum (`id tx ty tz qx qy qz qw` a line) | kitti "
+      "(3x4 [R t] row-major a line, by ascending id); docs/files.md")(
+      "covariances", po::value(&run.covariances),
+      "write every pose's marginal covariance at the final estimate, `id` and the upper triangle "
+      "a line (docs/files.md)")("json", po::bool_switch(&run.json), "print one JSON object")(
       "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr")(
       "robust", po::bool_switch(&run.robust),
       "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| = 1) "
@@ -353,6 +387,13 @@ int batchCommand(const std::vector<std::string>& args) {
         throw UsageError(std::string("--") + flag + " needs --robust");
   }
   if (!(run.settings.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
+  try {
+    run.format = parseTrajectoryFormat(format);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(std::string("--format: ") + e.what());
+  }
+  if (given.count("format") && !given["format"].defaulted() && run.output.empty())
+    throw UsageError("--format needs --output");
   run.read.information = parseInformationPolicy(information);
 
   ReadReport report;
