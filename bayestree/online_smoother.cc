@@ -18,6 +18,19 @@ bool finitePose(const SE3& x) {
   return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
 }
 
+void addStats(UpdateStats* total, const UpdateStats& s) {
+  total->new_factors += s.new_factors;
+  total->new_variables += s.new_variables;
+  total->cliques_reeliminated += s.cliques_reeliminated;
+  total->variables_reeliminated += s.variables_reeliminated;
+  total->cliques_updated += s.cliques_updated;
+  total->variables_relinearized += s.variables_relinearized;
+  total->indeterminate_cliques += s.indeterminate_cliques;
+  total->cliques_solved += s.cliques_solved;
+  total->cliques_on_helpers += s.cliques_on_helpers;
+  total->time_s += s.time_s;
+}
+
 }  // namespace
 
 const char* toString(EdgeStatus status) {
@@ -39,6 +52,7 @@ OnlineSmoother<G>::OnlineSmoother(OnlineSmootherOptions<G> options)
     : options_(options), smoother_(options.smoother) {
   if (!finitePose(options_.gauge))
     throw std::invalid_argument("OnlineSmoother: gauge pose not finite");
+  if (options_.robust) gnc_.emplace(*options_.robust);  // throws on bad options
 }
 
 template <class G>
@@ -153,9 +167,13 @@ void OnlineSmoother<G>::join(int from, int to, const G& z) {
 }
 
 template <class G>
-void OnlineSmoother<G>::apply(const Measurement& m) {
+void OnlineSmoother<G>::apply(const Measurement& m, EdgeTrust trust) {
   auto from = index_.find(m.from);
   auto to = index_.find(m.to);
+  // An edge that creates a pose or joins two components holds exactly at the estimate it
+  // makes: the robust layer trusts it.
+  const bool structural =
+      from == index_.end() || to == index_.end() || root(from->second) != root(to->second);
   if (from == index_.end() && to == index_.end()) {  // a new component, anchored at `from`
     const int f = createPose(m.from, options_.gauge, -1);
     createPose(m.to, smoother_.estimate(f).compose(m.z), f);
@@ -167,13 +185,16 @@ void OnlineSmoother<G>::apply(const Measurement& m) {
     join(from->second, to->second, m.z);
   }
   const auto edge = RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega);
-  smoother_.addFactor(edge);
-  queued_.push_back(edge);
+  Factor<G> factor(edge);
+  if (gnc_) factor.setInlierWeight(gnc_->admit(smoother_, m.from, m.to, trust, structural, edge));
+  smoother_.addFactor(factor);
+  queued_.push_back(factor);
   ++stats_.edges_accepted;
 }
 
 template <class G>
-EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix& omega) {
+EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix& omega,
+                                      EdgeTrust trust) {
   auto reject = [&](const std::string& why) {
     ++stats_.edges_rejected;
     return EdgeResult{EdgeStatus::kRejected, why};
@@ -194,7 +215,7 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
                                                     " -> " + std::to_string(to)};
     }
   same_pair.push_back(m);
-  apply(m);
+  apply(m, trust);
   return EdgeResult{EdgeStatus::kAccepted, ""};
 }
 
@@ -290,12 +311,53 @@ std::optional<Key> OnlineSmoother<G>::anchorOf(Key id) const {
 
 template <class G>
 UpdateStats OnlineSmoother<G>::update() {
-  return recordUpdate(smoother_.update());
+  if (!gnc_) return recordUpdate(smoother_.update());
+  gnc_->step(smoother_);  // the first graduation step rides on this update
+  UpdateStats total = smoother_.update();
+  gnc_->resolve(smoother_);
+  for (int k = 1; k < gnc_->options().steps_per_update && gnc_->graduating(); ++k) {
+    gnc_->step(smoother_);
+    addStats(&total, smoother_.update());
+    ++stats_.graduation_updates;
+  }
+  return recordUpdate(total);
 }
 
 template <class G>
+void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total) {
+  for (int k = 0; k < max_updates && gnc_->graduating(); ++k) {
+    gnc_->step(smoother_);
+    addStats(total, smoother_.update());
+    gnc_->resolve(smoother_);
+    ++stats_.graduation_updates;
+  }
+}
+
+// Robust: each round graduates every closure to the end, re-checks every settled one at the
+// kernel (a change graduates it again) and relinearises all; another round only while the
+// re-check changed a weight.
+template <class G>
 UpdateStats OnlineSmoother<G>::finalize() {
-  return recordUpdate(smoother_.relinearizeAll());
+  if (!gnc_) return recordUpdate(smoother_.relinearizeAll());
+  UpdateStats total;
+  const int bound = gnc_->options().max_steps_per_closure + 1;
+  for (int round = 0;; ++round) {
+    graduateFully(bound, &total);
+    addStats(&total, smoother_.relinearizeAll());
+    gnc_->resolve(smoother_);
+    if (round + 1 >= gnc_->options().finalize_rounds) break;
+    if (gnc_->step(smoother_, /*recheck_all=*/true) == 0 && !gnc_->graduating()) break;
+  }
+  return recordUpdate(total);
+}
+
+template <class G>
+std::vector<ClosureReport> OnlineSmoother<G>::closures() const {
+  if (!gnc_) return {};
+  std::vector<ClosureReport> out = gnc_->closures();
+  for (ClosureReport& r : out)  // the weight in the smoother (the caller's for an excluded one)
+    if (r.factor >= 0) r.weight = smoother_.factors()[static_cast<size_t>(r.factor)].inlierWeight();
+  return out;
 }
 
 template <class G>
@@ -416,6 +478,7 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
     smoother_ = std::move(fresh);
     queued_.clear();
     poses_at_update_ = static_cast<int>(ids_.size());
+    if (gnc_) gnc_->remap(smoother_);  // the weights came along on the factors
   }
   result.stats.time_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -459,7 +522,17 @@ std::map<Key, G> OnlineSmoother<G>::estimates() const {
 
 template <class G>
 OnlineStats OnlineSmoother<G>::stats() const {
-  return stats_;
+  OnlineStats out = stats_;
+  if (gnc_) {
+    const ClosureCounts c = gnc_->counts();
+    out.closures_inlier = c.inlier;
+    out.closures_outlier = c.outlier;
+    out.closures_trusted = c.trusted;
+    out.closures_excluded = c.excluded;
+    out.closures_graduating = c.graduating;
+    out.graduation_steps = c.graduation_steps;
+  }
+  return out;
 }
 
 template class OnlineSmoother<SE2>;

@@ -16,6 +16,11 @@
 // — the linearisation point and rebuilds the Bayes tree from scratch; incremental updates then
 // continue from there.
 //
+// Robust smoothing (OnlineSmootherOptions::robust, off by default): every loop closure is judged
+// and graduated by an OnlineGnc (bayestree/online_gnc.h) through the smoother's weight seam;
+// odometry, edges marked EdgeTrust::kTrusted, edges that create a pose or join two components,
+// and priors are trusted. Without it nothing changes, bit for bit.
+//
 // Thread-safety: none. One thread owns an OnlineSmoother and makes every call (the LCM service
 // feeds it from its single handler thread); const methods may run concurrently only with other
 // const methods.
@@ -30,6 +35,7 @@
 #include <Eigen/Core>
 
 #include "bayestree/incremental_smoother.h"
+#include "bayestree/online_gnc.h"
 #include "core/factor.h"
 #include "core/gauge.h"
 #include "core/pose_graph.h"
@@ -54,6 +60,8 @@ template <class G>
 struct OnlineSmootherOptions {
   SmootherOptions smoother;
   G gauge = G::Identity();  ///< the value of the first pose seen (held fixed)
+  /// Online robust smoothing of the loop closures (bayestree/online_gnc.h); none: off.
+  std::optional<RobustOptions> robust;
 };
 
 /// What reseed() did.
@@ -80,6 +88,16 @@ struct OnlineStats {
   int reseeds = 0;  ///< rebuilds by reseed() that were kept
   double total_reseed_time_s = 0;
   UpdateStats last_update;
+  // With OnlineSmootherOptions::robust (else 0): loop closures (|from − to| ≠ 1) by status
+  // (ClosureStatus), those of inlier + outlier still graduating, the weight changes made by
+  // graduation, and the extra smoother updates graduation ran (steps_per_update > 1, finalize).
+  int closures_inlier = 0;
+  int closures_outlier = 0;
+  int closures_trusted = 0;
+  int closures_excluded = 0;
+  int closures_graduating = 0;
+  int graduation_steps = 0;
+  int graduation_updates = 0;
 };
 
 template <class G>
@@ -92,8 +110,10 @@ class OnlineSmoother {
 
   explicit OnlineSmoother(OnlineSmootherOptions<G> options = {});
 
-  /// One measurement z of pose `to` in the frame of pose `from`, with information Ω.
-  EdgeResult addEdge(Key from, Key to, const G& z, const Matrix& omega);
+  /// One measurement z of pose `to` in the frame of pose `from`, with information Ω. With
+  /// robust smoothing, `trust` kTrusted keeps a loop closure out of the GNC (weight 1 for good).
+  EdgeResult addEdge(Key from, Key to, const G& z, const Matrix& omega,
+                     EdgeTrust trust = EdgeTrust::kByRule);
   /// A prior z on pose `id` in the world frame (core/prior_factors.h), with an optional sensor
   /// offset o (the prior is on x o). An unknown id starts a component there, at z o⁻¹.
   EdgeResult addPosePrior(Key id, const G& z, const Matrix& omega, const G& offset = G::Identity());
@@ -101,10 +121,18 @@ class OnlineSmoother {
   /// unknown id starts a component there (at p, identity rotation).
   EdgeResult addPositionPrior(Key id, const typename G::Translation& p,
                               const PositionMatrix& omega);
-  /// Runs one incremental update over the edges accepted since the last one.
+  /// Runs one incremental update over the edges accepted since the last one. With robust
+  /// smoothing, first one graduation step (OnlineGnc::step), then up to steps_per_update − 1
+  /// more, each a smoother update of its own (summed into the stats returned).
   UpdateStats update();
-  /// Relinearises everything and iterates to convergence (the end of a replay).
+  /// Relinearises everything and iterates to convergence (the end of a replay). With robust
+  /// smoothing, first graduates every closure to the end (bounded by max_steps_per_closure
+  /// updates) and re-checks every settled one, up to RobustOptions::finalize_rounds rounds.
   UpdateStats finalize();
+  /// With robust smoothing: every loop closure's weight and status (empty without it).
+  std::vector<ClosureReport> closures() const;
+  /// The robust layer, or nullptr without robust smoothing (exclude/include a factor).
+  const OnlineGnc<G>* gnc() const { return gnc_ ? &*gnc_ : nullptr; }
 
   /// The poses known at the last update() (the first ones in dense order; the anchors listed in
   /// `fixed`), every edge and prior taken in by the smoother so far, and the current estimate as
@@ -160,7 +188,9 @@ class OnlineSmoother {
   /// A new pose; creator −1 starts a component (anchored at it when `anchor`).
   int createPose(Key id, const G& value, int creator, bool anchor = true);
   /// Adds m to the smoother, creating an unknown end or a new component, or joining two.
-  void apply(const Measurement& m);
+  void apply(const Measurement& m, EdgeTrust trust);
+  /// Robust smoothing: graduation steps until none graduates or `max_updates` updates.
+  void graduateFully(int max_updates, UpdateStats* total);
   /// The edge from → to (dense indices, in different components) joins them.
   void join(int from, int to, const G& z);
   /// Priors of component c now fix its gauge: its anchor is released.
@@ -200,6 +230,7 @@ class OnlineSmoother {
   int poses_at_update_ = 0;        ///< poses known at the last update
   std::map<std::pair<Key, Key>, std::vector<Measurement>> seen_;  ///< accepted edges
   OnlineStats stats_;
+  std::optional<OnlineGnc<G>> gnc_;  ///< robust smoothing (options_.robust)
 };
 
 using OnlineSmoother2 = OnlineSmoother<SE2>;
