@@ -242,12 +242,17 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
     const double s = residual(smoother, c);
     c.s = s;
     const bool inlier = c.weight >= 0.5;
-    const bool flip = inlier ? s > options_.recheck_margin * c2_ : s <= c2_;
+    const bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
     const bool drift = options_.kernel != KernelKind::kTruncatedLeastSquares &&
                        options_.kernel != KernelKind::kGemanMcClure &&
                        std::abs(finalWeight(s) - c.weight) > 10 * options_.weight_tolerance;
     if (!flip && !drift) continue;
-    enter(&c, s);
+    if (inlier || drift) {
+      enter(&c, s);
+    } else {  // an outlier the estimate now agrees with: back at weight 1
+      c.state = State::kSettled;
+      c.weight = 1.0;
+    }
     if (c.state == State::kGraduating) graduating_.push_back(id);
     ++totals_.regraduated;
     if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() != c.weight) {

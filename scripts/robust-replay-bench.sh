@@ -19,9 +19,13 @@ printf 'dataset\tF_clean/F*\tprecision\trecall\trejected\tlabels\ttotal_s\tp99_m
 for name in "${names[@]}"; do
   base=${name%_*}; base=${base%_*}
   file="$SHARED/datasets/robust/$name.g2o"
-  "$ARBOR" replay "$file" --robust --json -o "$OUT/$name.est.g2o" \
-    --rejected-out "$OUT/$name.rej" > "$OUT/$name.json"
-  "$ARBOR" replay "$SHARED/datasets/$base.g2o" --json > "$OUT/$base.clean.json"
+  if ! timeout "${LIMIT:-300}" "$ARBOR" replay "$file" --robust --json -o "$OUT/$name.est.g2o" \
+    --rejected-out "$OUT/$name.rej" > "$OUT/$name.json"; then
+    printf '%s\tno result in %s s\n' "$name" "${LIMIT:-300}"
+    continue
+  fi
+  [ -s "$OUT/$base.clean.json" ] ||
+    "$ARBOR" replay "$SHARED/datasets/$base.g2o" --json > "$OUT/$base.clean.json"
   { grep '^VERTEX' "$OUT/$name.est.g2o"; grep -v '^VERTEX' "$SHARED/datasets/$base.g2o"; } \
     > "$OUT/$name.scored.g2o"
   "$ARBOR" batch "$OUT/$name.scored.g2o" --init file --max-iterations 0 --json \
