@@ -18,6 +18,19 @@ bool finitePose(const SE3& x) {
   return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
 }
 
+void addStats(UpdateStats* total, const UpdateStats& s) {
+  total->new_factors += s.new_factors;
+  total->new_variables += s.new_variables;
+  total->cliques_reeliminated += s.cliques_reeliminated;
+  total->variables_reeliminated += s.variables_reeliminated;
+  total->cliques_updated += s.cliques_updated;
+  total->variables_relinearized += s.variables_relinearized;
+  total->indeterminate_cliques += s.indeterminate_cliques;
+  total->cliques_solved += s.cliques_solved;
+  total->cliques_on_helpers += s.cliques_on_helpers;
+  total->time_s += s.time_s;
+}
+
 }  // namespace
 
 const char* toString(EdgeStatus status) {
@@ -57,6 +70,7 @@ OnlineSmoother<G>::OnlineSmoother(OnlineSmootherOptions<G> options)
     : options_(options), smoother_(options.smoother) {
   if (!finitePose(options_.gauge))
     throw std::invalid_argument("OnlineSmoother: gauge pose not finite");
+  if (options_.robust) gnc_.emplace(*options_.robust);  // throws on bad options
 }
 
 template <class G>
@@ -171,9 +185,13 @@ void OnlineSmoother<G>::join(int from, int to, const G& z) {
 }
 
 template <class G>
-void OnlineSmoother<G>::apply(const Measurement& m) {
+void OnlineSmoother<G>::apply(const Measurement& m, EdgeTrust trust) {
   auto from = index_.find(m.from);
   auto to = index_.find(m.to);
+  // An edge that creates a pose or joins two components holds exactly at the estimate it
+  // makes: the robust layer trusts it.
+  const bool structural =
+      from == index_.end() || to == index_.end() || root(from->second) != root(to->second);
   if (from == index_.end() && to == index_.end()) {  // a new component, anchored at `from`
     const int f = createPose(m.from, options_.gauge, -1);
     createPose(m.to, smoother_.estimate(f).compose(m.z), f);
@@ -184,16 +202,19 @@ void OnlineSmoother<G>::apply(const Measurement& m) {
   } else if (root(from->second) != root(to->second)) {
     join(from->second, to->second, m.z);
   }
-  Factor<G> edge(RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega));
+  const auto edge = RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega);
+  Factor<G> factor(edge);
+  if (gnc_) factor.setInlierWeight(gnc_->admit(smoother_, m.from, m.to, trust, structural, edge));
   if (!disabled_pairs_.empty() && disabled_pairs_.count(idPair(m.from, m.to)))
-    edge.setInlierWeight(0.0);  // between a pair taken back: disabled until enableEdge
-  smoother_.addFactor(edge);
-  queued_.push_back(edge);
+    factor.setInlierWeight(0.0);  // between a pair taken back: disabled until enableEdge
+  smoother_.addFactor(factor);
+  queued_.push_back(factor);
   ++stats_.edges_accepted;
 }
 
 template <class G>
-EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix& omega) {
+EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix& omega,
+                                      EdgeTrust trust) {
   auto reject = [&](const std::string& why) {
     ++stats_.edges_rejected;
     return EdgeResult{EdgeStatus::kRejected, why};
@@ -214,7 +235,7 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
                                                     " -> " + std::to_string(to)};
     }
   same_pair.push_back(m);
-  apply(m);
+  apply(m, trust);
   return EdgeResult{EdgeStatus::kAccepted, ""};
 }
 
@@ -310,15 +331,61 @@ std::optional<Key> OnlineSmoother<G>::anchorOf(Key id) const {
 
 template <class G>
 UpdateStats OnlineSmoother<G>::update() {
-  // Hook for the online GNC (bayestree/online_gnc.*), which reweights loop closures around
-  // this update: it must skip every factor with factorDisabled(f) (weight 0, set by
-  // disableEdge, until enableEdge), so a disabled edge is never reweighted.
-  return recordUpdate(smoother_.update());
+  if (!gnc_) return recordUpdate(smoother_.update());
+  // The online GNC (bayestree/online_gnc.*) never reweights a disabled edge: the factors of a
+  // pair taken back are excluded from it (disableEdge, and excludeDisabled for those that
+  // enter while their pair is disabled).
+  gnc_->step(smoother_);  // the first graduation step rides on this update
+  int first = smoother_.numFactors();
+  UpdateStats total = smoother_.update();
+  gnc_->resolve(smoother_);
+  excludeDisabled(first);
+  for (int k = 1; k < gnc_->options().steps_per_update && gnc_->graduating(); ++k) {
+    gnc_->step(smoother_);
+    first = smoother_.numFactors();
+    addStats(&total, smoother_.update());
+    gnc_->resolve(smoother_);
+    excludeDisabled(first);
+    ++stats_.graduation_updates;
+  }
+  return recordUpdate(total);
 }
 
 template <class G>
+void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total) {
+  for (int k = 0; k < max_updates && gnc_->graduating(); ++k) {
+    gnc_->step(smoother_);
+    addStats(total, smoother_.update());
+    gnc_->resolve(smoother_);
+    ++stats_.graduation_updates;
+  }
+}
+
+// Robust: each round graduates every closure to the end, re-checks every settled one at the
+// kernel (a change graduates it again) and relinearises all; another round only while the
+// re-check changed a weight.
+template <class G>
 UpdateStats OnlineSmoother<G>::finalize() {
-  return recordUpdate(smoother_.relinearizeAll());
+  if (!gnc_) return recordUpdate(smoother_.relinearizeAll());
+  UpdateStats total;
+  const int bound = gnc_->options().max_steps_per_closure + 1;
+  for (int round = 0;; ++round) {
+    graduateFully(bound, &total);
+    addStats(&total, smoother_.relinearizeAll());
+    gnc_->resolve(smoother_);
+    if (round + 1 >= gnc_->options().finalize_rounds) break;
+    if (gnc_->step(smoother_, /*recheck_all=*/true) == 0 && !gnc_->graduating()) break;
+  }
+  return recordUpdate(total);
+}
+
+template <class G>
+std::vector<ClosureReport> OnlineSmoother<G>::closures() const {
+  if (!gnc_) return {};
+  std::vector<ClosureReport> out = gnc_->closures();
+  for (ClosureReport& r : out)  // the weight in the smoother (the caller's for an excluded one)
+    if (r.factor >= 0) r.weight = smoother_.factors()[static_cast<size_t>(r.factor)].inlierWeight();
+  return out;
 }
 
 template <class G>
@@ -449,6 +516,7 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
     pair_factors_.clear();  // the rebuild numbers the factors anew
     factors_indexed_ = 0;
     indexEdgeFactors();
+    if (gnc_) gnc_->remap(smoother_);  // the weights came along on the factors
   }
   result.stats.time_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -495,7 +563,27 @@ OnlineStats OnlineSmoother<G>::stats() const {
   OnlineStats s = stats_;
   s.pairs_disabled = static_cast<int>(disabled_pairs_.size());
   for (const IdPair& p : disabled_pairs_) s.edges_disabled += edgesBetween(p);
+  if (gnc_) {
+    const ClosureCounts c = gnc_->counts();
+    s.closures_inlier = c.inlier;
+    s.closures_outlier = c.outlier;
+    s.closures_trusted = c.trusted;
+    s.closures_excluded = c.excluded;
+    s.closures_graduating = c.graduating;
+    s.graduation_steps = c.graduation_steps;
+  }
   return s;
+}
+
+// Factors from `first` on that entered between a pair taken back leave the GNC.
+template <class G>
+void OnlineSmoother<G>::excludeDisabled(int first) {
+  if (disabled_pairs_.empty()) return;
+  for (int f = first; f < smoother_.numFactors(); ++f)
+    if (factorDisabled(f)) {
+      gnc_->exclude(smoother_, f);
+      smoother_.setFactorWeight(f, 0.0);  // whatever a graduation step gave it before
+    }
 }
 
 // ---- Taking an edge back ---------------------------------------------------------------------
@@ -623,6 +711,14 @@ EdgeSwitchResult OnlineSmoother<G>::disableEdge(Key from, Key to) {
   }
   disabled_pairs_.insert(p);
   setPairWeight(p, 0.0);
+  if (gnc_) {  // the GNC leaves them alone until enableEdge
+    auto it = pair_factors_.find(p);
+    if (it != pair_factors_.end())
+      for (int f : it->second) {
+        gnc_->exclude(smoother_, f);
+        smoother_.setFactorWeight(f, 0.0);
+      }
+  }
   return {EdgeSwitchStatus::kApplied, n, "disabled " + edge + " from the next update on"};
 }
 
@@ -637,6 +733,11 @@ EdgeSwitchResult OnlineSmoother<G>::enableEdge(Key from, Key to) {
     return {EdgeSwitchStatus::kAlreadyEnabled, n, "enable " + edge + ": not disabled"};
   disabled_pairs_.erase(p);
   setPairWeight(p, 1.0);
+  if (gnc_) {  // a loop closure goes through the GNC's first check again (include)
+    auto it = pair_factors_.find(p);
+    if (it != pair_factors_.end())
+      for (int f : it->second) gnc_->include(smoother_, f);
+  }
   return {EdgeSwitchStatus::kApplied, n, "enabled " + edge + " from the next update on"};
 }
 

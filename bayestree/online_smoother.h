@@ -23,6 +23,11 @@
 // — the linearisation point and rebuilds the Bayes tree from scratch; incremental updates then
 // continue from there.
 //
+// Robust smoothing (OnlineSmootherOptions::robust, off by default): every loop closure is judged
+// and graduated by an OnlineGnc (bayestree/online_gnc.h) through the smoother's weight seam;
+// odometry, edges marked EdgeTrust::kTrusted, edges that create a pose or join two components,
+// and priors are trusted. Without it nothing changes, bit for bit.
+//
 // Thread-safety: none. One thread owns an OnlineSmoother and makes every call (the LCM service
 // feeds it from its single handler thread); const methods may run concurrently only with other
 // const methods.
@@ -39,6 +44,7 @@
 #include <Eigen/Core>
 
 #include "bayestree/incremental_smoother.h"
+#include "bayestree/online_gnc.h"
 #include "core/factor.h"
 #include "core/gauge.h"
 #include "core/pose_graph.h"
@@ -82,6 +88,8 @@ template <class G>
 struct OnlineSmootherOptions {
   SmootherOptions smoother;
   G gauge = G::Identity();  ///< the value of the first pose seen (held fixed)
+  /// Online robust smoothing of the loop closures (bayestree/online_gnc.h); none: off.
+  std::optional<RobustOptions> robust;
 };
 
 /// What reseed() did.
@@ -110,6 +118,16 @@ struct OnlineStats {
   int edges_disabled = 0;  ///< accepted edges disabled now (disableEdge), weight 0
   int pairs_disabled = 0;  ///< id pairs disabled now
   UpdateStats last_update;
+  // With OnlineSmootherOptions::robust (else 0): loop closures (|from − to| ≠ 1) by status
+  // (ClosureStatus), those of inlier + outlier still graduating, the weight changes made by
+  // graduation, and the extra smoother updates graduation ran (steps_per_update > 1, finalize).
+  int closures_inlier = 0;
+  int closures_outlier = 0;
+  int closures_trusted = 0;
+  int closures_excluded = 0;
+  int closures_graduating = 0;
+  int graduation_steps = 0;
+  int graduation_updates = 0;
 };
 
 template <class G>
@@ -122,8 +140,10 @@ class OnlineSmoother {
 
   explicit OnlineSmoother(OnlineSmootherOptions<G> options = {});
 
-  /// One measurement z of pose `to` in the frame of pose `from`, with information Ω.
-  EdgeResult addEdge(Key from, Key to, const G& z, const Matrix& omega);
+  /// One measurement z of pose `to` in the frame of pose `from`, with information Ω. With
+  /// robust smoothing, `trust` kTrusted keeps a loop closure out of the GNC (weight 1 for good).
+  EdgeResult addEdge(Key from, Key to, const G& z, const Matrix& omega,
+                     EdgeTrust trust = EdgeTrust::kByRule);
   /// A prior z on pose `id` in the world frame (core/prior_factors.h), with an optional sensor
   /// offset o (the prior is on x o). An unknown id starts a component there, at z o⁻¹.
   EdgeResult addPosePrior(Key id, const G& z, const Matrix& omega, const G& offset = G::Identity());
@@ -148,10 +168,18 @@ class OnlineSmoother {
   /// no edge is disabled). O(m).
   double objective() const;
 
-  /// Runs one incremental update over the edges accepted since the last one.
+  /// Runs one incremental update over the edges accepted since the last one. With robust
+  /// smoothing, first one graduation step (OnlineGnc::step), then up to steps_per_update − 1
+  /// more, each a smoother update of its own (summed into the stats returned).
   UpdateStats update();
-  /// Relinearises everything and iterates to convergence (the end of a replay).
+  /// Relinearises everything and iterates to convergence (the end of a replay). With robust
+  /// smoothing, first graduates every closure to the end (bounded by max_steps_per_closure
+  /// updates) and re-checks every settled one, up to RobustOptions::finalize_rounds rounds.
   UpdateStats finalize();
+  /// With robust smoothing: every loop closure's weight and status (empty without it).
+  std::vector<ClosureReport> closures() const;
+  /// The robust layer, or nullptr without robust smoothing (exclude/include a factor).
+  const OnlineGnc<G>* gnc() const { return gnc_ ? &*gnc_ : nullptr; }
 
   /// The poses known at the last update() (the first ones in dense order; the anchors listed in
   /// `fixed`), every edge and prior taken in by the smoother so far but the disabled edges, and
@@ -219,7 +247,9 @@ class OnlineSmoother {
   /// A new pose; creator −1 starts a component (anchored at it when `anchor`).
   int createPose(Key id, const G& value, int creator, bool anchor = true);
   /// Adds m to the smoother, creating an unknown end or a new component, or joining two.
-  void apply(const Measurement& m);
+  void apply(const Measurement& m, EdgeTrust trust);
+  /// Robust smoothing: graduation steps until none graduates or `max_updates` updates.
+  void graduateFully(int max_updates, UpdateStats* total);
   /// The edge from → to (dense indices, in different components) joins them.
   void join(int from, int to, const G& z);
   /// Priors of component c now fix its gauge: its anchor is released.
@@ -279,6 +309,9 @@ class OnlineSmoother {
   std::set<IdPair> disabled_pairs_;                  ///< pairs taken back by disableEdge
   std::map<IdPair, std::vector<int>> pair_factors_;  ///< per pair: its edges' smoother factors
   int factors_indexed_ = 0;                          ///< smoother factors in pair_factors_
+  std::optional<OnlineGnc<G>> gnc_;  ///< robust smoothing (options_.robust)
+  /// Factors from `first` on whose pair is disabled leave the GNC (after its resolve()).
+  void excludeDisabled(int first);
 };
 
 using OnlineSmoother2 = OnlineSmoother<SE2>;

@@ -190,6 +190,62 @@ TEST(Cli, BatchRobustWritesTheRejectedEdges) {
   }
 }
 
+// arbor replay --robust on the same kind of graph: online GNC per loop closure rejects every
+// planted closure, --rejected-out writes as many edges as the JSON counts as outliers, the text
+// summary prints the closure counts, and the robust flags are refused without --robust (and
+// `auto`, batch only, and --batch with it).
+TEST(Cli, ReplayRobustWritesTheRejectedEdges) {
+  const std::string file = tempPath("replay_robust.g2o");
+  ASSERT_EQ(run("generate manhattan --poses 300 --grid 6 --seed 5 -o " + file).status, 0);
+  std::vector<long> ids;
+  {
+    std::ifstream in(file);
+    std::string line;
+    while (std::getline(in, line)) {
+      std::istringstream ls(line);
+      std::string tag;
+      long id;
+      if (ls >> tag >> id && tag.rfind("VERTEX", 0) == 0) ids.push_back(id);
+    }
+  }
+  ASSERT_GE(ids.size(), 300u);
+  std::set<std::pair<long, long>> planted;
+  {
+    std::ofstream out(file, std::ios::app);
+    for (int k = 0; k < 6; ++k) {
+      const long i = ids[10 + 37 * k], j = ids[150 + 23 * k];
+      planted.emplace(i, j);
+      out << "EDGE_SE2 " << i << " " << j << " " << 7.0 + k << " " << -5.0 + 2 * k << " "
+          << 0.4 * k - 1.0 << " 100 0 0 100 0 1000\n";
+    }
+  }
+  const std::string rejected = tempPath("replay_robust.rej");
+  const Result r = run("replay " + file + " --robust --json --rejected-out " + rejected);
+  ASSERT_EQ(r.status, 0) << r.out;
+  const auto j = nlohmann::json::parse(r.out);
+  ASSERT_TRUE(j.contains("robust")) << r.out;
+  EXPECT_EQ(j["robust"]["kernel"], "tls");
+  EXPECT_EQ(j["robust"]["closures_graduating"], 0);
+  EXPECT_GT(j["robust"]["closures_inlier"].get<int>(), 0);
+  EXPECT_LT(j["robust"]["F_kept"].get<double>(), j["F_final"].get<double>());
+  std::set<std::pair<long, long>> written;
+  std::ifstream in(rejected);
+  long i, k;
+  while (in >> i >> k) written.emplace(i, k);
+  EXPECT_EQ(static_cast<int>(written.size()), j["robust"]["closures_outlier"].get<int>());
+  for (const auto& edge : planted) EXPECT_EQ(written.count(edge), 1u);
+  const Result text = run("replay " + file + " --robust --kernel gm");
+  ASSERT_EQ(text.status, 0) << text.out;
+  EXPECT_NE(text.out.find("closures      "), std::string::npos) << text.out;
+  for (const std::string args : {"--kernel tls", "--rejected-out x.txt", "--inlier-threshold 3",
+                                 "--robust --kernel welsch", "--robust --inlier-threshold -1",
+                                 "--robust --inlier-threshold auto", "--robust --batch lm"}) {
+    const Result bad = run("replay " + file + " " + args);
+    EXPECT_EQ(bad.status, 2) << args << ": " << bad.out;
+    EXPECT_EQ(std::count(bad.out.begin(), bad.out.end(), '\n'), 1) << args << ": " << bad.out;
+  }
+}
+
 // A value the smoother (or the refinement) refuses exits 2 with one line naming the flag and the
 // value, in replay, serve and the benchmarks alike.
 TEST(Cli, BadSmootherOrBatchValueExitsTwoNamingTheFlagAndValue) {

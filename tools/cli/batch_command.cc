@@ -15,6 +15,7 @@
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
 #include "tools/cli/covariance_output.h"
+#include "tools/cli/robust_flags.h"
 #include "tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
@@ -310,7 +311,7 @@ int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
-  std::string kernel = "tls", threshold = "chi2", format = "g2o";
+  std::string format = "g2o";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -331,17 +332,10 @@ int batchCommand(const std::vector<std::string>& args) {
       "covariances", po::value(&run.covariances),
       "write every pose's marginal covariance at the final estimate, `id` and the upper triangle "
       "a line (docs/files.md)")("json", po::bool_switch(&run.json), "print one JSON object")(
-      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr")(
-      "robust", po::bool_switch(&run.robust),
-      "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| = 1) "
-      "trusted; with --solver rtr, then the certifiable solver on the edges kept")(
-      "kernel", po::value(&kernel)->default_value(kernel),
-      "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
-      "inlier-threshold", po::value(&threshold)->default_value(threshold),
-      "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
-      "at its word); auto: that quantile times the variance factor estimated over the inliers")(
-      "rejected-out", po::value(&run.rejected_out),
-      "with --robust: write the rejected edges, `i j` (file ids) a line");
+      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr");
+  addRobustFlags(options,
+                 "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| "
+                 "= 1) trusted; with --solver rtr, then the certifiable solver on the edges kept");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return 0;
@@ -353,39 +347,18 @@ int batchCommand(const std::vector<std::string>& args) {
     throw UsageError(e.what());
   }
   if (run.settings.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
-  if (run.robust) {
-    try {
-      run.gnc.kernel = parseKernelKind(kernel);
-    } catch (const std::invalid_argument& e) {
-      throw UsageError(std::string("--kernel: ") + e.what());
-    }
-    if (run.gnc.kernel == KernelKind::kNone)
-      throw UsageError("--kernel must be tls, gm, cauchy or huber with --robust, not none");
-    if (threshold == "auto") {
-      run.gnc.estimate_scale = true;
-    } else if (threshold != "chi2") {
-      std::size_t used = 0;
-      double value = 0;
-      try {
-        value = std::stod(threshold, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != threshold.size() || !(value > 0) || !std::isfinite(value))
-        throw UsageError("--inlier-threshold must be chi2, auto or a number > 0, not '" +
-                         threshold + "'");
-      run.gnc.threshold = value;
-    }
-    if (run.solver != BatchSolver::kLevenbergMarquardt && run.solver != BatchSolver::kRtr)
-      throw UsageError(
-          "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
-          "rtr, not '" +
-          solver + "'");
-  } else {
-    for (const char* flag : {"kernel", "inlier-threshold", "rejected-out"})
-      if (given.count(flag) && !given[flag].defaulted())
-        throw UsageError(std::string("--") + flag + " needs --robust");
-  }
+  const RobustFlags robust = readRobustFlags(given, /*allow_auto=*/true);
+  run.robust = robust.robust;
+  run.gnc.kernel = robust.kernel;
+  run.gnc.threshold = robust.threshold;
+  run.gnc.estimate_scale = robust.estimate_scale;
+  run.rejected_out = robust.rejected_out;
+  if (run.robust && run.solver != BatchSolver::kLevenbergMarquardt &&
+      run.solver != BatchSolver::kRtr)
+    throw UsageError(
+        "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
+        "rtr, not '" +
+        solver + "'");
   if (!(run.settings.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
   try {
     run.format = parseTrajectoryFormat(format);

@@ -5,12 +5,14 @@
 
 #include <algorithm>
 #include <cctype>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
 
+#include "core/gnc_solver.h"
 #include "io/pose_graph_file.h"
 #include "tools/cli/batch_refinement.h"
 #include "tools/cli/cli_common.h"
@@ -39,6 +41,12 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   settings.smoother = run.smoother;
   settings.per_pose = run.step == "pose";
   settings.finalize = run.finalize;
+  if (run.robust.robust) {
+    RobustOptions robust;
+    robust.kernel = run.robust.kernel;
+    robust.threshold = run.robust.threshold;
+    settings.robust = robust;
+  }
   LoopResult<G> loop_result;
   const bool with_batches = run.batch.has_value();
   if (with_batches) {
@@ -56,6 +64,17 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   if (!run.latency_csv.empty()) writeLatencyCsv(run.latency_csv, r.rows);
   const double gap = (r.F_final - r.batch.F_final) / r.batch.F_final;
   const LatencySummary& lat = r.latency;
+  const OnlineStats& online = r.online;
+  if (!run.robust.rejected_out.empty()) {
+    std::ofstream out(run.robust.rejected_out);
+    for (const ClosureReport& c : r.closures)
+      if (c.status == ClosureStatus::kOutlier) out << c.from << " " << c.to << "\n";
+    if (!out) throw std::runtime_error("cannot write " + run.robust.rejected_out);
+  }
+  const double F_kept =
+      run.robust.robust ? objective(keepEdges(graph, keptEdges(graph, r.closures)), r.poses) : 0;
+  const double c2 =
+      run.robust.threshold > 0 ? run.robust.threshold : chiSquareThreshold(0.99, G::kDoF);
 
   if (run.json) {
     nlohmann::json j = graphJson(run.file, graph);
@@ -80,6 +99,20 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"peak_rss_mb", peakRssMb()},
         {"wall_s", total_clock.seconds()},
     });
+    if (run.robust.robust) {
+      j["robust"] = {
+          {"kernel", toString(run.robust.kernel)},
+          {"inlier_threshold", c2},
+          {"F_kept", F_kept},
+          {"closures_inlier", online.closures_inlier},
+          {"closures_outlier", online.closures_outlier},
+          {"closures_trusted", online.closures_trusted},
+          {"closures_graduating", online.closures_graduating},
+          {"graduation_steps", online.graduation_steps},
+          {"graduation_updates", online.graduation_updates},
+      };
+      if (!run.robust.rejected_out.empty()) j["rejected_out"] = run.robust.rejected_out;
+    }
     if (with_batches) {
       j["batch"] = refine::toString(*run.batch);
       j["batch_every"] = run.batch_every;
@@ -103,10 +136,25 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
             << " (before the final relinearisation)\n"
             << "F final       " << r.F_final << "\n"
             << batchLabel(run) << r.batch.F_final << " (" << r.batch.iterations
-            << " iterations from the incremental estimate, " << std::setprecision(4)
+            << " iterations from the incremental estimate"
+            << (run.robust.robust ? ", kept edges" : "") << ", " << std::setprecision(4)
             << r.batch.time_s << " s)\n"
             << "gap           " << std::setprecision(3) << 100.0 * gap << " %\n"
             << "relinearized  " << r.relinearized << " variables in total\n";
+  if (run.robust.robust) {
+    std::cout << std::setprecision(4) << "robust        GNC-" << toString(run.robust.kernel)
+              << " per loop closure, online, c² " << c2
+              << (run.robust.threshold > 0 ? " (given)" : " (χ² 0.99 quantile)") << "\n"
+              << "closures      " << online.closures_inlier << " inlier, "
+              << online.closures_outlier << " outlier (rejected), " << online.closures_trusted
+              << " trusted, " << online.closures_graduating << " still graduating; "
+              << online.graduation_steps << " graduation steps, " << online.graduation_updates
+              << " extra updates\n"
+              << std::setprecision(10) << "F kept        " << F_kept
+              << " (the final estimate without the rejected edges)\n";
+    if (!run.robust.rejected_out.empty())
+      std::cout << "rejected out  " << run.robust.rejected_out << "\n";
+  }
   if (r.indeterminate) std::cout << "indeterminate " << r.indeterminate << " cliques damped\n";
   if (r.duplicates || r.rejected || r.pending) {
     std::cout << "input         " << r.duplicates << " duplicates, " << r.rejected << " rejected, "
@@ -149,6 +197,10 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       "a background batch run every N updates (needs --batch)")(
       "reseed", po::bool_switch(&run.reseed),
       "rebuild the smoother from a batch estimate with lower F");
+  addRobustFlags(options,
+                 "robust to false loop closures: graduated non-convexity per loop closure in "
+                 "the Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; the final batch "
+                 "LM runs over the edges kept");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return std::nullopt;
@@ -172,6 +224,9 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
     throw UsageError("--batch-every and --reseed need --batch " +
                      refine::batchSolverNames(true, "|"));
   }
+  run.robust = readRobustFlags(vm, /*allow_auto=*/false);
+  if (run.robust.robust && run.batch)
+    throw UsageError("--robust with --batch: the batch runs in the loop are not robust yet");
   run.read.information = parseInformationPolicy(information);
   return run;
 }

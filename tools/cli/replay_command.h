@@ -7,6 +7,7 @@
 
 #include "bayestree/incremental_smoother.h"
 #include "io/pose_graph_file.h"
+#include "tools/cli/robust_flags.h"
 #include "tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
@@ -17,6 +18,7 @@ struct ReplayCommandLine {
   std::optional<refine::BatchSolver> batch;  ///< --batch: a row that refines; none: no loop
   int batch_every = 0;
   SmootherOptions smoother;  ///< tools/cli/smoother_flags.h
+  RobustFlags robust;        ///< tools/cli/robust_flags.h: online GNC per loop closure
   ReadOptions read;
 };
 

@@ -3,9 +3,11 @@
 #include <fstream>
 #include <iomanip>
 #include <numeric>
+#include <set>
 #include <stdexcept>
 
 #include "bayestree/online_smoother.h"
+#include "core/gnc_solver.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/replay_order.h"
 
@@ -92,18 +94,37 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
   result.poses = graph.poses;
   for (const auto& [id, pose] : smoother.estimates()) result.poses[graph.index.at(id)] = pose;
   result.F_final = objective(graph, result.poses);
+  result.online = smoother.stats();
+  result.closures = smoother.closures();
   return result;
+}
+
+template <class G>
+std::vector<char> keptEdges(const PoseGraph<G>& graph, const std::vector<ClosureReport>& closures) {
+  std::set<std::pair<Key, Key>> rejected;
+  for (const ClosureReport& c : closures)
+    if (c.status == ClosureStatus::kOutlier) rejected.insert({c.from, c.to});
+  std::vector<char> keep(graph.edges.size(), 1);
+  for (size_t k = 0; k < graph.edges.size(); ++k)
+    if (rejected.count({graph.ids[graph.edges[k].i], graph.ids[graph.edges[k].j]})) keep[k] = 0;
+  return keep;
 }
 
 template <class G>
 ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings) {
   OnlineSmootherOptions<G> options;
   options.smoother = settings.smoother;
+  options.robust = settings.robust;
   OnlineSmoother<G> smoother(options);
   ReplayResult<G> result = replayInto(graph, settings, smoother);
   if (settings.batch) {
     result.batch_poses = result.poses;
-    result.batch = solveBatch(graph, &result.batch_poses);
+    if (settings.robust) {  // LM over the edges kept: the false ones would wreck it
+      result.batch =
+          solveBatch(keepEdges(graph, keptEdges(graph, result.closures)), &result.batch_poses);
+    } else {
+      result.batch = solveBatch(graph, &result.batch_poses);
+    }
   }
   return result;
 }
@@ -126,6 +147,8 @@ template ReplayResult<SE2> replayInto(const PoseGraph<SE2>&, const ReplaySetting
                                       OnlineSmoother<SE2>&, const ReplayHooks<SE2>&);
 template ReplayResult<SE3> replayInto(const PoseGraph<SE3>&, const ReplaySettings&,
                                       OnlineSmoother<SE3>&, const ReplayHooks<SE3>&);
+template std::vector<char> keptEdges(const PoseGraph<SE2>&, const std::vector<ClosureReport>&);
+template std::vector<char> keptEdges(const PoseGraph<SE3>&, const std::vector<ClosureReport>&);
 template ReplayResult<SE2> runReplay(const PoseGraph<SE2>&, const ReplaySettings&);
 template ReplayResult<SE3> runReplay(const PoseGraph<SE3>&, const ReplaySettings&);
 

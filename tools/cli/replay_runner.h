@@ -4,6 +4,7 @@
 #pragma once
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,9 @@ struct ReplaySettings {
   bool per_pose = false;  ///< one update per new pose (all its edges) instead of per edge
   bool finalize = true;   ///< relinearise everything at the end
   bool batch = true;      ///< run batch LM from the incremental estimate
+  /// Online robust smoothing (bayestree/online_gnc.h); the batch LM then runs over the edges
+  /// it kept.
+  std::optional<RobustOptions> robust;
 };
 
 struct UpdateRow {
@@ -46,7 +50,14 @@ struct ReplayResult {
   std::vector<std::string> rejections;  ///< one line per rejected edge
   std::vector<G> poses;                 ///< the final estimate in the graph's dense order
   std::vector<G> batch_poses;           ///< the batch LM estimate
+  OnlineStats online;                   ///< the online layer's counts at the end
+  std::vector<ClosureReport> closures;  ///< with settings.robust: every loop closure
 };
+
+/// The graph's edges the robust replay kept: false for an edge whose (from, to) ids a rejected
+/// closure has (`closures`' outliers).
+template <class G>
+std::vector<char> keptEdges(const PoseGraph<G>& graph, const std::vector<ClosureReport>& closures);
 
 template <class G>
 ReplayResult<G> runReplay(const PoseGraph<G>& graph, const ReplaySettings& settings);

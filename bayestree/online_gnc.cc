@@ -1,0 +1,347 @@
+#include "bayestree/online_gnc.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <stdexcept>
+
+namespace arbor {
+namespace {
+
+bool samePose(const SE2& a, const SE2& b) {
+  return a.x() == b.x() && a.y() == b.y() && a.cos() == b.cos() && a.sin() == b.sin();
+}
+bool samePose(const SE3& a, const SE3& b) {
+  return a.translation() == b.translation() && a.quaternion().coeffs() == b.quaternion().coeffs();
+}
+
+bool odometry(Key from, Key to) { return from - to == 1 || to - from == 1; }
+
+}  // namespace
+
+std::string RobustOptions::problem() const {
+  auto bad = [](const std::string& field, double value, const std::string& want) {
+    return "RobustOptions::" + field + " must be " + want + ", not " + std::to_string(value);
+  };
+  if (kernel == KernelKind::kNone)
+    return "RobustOptions::kernel must be tls, gm, cauchy or huber, not none";
+  if (!std::isfinite(threshold)) return bad("threshold", threshold, "finite (≤ 0: automatic)");
+  if (threshold <= 0 && !(confidence > 0 && confidence < 1))
+    return bad("confidence", confidence, "in (0, 1)");
+  if (!(mu_step > 1) || !std::isfinite(mu_step)) return bad("mu_step", mu_step, "finite and > 1");
+  if (steps_per_update < 1) return bad("steps_per_update", steps_per_update, ">= 1");
+  if (max_steps_per_closure < 1) return bad("max_steps_per_closure", max_steps_per_closure, ">= 1");
+  if (!(max_mu > 0)) return bad("max_mu", max_mu, "> 0");
+  if (!(weight_tolerance > 0) || !std::isfinite(weight_tolerance))
+    return bad("weight_tolerance", weight_tolerance, "finite and > 0");
+  if (rechecks_per_update < 0) return bad("rechecks_per_update", rechecks_per_update, ">= 0");
+  if (!(recheck_margin >= 1) || !std::isfinite(recheck_margin))
+    return bad("recheck_margin", recheck_margin, "finite and >= 1");
+  if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
+  return "";
+}
+
+const char* toString(ClosureStatus status) {
+  switch (status) {
+    case ClosureStatus::kInlier:
+      return "inlier";
+    case ClosureStatus::kOutlier:
+      return "outlier";
+    case ClosureStatus::kTrusted:
+      return "trusted";
+    case ClosureStatus::kExcluded:
+      return "excluded";
+  }
+  return "unknown";
+}
+
+template <class G>
+OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
+  const std::string problem = options_.problem();
+  if (!problem.empty()) throw std::invalid_argument(problem);
+  c2_ = options_.threshold > 0 ? options_.threshold
+                               : chiSquareThreshold(options_.confidence, G::kDoF);
+}
+
+template <class G>
+RobustKernel OnlineGnc<G>::kernelAt(double mu) const {
+  return RobustKernel{options_.kernel, c2_, mu};
+}
+
+template <class G>
+double OnlineGnc<G>::finalWeight(double s) const {
+  switch (options_.kernel) {
+    case KernelKind::kTruncatedLeastSquares:
+      return s <= c2_ ? 1.0 : 0.0;
+    case KernelKind::kGemanMcClure:
+      return kernelAt(1.0).weight(s);
+    default:
+      return kernelAt(1.0).weight(s);
+  }
+}
+
+// The first check: s ≤ c² settles at weight 1 (no graduation); otherwise the convex surrogate
+// at μ₀ = initialMu(s) and w₀ = ρ′_μ₀(s) (Huber, Cauchy: w₀ = ρ′(s)).
+template <class G>
+void OnlineGnc<G>::enter(Closure* c, double s) {
+  c->s = s;
+  c->steps = 0;
+  if (s <= c2_) {
+    c->state = State::kSettled;
+    c->weight = 1.0;
+    return;
+  }
+  const RobustKernel k = kernelAt(1.0);
+  c->mu = k.isGraduated() ? k.initialMu(s) : 1.0;
+  c->weight = kernelAt(c->mu).weight(s);
+  c->state = State::kGraduating;
+}
+
+// One step: μ moves one notch towards the kernel, w = ρ′_μ(s). Settled when the surrogate's
+// weight is the kernel's (TLS: binary, or μ ≥ max_mu; GM: μ = 1; Huber, Cauchy: w stopped
+// moving), or after max_steps_per_closure steps (then the kernel's own weight).
+template <class G>
+double OnlineGnc<G>::graduate(Closure* c, double s) {
+  c->s = s;
+  ++c->steps;
+  const RobustKernel now = kernelAt(c->mu);
+  double w;
+  bool settled;
+  if (now.isGraduated()) {
+    c->mu = now.nextMu(options_.mu_step);
+    const RobustKernel next = kernelAt(c->mu);
+    w = next.weight(s);
+    settled = options_.kernel == KernelKind::kTruncatedLeastSquares
+                  ? (w == 0.0 || w == 1.0 || c->mu >= options_.max_mu)
+                  : next.atKernel();
+  } else {
+    w = now.weight(s);
+    settled = std::abs(w - c->weight) < options_.weight_tolerance;
+  }
+  if (!settled && c->steps >= options_.max_steps_per_closure) {
+    w = finalWeight(s);
+    settled = true;
+  }
+  if (settled && options_.kernel == KernelKind::kTruncatedLeastSquares) w = finalWeight(s);
+  if (settled) c->state = State::kSettled;
+  return w;
+}
+
+template <class G>
+double OnlineGnc<G>::residual(const IncrementalSmoother<G>& smoother, const Closure& c) const {
+  const Factor<G>& f = smoother.factors()[static_cast<size_t>(c.factor)];
+  return f.relativePose()->cost(smoother.estimate(c.i), smoother.estimate(c.j));
+}
+
+template <class G>
+void OnlineGnc<G>::setWeight(IncrementalSmoother<G>& smoother, Closure* c, double w) {
+  c->weight = w;
+  smoother.setFactorWeight(c->factor, w);
+}
+
+template <class G>
+double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key to,
+                           EdgeTrust trust, bool structural, const Edge& edge) {
+  if (odometry(from, to)) return 1.0;  // odometry: not a loop closure
+  Closure c;
+  c.from = from;
+  c.to = to;
+  c.i = edge.i;
+  c.j = edge.j;
+  c.z = edge.measurement;
+  if (trust == EdgeTrust::kTrusted || structural) {
+    c.state = State::kTrusted;
+  } else {
+    enter(&c, edge.cost(smoother.estimate(edge.i), smoother.estimate(edge.j)));
+  }
+  const int id = static_cast<int>(closures_.size());
+  closures_.push_back(c);
+  unresolved_.push_back(id);
+  if (c.state == State::kGraduating) graduating_.push_back(id);
+  return c.weight;
+}
+
+template <class G>
+void OnlineGnc<G>::match(const IncrementalSmoother<G>& smoother, int first, std::vector<int>* ids) {
+  if (ids->empty()) return;
+  std::map<std::pair<int, int>, std::vector<int>> wanted;
+  for (int id : *ids) wanted[{closures_[id].i, closures_[id].j}].push_back(id);
+  const auto& factors = smoother.factors();
+  by_factor_.resize(factors.size(), -1);
+  for (size_t f = static_cast<size_t>(first); f < factors.size(); ++f) {
+    const Edge* e = factors[f].relativePose();
+    if (!e) continue;
+    auto it = wanted.find({e->i, e->j});
+    if (it == wanted.end()) continue;
+    for (int& id : it->second) {
+      if (id < 0 || !samePose(closures_[id].z, e->measurement)) continue;
+      closures_[id].factor = static_cast<int>(f);
+      by_factor_[f] = id;
+      id = -1;
+      break;
+    }
+  }
+  std::vector<int> left;
+  for (auto& [pair, list] : wanted)
+    for (int id : list)
+      if (id >= 0) left.push_back(id);
+  ids->swap(left);  // still queued (not added by this update)
+}
+
+template <class G>
+void OnlineGnc<G>::resolve(const IncrementalSmoother<G>& smoother) {
+  match(smoother, resolved_factors_, &unresolved_);
+  resolved_factors_ = smoother.numFactors();
+}
+
+template <class G>
+void OnlineGnc<G>::remap(const IncrementalSmoother<G>& smoother) {
+  std::vector<int> all;
+  for (size_t id = 0; id < closures_.size(); ++id) {
+    closures_[id].factor = -1;
+    all.push_back(static_cast<int>(id));
+  }
+  by_factor_.assign(smoother.factors().size(), -1);
+  match(smoother, 0, &all);
+  unresolved_ = all;
+  resolved_factors_ = smoother.numFactors();
+}
+
+template <class G>
+int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
+  int changed = 0;
+  // The graduating closures: one step each (those not in the smoother yet keep w₀).
+  std::vector<int> still;
+  for (int id : graduating_) {
+    Closure& c = closures_[id];
+    if (c.state != State::kGraduating) continue;  // excluded meanwhile
+    if (c.factor < 0) {
+      still.push_back(id);
+      continue;
+    }
+    const double w = graduate(&c, residual(smoother, c));
+    if (w != c.weight) {
+      setWeight(smoother, &c, w);
+      ++changed;
+      ++totals_.graduation_steps;
+    }
+    if (c.state == State::kGraduating) still.push_back(id);
+  }
+  graduating_.swap(still);
+  // The settled closures, at the kernel: an outlier the estimate now agrees with comes back, an
+  // inlier beyond recheck_margin·c² graduates again (the "affected" closures, header comment).
+  const size_t n = closures_.size();
+  const size_t budget = recheck_all ? n : static_cast<size_t>(options_.rechecks_per_update);
+  for (size_t k = 0, looked = 0; k < budget && looked < n; ++looked) {
+    const int id = static_cast<int>(cursor_++ % n);
+    Closure& c = closures_[id];
+    if (c.state != State::kSettled || c.factor < 0) continue;
+    ++k;
+    ++totals_.rechecks;
+    const double s = residual(smoother, c);
+    c.s = s;
+    const bool inlier = c.weight >= 0.5;
+    const bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
+    const bool drift = options_.kernel != KernelKind::kTruncatedLeastSquares &&
+                       options_.kernel != KernelKind::kGemanMcClure &&
+                       std::abs(finalWeight(s) - c.weight) > 10 * options_.weight_tolerance;
+    if (!flip && !drift) continue;
+    if (inlier || drift) {
+      enter(&c, s);
+    } else {  // an outlier the estimate now agrees with: back at weight 1
+      c.state = State::kSettled;
+      c.weight = 1.0;
+    }
+    if (c.state == State::kGraduating) graduating_.push_back(id);
+    ++totals_.regraduated;
+    if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() != c.weight) {
+      smoother.setFactorWeight(c.factor, c.weight);
+      ++changed;
+    }
+  }
+  return changed;
+}
+
+template <class G>
+int OnlineGnc<G>::closureOf(int factor) const {
+  if (factor < 0 || static_cast<size_t>(factor) >= by_factor_.size()) return -1;
+  return by_factor_[static_cast<size_t>(factor)];
+}
+
+template <class G>
+void OnlineGnc<G>::exclude(IncrementalSmoother<G>& smoother, int factor) {
+  if (factor < 0 || factor >= smoother.numFactors())
+    throw std::invalid_argument("OnlineGnc::exclude: factor " + std::to_string(factor) +
+                                " out of range (" + std::to_string(smoother.numFactors()) +
+                                " factors)");
+  const int id = closureOf(factor);
+  if (id < 0 || closures_[id].state == State::kTrusted) return;
+  closures_[id].state = State::kExcluded;  // dropped from graduating_ by the next step()
+}
+
+template <class G>
+void OnlineGnc<G>::include(IncrementalSmoother<G>& smoother, int factor) {
+  if (factor < 0 || factor >= smoother.numFactors())
+    throw std::invalid_argument("OnlineGnc::include: factor " + std::to_string(factor) +
+                                " out of range (" + std::to_string(smoother.numFactors()) +
+                                " factors)");
+  const int id = closureOf(factor);
+  if (id < 0 || closures_[id].state != State::kExcluded) return;
+  Closure& c = closures_[id];
+  enter(&c, residual(smoother, c));
+  if (c.state == State::kGraduating) graduating_.push_back(id);
+  smoother.setFactorWeight(c.factor, c.weight);
+}
+
+template <class G>
+ClosureCounts OnlineGnc<G>::counts() const {
+  ClosureCounts out = totals_;
+  for (const Closure& c : closures_) {
+    switch (c.state) {
+      case State::kTrusted:
+        ++out.trusted;
+        break;
+      case State::kExcluded:
+        ++out.excluded;
+        break;
+      default:
+        ++(c.weight >= 0.5 ? out.inlier : out.outlier);
+        if (c.state == State::kGraduating) ++out.graduating;
+    }
+  }
+  return out;
+}
+
+template <class G>
+std::vector<ClosureReport> OnlineGnc<G>::closures() const {
+  std::vector<ClosureReport> out;
+  out.reserve(closures_.size());
+  for (const Closure& c : closures_) {
+    ClosureReport r;
+    r.from = c.from;
+    r.to = c.to;
+    r.weight = c.weight;
+    r.residual = c.s;
+    r.graduating = c.state == State::kGraduating;
+    r.steps = c.steps;
+    r.factor = c.factor;
+    switch (c.state) {
+      case State::kTrusted:
+        r.status = ClosureStatus::kTrusted;
+        break;
+      case State::kExcluded:
+        r.status = ClosureStatus::kExcluded;
+        break;
+      default:
+        r.status = c.weight >= 0.5 ? ClosureStatus::kInlier : ClosureStatus::kOutlier;
+    }
+    out.push_back(r);
+  }
+  return out;
+}
+
+template class OnlineGnc<SE2>;
+template class OnlineGnc<SE3>;
+
+}  // namespace arbor

@@ -1,0 +1,203 @@
+// Online robust smoothing in the Bayes tree: graduated non-convexity per loop closure, in the
+// manner of riSAM (McGann, Rogers, Kaess, "Robust Incremental Smoothing and Mapping", ICRA 2023),
+// over IncrementalSmoother's weight seam (setFactorWeight). The online layer (OnlineSmoother)
+// owns one OnlineGnc and calls it around each smoother update; nothing here changes the Bayes
+// tree except through setFactorWeight, so every weight change is a relinearisation of that one
+// factor and only its keys' cliques (with their ancestors) are re-eliminated.
+//
+// Which edges are weighted. Odometry (consecutive ids, |from − to| = 1), edges the caller marks
+// trusted, an edge that creates one of its poses (its only constraint: e = 0 by construction)
+// and an edge that joins two components (the smaller moves rigidly onto it, e = 0 again; with
+// nothing else between the two it cannot be judged) keep weight 1 for good and are reported
+// "trusted". Priors are never weighted. Every other edge is a loop closure and is judged.
+//
+// One closure's life (the kernel ρ_μ on s = eᵀΩe, core/robust_kernel.h; c² the threshold):
+//   first check   s₀ at the estimate before the closure enters (what the graph without it
+//                 says). s₀ ≤ c²: weight 1, settled inlier, no graduation — so on clean data
+//                 where every closure passes, the factors and hence the estimate are the plain
+//                 smoother's, bit for bit (w = 1 changes nothing in Factor::linearizeWeighted).
+//   entry         otherwise the closure enters with the convex surrogate: μ₀ = initialMu(s₀)
+//                 (TLS: c²/(2s₀ − c²); GM: 2s₀/c²) and w₀ = ρ′_μ₀(s₀), as GNC starts from the
+//                 largest residual (Yang et al., RA-L 2020, Alg. 1) — here the closure's own.
+//   graduation    before each of the following smoother updates: s at the current estimate,
+//                 μ ← μ·step (TLS) or μ/step (GM), w = ρ′_μ(s), setFactorWeight(w). At most
+//                 RobustOptions::steps_per_update steps per OnlineSmoother::update (the first
+//                 rides on the update itself, the others each run one more smoother update),
+//                 so no update hangs, however many closures graduate.
+//   settled       TLS: w binary (s outside the band [μ/(μ+1) c², (μ+1)/μ c²], where the kernel
+//                 and its surrogate agree) or μ ≥ RobustOptions::max_mu; GM: μ at 1; Huber,
+//                 Cauchy (no graduation, IRLS): w moved by less than weight_tolerance. Or after
+//                 max_steps_per_closure steps, with the kernel's own weight at s.
+//   status        inlier iff w ≥ 0.5 (GNC's convention, as GTSAM's GncOptimizer and the
+//                 reference figures count): for TLS at the kernel, s ≤ c².
+//
+// Which closures are re-weighted on an update. riSAM resets μ of every graduated factor in the
+// "update-involved" top of the tree whenever new graduated factors arrive and iterates to
+// convergence within the update (RISAM2::relinearizeFactor, iterateToConvergence), which is
+// what makes it slow on large graphs (shared/reference/robust-anchors.tsv: M3500 186 s).
+// Here the closures graduating now are stepped, and the settled ones are re-checked at the
+// kernel in a bounded round robin (RobustOptions::rechecks_per_update per update, all of them
+// in finalize()): a settled outlier whose residual the updates since brought within c² is taken
+// back (weight 1), a settled inlier whose residual grew beyond recheck_margin·c² graduates again
+// from μ₀ at that residual. These are the "affected" closures of riSAM, found by looking rather
+// than through the tree; the margin keeps a true closure in the χ² tail from flapping.
+//
+// Excluding a closure (exclude/include, by smoother factor index): the GNC stops weighting it
+// and leaves its weight to the caller (a front end that takes an edge back sets it to 0);
+// include() re-admits it through the first check and sets its weight itself.
+//
+// Reseeding (OnlineSmoother::reseed) keeps every weight (they live on the factors, which the
+// rebuild re-adds) and this state; remap() finds the factors' new indices.
+#pragma once
+
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "bayestree/incremental_smoother.h"
+#include "core/factor.h"
+#include "core/pose_graph.h"
+#include "core/robust_kernel.h"
+
+namespace arbor {
+
+struct RobustOptions {
+  /// The kernel the closures graduate towards: tls (default) or gm graduate (GNC); huber and
+  /// cauchy are reweighted without graduation (IRLS). Not none.
+  KernelKind kernel = KernelKind::kTruncatedLeastSquares;
+  /// c² on s = eᵀΩe; ≤ 0: the χ² quantile of the edge's dimension (kDoF) at `confidence`, Ω
+  /// taken at its word (as `arbor batch --robust --inlier-threshold chi2`).
+  double threshold = 0.0;
+  double confidence = 0.99;  ///< of the automatic threshold, in (0, 1)
+  double mu_step = 1.4;      ///< μ's factor per step (Yang et al.: 1.4), > 1
+  /// Graduation steps per OnlineSmoother::update, ≥ 1: the first rides on the update, each
+  /// further one runs one more smoother update (only while closures graduate).
+  int steps_per_update = 1;
+  /// A closure still graduating after this many steps is settled with the kernel's own weight.
+  int max_steps_per_closure = 40;
+  /// TLS: μ at which the surrogate counts as the kernel (riSAM's TLS convergence: 1e5).
+  double max_mu = 1e5;
+  /// Huber, Cauchy: settled when the weight moves by less than this in one step.
+  double weight_tolerance = 1e-3;
+  /// Settled closures re-checked at the kernel per update (round robin); 0: only in finalize().
+  int rechecks_per_update = 16;
+  /// A settled inlier graduates again when its s exceeds this many times c² (≥ 1).
+  double recheck_margin = 2.0;
+  /// Rounds of finalize(): graduate to the end, re-check every closure, relinearise all; again
+  /// while a re-check changed a weight (≥ 1).
+  int finalize_rounds = 3;
+
+  /// Why the options cannot be used ("" when they can): names the field and the value.
+  std::string problem() const;
+};
+
+/// Whether an edge given to the online layer is weighted.
+enum class EdgeTrust {
+  kByRule,   ///< odometry (|from − to| = 1) trusted, any other edge a loop closure to judge
+  kTrusted,  ///< the sender vouches for it: weight 1 for good
+};
+
+enum class ClosureStatus {
+  kInlier,    ///< weight ≥ 0.5
+  kOutlier,   ///< weight < 0.5: rejected
+  kTrusted,   ///< never weighted (marked, or it created a pose or joined two components)
+  kExcluded,  ///< taken out of the GNC by the caller (exclude()); its weight is the caller's
+};
+
+const char* toString(ClosureStatus status);  ///< "inlier", "outlier", "trusted", "excluded"
+
+/// One loop closure as the GNC sees it now.
+struct ClosureReport {
+  Key from = 0, to = 0;
+  double weight = 1.0;    ///< the factor's inlier weight in the smoother
+  double residual = 0.0;  ///< s = eᵀΩe at its last check
+  ClosureStatus status = ClosureStatus::kInlier;
+  bool graduating = false;  ///< still being graduated (status by its current weight)
+  int steps = 0;            ///< graduation steps it has taken
+  int factor = -1;          ///< its index in the smoother (−1 until the update that adds it)
+};
+
+struct ClosureCounts {
+  int inlier = 0, outlier = 0, trusted = 0, excluded = 0;
+  int graduating = 0;        ///< of inlier + outlier, those not settled yet
+  int graduation_steps = 0;  ///< weight changes made by graduation, in total
+  int rechecks = 0;          ///< settled closures re-checked, in total
+  int regraduated = 0;       ///< re-checks that changed a settled closure's weight
+};
+
+template <class G>
+class OnlineGnc {
+ public:
+  using Edge = RelativePoseEdge<G>;
+
+  /// Throws std::invalid_argument with RobustOptions::problem() on bad options.
+  explicit OnlineGnc(const RobustOptions& options);
+
+  /// The first check of a new edge (dense indices) before it enters the smoother: returns the
+  /// inlier weight it enters with (1, or w₀ for a closure that graduates) and records it when
+  /// it is a loop closure. `structural`: the edge created one of its poses or joined two
+  /// components (trusted).
+  double admit(const IncrementalSmoother<G>& smoother, Key from, Key to, EdgeTrust trust,
+               bool structural, const Edge& edge);
+  /// Before a smoother update: one graduation step of every graduating closure and the round
+  /// robin of re-checks (`recheck_all`: every settled closure). Returns the weights changed.
+  int step(IncrementalSmoother<G>& smoother, bool recheck_all = false);
+  /// After a smoother update: the indices of the closures it added.
+  void resolve(const IncrementalSmoother<G>& smoother);
+  /// After the smoother was rebuilt with the same factors in another order (reseed).
+  void remap(const IncrementalSmoother<G>& smoother);
+
+  /// Takes factor `factor` out of the GNC (its weight is the caller's from now on), or puts it
+  /// back through the first check (include sets its weight). No-ops for a factor the GNC does
+  /// not weight (odometry, trusted, priors). Throws std::invalid_argument on an index out of
+  /// range.
+  void exclude(IncrementalSmoother<G>& smoother, int factor);
+  void include(IncrementalSmoother<G>& smoother, int factor);
+
+  bool graduating() const { return !graduating_.empty(); }
+  ClosureCounts counts() const;
+  std::vector<ClosureReport> closures() const;
+  double threshold() const { return c2_; }  ///< c² in use
+  const RobustOptions& options() const { return options_; }
+
+ private:
+  enum class State { kGraduating, kSettled, kTrusted, kExcluded };
+  struct Closure {
+    Key from = 0, to = 0;
+    int i = 0, j = 0;  ///< dense indices
+    G z;               ///< the measurement (to find the factor after an update)
+    int factor = -1;
+    State state = State::kSettled;
+    double mu = 0, weight = 1, s = 0;
+    int steps = 0;
+  };
+
+  RobustKernel kernelAt(double mu) const;
+  /// The kernel's own weight at s (TLS: 1 or 0; GM at μ = 1; Huber, Cauchy: ρ′(s)).
+  double finalWeight(double s) const;
+  /// The first check at s: settles at weight 1 or starts graduation from μ₀(s).
+  void enter(Closure* c, double s);
+  /// One graduation step at s; returns the new weight.
+  double graduate(Closure* c, double s);
+  double residual(const IncrementalSmoother<G>& smoother, const Closure& c) const;
+  void setWeight(IncrementalSmoother<G>& smoother, Closure* c, double w);
+  /// Finds factor indices for the closures not resolved among factors [first, numFactors).
+  void match(const IncrementalSmoother<G>& smoother, int first, std::vector<int>* ids);
+  int closureOf(int factor) const;
+
+  RobustOptions options_;
+  double c2_ = 0;
+  std::vector<Closure> closures_;
+  std::vector<int> unresolved_;  ///< closures added since the last resolve()
+  std::vector<int> graduating_;  ///< closures graduating, by id
+  std::vector<int> by_factor_;   ///< factor index → closure id (−1: none)
+  size_t cursor_ = 0;            ///< round robin of re-checks over closures_
+  int resolved_factors_ = 0;     ///< factors seen by resolve()
+  ClosureCounts totals_;         ///< graduation_steps, rechecks, regraduated
+};
+
+extern template class OnlineGnc<SE2>;
+extern template class OnlineGnc<SE3>;
+
+}  // namespace arbor

@@ -1,0 +1,65 @@
+#include "tools/cli/robust_flags.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "tools/cli/cli_common.h"
+
+namespace arbor::cli {
+
+namespace po = boost::program_options;
+
+void addRobustFlags(po::options_description& options, const std::string& robust_help) {
+  options.add_options()("robust", po::bool_switch(), robust_help.c_str())(
+      "kernel", po::value<std::string>()->default_value("tls"),
+      "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
+      "inlier-threshold", po::value<std::string>()->default_value("chi2"),
+      "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
+      "at its word); auto (batch only): that quantile times the variance factor estimated over "
+      "the inliers")("rejected-out", po::value<std::string>(),
+                     "with --robust: write the rejected edges, `i j` (file ids) a line");
+}
+
+RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
+  RobustFlags flags;
+  flags.robust = vm.count("robust") && vm["robust"].as<bool>();
+  if (!flags.robust) {
+    for (const char* flag : {"kernel", "inlier-threshold", "rejected-out"})
+      if (vm.count(flag) && !vm[flag].defaulted())
+        throw UsageError(std::string("--") + flag + " needs --robust");
+    return flags;
+  }
+  const std::string kernel = vm["kernel"].as<std::string>();
+  try {
+    flags.kernel = parseKernelKind(kernel);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(std::string("--kernel: ") + e.what());
+  }
+  if (flags.kernel == KernelKind::kNone)
+    throw UsageError("--kernel must be tls, gm, cauchy or huber with --robust, not none");
+  const std::string threshold = vm["inlier-threshold"].as<std::string>();
+  if (threshold == "auto") {
+    if (!allow_auto)
+      throw UsageError(
+          "--inlier-threshold auto (a variance factor estimated over the inliers) is batch "
+          "only; give chi2 or a number > 0");
+    flags.estimate_scale = true;
+  } else if (threshold != "chi2") {
+    std::size_t used = 0;
+    double value = 0;
+    try {
+      value = std::stod(threshold, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != threshold.size() || !(value > 0) || !std::isfinite(value))
+      throw UsageError("--inlier-threshold must be " +
+                       std::string(allow_auto ? "chi2, auto" : "chi2") + " or a number > 0, not '" +
+                       threshold + "'");
+    flags.threshold = value;
+  }
+  if (vm.count("rejected-out")) flags.rejected_out = vm["rejected-out"].as<std::string>();
+  return flags;
+}
+
+}  // namespace arbor::cli

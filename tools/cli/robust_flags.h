@@ -1,0 +1,33 @@
+// The command-line flags of robustness against false loop closures, one binder for every
+// command that has them (`arbor batch`, `arbor replay`): --robust, --kernel, --inlier-threshold,
+// --rejected-out, with the same help and the same checks.
+#pragma once
+
+#include <string>
+
+#include <boost/program_options.hpp>
+
+#include "core/robust_kernel.h"
+
+namespace arbor::cli {
+
+struct RobustFlags {
+  bool robust = false;                                     ///< --robust
+  KernelKind kernel = KernelKind::kTruncatedLeastSquares;  ///< --kernel tls|gm|cauchy|huber
+  /// --inlier-threshold: c² on eᵀΩe when > 0; 0 with `estimate_scale` false: "chi2" (the χ²
+  /// 0.99 quantile of the edge's dimension); "auto" sets estimate_scale.
+  double threshold = 0.0;
+  bool estimate_scale = false;
+  std::string rejected_out;  ///< --rejected-out FILE: the rejected edges, `i j` a line
+};
+
+/// Adds the four flags to `options`; `robust_help` says what --robust does in this command.
+void addRobustFlags(boost::program_options::options_description& options,
+                    const std::string& robust_help);
+
+/// The flags in `vm` (parsed against a description addRobustFlags filled). Throws UsageError
+/// on a bad kernel or threshold, on `auto` when `allow_auto` is false, and on --kernel,
+/// --inlier-threshold or --rejected-out given without --robust.
+RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, bool allow_auto);
+
+}  // namespace arbor::cli
