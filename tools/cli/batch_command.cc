@@ -31,7 +31,7 @@ struct BatchRun {
   bool json = false;
   ReadOptions read;
   bool robust = false;
-  GncOptions gnc;            // --kernel, --inlier-threshold
+  GncOptions gnc;            // --kernel, --inlier-threshold, --gnc-inner-start, --gnc-mu-start
   std::string rejected_out;  // --rejected-out
 };
 
@@ -281,7 +281,7 @@ int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
-  std::string kernel = "tls", threshold = "chi2";
+  std::string kernel = "tls", threshold = "chi2", inner_start = "initial", mu_start = "initial";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -306,6 +306,12 @@ int batchCommand(const std::vector<std::string>& args) {
       "inlier-threshold", po::value(&threshold)->default_value(threshold),
       "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
       "at its word); auto: that quantile times the variance factor estimated over the inliers")(
+      "gnc-inner-start", po::value(&inner_start)->default_value(inner_start),
+      "with --robust: each GNC step's weighted solve starts from the initial estimate (initial, "
+      "as GTSAM's GncOptimizer) or from the previous step's (previous)")(
+      "gnc-mu-start", po::value(&mu_start)->default_value(mu_start),
+      "with --robust: GNC's first μ from the residuals at the initial estimate (initial, as "
+      "GTSAM) or at the least-squares solution (least-squares)")(
       "rejected-out", po::value(&run.rejected_out),
       "with --robust: write the rejected edges, `i j` (file ids) a line");
   po::positional_options_description positional;
@@ -342,13 +348,21 @@ int batchCommand(const std::vector<std::string>& args) {
                          threshold + "'");
       run.gnc.threshold = value;
     }
+    if (inner_start != "initial" && inner_start != "previous")
+      throw UsageError("--gnc-inner-start must be initial or previous, not '" + inner_start + "'");
+    run.gnc.inner_start =
+        inner_start == "initial" ? GncInnerStart::kInitial : GncInnerStart::kPrevious;
+    if (mu_start != "initial" && mu_start != "least-squares")
+      throw UsageError("--gnc-mu-start must be initial or least-squares, not '" + mu_start + "'");
+    run.gnc.mu_start = mu_start == "initial" ? GncMuStart::kInitial : GncMuStart::kLeastSquares;
     if (run.solver != BatchSolver::kLevenbergMarquardt && run.solver != BatchSolver::kRtr)
       throw UsageError(
           "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
           "rtr, not '" +
           solver + "'");
   } else {
-    for (const char* flag : {"kernel", "inlier-threshold", "rejected-out"})
+    for (const char* flag :
+         {"kernel", "inlier-threshold", "gnc-inner-start", "gnc-mu-start", "rejected-out"})
       if (given.count(flag) && !given[flag].defaulted())
         throw UsageError(std::string("--") + flag + " needs --robust");
   }
