@@ -8,6 +8,8 @@
 //                                              largest s_k of a weighted edge at x_init (GTSAM:
 //                                              its initial values, not x⁰), μ⁰ = ∞ for TLS when
 //                                              s_max ≤ c²/2: every edge is an inlier already
+//   TLS: if every weighted s_k(x⁰) ≤ c², stop at x⁰ (a local minimum of Σ min(s_k, c²): there
+//        the cost is least squares, which x⁰ minimises; ours, GTSAM stops only at s_max ≤ c²/2)
 //   repeat:  w_k = ρ′_μ(s_k(x))               (eq. 14 for TLS, 12 for GM; trusted edges: 1)
 //            x = argmin Σ w_k s_k(x) + priors  (the inner solve, from x_init again: GTSAM
 //                                              restarts every inner optimisation from its

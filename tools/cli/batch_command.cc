@@ -138,7 +138,7 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
   return summary.termination == Termination::kDiverged ? 3 : 0;
 }
 
-// arbor batch --robust: GNC over LM from --init (core/gnc_solver.h); with --solver rtr, then the
+// arbor batch --robust: GNC from --init (core/gnc_solver.h); with --solver rtr, then the
 // certifiable solver on the graph without the rejected edges, whose certificate is of that
 // inlier problem.
 template <class G>
@@ -233,7 +233,8 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   if (report.made_isotropic)
     std::cout << "information  " << report.made_isotropic << " made isotropic\n";
   std::cout << "init         " << toString(init) << "\n"
-            << "robust       GNC-" << toString(run.gnc.kernel) << " over LM, c² " << gnc.threshold
+            << "robust       GNC-" << toString(run.gnc.kernel) << " over "
+            << toString(run.gnc.inner.method) << ", c² " << gnc.threshold
             << (run.gnc.threshold > 0 ? std::string(" (given)")
                 : run.gnc.estimate_scale
                     ? " (χ² " + std::to_string(run.gnc.confidence) + " quantile × σ̂² " +
@@ -299,13 +300,17 @@ int batchCommand(const std::vector<std::string>& args) {
       "json", po::bool_switch(&run.json), "print one JSON object")(
       "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr")(
       "robust", po::bool_switch(&run.robust),
-      "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| = 1) "
+      "robust to false loop closures: GNC-TLS (Yang et al. 2020, as GTSAM's GncOptimizer), "
+      "odometry (|i-j| = 1) "
       "trusted; with --solver rtr, then the certifiable solver on the edges kept")(
       "kernel", po::value(&kernel)->default_value(kernel),
       "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
       "inlier-threshold", po::value(&threshold)->default_value(threshold),
-      "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
-      "at its word); auto: that quantile times the variance factor estimated over the inliers")(
+      "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
+      "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the χ² "
+      "0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); auto: that "
+      "quantile times the variance factor estimated over the inliers (experimental: it feeds on "
+      "its own truncation)")(
       "gnc-inner-start", po::value(&inner_start)->default_value(inner_start),
       "with --robust: each GNC step's weighted solve starts from the initial estimate (initial, "
       "as GTSAM's GncOptimizer) or from the previous step's (previous)")(
@@ -357,7 +362,8 @@ int batchCommand(const std::vector<std::string>& args) {
     run.gnc.mu_start = mu_start == "initial" ? GncMuStart::kInitial : GncMuStart::kLeastSquares;
     if (run.solver != BatchSolver::kLevenbergMarquardt && run.solver != BatchSolver::kRtr)
       throw UsageError(
-          "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
+          "--robust runs GNC (LM for its least-squares start), then optionally rtr: --solver must "
+          "be lm or "
           "rtr, not '" +
           solver + "'");
   } else {
