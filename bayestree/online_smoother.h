@@ -309,7 +309,7 @@ class OnlineSmoother {
   std::set<IdPair> disabled_pairs_;                  ///< pairs taken back by disableEdge
   std::map<IdPair, std::vector<int>> pair_factors_;  ///< per pair: its edges' smoother factors
   int factors_indexed_ = 0;                          ///< smoother factors in pair_factors_
-  std::optional<OnlineGnc<G>> gnc_;  ///< robust smoothing (options_.robust)
+  std::optional<OnlineGnc<G>> gnc_;                  ///< robust smoothing (options_.robust)
   /// Factors from `first` on whose pair is disabled leave the GNC (after its resolve()).
   void excludeDisabled(int first);
 };

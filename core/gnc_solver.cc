@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <utility>
 
 namespace arbor {
 namespace {
@@ -21,6 +22,13 @@ void checkOptions(const GncOptions& o, int edges) {
   if (!(o.mu_factor > 1.0))
     throw std::invalid_argument("GncOptions.mu_factor must be > 1, got " +
                                 std::to_string(o.mu_factor));
+  for (const auto& [name, value] :
+       {std::pair<const char*, double>{"weight_tolerance", o.weight_tolerance},
+        {"cost_tolerance", o.cost_tolerance},
+        {"min_initial_mu", o.min_initial_mu}})
+    if (!(value >= 0) || !std::isfinite(value))
+      throw std::invalid_argument(std::string("GncOptions.") + name +
+                                  " must be finite and >= 0, got " + std::to_string(value));
   if (o.max_iterations < 1 || o.max_rounds < 1)
     throw std::invalid_argument("GncOptions.max_iterations and max_rounds must be >= 1");
   if (!o.trusted.empty() && static_cast<int>(o.trusted.size()) != edges)
@@ -101,13 +109,16 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
     if (!result.trusted[k]) ++result.candidates;
   }
 
+  const std::vector<G> x_init = *poses;
+  const std::vector<double> s_init = edgeCosts(graph, x_init);
   WeightedBatchSolver<G> solver(graph);
   std::vector<double>& w = result.weights;
   w.assign(m, 1.0);
-  // x⁰: plain least squares (Algorithm 1, line 1).
+  // x⁰: plain least squares from x_init (Algorithm 1, line 1).
   const BatchSummary ls = solver.solve(w, poses, options.outer);
   result.lm_iterations += ls.iterations;
   result.F_least_squares = ls.F_final;
+  const std::vector<G> x_ls = *poses;
   std::vector<double> s = edgeCosts(graph, *poses);
 
   const bool given = options.threshold > 0;
@@ -116,20 +127,44 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   std::vector<char> inlier(m, 1);
   result.scale = automatic ? varianceFactor(graph, *poses, s, inlier) : 1.0;
   result.threshold = given ? options.threshold : quantile * result.scale;
+  const bool restart = options.inner_start == GncInnerStart::kInitial;
 
   RobustKernel kernel{options.kernel, result.threshold, 1.0};
   for (int round = 0; round < options.max_rounds; ++round) {
     ++result.rounds;
     kernel.threshold = result.threshold;
-    if (kernel.isGraduated()) {
-      double s_max = 0.0;
-      for (int k = 0; k < m; ++k)
-        if (!result.trusted[k]) s_max = std::max(s_max, s[k]);
-      kernel.mu = kernel.initialMu(s_max);
+    if (round > 0) {  // a new threshold: GNC again from the start, at x⁰'s residuals
+      *poses = x_ls;
+      s = edgeCosts(graph, *poses);
     }
     result.converged = false;
+    bool done = false;
+    if (kernel.isGraduated()) {
+      // μ⁰ (Remark 5) from the largest weighted residual at x_init (GTSAM) or x⁰.
+      const std::vector<double>& s0 = options.mu_start == GncMuStart::kInitial ? s_init : s;
+      double s_max = 0.0;
+      for (int k = 0; k < m; ++k)
+        if (!result.trusted[k]) s_max = std::max(s_max, s0[k]);
+      kernel.mu = kernel.initialMu(s_max);
+      // x⁰ with every weighted s_k(x⁰) ≤ c² is a local minimum of Σ min(s_k, c²) (there TLS is
+      // least squares, and x⁰ minimises it): TLS's answer, whatever μ⁰ says; GTSAM stops likewise
+      // when s_max ≤ c²/2 at its initial values.
+      double s_max_ls = 0.0;
+      for (int k = 0; k < m; ++k)
+        if (!result.trusted[k]) s_max_ls = std::max(s_max_ls, s[k]);
+      if (kernel.kind == KernelKind::kTruncatedLeastSquares) {
+        if (std::isinf(kernel.mu) || s_max_ls <= kernel.threshold) {
+          std::fill(w.begin(), w.end(), 1.0);
+          result.converged = done = true;
+          result.message = "every residual within c² at the least-squares start";
+        }
+        kernel.mu = std::max(kernel.mu, options.min_initial_mu);
+      }
+    }
+    // F_w,prev: at the first step the least-squares objective (GTSAM's prev_cost).
+    double previous_cost = ls.F_final;
     std::vector<double> previous(m, -1.0);
-    for (int it = 0; it < options.max_iterations; ++it) {
+    for (int it = 0; !done && it < options.max_iterations; ++it) {
       ++result.iterations;
       // The closed-form weight update at the current estimate (trusted edges stay at 1).
       bool binary = true;
@@ -137,36 +172,48 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
       for (int k = 0; k < m; ++k) {
         if (result.trusted[k]) continue;
         w[k] = kernel.weight(s[k]);
-        if (w[k] > 1e-12 && w[k] < 1.0 - 1e-12) binary = false;
+        if (std::min(w[k], 1.0 - w[k]) > options.weight_tolerance) binary = false;
         change = std::max(change, std::abs(w[k] - previous[k]));
       }
-      // Binary weights end TLS only once its band [μ/(μ+1), (μ+1)/μ]·c² is narrow (μ ≥ 1):
-      // at small μ they only say that no residual lies in a wide band yet.
-      if (kernel.kind == KernelKind::kTruncatedLeastSquares && binary && it > 0 &&
-          kernel.mu >= 1.0) {
-        result.converged = true;
-        result.message = "weights binary";
-        break;
-      }
-      if (change <= options.weight_tolerance && (kernel.atKernel() || binary)) {
+      if (!kernel.isGraduated() && change <= options.weight_tolerance) {
         result.converged = true;
         result.message = "weights converged";
         break;
       }
       previous = w;
+      if (restart && kernel.isGraduated()) *poses = x_init;
       const BatchSummary step = solver.solve(w, poses, options.inner);
       result.lm_iterations += step.iterations;
       s = edgeCosts(graph, *poses);
+      const double cost = step.F_final;
       if (options.verbose) {
         int out = 0;
         for (int k = 0; k < m; ++k) out += !result.trusted[k] && w[k] <= 0.5;
         std::fprintf(stderr,
                      "gnc round %d step %3d  c² %.4g  μ %.4g  weighted F %.10e  outliers %d  "
-                     "max Δw %.3g  lm %d\n",
-                     round, it, kernel.threshold, kernel.mu, step.F_final, out, change,
-                     step.iterations);
+                     "max Δw %.3g  inner %d (%s)\n",
+                     round, it, kernel.threshold, kernel.mu, cost, out, change, step.iterations,
+                     toString(step.termination).c_str());
       }
-      if (kernel.isGraduated()) kernel.mu = kernel.nextMu(options.mu_factor);
+      if (!kernel.isGraduated()) continue;
+      // GTSAM's checkConvergence, on the weights this step solved with and its cost.
+      if (kernel.kind == KernelKind::kTruncatedLeastSquares && binary) {
+        result.converged = true;
+        result.message = "weights binary";
+        break;
+      }
+      if (kernel.kind == KernelKind::kGemanMcClure && kernel.atKernel()) {
+        result.converged = true;
+        result.message = "μ at the kernel";
+        break;
+      }
+      if (std::abs(cost - previous_cost) / std::max(previous_cost, 1e-7) < options.cost_tolerance) {
+        result.converged = true;
+        result.message = "weighted cost converged";
+        break;
+      }
+      previous_cost = cost;
+      kernel.mu = kernel.nextMu(options.mu_factor);
     }
     if (!result.converged) result.message = "GNC iteration limit reached";
     for (int k = 0; k < m; ++k) inlier[k] = result.trusted[k] || w[k] > 0.5;
@@ -183,7 +230,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   }
   result.mu = kernel.mu;
 
-  // The inlier problem: the edges kept, each with weight 1.
+  // The inlier problem: the edges kept, each with weight 1, from the GNC estimate.
   std::vector<double> binary(m);
   for (int k = 0; k < m; ++k) binary[k] = inlier[k] ? 1.0 : 0.0;
   const BatchSummary last = solver.solve(binary, poses, options.outer);

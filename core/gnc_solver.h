@@ -1,33 +1,47 @@
-// Robust batch solve of a pose graph with false loop closures: graduated non-convexity (GNC)
-// over Levenberg–Marquardt, after Yang, Antonante, Tzoumas, Carlone, "Graduated Non-Convexity
-// for Robust Spatial Perception", RA-L 2020, Algorithm 1, with the kernels of
-// core/robust_kernel.h on each edge's s = eᵀΩe:
+// Robust batch solve of a pose graph with false loop closures: graduated non-convexity (GNC),
+// after Yang, Antonante, Tzoumas, Carlone, "Graduated Non-Convexity for Robust Spatial
+// Perception", RA-L 2020, Algorithm 1, as GTSAM's GncOptimizer (4.2) runs it, with the kernels
+// of core/robust_kernel.h on each edge's s = eᵀΩe. x_init is *poses on entry:
 //
-//   x⁰ = argmin Σ s_k(x)                      (plain least squares, every weight 1)
-//   μ⁰ from s_max = max s_k(x⁰) over the weighted edges (RobustKernel::initialMu)
-//   repeat:  w_k = ρ′_μ(s_k(x))               (the closed-form weight update; trusted: 1)
-//            x = argmin Σ w_k s_k(x) + priors  (LM, warm-started: WeightedBatchSolver)
-//            μ ← μ·1.4 (TLS) or μ/1.4 (GM)
-//   until the weights are binary (TLS: no s_k in the transition band), stop changing, or the
-//   iteration limit; then the inlier set {w_k > 0.5} is solved once more with weight 1
-//   (the inlier problem, whose F is F_inliers).
+//   x⁰ = argmin Σ s_k(x) from x_init          (plain least squares, every weight 1; line 1)
+//   μ⁰ = max(1e-6, c² / (2 s_max − c²))       (TLS, Remark 5; GM: 2 s_max / c²), s_max the
+//                                              largest s_k of a weighted edge at x_init (GTSAM:
+//                                              its initial values, not x⁰), μ⁰ = ∞ for TLS when
+//                                              s_max ≤ c²/2: every edge is an inlier already
+//   TLS: if every weighted s_k(x⁰) ≤ c², stop at x⁰ (a local minimum of Σ min(s_k, c²): there
+//        the cost is least squares, which x⁰ minimises; ours, GTSAM stops only at s_max ≤ c²/2)
+//   repeat:  w_k = ρ′_μ(s_k(x))               (eq. 14 for TLS, 12 for GM; trusted edges: 1)
+//            x = argmin Σ w_k s_k(x) + priors  (the inner solve, from x_init again: GTSAM
+//                                              restarts every inner optimisation from its
+//                                              initial values; GncOptions::inner_start)
+//            stop if |F_w − F_w,prev| / max(F_w,prev, 1e-7) < cost_tolerance (F_w the weighted
+//              objective at the new x, F_w,prev the previous step's, x⁰'s F at the first), or
+//              every w_k is within weight_tolerance of 0 or 1 (TLS), or μ = 1 (GM)
+//            μ ← μ·1.4 (TLS) or max(1, μ/1.4) (GM)
+//   then the inlier set {w_k > 0.5} is solved once more with weight 1, from the GNC estimate
+//   (the inlier problem, whose F is F_inliers; GTSAM returns the last weighted estimate).
 //
-// Huber and Cauchy have no graduation: plain iteratively reweighted least squares,
-// w_k = ρ′(s_k) until the weights stop changing.
+// Why the restart matters: a warm start carries the basin of x⁰, which every false closure has
+// pulled (on intel with 90% false closures x⁰ is far from any good map), and with small μ the
+// weighted problem is nearly convex only around the start it is solved from. From x_init (the
+// odometry chain, or the file's vertices) each step solves the current weighted problem afresh.
 //
-// Trusted edges (weight 1 throughout): odometry, |i − j| = 1 in dense indices, or the edges the
-// caller marks; priors are never weighted.
+// Huber and Cauchy have no graduation: plain iteratively reweighted least squares, w_k = ρ′(s_k),
+// warm-started, until the weights stop changing.
 //
-// The threshold c² on s. Given (GncOptions::threshold > 0) it is used as is. Otherwise it is
-// the χ² quantile of the edge's dimension at GncOptions::confidence (Ω taken at its word), and
-// with GncOptions::estimate_scale that quantile times the variance factor σ̂² of the problem (the
-// a-posteriori variance of unit weight of adjustment theory: σ̂² = Σ_inliers s_k / r, r = residual
-// rows − unknowns, the redundancy), so that data whose Ω is off by a constant factor (the shared
-// parking-garage's residuals are 10⁴ times below their Ω's prediction, sphere_bignoise's 10² above)
-// get the same test as data whose Ω is right. σ̂² is taken first at x⁰ (inflated by the outliers: a
-// generous first threshold), then at each GNC result over its inliers, and GNC runs again from the
-// last estimate while c² moves by more than GncOptions::scale_tolerance (at most
-// GncOptions::max_rounds rounds).
+// Trusted edges (weight 1 throughout; GTSAM's known inliers): odometry, |i − j| = 1 in dense
+// indices, or the edges the caller marks; priors are never weighted.
+//
+// The threshold c² on s. Given (GncOptions::threshold > 0) it is used as is (GTSAM's barcSq = 1
+// on its error ½‖r‖² is c² = 2). Otherwise it is the χ² quantile of the edge's dimension at
+// GncOptions::confidence, Ω taken at its word (GTSAM's default,
+// setInlierCostThresholdsAtProbability (0.99)), and with GncOptions::estimate_scale that quantile
+// times the variance factor σ̂² of the problem (σ̂² = Σ_inliers s_k / r, r = residual rows −
+// unknowns, the redundancy), taken first at x⁰, then at each GNC result over its inliers, GNC
+// running again from x_init while c² moves by more than GncOptions::scale_tolerance (at most
+// GncOptions::max_rounds rounds). That estimate feeds on its own truncation (TLS drops the largest
+// true residuals, σ̂² shrinks, the next c² drops more): docs/benchmarks.md, "Robust batch (GNC)",
+// measures it; it is not the default.
 #pragma once
 
 #include <string>
@@ -39,6 +53,18 @@
 #include "core/robust_kernel.h"
 
 namespace arbor {
+
+/// Where each inner (weighted) solve of a GNC step starts.
+enum class GncInnerStart {
+  kInitial,   ///< from x_init, the poses given to solveGnc (GTSAM's GncOptimizer)
+  kPrevious,  ///< from the previous step's estimate (warm start; cheaper, keeps x⁰'s basin)
+};
+
+/// At which estimate the residuals that set μ⁰ are taken.
+enum class GncMuStart {
+  kInitial,       ///< x_init (GTSAM's GncOptimizer::initializeMu)
+  kLeastSquares,  ///< x⁰, the least-squares solution over every edge
+};
 
 struct GncOptions {
   /// tls or gm: GNC (Yang et al. Algorithm 1); huber or cauchy: IRLS. Not none.
@@ -53,20 +79,28 @@ struct GncOptions {
   /// more than this fraction, at most max_rounds rounds.
   double scale_tolerance = 0.1;
   int max_rounds = 8;
-  /// μ's factor per GNC step (Yang et al.: 1.4).
+  /// μ's factor per GNC step (Yang et al., GTSAM's muStep: 1.4).
   double mu_factor = 1.4;
-  /// GNC/IRLS steps (each a warm-started LM solve) per round.
-  int max_iterations = 200;
-  /// Stop when no weight moves by more than this in one step (after binary weights, the other
-  /// stop).
+  /// μ⁰'s floor for TLS (GTSAM: 1e-6; a huge s_max would give μ⁰ ≈ 0).
+  double min_initial_mu = 1e-6;
+  /// GNC/IRLS steps per round (GTSAM's maxIterations: 100).
+  int max_iterations = 100;
+  /// TLS stops when every weight is within this of 0 or 1 (GTSAM's weightsTol); IRLS stops when
+  /// no weight moves by more than this in one step.
   double weight_tolerance = 1e-4;
+  /// Stop when the weighted objective changes by less than this fraction between two steps
+  /// (GTSAM's relativeCostTol).
+  double cost_tolerance = 1e-5;
+  GncInnerStart inner_start = GncInnerStart::kInitial;
+  GncMuStart mu_start = GncMuStart::kInitial;
   /// |i − j| = 1 (dense indices) edges are trusted (weight 1).
   bool trust_odometry = true;
   /// Per-edge marks of trusted edges (the sender's), one per edge, or empty: none beyond
   /// odometry.
   std::vector<char> trusted;
-  /// The LM solve of each weighted problem (warm-started, so few iterations each).
-  BatchOptions inner = {BatchMethod::kLevenbergMarquardt, 50, 1e-4, false};
+  /// The solve of each weighted problem (GTSAM: Gauss–Newton, relative tolerance 1e-5, at most
+  /// 100 iterations).
+  BatchOptions inner = {BatchMethod::kGaussNewton, 100, 1e-5, false};
   /// The plain least-squares start and the final solve of the inlier problem.
   BatchOptions outer = {BatchMethod::kLevenbergMarquardt, 100, 1e-5, false};
   bool verbose = false;  ///< one line per GNC step on stderr
@@ -83,13 +117,13 @@ struct GncResult {
   double mu = 0;                ///< μ at the last step
   int rounds = 0;               ///< GNC runs (automatic threshold: one per σ̂²)
   int iterations = 0;           ///< GNC/IRLS steps over all rounds
-  int lm_iterations = 0;        ///< LM iterations over all solves
+  int lm_iterations = 0;        ///< solver iterations over all solves (inner and outer)
   double F_least_squares = 0;   ///< F at x⁰ (every edge, weight 1)
   double F_all = 0;             ///< Σ eᵀΩe over every edge and prior at the estimate
   double F_inliers = 0;         ///< … over the inlier edges and the priors
   double robust_cost = 0;       ///< Σ ρ(s_k) (the kernel at the last μ) + trusted s_k + priors
   double time_s = 0;
-  bool converged = false;  ///< the last round stopped on its weights, not the iteration limit
+  bool converged = false;  ///< the last round stopped on its weights or cost, not the step limit
   std::string message;     ///< why it stopped
 };
 

@@ -36,7 +36,7 @@ struct BatchRun {
   bool json = false;
   ReadOptions read;
   bool robust = false;
-  GncOptions gnc;            // --kernel, --inlier-threshold
+  GncOptions gnc;            // --kernel, --inlier-threshold, --gnc-inner-start, --gnc-mu-start
   std::string rejected_out;  // --rejected-out
 };
 
@@ -167,7 +167,7 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
   return summary.termination == Termination::kDiverged ? 3 : 0;
 }
 
-// arbor batch --robust: GNC over LM from --init (core/gnc_solver.h); with --solver rtr, then the
+// arbor batch --robust: GNC from --init (core/gnc_solver.h); with --solver rtr, then the
 // certifiable solver on the graph without the rejected edges, whose certificate is of that
 // inlier problem.
 template <class G>
@@ -263,7 +263,8 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   if (report.made_isotropic)
     std::cout << "information  " << report.made_isotropic << " made isotropic\n";
   std::cout << "init         " << toString(init) << "\n"
-            << "robust       GNC-" << toString(run.gnc.kernel) << " over LM, c² " << gnc.threshold
+            << "robust       GNC-" << toString(run.gnc.kernel) << " over "
+            << toString(run.gnc.inner.method) << ", c² " << gnc.threshold
             << (run.gnc.threshold > 0 ? std::string(" (given)")
                 : run.gnc.estimate_scale
                     ? " (χ² " + std::to_string(run.gnc.confidence) + " quantile × σ̂² " +
@@ -311,7 +312,7 @@ int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
-  std::string format = "g2o";
+  std::string format = "g2o", inner_start = "initial", mu_start = "initial";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -336,6 +337,13 @@ int batchCommand(const std::vector<std::string>& args) {
   addRobustFlags(options,
                  "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| "
                  "= 1) trusted; with --solver rtr, then the certifiable solver on the edges kept");
+  options.add_options()(
+      "gnc-inner-start", po::value(&inner_start)->default_value(inner_start),
+      "with --robust: each GNC step's weighted solve starts from the initial estimate (initial, "
+      "as GTSAM's GncOptimizer) or from the previous step's (previous)")(
+      "gnc-mu-start", po::value(&mu_start)->default_value(mu_start),
+      "with --robust: GNC's first μ from the residuals at the initial estimate (initial, as "
+      "GTSAM) or at the least-squares solution (least-squares)");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return 0;
@@ -359,6 +367,19 @@ int batchCommand(const std::vector<std::string>& args) {
         "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
         "rtr, not '" +
         solver + "'");
+  if (run.robust) {
+    if (inner_start != "initial" && inner_start != "previous")
+      throw UsageError("--gnc-inner-start must be initial or previous, not '" + inner_start + "'");
+    run.gnc.inner_start =
+        inner_start == "initial" ? GncInnerStart::kInitial : GncInnerStart::kPrevious;
+    if (mu_start != "initial" && mu_start != "least-squares")
+      throw UsageError("--gnc-mu-start must be initial or least-squares, not '" + mu_start + "'");
+    run.gnc.mu_start = mu_start == "initial" ? GncMuStart::kInitial : GncMuStart::kLeastSquares;
+  } else {
+    for (const char* flag : {"gnc-inner-start", "gnc-mu-start"})
+      if (given.count(flag) && !given[flag].defaulted())
+        throw UsageError(std::string("--") + flag + " needs --robust");
+  }
   if (!(run.settings.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
   try {
     run.format = parseTrajectoryFormat(format);

@@ -14,10 +14,13 @@ void addRobustFlags(po::options_description& options, const std::string& robust_
       "kernel", po::value<std::string>()->default_value("tls"),
       "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
       "inlier-threshold", po::value<std::string>()->default_value("chi2"),
-      "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
-      "at its word); auto (batch only): that quantile times the variance factor estimated over "
-      "the inliers")("rejected-out", po::value<std::string>(),
-                     "with --robust: write the rejected edges, `i j` (file ids) a line");
+      "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
+      "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the "
+      "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); auto "
+      "(batch only, experimental: it feeds on its own truncation): that quantile times the "
+      "variance factor estimated over the inliers")(
+      "rejected-out", po::value<std::string>(),
+      "with --robust: write the rejected edges, `i j` (file ids) a line");
 }
 
 RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
