@@ -13,6 +13,7 @@
 #include "io/pose_graph_file.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/commands.h"
+#include "tools/cli/robust_flags.h"
 #include "tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
@@ -301,11 +302,8 @@ int batchCommand(const std::vector<std::string>& args) {
       "robust", po::bool_switch(&run.robust),
       "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| = 1) "
       "trusted; with --solver rtr, then the certifiable solver on the edges kept")(
-      "kernel", po::value(&kernel)->default_value(kernel),
-      "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
-      "inlier-threshold", po::value(&threshold)->default_value(threshold),
-      "with --robust: c² on eᵀΩe; chi2: the χ² 0.99 quantile of the edge's dimension (Ω taken "
-      "at its word); auto: that quantile times the variance factor estimated over the inliers")(
+      "kernel", po::value(&kernel)->default_value(kernel), kKernelHelp)(
+      "inlier-threshold", po::value(&threshold)->default_value(threshold), kInlierThresholdHelp)(
       "rejected-out", po::value(&run.rejected_out),
       "with --robust: write the rejected edges, `i j` (file ids) a line");
   po::positional_options_description positional;
@@ -320,28 +318,7 @@ int batchCommand(const std::vector<std::string>& args) {
   }
   if (run.settings.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
   if (run.robust) {
-    try {
-      run.gnc.kernel = parseKernelKind(kernel);
-    } catch (const std::invalid_argument& e) {
-      throw UsageError(std::string("--kernel: ") + e.what());
-    }
-    if (run.gnc.kernel == KernelKind::kNone)
-      throw UsageError("--kernel must be tls, gm, cauchy or huber with --robust, not none");
-    if (threshold == "auto") {
-      run.gnc.estimate_scale = true;
-    } else if (threshold != "chi2") {
-      std::size_t used = 0;
-      double value = 0;
-      try {
-        value = std::stod(threshold, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != threshold.size() || !(value > 0) || !std::isfinite(value))
-        throw UsageError("--inlier-threshold must be chi2, auto or a number > 0, not '" +
-                         threshold + "'");
-      run.gnc.threshold = value;
-    }
+    readRobustFlags(kernel, threshold, &run.gnc);
     if (run.solver != BatchSolver::kLevenbergMarquardt && run.solver != BatchSolver::kRtr)
       throw UsageError(
           "--robust runs GNC over LM, then optionally rtr: --solver must be lm or "
