@@ -30,6 +30,7 @@
 #include "bayestree/partial_solve.h"
 #include "bayestree/top_elimination.h"
 #include "bayestree/update_threads.h"
+#include "core/finite_pose.h"
 #include "core/information.h"
 
 namespace arbor {
@@ -39,14 +40,6 @@ using Clock = std::chrono::steady_clock;
 
 double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-bool isFinitePose(const SE2& x) {
-  return std::isfinite(x.x()) && std::isfinite(x.y()) && std::isfinite(x.cos()) &&
-         std::isfinite(x.sin());
-}
-bool isFinitePose(const SE3& x) {
-  return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
 }
 
 void accumulate(UpdateStats* total, const UpdateStats& s) {
@@ -146,7 +139,7 @@ struct IncrementalSmoother<G>::Impl {
   int numPoses() const { return static_cast<int>(theta.size()); }
 
   int addPose(const G& x, bool is_fixed) {
-    if (!isFinitePose(x)) throw std::invalid_argument("IncrementalSmoother::addPose: not finite");
+    if (!allFinite(x)) throw std::invalid_argument("IncrementalSmoother::addPose: not finite");
     const int index = numPoses();
     theta.push_back(x);
     fixed.push_back(is_fixed);
@@ -195,7 +188,7 @@ struct IncrementalSmoother<G>::Impl {
   // Extension (the online layer's components): θ_v ← T θ_v; the factors not invariant under
   // the move are relinearised and their cliques re-eliminated by the next update.
   void transformPoses(const std::vector<int>& poses, const G& T) {
-    if (!isFinitePose(T))
+    if (!allFinite(T))
       throw std::invalid_argument("IncrementalSmoother::transformPoses: transform not finite");
     for (int v : poses)
       if (v < 0 || v >= numPoses())

@@ -4,19 +4,12 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "core/finite_pose.h"
 #include "core/information.h"
 #include "core/rigid_alignment.h"
 
 namespace arbor {
 namespace {
-
-bool finitePose(const SE2& x) {
-  return std::isfinite(x.x()) && std::isfinite(x.y()) && std::isfinite(x.cos()) &&
-         std::isfinite(x.sin());
-}
-bool finitePose(const SE3& x) {
-  return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
-}
 
 void addStats(UpdateStats* total, const UpdateStats& s) {
   total->new_factors += s.new_factors;
@@ -68,7 +61,7 @@ const char* toString(EdgeSwitchStatus status) {
 template <class G>
 OnlineSmoother<G>::OnlineSmoother(OnlineSmootherOptions<G> options)
     : options_(options), smoother_(options.smoother) {
-  if (!finitePose(options_.gauge))
+  if (!allFinite(options_.gauge))
     throw std::invalid_argument("OnlineSmoother: gauge pose not finite");
   if (options_.robust) gnc_.emplace(*options_.robust);  // throws on bad options
 }
@@ -219,7 +212,7 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
     ++stats_.edges_rejected;
     return EdgeResult{EdgeStatus::kRejected, why};
   };
-  if (!finitePose(z) || !omega.allFinite()) return reject("NaN or infinite value");
+  if (!allFinite(z) || !omega.allFinite()) return reject("NaN or infinite value");
   if (from == to) return reject("self-loop on pose " + std::to_string(from));
   const std::string problem = informationProblem(omega);
   if (!problem.empty()) return reject("bad information: " + problem);
@@ -278,7 +271,7 @@ EdgeResult OnlineSmoother<G>::addPrior(Key id, const Factor<G>& prior, const G& 
 template <class G>
 EdgeResult OnlineSmoother<G>::addPosePrior(Key id, const G& z, const Matrix& omega,
                                            const G& offset) {
-  if (!finitePose(z) || !finitePose(offset) || !omega.allFinite()) {
+  if (!allFinite(z) || !allFinite(offset) || !omega.allFinite()) {
     ++stats_.priors_rejected;
     return {EdgeStatus::kRejected,
             "pose prior on " + std::to_string(id) + ": NaN or infinite value"};
@@ -451,7 +444,7 @@ std::vector<G> OnlineSmoother<G>::seedPoint(const std::map<Key, G>& values) cons
     if (it == index_.end()) {
       throw std::invalid_argument("OnlineSmoother::reseed: unknown pose id " + std::to_string(id));
     }
-    if (!finitePose(value)) {
+    if (!allFinite(value)) {
       throw std::invalid_argument("OnlineSmoother::reseed: the value of pose id " +
                                   std::to_string(id) + " is not finite");
     }
@@ -471,7 +464,7 @@ std::vector<G> OnlineSmoother<G>::seedPoint(const std::vector<G>& prefix) const 
   std::vector<G> dense(ids_.size());
   std::vector<char> given(ids_.size(), 0);
   for (size_t k = 0; k < prefix.size(); ++k) {
-    if (!finitePose(prefix[k])) {
+    if (!allFinite(prefix[k])) {
       throw std::invalid_argument("OnlineSmoother::reseed: the value of pose id " +
                                   std::to_string(ids_[k]) + " is not finite");
     }

@@ -2,18 +2,9 @@
 
 #include <cmath>
 
+#include "core/finite_pose.h"
+
 namespace arbor {
-namespace {
-
-bool finitePose(const SE2& x) {
-  return std::isfinite(x.x()) && std::isfinite(x.y()) && std::isfinite(x.cos()) &&
-         std::isfinite(x.sin());
-}
-bool finitePose(const SE3& x) {
-  return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
-}
-
-}  // namespace
 
 const char* toString(FactorKind kind) {
   switch (kind) {
@@ -36,7 +27,7 @@ bool Factor<G>::isFinite() const {
         if constexpr (std::is_same_v<F, PositionPriorFactor<G>>)
           ok = ok && f.position.allFinite();
         else
-          ok = ok && finitePose(f.measurement);
+          ok = ok && allFinite(f.measurement);
         return ok;
       },
       f_);

@@ -12,10 +12,10 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
-#include <Eigen/SVD>
 
 #include "core/gauge.h"
 #include "core/pose_graph.h"
+#include "core/rigid_alignment.h"
 
 namespace arbor::init_detail {
 
@@ -190,12 +190,12 @@ Roots<G> findRoots(const PoseGraph<G>& graph, const std::string& where) {
   return roots;
 }
 
-/// Σ w, Σ w q, Σ w p and the gauge information of one component's position priors.
+/// One component's position priors, for its rigid alignment: the positions qₖ of their poses,
+/// the priors' positions pₖ, their weights wₖ and what they fix of the gauge.
 template <class G>
-struct AlignmentSums {
-  double w = 0;
-  Eigen::Matrix<double, G::kDim, 1> q = Eigen::Matrix<double, G::kDim, 1>::Zero();
-  Eigen::Matrix<double, G::kDim, 1> p = Eigen::Matrix<double, G::kDim, 1>::Zero();
+struct AlignmentPoints {
+  std::vector<typename G::Translation> q, p;
+  std::vector<double> w;
   GaugeInformation<G> info;
 };
 
@@ -203,9 +203,8 @@ struct AlignmentSums {
 /// T = (R, t) minimising Σ wₖ ‖R qₖ + t − pₖ‖² over the priors k of the component, qₖ the
 /// position of its pose in *x, pₖ the prior's position, wₖ = kDim / tr(Ωₖ⁻¹) (the isotropic
 /// precision). When the priors fix the rotation (GaugeInformation: ≥ 2 distinct positions in 2D,
-/// ≥ 3 non-collinear in 3D), R is the weighted Kabsch / Umeyama rotation: with centroids
-/// q̄ = Σ wq / Σ w, p̄ likewise, and C = Σ w (p − p̄)(q − q̄)ᵀ = U Σ Vᵀ,
-/// R = U diag(1, …, 1, det(U Vᵀ)) Vᵀ and t = p̄ − R q̄; otherwise R = I and t = p̄ − q̄.
+/// ≥ 3 non-collinear in 3D), T is the weighted Kabsch / Umeyama fit of core/rigid_alignment.h;
+/// otherwise R = I and t = p̄ − q̄ (weighted centroids q̄ = Σ wq / Σ w, p̄ likewise).
 template <class G>
 void alignToPositionPriors(const PoseGraph<G>& graph, const Roots<G>& roots, std::vector<G>* x) {
   constexpr int d = G::kDim;
@@ -213,42 +212,30 @@ void alignToPositionPriors(const PoseGraph<G>& graph, const Roots<G>& roots, std
   using VecD = Eigen::Matrix<double, d, 1>;
   const int n = graph.numPoses();
   if (graph.position_priors.empty()) return;
-  std::vector<AlignmentSums<G>> sums(n);
-  std::vector<double> weight(graph.position_priors.size());
-  for (std::size_t k = 0; k < graph.position_priors.size(); ++k) {
-    const auto& prior = graph.position_priors[k];
+  std::vector<AlignmentPoints<G>> points(n);  // per component (indexed by its lowest pose)
+  for (const auto& prior : graph.position_priors) {
     const int c = roots.component[prior.i];
     if (!roots.align[c]) continue;
-    weight[k] = d / prior.information.inverse().trace();
-    AlignmentSums<G>& s = sums[c];
-    s.w += weight[k];
-    s.q += weight[k] * (*x)[prior.i].translation();
-    s.p += weight[k] * prior.position;
+    AlignmentPoints<G>& s = points[c];
+    s.q.push_back((*x)[prior.i].translation());
+    s.p.push_back(prior.position);
+    s.w.push_back(d / prior.information.inverse().trace());
     s.info.addPositionPrior(prior.position, prior.information);
-  }
-  std::vector<MatD> C(n, MatD::Zero());
-  for (std::size_t k = 0; k < graph.position_priors.size(); ++k) {
-    const auto& prior = graph.position_priors[k];
-    const int c = roots.component[prior.i];
-    if (!roots.align[c]) continue;
-    const AlignmentSums<G>& s = sums[c];
-    C[c] += weight[k] * (prior.position - s.p / s.w) *
-            ((*x)[prior.i].translation() - s.q / s.w).transpose();
   }
   std::vector<G> transform(n, G::Identity());
   std::vector<char> moved(n, 0);
   for (int c = 0; c < n; ++c) {
-    const AlignmentSums<G>& s = sums[c];
-    if (!(s.w > 0)) continue;
-    const VecD q_mean = s.q / s.w, p_mean = s.p / s.w;
-    MatD R = MatD::Identity();
-    if (s.info.fixesGauge()) {
-      const Eigen::JacobiSVD<MatD> svd(C[c], Eigen::ComputeFullU | Eigen::ComputeFullV);
-      MatD D = MatD::Identity();
-      D(d - 1, d - 1) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1;
-      R = svd.matrixU() * D * svd.matrixV().transpose();
+    const AlignmentPoints<G>& s = points[c];
+    double w = 0;
+    VecD q = VecD::Zero(), p = VecD::Zero();
+    for (std::size_t k = 0; k < s.w.size(); ++k) {
+      w += s.w[k];
+      q += s.w[k] * s.q[k];
+      p += s.w[k] * s.p[k];
     }
-    transform[c] = makePose(R, VecD(p_mean - R * q_mean));
+    if (!(w > 0)) continue;
+    transform[c] = s.info.fixesGauge() ? rigidAlignment<G>(s.q, s.p, s.w)
+                                       : makePose(MatD::Identity(), VecD(p / w - q / w));
     moved[c] = 1;
   }
   for (int v = 0; v < n; ++v) {

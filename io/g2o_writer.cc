@@ -11,6 +11,7 @@
 #include <ostream>
 #include <type_traits>
 
+#include "core/finite_pose.h"
 #include "io/pose_graph_file.h"
 
 namespace arbor {
@@ -26,11 +27,6 @@ void appendNumber(std::string* out, double v) {
 void appendId(std::string* out, Key id) {
   out->push_back(' ');
   out->append(std::to_string(id));
-}
-
-bool finite(const SE2& x) { return std::isfinite(x.x() + x.y() + x.cos() + x.sin()); }
-bool finite(const SE3& x) {
-  return x.translation().allFinite() && x.quaternion().coeffs().allFinite();
 }
 
 void appendPose(std::string* out, const SE2& x) {
@@ -109,7 +105,7 @@ void checkWritable(const PoseGraph<G>& graph, const std::vector<G>& poses) {
                                 " poses for a graph of " + std::to_string(n) + " ids");
   }
   for (int k = 0; k < n; ++k) {
-    if (!finite(poses[k])) {
+    if (!allFinite(poses[k])) {
       throw std::invalid_argument("writeG2o: the pose of id " + std::to_string(graph.ids[k]) +
                                   " is not finite");
     }
@@ -126,7 +122,7 @@ void checkWritable(const PoseGraph<G>& graph, const std::vector<G>& poses) {
                                   std::to_string(e.i) + " -> " + std::to_string(e.j) +
                                   ") has a pose index out of range");
     }
-    if (!finite(e.measurement) || !e.information.allFinite()) {
+    if (!allFinite(e.measurement) || !e.information.allFinite()) {
       throw std::invalid_argument("writeG2o: edge " + std::to_string(k) +
                                   " has a value that is not finite");
     }
@@ -144,7 +140,7 @@ void checkWritable(const PoseGraph<G>& graph, const std::vector<G>& poses) {
   for (std::size_t k = 0; k < graph.pose_priors.size(); ++k) {
     const auto& p = graph.pose_priors[k];
     checkPrior("pose prior", k, p.i,
-               finite(p.measurement) && finite(p.offset) && p.information.allFinite());
+               allFinite(p.measurement) && allFinite(p.offset) && p.information.allFinite());
     if (!kPriorsNameAnOffset<G> && p.has_offset) {
       throw std::invalid_argument("writeG2o: pose prior " + std::to_string(k) +
                                   " has an offset, which g2o's EDGE_PRIOR_SE2 cannot hold");

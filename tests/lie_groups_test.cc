@@ -1,8 +1,10 @@
 // Jacobians of SE(2), SE(3) and the relative-pose error against numerical differentiation.
+#include <limits>
 #include <random>
 
 #include <gtest/gtest.h>
 
+#include "core/finite_pose.h"
 #include "core/relative_pose_factor.h"
 #include "core/se2.h"
 #include "core/se3.h"
@@ -148,6 +150,19 @@ TYPED_TEST(LieGroupTest, RelativePoseErrorJacobians) {
     EXPECT_LT((Ji - Ni).norm(), 1e-5) << "trial " << trial;
     EXPECT_LT((Jj - Nj).norm(), 1e-5) << "trial " << trial;
   }
+}
+
+TEST(LieGroups, AllFiniteSeesEveryNumber) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  EXPECT_TRUE(allFinite(SE2(1e308, 1e308, 0.5)));  // finite however large
+  EXPECT_FALSE(allFinite(SE2(nan, 0, 0)));
+  EXPECT_FALSE(allFinite(SE2(0, inf, 0)));
+  EXPECT_FALSE(allFinite(SE2(0, 0, nan)));  // cos and sin of a NaN angle
+  const Eigen::Quaterniond q(0.5, 0.5, 0.5, 0.5);
+  EXPECT_TRUE(allFinite(SE3(q, Eigen::Vector3d(1e308, -1e308, 3))));
+  EXPECT_FALSE(allFinite(SE3(q, Eigen::Vector3d(0, nan, 0))));
+  EXPECT_FALSE(allFinite(SE3(Eigen::Quaterniond(nan, 0, 0, 1), Eigen::Vector3d::Zero())));
 }
 
 TEST(RelativePoseError, ConventionMatchesDefinition) {

@@ -12,6 +12,11 @@
 //   arbor-bench covariance [--shared DIR] [--only NAME,...] [--samples K] [--no-ceres]
 //     marginal covariances at the end of a replay: one pose's cost beside an update's p50, and
 //     (2D) the agreement with ceres::Covariance.
+//   arbor-bench robust [--shared DIR] [--only NAME,...] [--no-generated] [--generate-from NAMES]
+//                      [--fractions F,...] [--policies P,...] [--seed S] [--kernel K]
+//                      [--inlier-threshold X] [--solver lm|rtr] [--keep-generated DIR]
+//     the robust batch (GNC over LM, as `arbor batch --robust`) on the shared files with false
+//     loop closures and on its own, generated from shared clean sets (tools/bench/robust_bench.h).
 //   arbor-bench micro [--sizes=N,...] [--benchmark_* flags]
 //     the Google Benchmark microbenchmarks: runs `arbor-microbench` built beside this program.
 #include <unistd.h>
@@ -26,6 +31,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <sstream>
 #include <type_traits>
 
 #include <boost/program_options.hpp>
@@ -36,9 +42,11 @@
 #include "tools/bench/format.h"
 #include "tools/bench/growth.h"
 #include "tools/bench/paper_runner.h"
+#include "tools/bench/robust_bench.h"
 #include "tools/bench/shared_data.h"
 #include "tools/cli/cli_common.h"
 #include "tools/cli/replay_runner.h"
+#include "tools/cli/robust_flags.h"
 #include "tools/cli/smoother_flags.h"
 #include "tools/refine/batch_solvers.h"
 
@@ -485,6 +493,151 @@ int paper(const std::vector<std::string>& args, const std::string& default_share
   return 0;
 }
 
+// The first three fields of /proc/loadavg ("1.20 1.66 1.85"), "unknown" if unreadable.
+std::string loadAverage() {
+  std::ifstream in("/proc/loadavg");
+  std::string a, b, c;
+  if (!(in >> a >> b >> c)) return "unknown";
+  return a + " " + b + " " + c;
+}
+
+// A comma-separated list, empty items dropped.
+std::vector<std::string> splitList(const std::string& list) {
+  std::vector<std::string> items;
+  std::stringstream in(list);
+  for (std::string item; std::getline(in, item, ',');) {
+    if (!item.empty()) items.push_back(item);
+  }
+  return items;
+}
+
+// Removes the temporary directory of the generated files when the benchmark ends.
+struct TemporaryDirectory {
+  std::string path;
+  ~TemporaryDirectory() {
+    std::error_code ec;
+    if (!path.empty()) std::filesystem::remove_all(path, ec);
+  }
+};
+
+// `arbor bench robust`: tools/bench/robust_bench.h.
+int robust(const std::vector<std::string>& args, const std::string& default_shared) {
+  DatasetOptions data;
+  bool no_generated = false;
+  std::string generate_from, fractions, policies, kernel = "tls", threshold = "chi2", solver,
+                                                  keep_dir;
+  bench::GenerationPlan plan;
+  po::options_description options =
+      datasetOptions("arbor bench robust [options]", &data, default_shared);
+  options.add_options()("no-generated", po::bool_switch(&no_generated),
+                        "only the shared files of DIR/datasets/robust")(
+      "generate-from", po::value(&generate_from)->default_value("intel,smallGrid3D"),
+      "shared clean sets (names in DIR/datasets) to plant false closures in")(
+      "fractions", po::value(&fractions)->default_value("0.1,0.5,0.9"),
+      "false closures per loop closure of the base, one generated file each")(
+      "policies", po::value(&policies)->default_value("random,local,group"),
+      "random | local | group, one generated file each")(
+      "seed", po::value(&plan.seed)->default_value(plan.seed), "the generator's seed")(
+      "kernel", po::value(&kernel)->default_value(kernel), cli::kKernelHelp)(
+      "inlier-threshold", po::value(&threshold)->default_value(threshold),
+      cli::kInlierThresholdHelp)("solver", po::value(&solver)->default_value("lm"),
+                                 "lm: GNC over LM; rtr: then the certifiable solver on GNC's "
+                                 "inlier set (as arbor batch --robust --solver rtr)")(
+      "keep-generated", po::value(&keep_dir),
+      "write the generated files (NAME.g2o, NAME.labels) here and keep them (default: a "
+      "temporary directory, removed at the end)");
+  if (!parseOptions(args, options)) return 0;
+  bench::RobustBatchSettings settings;
+  cli::readRobustFlags(kernel, threshold, &settings.gnc);
+  if (solver != "lm" && solver != "rtr")
+    throw cli::UsageError("--solver must be lm or rtr, not '" + solver + "'");
+  settings.certify = solver == "rtr";
+  plan.bases = splitList(generate_from);
+  plan.fractions.clear();
+  for (const std::string& f : splitList(fractions)) {
+    char* end = nullptr;
+    const double value = std::strtod(f.c_str(), &end);
+    if (end == f.c_str() || *end != '\0' || !(value >= 0) || !std::isfinite(value))
+      throw cli::UsageError("--fractions: '" + f + "' is not a finite fraction >= 0");
+    plan.fractions.push_back(value);
+  }
+  plan.policies.clear();
+  for (const std::string& p : splitList(policies)) {
+    const auto policy = sim::parseOutlierPolicy(p);
+    if (!policy) throw cli::UsageError("--policies: '" + p + "' is not random, local or group");
+    plan.policies.push_back(*policy);
+  }
+
+  const std::string robust_dir = data.shared + "/datasets/robust";
+  std::vector<bench::RobustCase> cases = bench::sharedRobustCases(data.shared);
+  std::vector<std::string> notes;
+  if (cases.empty())
+    notes.push_back("the shared robust files are absent (no NAME.g2o with NAME.labels in " +
+                    robust_dir + ")");
+  TemporaryDirectory temporary;
+  if (!no_generated && !plan.bases.empty()) {
+    std::string out_dir = keep_dir;
+    if (out_dir.empty()) {
+      std::string pattern =
+          (std::filesystem::temp_directory_path() / "arbor-bench-robust-XXXXXX").string();
+      if (!mkdtemp(pattern.data()))
+        throw std::runtime_error("cannot make a temporary directory " + pattern + ": " +
+                                 std::strerror(errno));
+      out_dir = temporary.path = pattern;
+    } else {
+      std::filesystem::create_directories(out_dir);
+    }
+    std::vector<std::string> missing;
+    const auto generated = bench::generateRobustCases(data.shared, plan, out_dir, &missing);
+    cases.insert(cases.end(), generated.begin(), generated.end());
+    for (const std::string& base : missing)
+      notes.push_back("no generated files from " + base + ": " + data.shared + "/datasets/" + base +
+                      ".g2o is absent");
+  }
+  if (cases.empty())
+    throw std::runtime_error(
+        "no robust files: none in " + robust_dir +
+        (no_generated ? " (and --no-generated)"
+                      : " and no base to generate from in " + data.shared + "/datasets"));
+  cases = bench::selectCases(cases, data.only);
+  if (cases.empty()) throw std::runtime_error("no robust file is named in --only " + data.only);
+  const auto optimum = bench::readOptimumTable(data.shared);
+  const auto anchors = bench::readRobustAnchorTable(data.shared);
+  if (optimum.empty())
+    notes.push_back(data.shared +
+                    "/reference/optimum.tsv is absent: F* unknown (F_clean / F* "
+                    "shows —)");
+  if (anchors.empty())
+    notes.push_back(data.shared +
+                    "/reference/robust-anchors.tsv is absent: no GTSAM GNC or riSAM figures");
+  for (const std::string& n : notes) std::cerr << "arbor bench robust: " << n << "\n";
+
+  const std::string load_before = loadAverage();
+  // The replay rows' extension point: bench::RobustReplayHooks (robust_bench.h). None is
+  // registered yet, so the table has no replay columns.
+  const bench::RobustReplayHooks hooks{};
+  const auto rows = bench::runRobustBench(cases, optimum, anchors, settings, hooks, &std::cerr);
+  std::cout
+      << "Robust batch: GNC-" << toString(settings.gnc.kernel) << " over LM"
+      << (settings.certify ? ", then the certifiable solver on its inlier set" : "")
+      << " (as `arbor batch --robust" << (settings.certify ? " --solver rtr" : "") << "`), c² "
+      << threshold
+      << ", from the file's vertices, odometry (|i − j| = 1) trusted. F_clean / F*: F over the "
+         "base file's edges against optimum.tsv; ATE: RMS position error against the clean "
+         "optimum after a rigid alignment; precision and recall of the rejected edges against "
+         "the labels (pairs unordered); total: start and solve; GNC steps over all rounds. "
+         "GTSAM GNC and riSAM from reference/robust-anchors.tsv. Generated files: "
+      << (no_generated ? std::string("none (--no-generated)")
+                       : "from " + generate_from + ", fractions " + fractions + ", policies " +
+                             policies + ", seed " + std::to_string(plan.seed))
+      << ". Load average " << load_before << " at the start, " << loadAverage()
+      << " at the end.\n\n";
+  for (const std::string& n : notes) std::cout << "Note: " << n << ".\n";
+  if (!notes.empty()) std::cout << "\n";
+  std::cout << bench::robustMarkdown(rows);
+  return 0;
+}
+
 /// Replaces this process by arbor-microbench (beside this executable) with `args`.
 int micro(const std::vector<std::string>& args) {
   std::error_code ec;
@@ -518,6 +671,9 @@ int main(int argc, char** argv) {
            "--dogleg, ...; arbor bench replay --help lists them)\n"
            "       arbor bench covariance [--shared DIR] [--only NAMES] [--samples K] "
            "[--no-ceres] [smoother flags]\n"
+           "       arbor bench robust [--shared DIR] [--only NAMES] [--no-generated] "
+           "[--generate-from NAMES] [--fractions F,...] [--policies P,...] [--seed S] [--kernel K] "
+           "[--inlier-threshold X] [--solver lm|rtr] [--keep-generated DIR]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
@@ -528,6 +684,7 @@ int main(int argc, char** argv) {
     if (args[0] == "paper") return paper(rest, ARBOR_SHARED_DIR);
     if (args[0] == "growth") return growth(rest, ARBOR_SHARED_DIR);
     if (args[0] == "covariance") return covariance(rest, ARBOR_SHARED_DIR);
+    if (args[0] == "robust") return robust(rest, ARBOR_SHARED_DIR);
     if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";
     return 2;

@@ -9,44 +9,40 @@ namespace arbor::cli {
 
 namespace po = boost::program_options;
 
+const char* const kKernelHelp = "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)";
+const char* const kInlierThresholdHelp =
+    "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
+    "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the "
+    "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); auto "
+    "(batch only, experimental: it feeds on its own truncation): that quantile times the "
+    "variance factor estimated over the inliers";
+
 void addRobustFlags(po::options_description& options, const std::string& robust_help) {
   options.add_options()("robust", po::bool_switch(), robust_help.c_str())(
-      "kernel", po::value<std::string>()->default_value("tls"),
-      "with --robust: tls | gm (graduated) | cauchy | huber (reweighted)")(
-      "inlier-threshold", po::value<std::string>()->default_value("chi2"),
-      "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
-      "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the "
-      "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); auto "
-      "(batch only, experimental: it feeds on its own truncation): that quantile times the "
-      "variance factor estimated over the inliers")(
+      "kernel", po::value<std::string>()->default_value("tls"), kKernelHelp)(
+      "inlier-threshold", po::value<std::string>()->default_value("chi2"), kInlierThresholdHelp)(
       "rejected-out", po::value<std::string>(),
       "with --robust: write the rejected edges, `i j` (file ids) a line");
 }
 
-RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
-  RobustFlags flags;
-  flags.robust = vm.count("robust") && vm["robust"].as<bool>();
-  if (!flags.robust) {
-    for (const char* flag : {"kernel", "inlier-threshold", "rejected-out"})
-      if (vm.count(flag) && !vm[flag].defaulted())
-        throw UsageError(std::string("--") + flag + " needs --robust");
-    return flags;
-  }
-  const std::string kernel = vm["kernel"].as<std::string>();
+namespace {
+
+/// The checks of --kernel and --inlier-threshold, into flags.
+void parseKernelAndThreshold(const std::string& kernel, const std::string& threshold,
+                             bool allow_auto, RobustFlags* flags) {
   try {
-    flags.kernel = parseKernelKind(kernel);
+    flags->kernel = parseKernelKind(kernel);
   } catch (const std::invalid_argument& e) {
     throw UsageError(std::string("--kernel: ") + e.what());
   }
-  if (flags.kernel == KernelKind::kNone)
+  if (flags->kernel == KernelKind::kNone)
     throw UsageError("--kernel must be tls, gm, cauchy or huber with --robust, not none");
-  const std::string threshold = vm["inlier-threshold"].as<std::string>();
   if (threshold == "auto") {
     if (!allow_auto)
       throw UsageError(
           "--inlier-threshold auto (a variance factor estimated over the inliers) is batch "
           "only; give chi2 or a number > 0");
-    flags.estimate_scale = true;
+    flags->estimate_scale = true;
   } else if (threshold != "chi2") {
     std::size_t used = 0;
     double value = 0;
@@ -59,10 +55,33 @@ RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
       throw UsageError("--inlier-threshold must be " +
                        std::string(allow_auto ? "chi2, auto" : "chi2") + " or a number > 0, not '" +
                        threshold + "'");
-    flags.threshold = value;
+    flags->threshold = value;
   }
+}
+
+}  // namespace
+
+RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
+  RobustFlags flags;
+  flags.robust = vm.count("robust") && vm["robust"].as<bool>();
+  if (!flags.robust) {
+    for (const char* flag : {"kernel", "inlier-threshold", "rejected-out"})
+      if (vm.count(flag) && !vm[flag].defaulted())
+        throw UsageError(std::string("--") + flag + " needs --robust");
+    return flags;
+  }
+  parseKernelAndThreshold(vm["kernel"].as<std::string>(), vm["inlier-threshold"].as<std::string>(),
+                          allow_auto, &flags);
   if (vm.count("rejected-out")) flags.rejected_out = vm["rejected-out"].as<std::string>();
   return flags;
+}
+
+void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {
+  RobustFlags flags;
+  parseKernelAndThreshold(kernel, threshold, /*allow_auto=*/true, &flags);
+  gnc->kernel = flags.kernel;
+  gnc->threshold = flags.threshold;
+  gnc->estimate_scale = flags.estimate_scale;
 }
 
 }  // namespace arbor::cli

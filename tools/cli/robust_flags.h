@@ -7,6 +7,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "core/gnc_solver.h"
 #include "core/robust_kernel.h"
 
 namespace arbor::cli {
@@ -29,5 +30,13 @@ void addRobustFlags(boost::program_options::options_description& options,
 /// on a bad kernel or threshold, on `auto` when `allow_auto` is false, and on --kernel,
 /// --inlier-threshold or --rejected-out given without --robust.
 RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, bool allow_auto);
+
+/// Help texts of --kernel and --inlier-threshold (for a command that reads them itself).
+extern const char* const kKernelHelp;
+extern const char* const kInlierThresholdHelp;
+
+/// --kernel and --inlier-threshold given as strings (`arbor bench robust`) into gnc's kernel,
+/// threshold and estimate_scale, with readRobustFlags' checks (auto allowed).
+void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc);
 
 }  // namespace arbor::cli
