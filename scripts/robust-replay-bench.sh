@@ -19,7 +19,8 @@ printf 'dataset\tF_clean/F*\tprecision\trecall\trejected\tlabels\ttotal_s\tp99_m
 for name in "${names[@]}"; do
   base=${name%_*}; base=${base%_*}
   file="$SHARED/datasets/robust/$name.g2o"
-  if ! timeout "${LIMIT:-300}" "$ARBOR" replay "$file" --robust --json -o "$OUT/$name.est.g2o" \
+  # shellcheck disable=SC2086  # ROBUST_ARGS: extra flags, e.g. "--inlier-threshold 2"
+  if ! timeout "${LIMIT:-300}" "$ARBOR" replay "$file" --robust ${ROBUST_ARGS:-} --json -o "$OUT/$name.est.g2o" \
     --rejected-out "$OUT/$name.rej" > "$OUT/$name.json"; then
     printf '%s\tno result in %s s\n' "$name" "${LIMIT:-300}"
     continue
