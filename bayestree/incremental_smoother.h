@@ -18,9 +18,9 @@
 #include <memory>
 #include <vector>
 
-#include "core/factor.h"
-#include "core/pose_graph.h"
-#include "core/relative_pose_factor.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/relative_pose_factor.h"
 
 namespace arbor {
 

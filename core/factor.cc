@@ -1,4 +1,4 @@
-#include "core/factor.h"
+#include "arbor/core/factor.h"
 
 #include <cmath>
 

@@ -14,8 +14,8 @@
 #include <Eigen/LU>
 #include <Eigen/SVD>
 
-#include "core/gauge.h"
-#include "core/pose_graph.h"
+#include "arbor/core/gauge.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor::init_detail {
 

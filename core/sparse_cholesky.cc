@@ -1,4 +1,4 @@
-#include "core/sparse_cholesky.h"
+#include "arbor/core/sparse_cholesky.h"
 
 #include <cholmod.h>
 
@@ -7,7 +7,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "core/serial_openmp.h"
+#include "arbor/core/serial_openmp.h"
 
 namespace arbor {
 namespace {

@@ -11,7 +11,7 @@
 #include <ostream>
 #include <type_traits>
 
-#include "io/pose_graph_file.h"
+#include "arbor/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

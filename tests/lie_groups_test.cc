@@ -3,10 +3,10 @@
 
 #include <gtest/gtest.h>
 
-#include "core/relative_pose_factor.h"
-#include "core/se2.h"
-#include "core/se3.h"
-#include "core/so3.h"
+#include "arbor/core/relative_pose_factor.h"
+#include "arbor/core/se2.h"
+#include "arbor/core/se3.h"
+#include "arbor/core/so3.h"
 
 namespace arbor {
 namespace {

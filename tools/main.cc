@@ -5,8 +5,8 @@
 #include <string>
 #include <vector>
 
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-#include "tools/cli/cli_common.h"
+#include "arbor/tools/cli/cli_common.h"
 
 #include <dlfcn.h>
 

@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "bayestree/incremental_smoother.h"
-#include "io/pose_graph_file.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 

@@ -1,13 +1,13 @@
-#include "tools/cli/replay_runner.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 #include <fstream>
 #include <iomanip>
 #include <numeric>
 #include <stdexcept>
 
-#include "bayestree/online_smoother.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/replay_order.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/replay_order.h"
 
 namespace arbor::cli {
 

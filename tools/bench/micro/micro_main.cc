@@ -9,8 +9,8 @@
 
 #include <benchmark/benchmark.h>
 
-#include "tools/bench/micro/bench_graphs.h"
-#include "tools/cli/cli_common.h"
+#include "arbor/tools/bench/micro/bench_graphs.h"
+#include "arbor/tools/cli/cli_common.h"
 
 namespace {
 
