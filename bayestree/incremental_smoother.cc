@@ -29,6 +29,7 @@
 #include "arbor/bayestree/partial_solve.h"
 #include "arbor/bayestree/top_elimination.h"
 #include "arbor/bayestree/update_threads.h"
+#include "arbor/core/blas_threads.h"
 #include "arbor/core/information.h"
 
 namespace arbor {
@@ -515,7 +516,9 @@ struct IncrementalSmoother<G>::Impl {
 
 template <class G>
 IncrementalSmoother<G>::IncrementalSmoother(SmootherOptions options)
-    : impl_(std::make_unique<Impl>(options)) {}
+    : impl_(std::make_unique<Impl>(options)) {
+  useOneBlasThread();  // the dense clique kernels call LAPACK/BLAS
+}
 template <class G>
 IncrementalSmoother<G>::~IncrementalSmoother() = default;
 template <class G>

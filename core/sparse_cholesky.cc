@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "arbor/core/blas_threads.h"
 #include "arbor/core/serial_openmp.h"
 
 namespace arbor {
@@ -97,6 +98,7 @@ struct SparseCholesky::Cholmod {
 
 SparseCholesky::SparseCholesky(SymmetricPattern pattern)
     : pattern_(std::move(pattern)), cholmod_(std::make_unique<Cholmod>()) {
+  useOneBlasThread();  // CHOLMOD's supernodal factorisation calls the BLAS
   checkPattern(pattern_, "SparseCholesky");
   cholmod_common& c = cholmod_->common.c;
   c.nmethods = 1;

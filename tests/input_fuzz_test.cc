@@ -76,7 +76,6 @@ std::string corrupt(std::vector<std::string> lines, std::mt19937& rng) {
 
 void fuzzLines(const std::string& file, const std::vector<std::string>& lines, unsigned seed,
                int rounds) {
-  cli::useOneBlasThread();  // as the tools do: the smoother's own threads share the cores
   ASSERT_FALSE(lines.empty()) << file;
   std::mt19937 rng(seed);
   int read = 0, refused = 0;

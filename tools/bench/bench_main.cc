@@ -24,6 +24,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "arbor/core/blas_threads.h"
 #include "arbor/core/initialization.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/bench/ceres_pose_graph.h"
@@ -385,7 +386,7 @@ int micro(const std::vector<std::string>& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  arbor::cli::useOneBlasThread();
+  arbor::useOneBlasThread();  // first thing: stops OpenBLAS's idle workers early
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout
