@@ -1,10 +1,10 @@
-#include "bayestree/bayes_tree.h"
+#include "arbor/bayestree/bayes_tree.h"
 
 #include <algorithm>
 #include <stdexcept>
 #include <string>
 
-#include "core/factor.h"
+#include "arbor/core/factor.h"
 
 namespace arbor::bayestree {
 

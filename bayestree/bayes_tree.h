@@ -7,8 +7,8 @@
 #include <functional>
 #include <vector>
 
-#include "bayestree/clique.h"
-#include "bayestree/incremental_smoother.h"
+#include "arbor/bayestree/clique.h"
+#include "arbor/bayestree/incremental_smoother.h"
 
 namespace arbor::bayestree {
 

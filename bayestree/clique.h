@@ -12,7 +12,7 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/dense_kernels.h"
+#include "arbor/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "bayestree/dense_kernels.h"
+#include "arbor/bayestree/dense_kernels.h"
 
 #include <cmath>
 

@@ -11,7 +11,7 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/clique.h"
+#include "arbor/bayestree/clique.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "bayestree/elimination_plan.h"
+#include "arbor/bayestree/elimination_plan.h"
 
 #include <cholmod.h>
 

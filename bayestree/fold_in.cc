@@ -1,4 +1,4 @@
-#include "bayestree/fold_in.h"
+#include "arbor/bayestree/fold_in.h"
 
 #include <algorithm>
 

@@ -10,10 +10,10 @@
 
 #include <vector>
 
-#include "bayestree/bayes_tree.h"
-#include "bayestree/dense_kernels.h"
-#include "bayestree/linear_factors.h"
-#include "core/factor.h"
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/dense_kernels.h"
+#include "arbor/bayestree/linear_factors.h"
+#include "arbor/core/factor.h"
 
 namespace arbor::bayestree {
 

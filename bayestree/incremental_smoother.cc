@@ -7,7 +7,7 @@
 // new factors, Alg. 4 the same with fluid relinearisation, Alg. 5 fluid relinearisation, Alg. 6
 // one step of iSAM2, Alg. 7 the partial state update. Steps marked "Extension" are ours
 // (docs/design.md, "The update, step by step").
-#include "bayestree/incremental_smoother.h"
+#include "arbor/bayestree/incremental_smoother.h"
 
 #include <algorithm>
 #include <chrono>
@@ -22,16 +22,16 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/bayes_tree.h"
-#include "bayestree/dogleg_step.h"
-#include "bayestree/fold_in.h"
-#include "bayestree/linear_factors.h"
-#include "bayestree/marginals.h"
-#include "bayestree/partial_solve.h"
-#include "bayestree/top_elimination.h"
-#include "bayestree/update_threads.h"
-#include "core/finite_pose.h"
-#include "core/information.h"
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/dogleg_step.h"
+#include "arbor/bayestree/fold_in.h"
+#include "arbor/bayestree/linear_factors.h"
+#include "arbor/bayestree/marginals.h"
+#include "arbor/bayestree/partial_solve.h"
+#include "arbor/bayestree/top_elimination.h"
+#include "arbor/bayestree/update_threads.h"
+#include "arbor/core/finite_pose.h"
+#include "arbor/core/information.h"
 
 namespace arbor {
 namespace {
@@ -519,7 +519,9 @@ struct IncrementalSmoother<G>::Impl {
 
 template <class G>
 IncrementalSmoother<G>::IncrementalSmoother(SmootherOptions options)
-    : impl_(std::make_unique<Impl>(options)) {}
+    : impl_(std::make_unique<Impl>(options)) {
+  useOneBlasThread();  // the dense clique kernels call LAPACK/BLAS
+}
 template <class G>
 IncrementalSmoother<G>::~IncrementalSmoother() = default;
 template <class G>

@@ -18,9 +18,9 @@
 #include <memory>
 #include <vector>
 
-#include "core/factor.h"
-#include "core/pose_graph.h"
-#include "core/relative_pose_factor.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/relative_pose_factor.h"
 
 namespace arbor {
 
@@ -59,7 +59,7 @@ struct SmootherOptions {
   /// smoother, idle between updates), which eliminate and back-substitute independent subtrees
   /// of the Bayes tree side by side. The estimate does not depend on it, bit for bit. 0: one per
   /// core, at most 4. The BLAS should then run one thread per call (a multi-threaded OpenBLAS
-  /// competes for the same cores: the tools call openblas_set_num_threads(1), docs/design.md).
+  /// competes for the same cores): the constructor calls useOneBlasThread (core/blas_threads.h).
   int threads = 0;
 };
 

@@ -1,4 +1,4 @@
-#include "bayestree/linear_factors.h"
+#include "arbor/bayestree/linear_factors.h"
 
 #include <algorithm>
 

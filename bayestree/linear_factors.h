@@ -10,8 +10,8 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/update_threads.h"
-#include "core/factor.h"
+#include "arbor/bayestree/update_threads.h"
+#include "arbor/core/factor.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "bayestree/marginals.h"
+#include "arbor/bayestree/marginals.h"
 
 #include <algorithm>
 #include <stdexcept>

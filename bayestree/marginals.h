@@ -32,7 +32,7 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/bayes_tree.h"
+#include "arbor/bayestree/bayes_tree.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "bayestree/online_gnc.h"
+#include "arbor/bayestree/online_gnc.h"
 
 #include <algorithm>
 #include <cmath>

@@ -55,10 +55,10 @@
 #include <utility>
 #include <vector>
 
-#include "bayestree/incremental_smoother.h"
-#include "core/factor.h"
-#include "core/pose_graph.h"
-#include "core/robust_kernel.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/robust_kernel.h"
 
 namespace arbor {
 

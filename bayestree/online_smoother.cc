@@ -1,12 +1,12 @@
-#include "bayestree/online_smoother.h"
+#include "arbor/bayestree/online_smoother.h"
 
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
 
-#include "core/finite_pose.h"
-#include "core/information.h"
-#include "core/rigid_alignment.h"
+#include "arbor/core/finite_pose.h"
+#include "arbor/core/information.h"
+#include "arbor/core/rigid_alignment.h"
 
 namespace arbor {
 namespace {

@@ -43,11 +43,11 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/incremental_smoother.h"
-#include "bayestree/online_gnc.h"
-#include "core/factor.h"
-#include "core/gauge.h"
-#include "core/pose_graph.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_gnc.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/gauge.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor {
 

@@ -1,8 +1,8 @@
-#include "bayestree/partial_solve.h"
+#include "arbor/bayestree/partial_solve.h"
 
 #include <deque>
 
-#include "bayestree/dense_kernels.h"
+#include "arbor/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
 namespace {

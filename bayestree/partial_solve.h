@@ -8,8 +8,8 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/bayes_tree.h"
-#include "bayestree/update_threads.h"
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/update_threads.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "bayestree/top_elimination.h"
+#include "arbor/bayestree/top_elimination.h"
 
 #include <algorithm>
 #include <atomic>

@@ -8,11 +8,11 @@
 
 #include <vector>
 
-#include "bayestree/bayes_tree.h"
-#include "bayestree/dense_kernels.h"
-#include "bayestree/elimination_plan.h"
-#include "bayestree/linear_factors.h"
-#include "bayestree/update_threads.h"
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/dense_kernels.h"
+#include "arbor/bayestree/elimination_plan.h"
+#include "arbor/bayestree/linear_factors.h"
+#include "arbor/bayestree/update_threads.h"
 
 namespace arbor::bayestree {
 

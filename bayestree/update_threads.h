@@ -9,8 +9,8 @@
 #include <deque>
 #include <vector>
 
-#include "bayestree/dense_kernels.h"
-#include "bayestree/work_lanes.h"
+#include "arbor/bayestree/dense_kernels.h"
+#include "arbor/bayestree/work_lanes.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "bayestree/work_lanes.h"
+#include "arbor/bayestree/work_lanes.h"
 
 #include <chrono>
 #include <stdexcept>

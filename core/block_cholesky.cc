@@ -1,4 +1,4 @@
-#include "core/block_cholesky.h"
+#include "arbor/core/block_cholesky.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,8 +1,8 @@
-#include "core/factor.h"
+#include "arbor/core/factor.h"
 
 #include <cmath>
 
-#include "core/finite_pose.h"
+#include "arbor/core/finite_pose.h"
 
 namespace arbor {
 

@@ -23,10 +23,10 @@
 
 #include <Eigen/Core>
 
-#include "core/pose_graph.h"
-#include "core/prior_factors.h"
-#include "core/relative_pose_factor.h"
-#include "core/robust_kernel.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/prior_factors.h"
+#include "arbor/core/relative_pose_factor.h"
+#include "arbor/core/robust_kernel.h"
 
 namespace arbor {
 

@@ -21,8 +21,8 @@
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
 
-#include "core/prior_factors.h"
-#include "core/relative_pose_factor.h"
+#include "arbor/core/prior_factors.h"
+#include "arbor/core/relative_pose_factor.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "core/gnc_solver.h"
+#include "arbor/core/gnc_solver.h"
 
 #include <algorithm>
 #include <chrono>

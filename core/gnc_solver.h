@@ -47,10 +47,10 @@
 #include <string>
 #include <vector>
 
-#include "core/batch_solver.h"
-#include "core/pose_graph.h"
-#include "core/riemannian_staircase.h"
-#include "core/robust_kernel.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/riemannian_staircase.h"
+#include "arbor/core/robust_kernel.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "core/information.h"
+#include "arbor/core/information.h"
 
 #include <cmath>
 #include <sstream>

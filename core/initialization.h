@@ -26,7 +26,7 @@
 #include <string>
 #include <vector>
 
-#include "core/pose_graph.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "core/normal_equations.h"
+#include "arbor/core/normal_equations.h"
 
 #include <algorithm>
 #include <cmath>

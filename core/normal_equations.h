@@ -13,9 +13,9 @@
 
 #include <Eigen/Core>
 
-#include "core/block_cholesky.h"
-#include "core/pose_graph.h"
-#include "core/sparse_cholesky.h"
+#include "arbor/core/block_cholesky.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/sparse_cholesky.h"
 
 namespace arbor {
 

@@ -8,9 +8,9 @@
 #include <unordered_map>
 #include <vector>
 
-#include "core/gauge.h"
-#include "core/prior_factors.h"
-#include "core/relative_pose_factor.h"
+#include "arbor/core/gauge.h"
+#include "arbor/core/prior_factors.h"
+#include "arbor/core/relative_pose_factor.h"
 
 namespace arbor {
 

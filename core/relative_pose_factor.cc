@@ -1,6 +1,6 @@
-#include "core/relative_pose_factor.h"
+#include "arbor/core/relative_pose_factor.h"
 
-#include "core/so3.h"
+#include "arbor/core/so3.h"
 
 namespace arbor {
 

@@ -10,9 +10,9 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "core/information.h"
-#include "core/se2.h"
-#include "core/se3.h"
+#include "arbor/core/information.h"
+#include "arbor/core/se2.h"
+#include "arbor/core/se3.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "core/riemannian_staircase.h"
+#include "arbor/core/riemannian_staircase.h"
 
 #include <algorithm>
 #include <chrono>
@@ -10,9 +10,9 @@
 #include <Spectra/SymEigsSolver.h>
 #include <Eigen/Eigenvalues>
 
-#include "core/initialization.h"
-#include "core/serial_openmp.h"
-#include "core/stiefel_product.h"
+#include "arbor/core/initialization.h"
+#include "arbor/core/serial_openmp.h"
+#include "arbor/core/stiefel_product.h"
 
 namespace arbor {
 

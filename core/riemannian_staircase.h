@@ -11,9 +11,9 @@
 
 #include <Eigen/Core>
 
-#include "core/batch_solver.h"
-#include "core/pose_graph.h"
-#include "core/sesync_problem.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/sesync_problem.h"
 
 namespace arbor {
 

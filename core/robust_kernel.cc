@@ -1,4 +1,4 @@
-#include "core/robust_kernel.h"
+#include "arbor/core/robust_kernel.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "core/se2.h"
+#include "arbor/core/se2.h"
 
 #include <cmath>
 

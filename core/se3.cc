@@ -1,10 +1,10 @@
-#include "core/se3.h"
+#include "arbor/core/se3.h"
 
 #include <cmath>
 
 #include <Eigen/LU>
 
-#include "core/so3.h"
+#include "arbor/core/so3.h"
 
 namespace arbor {
 namespace {

@@ -1,4 +1,4 @@
-#include "core/sesync_problem.h"
+#include "arbor/core/sesync_problem.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +9,7 @@
 #include <Spectra/SymEigsSolver.h>
 #include <Eigen/CholmodSupport>
 
-#include "core/information.h"
+#include "arbor/core/information.h"
 
 namespace arbor {
 

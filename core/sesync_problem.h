@@ -16,7 +16,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
-#include "core/pose_graph.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor {
 

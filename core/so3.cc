@@ -1,4 +1,4 @@
-#include "core/so3.h"
+#include "arbor/core/so3.h"
 
 #include <cmath>
 

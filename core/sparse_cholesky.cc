@@ -1,4 +1,4 @@
-#include "core/sparse_cholesky.h"
+#include "arbor/core/sparse_cholesky.h"
 
 #include <cholmod.h>
 
@@ -7,7 +7,8 @@
 #include <stdexcept>
 #include <utility>
 
-#include "core/serial_openmp.h"
+#include "arbor/core/blas_threads.h"
+#include "arbor/core/serial_openmp.h"
 
 namespace arbor {
 namespace {
@@ -97,6 +98,7 @@ struct SparseCholesky::Cholmod {
 
 SparseCholesky::SparseCholesky(SymmetricPattern pattern)
     : pattern_(std::move(pattern)), cholmod_(std::make_unique<Cholmod>()) {
+  useOneBlasThread();  // CHOLMOD's supernodal factorisation calls the BLAS
   checkPattern(pattern_, "SparseCholesky");
   cholmod_common& c = cholmod_->common.c;
   c.nmethods = 1;

@@ -1,4 +1,4 @@
-#include "core/stiefel_product.h"
+#include "arbor/core/stiefel_product.h"
 
 #include <cmath>
 #include <stdexcept>

@@ -11,8 +11,8 @@
 #include <ostream>
 #include <type_traits>
 
-#include "core/finite_pose.h"
-#include "io/pose_graph_file.h"
+#include "arbor/core/finite_pose.h"
+#include "arbor/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

@@ -1,4 +1,4 @@
-#include "io/labels_file.h"
+#include "arbor/io/labels_file.h"
 
 #include <cerrno>
 #include <cstring>
@@ -6,7 +6,7 @@
 #include <istream>
 #include <ostream>
 
-#include "io/line_fields.h"
+#include "arbor/io/line_fields.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "io/lcm_journal.h"
+#include "arbor/io/lcm_journal.h"
 
 #include <algorithm>
 #include <cerrno>

@@ -1,4 +1,4 @@
-#include "io/lcm_messages.h"
+#include "arbor/io/lcm_messages.h"
 
 #include <cmath>
 #include <exception>
@@ -6,7 +6,7 @@
 
 #include <lcm/lcm_coretypes.h>
 
-#include "core/information.h"
+#include "arbor/core/information.h"
 
 namespace arbor {
 namespace {

@@ -12,16 +12,16 @@
 
 #include <Eigen/Core>
 
-#include "core/pose_graph.h"
-#include "core/se2.h"
-#include "core/se3.h"
-#include "io/lcm/arbor/command_t.hpp"
-#include "io/lcm/arbor/edge_command_t.hpp"
-#include "io/lcm/arbor/edge_t.hpp"
-#include "io/lcm/arbor/estimate_t.hpp"
-#include "io/lcm/arbor/journal_mark_t.hpp"
-#include "io/lcm/arbor/prior_t.hpp"
-#include "io/lcm/arbor/status_t.hpp"
+#include "arbor/command_t.hpp"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/se2.h"
+#include "arbor/core/se3.h"
+#include "arbor/edge_command_t.hpp"
+#include "arbor/edge_t.hpp"
+#include "arbor/estimate_t.hpp"
+#include "arbor/journal_mark_t.hpp"
+#include "arbor/prior_t.hpp"
+#include "arbor/status_t.hpp"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "io/line_fields.h"
+#include "arbor/io/line_fields.h"
 
 #include <charconv>
 #include <cmath>

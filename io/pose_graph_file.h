@@ -13,8 +13,8 @@
 #include <variant>
 #include <vector>
 
-#include "core/information.h"
-#include "core/pose_graph.h"
+#include "arbor/core/information.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "io/trajectory_writer.h"
+#include "arbor/io/trajectory_writer.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -12,7 +12,7 @@
 
 #include <Eigen/Geometry>
 
-#include "io/pose_graph_file.h"
+#include "arbor/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

@@ -10,7 +10,7 @@
 
 #include <gtest/gtest.h>
 
-#include "tools/refine/batch_refiner.h"
+#include "arbor/tools/refine/batch_refiner.h"
 
 namespace arbor::refine {
 namespace {

@@ -9,13 +9,13 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
-#include "core/batch_solver.h"
-#include "core/block_cholesky.h"
-#include "core/normal_equations.h"
-#include "core/pose_graph.h"
-#include "core/prior_factors.h"
-#include "core/sparse_cholesky.h"
-#include "tests/random_graphs.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/block_cholesky.h"
+#include "arbor/core/normal_equations.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/prior_factors.h"
+#include "arbor/core/sparse_cholesky.h"
+#include "arbor/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

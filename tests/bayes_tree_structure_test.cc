@@ -8,9 +8,9 @@
 
 #include <gtest/gtest.h>
 
-#include "bayestree/bayes_tree.h"
-#include "core/factor.h"
-#include "core/se2.h"
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/se2.h"
 
 namespace arbor {
 namespace {

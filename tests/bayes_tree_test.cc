@@ -10,11 +10,11 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "bayestree/incremental_smoother.h"
-#include "core/batch_solver.h"
-#include "core/pose_graph.h"
-#include "io/pose_graph_file.h"
-#include "tests/shared_data.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/shared_data.h"
 
 #include <gtest/gtest.h>
 

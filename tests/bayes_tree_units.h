@@ -9,12 +9,12 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "bayestree/bayes_tree.h"
-#include "bayestree/linear_factors.h"
-#include "bayestree/top_elimination.h"
-#include "bayestree/update_threads.h"
-#include "core/factor.h"
-#include "core/se2.h"
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/linear_factors.h"
+#include "arbor/bayestree/top_elimination.h"
+#include "arbor/bayestree/update_threads.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/se2.h"
 #include "random_graphs.h"
 
 namespace arbor::testing {

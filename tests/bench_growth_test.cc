@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <stdexcept>
 
-#include "tools/bench/growth.h"
-#include "tools/generator/graph_generator.h"
+#include "arbor/tools/bench/growth.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -13,9 +13,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "core/initialization.h"
-#include "tools/bench/paper_runner.h"
-#include "tools/generator/graph_generator.h"
+#include "arbor/core/initialization.h"
+#include "arbor/tools/bench/paper_runner.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

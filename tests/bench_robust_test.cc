@@ -11,11 +11,11 @@
 #include <random>
 #include <stdexcept>
 
-#include "io/pose_graph_file.h"
-#include "tools/bench/robust_bench.h"
-#include "tools/bench/robust_metrics.h"
-#include "tools/generator/false_closures.h"
-#include "tools/generator/graph_generator.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/bench/robust_bench.h"
+#include "arbor/tools/bench/robust_metrics.h"
+#include "arbor/tools/generator/false_closures.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -15,9 +15,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "io/labels_file.h"
-#include "io/pose_graph_file.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/io/labels_file.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace {
 

@@ -9,12 +9,12 @@
 
 #include <gtest/gtest.h>
 
-#include "tools/cli/cli_common.h"
-#include "tools/cli/replay_command.h"
-#include "tools/cli/serve_command.h"
-#include "tools/cli/smoother_flags.h"
-#include "tools/generator/graph_generator.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/replay_command.h"
+#include "arbor/tools/cli/serve_command.h"
+#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor/tools/generator/graph_generator.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 namespace {

@@ -5,7 +5,7 @@
 #include <numeric>
 #include <vector>
 
-#include "bayestree/elimination_plan.h"
+#include "arbor/bayestree/elimination_plan.h"
 
 #include <gtest/gtest.h>
 

@@ -12,11 +12,11 @@
 
 #include <gtest/gtest.h>
 
-#include "io/labels_file.h"
-#include "io/pose_graph_file.h"
+#include "arbor/io/labels_file.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/generator/false_closures.h"
+#include "arbor/tools/generator/graph_generator.h"
 #include "shared_data.h"
-#include "tools/generator/false_closures.h"
-#include "tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -6,9 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include "arbor/bayestree/fold_in.h"
+#include "arbor/bayestree/partial_solve.h"
 #include "bayes_tree_units.h"
-#include "bayestree/fold_in.h"
-#include "bayestree/partial_solve.h"
 
 namespace arbor {
 namespace {

@@ -9,11 +9,11 @@
 
 #include <gtest/gtest.h>
 
-#include "core/batch_solver.h"
-#include "core/gnc_solver.h"
-#include "core/normal_equations.h"
-#include "core/pose_graph.h"
-#include "tests/random_graphs.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/gnc_solver.h"
+#include "arbor/core/normal_equations.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

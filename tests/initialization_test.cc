@@ -1,4 +1,4 @@
-#include "core/initialization.h"
+#include "arbor/core/initialization.h"
 
 #include <cmath>
 #include <random>

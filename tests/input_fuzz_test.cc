@@ -12,10 +12,10 @@
 
 #include <gtest/gtest.h>
 
-#include "io/pose_graph_file.h"
-#include "tests/random_graphs.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/replay_runner.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/random_graphs.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {
@@ -76,7 +76,6 @@ std::string corrupt(std::vector<std::string> lines, std::mt19937& rng) {
 
 void fuzzLines(const std::string& file, const std::vector<std::string>& lines, unsigned seed,
                int rounds) {
-  cli::useOneBlasThread();  // as the tools do: the smoother's own threads share the cores
   ASSERT_FALSE(lines.empty()) << file;
   std::mt19937 rng(seed);
   int read = 0, refused = 0;

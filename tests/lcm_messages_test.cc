@@ -14,8 +14,8 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "io/lcm_journal.h"
-#include "io/lcm_messages.h"
+#include "arbor/io/lcm_journal.h"
+#include "arbor/io/lcm_messages.h"
 
 namespace arbor {
 namespace {

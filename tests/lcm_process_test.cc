@@ -34,11 +34,11 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "io/lcm_journal.h"
-#include "io/lcm_messages.h"
-#include "io/pose_graph_file.h"
+#include "arbor/io/lcm_journal.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/lcm_test_support.h"
 #include "shared_data.h"
-#include "tests/lcm_test_support.h"
 
 extern char** environ;
 

@@ -15,13 +15,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "io/lcm_messages.h"
-#include "tests/lcm_test_support.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/cli/replay_order.h"
-#include "tools/generator/graph_generator.h"
-#include "tools/serve/serve_service.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tests/lcm_test_support.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/replay_order.h"
+#include "arbor/tools/generator/graph_generator.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

@@ -21,14 +21,14 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "bayestree/online_smoother.h"
-#include "io/lcm_journal.h"
-#include "io/lcm_messages.h"
-#include "io/pose_graph_file.h"
-#include "tests/lcm_test_support.h"
-#include "tools/cli/replay_order.h"
-#include "tools/generator/graph_generator.h"
-#include "tools/serve/serve_service.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/io/lcm_journal.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/lcm_test_support.h"
+#include "arbor/tools/cli/replay_order.h"
+#include "arbor/tools/generator/graph_generator.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

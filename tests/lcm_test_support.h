@@ -19,12 +19,12 @@
 
 #include <lcm/lcm-cpp.hpp>
 
-#include "bayestree/online_smoother.h"
-#include "io/lcm_messages.h"
-#include "tools/cli/publish_stream.h"
-#include "tools/cli/replay_order.h"
-#include "tools/generator/graph_generator.h"
-#include "tools/serve/serve_service.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/publish_stream.h"
+#include "arbor/tools/cli/replay_order.h"
+#include "arbor/tools/generator/graph_generator.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::serve::testing {
 

@@ -4,11 +4,11 @@
 
 #include <gtest/gtest.h>
 
-#include "core/finite_pose.h"
-#include "core/relative_pose_factor.h"
-#include "core/se2.h"
-#include "core/se3.h"
-#include "core/so3.h"
+#include "arbor/core/finite_pose.h"
+#include "arbor/core/relative_pose_factor.h"
+#include "arbor/core/se2.h"
+#include "arbor/core/se3.h"
+#include "arbor/core/so3.h"
 
 namespace arbor {
 namespace {

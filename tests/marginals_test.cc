@@ -12,13 +12,13 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/marginals.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/bayestree/top_elimination.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/robust_kernel.h"
 #include "bayes_tree_units.h"
-#include "bayestree/incremental_smoother.h"
-#include "bayestree/marginals.h"
-#include "bayestree/online_smoother.h"
-#include "bayestree/top_elimination.h"
-#include "core/factor.h"
-#include "core/robust_kernel.h"
 #include "random_graphs.h"
 
 namespace arbor {

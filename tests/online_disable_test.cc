@@ -9,8 +9,8 @@
 
 #include <gtest/gtest.h>
 
-#include "bayestree/online_smoother.h"
-#include "core/batch_solver.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/batch_solver.h"
 
 namespace arbor {
 namespace {

@@ -15,12 +15,12 @@
 
 #include <gtest/gtest.h>
 
-#include "bayestree/online_smoother.h"
-#include "core/batch_solver.h"
-#include "core/initialization.h"
-#include "io/labels_file.h"
-#include "io/pose_graph_file.h"
-#include "tools/cli/replay_runner.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/initialization.h"
+#include "arbor/io/labels_file.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "arbor/bayestree/partial_solve.h"
 #include "bayes_tree_units.h"
-#include "bayestree/partial_solve.h"
 
 namespace arbor {
 namespace {

@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "core/information.h"
-#include "io/pose_graph_file.h"
-#include "tests/pose_graph_file_support.h"
+#include "arbor/core/information.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/pose_graph_file_support.h"
 
 namespace arbor {
 namespace {

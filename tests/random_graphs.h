@@ -4,7 +4,7 @@
 #include <random>
 #include <vector>
 
-#include "core/pose_graph.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor::testing {
 

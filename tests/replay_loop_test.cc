@@ -10,12 +10,12 @@
 
 #include <nlohmann/json.hpp>
 
-#include "io/pose_graph_file.h"
-#include "tests/shared_data.h"
-#include "tools/cli/batch_refinement.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/generator/graph_generator.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/shared_data.h"
+#include "arbor/tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor::cli {
 namespace {

@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
-#include "core/batch_solver.h"
-#include "tools/cli/replay_runner.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

@@ -7,8 +7,8 @@
 
 #include <gtest/gtest.h>
 
-#include "core/factor.h"
-#include "core/robust_kernel.h"
+#include "arbor/core/factor.h"
+#include "arbor/core/robust_kernel.h"
 
 namespace arbor {
 namespace {

@@ -10,14 +10,14 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
-#include "core/batch_solver.h"
-#include "core/initialization.h"
-#include "core/prior_factors.h"
-#include "core/riemannian_staircase.h"
-#include "core/sesync_problem.h"
-#include "io/pose_graph_file.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/initialization.h"
+#include "arbor/core/prior_factors.h"
+#include "arbor/core/riemannian_staircase.h"
+#include "arbor/core/sesync_problem.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/random_graphs.h"
 #include "shared_data.h"
-#include "tests/random_graphs.h"
 
 namespace arbor {
 namespace {

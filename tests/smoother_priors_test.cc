@@ -11,10 +11,10 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "bayestree/incremental_smoother.h"
-#include "bayestree/online_smoother.h"
-#include "core/batch_solver.h"
-#include "core/factor.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/factor.h"
 
 namespace arbor {
 namespace {

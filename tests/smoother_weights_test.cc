@@ -9,8 +9,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "bayestree/incremental_smoother.h"
-#include "core/factor.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/core/factor.h"
 
 namespace arbor {
 namespace {

@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "arbor/bayestree/top_elimination.h"
 #include "bayes_tree_units.h"
-#include "bayestree/top_elimination.h"
 
 namespace arbor {
 namespace {

@@ -13,8 +13,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "io/pose_graph_file.h"
-#include "io/trajectory_writer.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/io/trajectory_writer.h"
 #include "random_graphs.h"
 
 namespace arbor {

@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "bayestree/work_lanes.h"
+#include "arbor/bayestree/work_lanes.h"
 
 #include <gtest/gtest.h>
 

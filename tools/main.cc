@@ -5,8 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
+#include "arbor/core/blas_threads.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
 
 namespace {
 
@@ -45,7 +46,7 @@ void printUsage(std::ostream& out) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  arbor::cli::useOneBlasThread();
+  arbor::useOneBlasThread();  // first thing: stops OpenBLAS's idle workers early
   if (argc >= 2 && std::string(argv[1]) == "--version") {
     std::cout << "arbor " << ARBOR_VERSION << "\n";
     return 0;

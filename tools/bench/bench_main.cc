@@ -36,19 +36,19 @@
 
 #include <boost/program_options.hpp>
 
-#include "core/initialization.h"
-#include "io/pose_graph_file.h"
-#include "tools/bench/ceres_pose_graph.h"
-#include "tools/bench/format.h"
-#include "tools/bench/growth.h"
-#include "tools/bench/paper_runner.h"
-#include "tools/bench/robust_bench.h"
-#include "tools/bench/shared_data.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/replay_runner.h"
-#include "tools/cli/robust_flags.h"
-#include "tools/cli/smoother_flags.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/core/initialization.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/bench/ceres_pose_graph.h"
+#include "arbor/tools/bench/format.h"
+#include "arbor/tools/bench/growth.h"
+#include "arbor/tools/bench/paper_runner.h"
+#include "arbor/tools/bench/robust_bench.h"
+#include "arbor/tools/bench/shared_data.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/replay_runner.h"
+#include "arbor/tools/cli/robust_flags.h"
+#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace {
 
@@ -656,7 +656,7 @@ int micro(const std::vector<std::string>& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  arbor::cli::useOneBlasThread();
+  arbor::useOneBlasThread();  // first thing: stops OpenBLAS's idle workers early
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout

@@ -1,4 +1,4 @@
-#include "tools/bench/ceres_pose_graph.h"
+#include "arbor/tools/bench/ceres_pose_graph.h"
 
 #include <chrono>
 #include <stdexcept>

@@ -10,7 +10,7 @@
 
 #include <Eigen/Core>
 
-#include "core/pose_graph.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor::bench {
 

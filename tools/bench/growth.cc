@@ -1,13 +1,13 @@
-#include "tools/bench/growth.h"
+#include "arbor/tools/bench/growth.h"
 
 #include <algorithm>
 #include <stdexcept>
 
-#include "core/normal_equations.h"
-#include "tools/bench/format.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/latency.h"
-#include "tools/cli/replay_order.h"
+#include "arbor/core/normal_equations.h"
+#include "arbor/tools/bench/format.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/latency.h"
+#include "arbor/tools/cli/replay_order.h"
 
 namespace arbor::bench {
 namespace {

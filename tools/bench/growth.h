@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "core/pose_graph.h"
-#include "tools/cli/replay_runner.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor::bench {
 

@@ -1,4 +1,4 @@
-#include "tools/bench/paper_runner.h"
+#include "arbor/tools/bench/paper_runner.h"
 
 #include <cmath>
 #include <cstdio>
@@ -11,9 +11,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/initialization.h"
-#include "tools/bench/format.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/core/initialization.h"
+#include "arbor/tools/bench/format.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::bench {
 namespace {

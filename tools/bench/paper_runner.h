@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "core/pose_graph.h"
-#include "tools/cli/latency.h"
-#include "tools/cli/replay_runner.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/cli/latency.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor::bench {
 

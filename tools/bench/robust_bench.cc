@@ -1,4 +1,4 @@
-#include "tools/bench/robust_bench.h"
+#include "arbor/tools/bench/robust_bench.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,11 +11,11 @@
 #include <stdexcept>
 #include <variant>
 
-#include "core/initialization.h"
-#include "io/pose_graph_file.h"
-#include "tools/bench/format.h"
-#include "tools/cli/cli_common.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/core/initialization.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/bench/format.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::bench {
 namespace {

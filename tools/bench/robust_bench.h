@@ -30,13 +30,13 @@
 #include <utility>
 #include <vector>
 
-#include "core/gnc_solver.h"
-#include "core/pose_graph.h"
-#include "io/labels_file.h"
-#include "tools/bench/robust_metrics.h"
-#include "tools/bench/shared_data.h"
-#include "tools/cli/latency.h"
-#include "tools/generator/false_closures.h"
+#include "arbor/core/gnc_solver.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/io/labels_file.h"
+#include "arbor/tools/bench/robust_metrics.h"
+#include "arbor/tools/bench/shared_data.h"
+#include "arbor/tools/cli/latency.h"
+#include "arbor/tools/generator/false_closures.h"
 
 namespace arbor::bench {
 

@@ -1,4 +1,4 @@
-#include "tools/bench/robust_metrics.h"
+#include "arbor/tools/bench/robust_metrics.h"
 
 #include <algorithm>
 #include <set>

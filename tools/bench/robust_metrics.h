@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "core/pose_graph.h"
-#include "core/rigid_alignment.h"
-#include "io/labels_file.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/rigid_alignment.h"
+#include "arbor/io/labels_file.h"
 
 namespace arbor::bench {
 

@@ -1,4 +1,4 @@
-#include "tools/bench/shared_data.h"
+#include "arbor/tools/bench/shared_data.h"
 
 #include <algorithm>
 #include <cstdlib>

@@ -8,15 +8,15 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/gnc_solver.h"
-#include "core/initialization.h"
-#include "io/pose_graph_file.h"
-#include "io/trajectory_writer.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/cli/covariance_output.h"
-#include "tools/cli/robust_flags.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/core/gnc_solver.h"
+#include "arbor/core/initialization.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/io/trajectory_writer.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/covariance_output.h"
+#include "arbor/tools/cli/robust_flags.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 namespace {

@@ -1,11 +1,11 @@
-#include "tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/batch_refinement.h"
 
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
-#include "bayestree/online_smoother.h"
-#include "tools/cli/cli_common.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include "tools/cli/commands.h"
+#include "arbor/tools/cli/commands.h"
 
 namespace arbor::cli {
 

@@ -1,9 +1,6 @@
-#include "tools/cli/cli_common.h"
-
-#include <dlfcn.h>
+#include "arbor/tools/cli/cli_common.h"
 
 #include <algorithm>
-#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -53,21 +50,6 @@ InformationPolicy parseInformationPolicy(const std::string& name) {
   if (name == "repair") return InformationPolicy::kRepair;
   if (name == "isotropic") return InformationPolicy::kIsotropic;
   throw UsageError("--information must be refuse, repair or isotropic, not '" + name + "'");
-}
-
-void useOneBlasThread() {
-  if (std::getenv("OPENBLAS_NUM_THREADS")) return;
-  using SetThreads = void (*)(int);
-  auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
-  if (!set) return;
-  set(1);
-  // The worker threads OpenBLAS started when it was loaded spin (sched_yield) for a while
-  // before they sleep, on the core the smoother's helper wants; with one thread per call they
-  // are never used again, so stop them (OpenBLAS's own fork handler does the same; it would
-  // restart them if more threads were asked for).
-  using Shutdown = int (*)();
-  if (auto shutdown = reinterpret_cast<Shutdown>(dlsym(RTLD_DEFAULT, "blas_thread_shutdown_")))
-    shutdown();
 }
 
 double peakRssMb() {

@@ -9,9 +9,9 @@
 #include <boost/program_options.hpp>
 #include <nlohmann/json.hpp>
 
-#include "core/information.h"
-#include "core/pose_graph.h"
-#include "io/pose_graph_file.h"
+#include "arbor/core/information.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/io/pose_graph_file.h"
 
 namespace arbor::cli {
 
@@ -69,12 +69,5 @@ class Stopwatch {
 
 /// Peak resident set size of this process in MiB (from /proc/self/status), 0 if unknown.
 double peakRssMb();
-
-/// One BLAS thread per call, when the BLAS in use is OpenBLAS (what scripts/install-deps.sh
-/// installs): it would otherwise fan each large clique factorisation out to every core, no
-/// faster on one core and fighting the smoother's own helper threads for the cores (measured:
-/// docs/design.md, "Dense clique kernels and the BLAS"). A user's OPENBLAS_NUM_THREADS wins.
-/// Called first thing by the tools' main functions.
-void useOneBlasThread();
 
 }  // namespace arbor::cli

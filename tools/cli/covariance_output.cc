@@ -1,4 +1,4 @@
-#include "tools/cli/covariance_output.h"
+#include "arbor/tools/cli/covariance_output.h"
 
 #include <algorithm>
 #include <charconv>
@@ -7,8 +7,8 @@
 #include <ostream>
 #include <stdexcept>
 
-#include "bayestree/incremental_smoother.h"
-#include "core/factor.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/core/factor.h"
 
 namespace arbor::cli {
 namespace {

@@ -11,8 +11,8 @@
 
 #include <Eigen/Core>
 
-#include "bayestree/online_smoother.h"
-#include "core/pose_graph.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor::cli {
 

@@ -10,11 +10,11 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "io/lcm_messages.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/serve/lcm_tuning.h"
-#include "tools/serve/serve_service.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 namespace {

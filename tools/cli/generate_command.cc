@@ -7,13 +7,13 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "core/initialization.h"
-#include "io/labels_file.h"
-#include "io/pose_graph_file.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/generator/false_closures.h"
-#include "tools/generator/graph_generator.h"
+#include "arbor/core/initialization.h"
+#include "arbor/io/labels_file.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/generator/false_closures.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor::cli {
 namespace {

@@ -14,14 +14,14 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "io/lcm_messages.h"
-#include "io/pose_graph_file.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/cli/latency.h"
-#include "tools/cli/publish_stream.h"
-#include "tools/serve/lcm_tuning.h"
-#include "tools/serve/serve_service.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/latency.h"
+#include "arbor/tools/cli/publish_stream.h"
+#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 namespace {

@@ -1,7 +1,7 @@
 // arbor replay FILE: feed a file's edges one at a time (in order of max(i, j), then file order)
 // to the incremental smoother, print per-update latency, final F, and F of batch LM started
 // from the incremental estimate.
-#include "tools/cli/replay_command.h"
+#include "arbor/tools/cli/replay_command.h"
 
 #include <algorithm>
 #include <cctype>
@@ -12,13 +12,13 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/gnc_solver.h"
-#include "io/pose_graph_file.h"
-#include "tools/cli/batch_refinement.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/cli/replay_runner.h"
-#include "tools/cli/smoother_flags.h"
+#include "arbor/core/gnc_solver.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/replay_runner.h"
+#include "arbor/tools/cli/smoother_flags.h"
 
 namespace arbor::cli {
 namespace {

@@ -5,10 +5,10 @@
 #include <string>
 #include <vector>
 
-#include "bayestree/incremental_smoother.h"
-#include "io/pose_graph_file.h"
-#include "tools/cli/robust_flags.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/robust_flags.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 

@@ -9,8 +9,8 @@
 #include <numeric>
 #include <vector>
 
-#include "bayestree/online_smoother.h"
-#include "core/pose_graph.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/pose_graph.h"
 
 namespace arbor::cli {
 

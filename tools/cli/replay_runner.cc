@@ -1,4 +1,4 @@
-#include "tools/cli/replay_runner.h"
+#include "arbor/tools/cli/replay_runner.h"
 
 #include <fstream>
 #include <iomanip>
@@ -6,10 +6,10 @@
 #include <set>
 #include <stdexcept>
 
-#include "bayestree/online_smoother.h"
-#include "core/gnc_solver.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/replay_order.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/gnc_solver.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/replay_order.h"
 
 namespace arbor::cli {
 

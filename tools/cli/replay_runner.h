@@ -8,11 +8,11 @@
 #include <string>
 #include <vector>
 
-#include "bayestree/incremental_smoother.h"
-#include "bayestree/online_smoother.h"
-#include "core/batch_solver.h"
-#include "core/pose_graph.h"
-#include "tools/cli/latency.h"
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/cli/latency.h"
 
 namespace arbor::cli {
 

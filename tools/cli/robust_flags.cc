@@ -1,9 +1,9 @@
-#include "tools/cli/robust_flags.h"
+#include "arbor/tools/cli/robust_flags.h"
 
 #include <cmath>
 #include <stdexcept>
 
-#include "tools/cli/cli_common.h"
+#include "arbor/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

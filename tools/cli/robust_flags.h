@@ -7,8 +7,8 @@
 
 #include <boost/program_options.hpp>
 
-#include "core/gnc_solver.h"
-#include "core/robust_kernel.h"
+#include "arbor/core/gnc_solver.h"
+#include "arbor/core/robust_kernel.h"
 
 namespace arbor::cli {
 

@@ -1,6 +1,6 @@
 // arbor serve: ingest edges, priors and edge commands published over LCM into the incremental
 // smoother and publish the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
-#include "tools/cli/serve_command.h"
+#include "arbor/tools/cli/serve_command.h"
 
 #include <csignal>
 #include <iostream>
@@ -13,12 +13,12 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "tools/cli/batch_refinement.h"
-#include "tools/cli/cli_common.h"
-#include "tools/cli/commands.h"
-#include "tools/cli/smoother_flags.h"
-#include "tools/serve/lcm_tuning.h"
-#include "tools/serve/serve_service.h"
+#include "arbor/tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 namespace {

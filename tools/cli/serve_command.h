@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "tools/serve/serve_service.h"
+#include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 

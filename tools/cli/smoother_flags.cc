@@ -1,8 +1,8 @@
-#include "tools/cli/smoother_flags.h"
+#include "arbor/tools/cli/smoother_flags.h"
 
 #include <sstream>
 
-#include "tools/cli/cli_common.h"
+#include "arbor/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

@@ -7,7 +7,7 @@
 
 #include <boost/program_options.hpp>
 
-#include "bayestree/incremental_smoother.h"
+#include "arbor/bayestree/incremental_smoother.h"
 
 namespace arbor::cli {
 

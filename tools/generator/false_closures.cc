@@ -1,4 +1,4 @@
-#include "tools/generator/false_closures.h"
+#include "arbor/tools/generator/false_closures.h"
 
 #include <algorithm>
 #include <climits>

@@ -39,8 +39,8 @@
 #include <utility>
 #include <vector>
 
-#include "core/pose_graph.h"
-#include "tools/generator/random.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/generator/random.h"
 
 namespace arbor::sim {
 

@@ -1,10 +1,10 @@
-#include "tools/generator/graph_generator.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 #include <algorithm>
 #include <map>
 #include <stdexcept>
 
-#include "tools/generator/random.h"
+#include "arbor/tools/generator/random.h"
 
 namespace arbor::sim {
 namespace {

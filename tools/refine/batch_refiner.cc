@@ -1,4 +1,4 @@
-#include "tools/refine/batch_refiner.h"
+#include "arbor/tools/refine/batch_refiner.h"
 
 #include <algorithm>
 #include <atomic>
@@ -12,7 +12,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include "core/serial_openmp.h"
+#include "arbor/core/serial_openmp.h"
 
 namespace arbor::refine {
 

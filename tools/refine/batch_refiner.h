@@ -21,9 +21,9 @@
 #include <string>
 #include <vector>
 
-#include "bayestree/online_smoother.h"
-#include "core/pose_graph.h"
-#include "tools/refine/batch_solvers.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::refine {
 

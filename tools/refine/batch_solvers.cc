@@ -1,4 +1,4 @@
-#include "tools/refine/batch_solvers.h"
+#include "arbor/tools/refine/batch_solvers.h"
 
 #include <stdexcept>
 

@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "core/batch_solver.h"
-#include "core/pose_graph.h"
-#include "core/riemannian_staircase.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/riemannian_staircase.h"
 
 namespace arbor::refine {
 

@@ -1,4 +1,4 @@
-#include "tools/serve/edge_intake.h"
+#include "arbor/tools/serve/edge_intake.h"
 
 #include <algorithm>
 #include <stdexcept>

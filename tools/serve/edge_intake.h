@@ -19,7 +19,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "io/lcm_messages.h"
+#include "arbor/io/lcm_messages.h"
 
 namespace arbor::serve {
 

@@ -1,4 +1,4 @@
-#include "tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/lcm_tuning.h"
 
 #include <netinet/in.h>
 #include <netinet/tcp.h>

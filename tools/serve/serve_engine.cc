@@ -1,4 +1,4 @@
-#include "tools/serve/serve_engine.h"
+#include "arbor/tools/serve/serve_engine.h"
 
 #include <algorithm>
 #include <array>
@@ -8,7 +8,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "io/pose_graph_file.h"
+#include "arbor/io/pose_graph_file.h"
 
 namespace arbor::serve {
 namespace {

@@ -10,9 +10,9 @@
 #include <optional>
 #include <string>
 
-#include "bayestree/online_smoother.h"
-#include "io/lcm_messages.h"
-#include "tools/refine/batch_refiner.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tools/refine/batch_refiner.h"
 
 namespace arbor::serve {
 

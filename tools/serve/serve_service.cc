@@ -1,6 +1,6 @@
-#include "tools/serve/serve_service.h"
+#include "arbor/tools/serve/serve_service.h"
 
-#include "tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/lcm_tuning.h"
 
 #include <algorithm>
 #include <cmath>

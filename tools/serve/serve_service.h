@@ -28,11 +28,11 @@
 
 #include <lcm/lcm-cpp.hpp>
 
-#include "io/lcm_journal.h"
-#include "io/lcm_messages.h"
-#include "tools/cli/latency.h"
-#include "tools/serve/edge_intake.h"
-#include "tools/serve/serve_engine.h"
+#include "arbor/io/lcm_journal.h"
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/latency.h"
+#include "arbor/tools/serve/edge_intake.h"
+#include "arbor/tools/serve/serve_engine.h"
 
 namespace arbor::serve {
 

@@ -2,9 +2,9 @@
 // Levenberg–Marquardt solve from a spanning-tree start, and the initialisations.
 #include <benchmark/benchmark.h>
 
-#include "core/batch_solver.h"
-#include "core/initialization.h"
-#include "tools/bench/micro/bench_graphs.h"
+#include "arbor/core/batch_solver.h"
+#include "arbor/core/initialization.h"
+#include "arbor/tools/bench/micro/bench_graphs.h"
 
 namespace arbor {
 namespace {

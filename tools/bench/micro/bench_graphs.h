@@ -10,7 +10,7 @@
 #include <malloc.h>
 #endif
 
-#include "tools/generator/graph_generator.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor::micro {
 

@@ -7,7 +7,7 @@
 #include <benchmark/benchmark.h>
 #include <Eigen/Core>
 
-#include "bayestree/dense_kernels.h"
+#include "arbor/bayestree/dense_kernels.h"
 
 namespace arbor {
 namespace {

@@ -9,8 +9,9 @@
 
 #include <benchmark/benchmark.h>
 
-#include "tools/bench/micro/bench_graphs.h"
-#include "tools/cli/cli_common.h"
+#include "arbor/core/blas_threads.h"
+#include "arbor/tools/bench/micro/bench_graphs.h"
+#include "arbor/tools/cli/cli_common.h"
 
 namespace {
 
@@ -40,7 +41,7 @@ std::vector<int> parseSizes(const std::string& list) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  arbor::cli::useOneBlasThread();
+  arbor::useOneBlasThread();  // first thing: stops OpenBLAS's idle workers early
   std::vector<int> sizes = {500, 1000, 2000};
   std::vector<char*> rest;
   try {

@@ -10,9 +10,9 @@
 
 #include <benchmark/benchmark.h>
 
-#include "bayestree/online_smoother.h"
-#include "tools/bench/micro/bench_graphs.h"
-#include "tools/cli/replay_order.h"
+#include "arbor/bayestree/online_smoother.h"
+#include "arbor/tools/bench/micro/bench_graphs.h"
+#include "arbor/tools/cli/replay_order.h"
 
 namespace arbor {
 namespace {

@@ -1,0 +1,79 @@
+# ctest install_consumer (tests/CMakeLists.txt), run with cmake -P: installs the build tree into
+# a fresh prefix, then, as a user would,
+#   1. configures and builds tests/consumer (find_package(Arbor), Arbor::arbor) against it and
+#      replays each DATA file with it; its F must equal the installed `arbor replay`'s F_final
+#      (within 1e-9 relative), and OpenBLAS must run one thread per call without the program
+#      asking (unless the BLAS is not OpenBLAS);
+#   2. compiles pkg_config_check.cc with `pkg-config --cflags --libs arbor` alone
+#      (PKG_CONFIG_PATH into the prefix) and runs it.
+# Variables: BUILD_DIR, SOURCE_DIR, WORK_DIR, LIBDIR (CMAKE_INSTALL_LIBDIR), DATA (files
+# separated by |), CXX, LAUNCHER (may be empty), PKG_CONFIG.
+cmake_minimum_required(VERSION 3.19)  # string(JSON)
+string(REPLACE "|" ";" DATA "${DATA}")
+
+function(run)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    list(JOIN ARGN " " command)
+    message(FATAL_ERROR "failed (${rc}): ${command}\n${out}\n${err}")
+  endif()
+  set(out "${out}" PARENT_SCOPE)
+endfunction()
+
+set(prefix ${WORK_DIR}/prefix)
+file(REMOVE_RECURSE ${WORK_DIR})
+run(${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix})
+foreach(installed bin/arbor include/arbor/core/se2.h include/arbor/bayestree/online_smoother.h
+        include/arbor/io/pose_graph_file.h include/arbor/io/lcm_messages.h
+        include/arbor/edge_t.hpp ${LIBDIR}/cmake/Arbor/ArborConfig.cmake
+        ${LIBDIR}/cmake/Arbor/ArborConfigVersion.cmake
+        ${LIBDIR}/cmake/Arbor/FindArborSuiteSparse.cmake ${LIBDIR}/pkgconfig/arbor.pc)
+  if(NOT EXISTS ${prefix}/${installed})
+    message(FATAL_ERROR "not installed: ${prefix}/${installed}")
+  endif()
+endforeach()
+foreach(internal include/arbor/tools include/arbor/core/serial_openmp.h
+        include/arbor/core/initialization_internal.h)
+  if(EXISTS ${prefix}/${internal})
+    message(FATAL_ERROR "installed but internal: ${prefix}/${internal}")
+  endif()
+endforeach()
+
+# 1. The CMake package.
+set(configure ${CMAKE_COMMAND} -S ${SOURCE_DIR}/tests/consumer -B ${WORK_DIR}/consumer
+    -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_CXX_COMPILER=${CXX})
+if(LAUNCHER)
+  list(APPEND configure -DCMAKE_CXX_COMPILER_LAUNCHER=${LAUNCHER})
+endif()
+run(${configure})
+run(${CMAKE_COMMAND} --build ${WORK_DIR}/consumer)
+foreach(file ${DATA})
+  run(${CMAKE_COMMAND} -E env --unset=OPENBLAS_NUM_THREADS ${prefix}/bin/arbor replay ${file}
+      --json)
+  string(JSON expected GET "${out}" F_final)
+  run(${CMAKE_COMMAND} -E env --unset=OPENBLAS_NUM_THREADS ${WORK_DIR}/consumer/arbor_consumer
+      ${file} ${expected})
+  message(STATUS "${file}: arbor replay F_final ${expected}; consumer ${out}")
+  if(NOT out MATCHES "blas_threads (1|none)\n")
+    message(FATAL_ERROR "the consumer's OpenBLAS does not run one thread per call:\n${out}")
+  endif()
+endforeach()
+
+# 2. pkg-config.
+execute_process(COMMAND ${CMAKE_COMMAND} -E env PKG_CONFIG_PATH=${prefix}/${LIBDIR}/pkgconfig
+                ${PKG_CONFIG} --cflags --libs arbor
+                RESULT_VARIABLE rc OUTPUT_VARIABLE flags ERROR_VARIABLE err
+                OUTPUT_STRIP_TRAILING_WHITESPACE)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "pkg-config --cflags --libs arbor failed:\n${err}")
+endif()
+message(STATUS "pkg-config --cflags --libs arbor: ${flags}")
+separate_arguments(flags UNIX_COMMAND "${flags}")
+run(${CXX} -std=c++17 ${SOURCE_DIR}/tests/consumer/pkg_config_check.cc ${flags}
+    -o ${WORK_DIR}/pkg_config_check)
+list(GET DATA 0 file)
+run(${CMAKE_COMMAND} -E env LD_LIBRARY_PATH=${prefix}/${LIBDIR} ${WORK_DIR}/pkg_config_check ${file})
+if(NOT out MATCHES "^poses [1-9][0-9]* edges [1-9]")
+  message(FATAL_ERROR "pkg_config_check printed: ${out}")
+endif()
+message(STATUS "pkg_config_check: ${out}")
