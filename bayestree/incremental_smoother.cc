@@ -30,6 +30,7 @@
 #include "arbor/bayestree/partial_solve.h"
 #include "arbor/bayestree/top_elimination.h"
 #include "arbor/bayestree/update_threads.h"
+#include "arbor/core/blas_threads.h"
 #include "arbor/core/finite_pose.h"
 #include "arbor/core/information.h"
 

@@ -687,13 +687,22 @@ double OnlineSmoother<G>::objective() const {
   return enabledCost(smoother_.estimate(), smoother_.factors());
 }
 
+namespace {
+
+/// "edge FROM - TO (N accepted edges)": how the results of disableEdge/enableEdge name a pair.
+std::string pairText(Key from, Key to, int n) {
+  return "edge " + std::to_string(from) + " - " + std::to_string(to) + " (" + std::to_string(n) +
+         (n == 1 ? " accepted edge)" : " accepted edges)");
+}
+
+}  // namespace
+
 template <class G>
 EdgeSwitchResult OnlineSmoother<G>::disableEdge(Key from, Key to) {
   if (auto refusal = switchProblem(from, to, "disable")) return *refusal;
   const IdPair p = idPair(from, to);
   const int n = edgesBetween(p);
-  const std::string edge = "edge " + std::to_string(from) + " - " + std::to_string(to) + " (" +
-                           std::to_string(n) + (n == 1 ? " accepted edge)" : " accepted edges)");
+  const std::string edge = pairText(from, to, n);
   if (disabled_pairs_.count(p))
     return {EdgeSwitchStatus::kAlreadyDisabled, n, "disable " + edge + ": disabled already"};
   if (!connectedWithout(p)) {
@@ -720,8 +729,7 @@ EdgeSwitchResult OnlineSmoother<G>::enableEdge(Key from, Key to) {
   if (auto refusal = switchProblem(from, to, "enable")) return *refusal;
   const IdPair p = idPair(from, to);
   const int n = edgesBetween(p);
-  const std::string edge = "edge " + std::to_string(from) + " - " + std::to_string(to) + " (" +
-                           std::to_string(n) + (n == 1 ? " accepted edge)" : " accepted edges)");
+  const std::string edge = pairText(from, to, n);
   if (!disabled_pairs_.count(p))
     return {EdgeSwitchStatus::kAlreadyEnabled, n, "enable " + edge + ": not disabled"};
   disabled_pairs_.erase(p);

@@ -20,25 +20,14 @@
 #include "arbor/core/initialization.h"
 #include "arbor/io/labels_file.h"
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/tests/random_graphs.h"
 #include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {
 
-template <class G>
-typename RelativePoseEdge<G>::Matrix information(double t, double r) {
-  typename RelativePoseEdge<G>::Matrix m = RelativePoseEdge<G>::Matrix::Zero();
-  for (int k = 0; k < G::kDoF; ++k) m(k, k) = k < G::kDim ? t : r;
-  return m;
-}
-
-template <class G>
-typename G::Tangent noise(std::mt19937& rng, double sigma) {
-  std::normal_distribution<double> n(0.0, sigma);
-  typename G::Tangent t;
-  for (int k = 0; k < G::kDoF; ++k) t(k) = n(rng);
-  return t;
-}
+using testing::diagonalInformation;
+using testing::isotropicNoise;
 
 struct TestEdge {
   int from, to;
@@ -54,7 +43,7 @@ struct Circle {
   std::vector<G> truth;
   std::vector<TestEdge> edges;
   std::vector<G> z;
-  typename RelativePoseEdge<G>::Matrix omega = information<G>(50.0, 400.0);
+  typename RelativePoseEdge<G>::Matrix omega = diagonalInformation<G>(50.0, 400.0);
 
   Circle(int n, int per_lap, int closure_every, double scale, unsigned seed) {
     std::mt19937 rng(seed);
@@ -64,7 +53,7 @@ struct Circle {
     step(G::kDoF - 1) = 2 * M_PI / per_lap;
     for (int k = 1; k < n; ++k) truth[k] = truth[k - 1].compose(G::Exp(step));
     auto add = [&](int i, int j) {
-      typename G::Tangent e = noise<G>(rng, 1.0);
+      typename G::Tangent e = isotropicNoise<G>(rng, 1.0);
       for (int d = 0; d < G::kDoF; ++d) e(d) *= scale / std::sqrt(omega(d, d));
       z.push_back(truth[i].inverse().compose(truth[j]).compose(G::Exp(e)));
       edges.push_back({i, j, true});

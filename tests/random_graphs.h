@@ -32,6 +32,23 @@ typename RelativePoseEdge<G>::Matrix randomInformation(std::mt19937_64& rng) {
   return omega;
 }
 
+/// Diagonal information: t on the translational entries, r on the rotational ones.
+template <class G>
+typename RelativePoseEdge<G>::Matrix diagonalInformation(double t, double r) {
+  typename RelativePoseEdge<G>::Matrix m = RelativePoseEdge<G>::Matrix::Zero();
+  for (int k = 0; k < G::kDoF; ++k) m(k, k) = k < G::kDim ? t : r;
+  return m;
+}
+
+/// A tangent vector with every entry N(0, sigma²).
+template <class G>
+typename G::Tangent isotropicNoise(std::mt19937& rng, double sigma) {
+  std::normal_distribution<double> n(0.0, sigma);
+  typename G::Tangent t;
+  for (int k = 0; k < G::kDoF; ++k) t(k) = n(rng);
+  return t;
+}
+
 /// A graph with its ground truth.
 template <class G>
 struct Synthetic {

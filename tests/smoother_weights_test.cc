@@ -11,24 +11,13 @@
 
 #include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/core/factor.h"
+#include "arbor/tests/random_graphs.h"
 
 namespace arbor {
 namespace {
 
-template <class G>
-typename RelativePoseEdge<G>::Matrix information(double t, double r) {
-  typename RelativePoseEdge<G>::Matrix m = RelativePoseEdge<G>::Matrix::Zero();
-  for (int k = 0; k < G::kDoF; ++k) m(k, k) = k < G::kDim ? t : r;
-  return m;
-}
-
-template <class G>
-typename G::Tangent noise(std::mt19937& rng, double sigma) {
-  std::normal_distribution<double> n(0.0, sigma);
-  typename G::Tangent t;
-  for (int k = 0; k < G::kDoF; ++k) t(k) = n(rng);
-  return t;
-}
+using testing::diagonalInformation;
+using testing::isotropicNoise;
 
 /// A noisy trajectory of n poses with odometry and loop closures every 7 poses back to the
 /// start region, plus one wrong closure (the last factor): off by `error` metres and a fifth of
@@ -38,14 +27,15 @@ std::vector<Factor<G>> loopGraph(int n, unsigned seed, std::vector<G>* truth, do
   std::mt19937 rng(seed);
   truth->assign(n, G::Identity());
   for (int k = 1; k < n; ++k) {
-    typename G::Tangent t = noise<G>(rng, 0.2);
+    typename G::Tangent t = isotropicNoise<G>(rng, 0.2);
     t(0) += 1.0;
     (*truth)[k] = (*truth)[k - 1].compose(G::Exp(t));
   }
-  const auto omega = information<G>(50.0, 400.0);
+  const auto omega = diagonalInformation<G>(50.0, 400.0);
   std::vector<Factor<G>> fs;
   auto edge = [&](int i, int j, double sigma) {
-    const G z = (*truth)[i].inverse().compose((*truth)[j]).compose(G::Exp(noise<G>(rng, sigma)));
+    const G z =
+        (*truth)[i].inverse().compose((*truth)[j]).compose(G::Exp(isotropicNoise<G>(rng, sigma)));
     fs.emplace_back(RelativePoseEdge<G>::make(i, j, z, omega));
   };
   for (int k = 1; k < n; ++k) edge(k - 1, k, 0.02);

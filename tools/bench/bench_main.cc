@@ -36,6 +36,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "arbor/core/blas_threads.h"
 #include "arbor/core/initialization.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/bench/ceres_pose_graph.h"
