@@ -188,18 +188,12 @@ std::vector<RobustCase> selectCases(const std::vector<RobustCase>& cases, const 
 std::map<std::pair<std::string, std::string>, RobustAnchor> readRobustAnchorTable(
     const std::string& shared_dir) {
   std::map<std::pair<std::string, std::string>, RobustAnchor> table;
-  std::ifstream in(fs::path(shared_dir) / "reference" / "robust-anchors.tsv");
   auto number = [](const std::string& s) {
     char* end = nullptr;
     const double v = std::strtod(s.c_str(), &end);
     return end != s.c_str() ? v : kNaN;
   };
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#' || line.rfind("dataset", 0) == 0) continue;
-    std::vector<std::string> f;
-    std::istringstream row(line);
-    for (std::string cell; std::getline(row, cell, '\t');) f.push_back(cell);
+  for (const std::vector<std::string>& f : readReferenceRows(shared_dir, "robust-anchors.tsv")) {
     // dataset tool total_s p50_ms p99_ms max_ms rejected status F_clean F_clean/F* ate
     // precision recall
     if (f.size() < 13) continue;

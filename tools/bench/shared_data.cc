@@ -31,25 +31,31 @@ std::vector<std::string> sharedDatasets(const std::string& shared_dir) {
   return files;
 }
 
-std::map<std::string, Reference> readOptimumTable(const std::string& shared_dir) {
-  std::map<std::string, Reference> table;
-  std::ifstream in(fs::path(shared_dir) / "reference" / "optimum.tsv");
+std::vector<std::vector<std::string>> readReferenceRows(const std::string& shared_dir,
+                                                        const std::string& name) {
+  std::vector<std::vector<std::string>> rows;
+  std::ifstream in(fs::path(shared_dir) / "reference" / name);
   std::string line;
   while (std::getline(in, line)) {
     if (line.empty() || line[0] == '#' || line.rfind("dataset", 0) == 0) continue;
+    std::vector<std::string>& f = rows.emplace_back();
     std::istringstream row(line);
-    std::string name, dim, f, certified, lm, replay;
-    if (!std::getline(row, name, '\t') || !std::getline(row, dim, '\t') ||
-        !std::getline(row, f, '\t') || !std::getline(row, certified, '\t') ||
-        !std::getline(row, lm, '\t') || !std::getline(row, replay, '\t')) {
-      continue;
-    }
+    for (std::string cell; std::getline(row, cell, '\t');) f.push_back(cell);
+  }
+  return rows;
+}
+
+std::map<std::string, Reference> readOptimumTable(const std::string& shared_dir) {
+  std::map<std::string, Reference> table;
+  for (const std::vector<std::string>& f : readReferenceRows(shared_dir, "optimum.tsv")) {
+    // dataset dim F* certified lm_reaches replay_target
+    if (f.size() < 6) continue;
     Reference r;
-    r.F_star = std::strtod(f.c_str(), nullptr);
-    r.certified = certified == "yes";
-    r.lm_reaches = lm == "yes";
-    r.replay_target = replay == "yes";
-    table[name] = r;
+    r.F_star = std::strtod(f[2].c_str(), nullptr);
+    r.certified = f[3] == "yes";
+    r.lm_reaches = f[4] == "yes";
+    r.replay_target = f[5] == "yes";
+    table[f[0]] = r;
   }
   return table;
 }
@@ -57,13 +63,7 @@ std::map<std::string, Reference> readOptimumTable(const std::string& shared_dir)
 std::map<std::pair<std::string, std::string>, Anchor> readAnchorTable(
     const std::string& shared_dir) {
   std::map<std::pair<std::string, std::string>, Anchor> table;
-  std::ifstream in(fs::path(shared_dir) / "reference" / "anchors.tsv");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#' || line.rfind("dataset", 0) == 0) continue;
-    std::vector<std::string> f;
-    std::istringstream row(line);
-    for (std::string cell; std::getline(row, cell, '\t');) f.push_back(cell);
+  for (const std::vector<std::string>& f : readReferenceRows(shared_dir, "anchors.tsv")) {
     // dataset dim nodes edges run total_s p50 p90 p99 max iterations F peak_rss status
     if (f.size() < 14) continue;
     Anchor a;

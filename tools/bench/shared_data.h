@@ -24,6 +24,11 @@ std::string sharedDirectory(const std::string& fallback);
 /// Dataset files (*.g2o) in DIR/datasets, sorted by size (smallest first); empty if absent.
 std::vector<std::string> sharedDatasets(const std::string& shared_dir);
 
+/// The data rows of DIR/reference/NAME (tab-separated cells), without blank lines, `#`
+/// comments and the `dataset…` header; empty if the file is absent.
+std::vector<std::vector<std::string>> readReferenceRows(const std::string& shared_dir,
+                                                        const std::string& name);
+
 /// DIR/reference/optimum.tsv by dataset name (file stem); empty if absent.
 std::map<std::string, Reference> readOptimumTable(const std::string& shared_dir);
 
