@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include <stdio_ext.h>
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -106,7 +108,26 @@ EventLogWriter::EventLogWriter(const std::string& path, std::int64_t valid_bytes
   }
   log_ = lcm_eventlog_create(path.c_str(), "a");
   if (log_ == nullptr) throw std::runtime_error(systemError("EventLogWriter: cannot open", path));
+  struct stat st;
+  if (::fstat(fileno(log_->f), &st) != 0) {
+    const std::string error = systemError("EventLogWriter: cannot stat", path);
+    lcm_eventlog_destroy(log_);
+    throw std::runtime_error(error);
+  }
+  bytes_ = st.st_size;
   last_sync_us_ = steadyMicros();
+  reserve_path_ = path + ".reserve";
+  reserve_held_ = options_.reserve_bytes <= 0 || makeReserve();
+}
+
+bool EventLogWriter::makeReserve() {
+  const int fd = ::open(reserve_path_.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
+  if (fd < 0) return false;
+  // Blocks really allocated (not a sparse file), or the room is not held.
+  const bool ok = ::posix_fallocate(fd, 0, options_.reserve_bytes) == 0 && ::fsync(fd) == 0;
+  ::close(fd);
+  if (!ok) ::unlink(reserve_path_.c_str());
+  return ok;
 }
 
 EventLogWriter::~EventLogWriter() {
@@ -118,8 +139,55 @@ EventLogWriter::~EventLogWriter() {
 }
 
 void EventLogWriter::append(const std::string& channel, std::int64_t timestamp, const void* data,
-                            int size) {
+                            int size, EventClass kind) {
   std::lock_guard<std::mutex> lock(mutex_);
+  // An event on disk: sync word, event number, timestamp, channel and data lengths, channel,
+  // data (lcm_eventlog_write_event).
+  const std::int64_t event_bytes =
+      4 + 8 + 8 + 4 + 4 + static_cast<std::int64_t>(channel.size()) + size;
+  const bool measurement = kind == EventClass::kMeasurement;
+  const std::int64_t limit =
+      options_.max_bytes - (measurement ? std::max<std::int64_t>(0, options_.reserve_bytes) : 0);
+  if (options_.max_bytes > 0 && bytes_ + event_bytes > limit) {
+    ++failures_;
+    throw std::runtime_error(
+        "EventLogWriter: cannot write " + path_ + ": the journal is full (" +
+        std::to_string(bytes_) + " of at most " + std::to_string(options_.max_bytes) + " bytes" +
+        (measurement ? ", " + std::to_string(options_.reserve_bytes) + " of them kept for marks"
+                     : "") +
+        "; the event needs " + std::to_string(event_bytes) + ")");
+  }
+  if (measurement && !reserve_held_ && !(reserve_held_ = makeReserve())) {
+    ++failures_;
+    throw std::runtime_error(
+        "EventLogWriter: cannot write " + path_ + ": the disk is full (no room for the " +
+        std::to_string(options_.reserve_bytes) + " bytes kept for marks beside the journal)");
+  }
+  if (!writeEvent(channel, timestamp, data, size)) {
+    // A record may use the reserve: free it and try once more.
+    const bool retry = !measurement && options_.reserve_bytes > 0 && reserve_held_ &&
+                       (errno == ENOSPC || errno == EDQUOT);
+    if (retry) {
+      ::unlink(reserve_path_.c_str());
+      reserve_held_ = false;
+    }
+    if (!retry || !writeEvent(channel, timestamp, data, size)) {
+      ++failures_;
+      throw std::runtime_error(systemError("EventLogWriter: cannot write", path_));
+    }
+  }
+  bytes_ += event_bytes;
+  ++written_;
+  dirty_ = true;
+  if (options_.fsync_interval_ms == 0 ||
+      (options_.fsync_interval_ms > 0 &&
+       steadyMicros() - last_sync_us_ >= 1000LL * options_.fsync_interval_ms)) {
+    syncLocked();
+  }
+}
+
+bool EventLogWriter::writeEvent(const std::string& channel, std::int64_t timestamp,
+                                const void* data, int size) {
   lcm_eventlog_event_t e;
   std::memset(&e, 0, sizeof e);
   e.timestamp = timestamp;
@@ -128,15 +196,23 @@ void EventLogWriter::append(const std::string& channel, std::int64_t timestamp, 
   e.channel = const_cast<char*>(channel.c_str());
   e.data = const_cast<void*>(data);
   if (lcm_eventlog_write_event(log_, &e) != 0 || fflush(log_->f) != 0) {
-    throw std::runtime_error(systemError("EventLogWriter: cannot write", path_));
+    rollBack();  // keeps errno
+    return false;
   }
-  ++written_;
-  dirty_ = true;
-  if (options_.fsync_interval_ms == 0 ||
-      (options_.fsync_interval_ms > 0 &&
-       steadyMicros() - last_sync_us_ >= 1000LL * options_.fsync_interval_ms)) {
-    syncLocked();
+  return true;
+}
+
+void EventLogWriter::rollBack() {
+  // What stdio still holds of the failed event must never reach the file later.
+  __fpurge(log_->f);
+  std::clearerr(log_->f);
+  const int saved = errno;
+  if (::ftruncate(fileno(log_->f), bytes_) != 0) {
+    // The torn event stays; events after it are found again at their sync words (damage).
+    struct stat st;
+    if (::fstat(fileno(log_->f), &st) == 0) bytes_ = st.st_size;
   }
+  errno = saved;
 }
 
 void EventLogWriter::syncLocked() {
@@ -159,6 +235,16 @@ void EventLogWriter::syncIfDue() {
       steadyMicros() - last_sync_us_ >= 1000LL * options_.fsync_interval_ms) {
     syncLocked();
   }
+}
+
+std::int64_t EventLogWriter::bytes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return bytes_;
+}
+
+std::int64_t EventLogWriter::failures() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return failures_;
 }
 
 std::int64_t EventLogWriter::eventsWritten() const {

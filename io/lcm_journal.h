@@ -40,9 +40,29 @@ struct EventLogWriterOptions {
   /// the tail), or never (< 0: the OS decides). Every event is fflush'ed to the kernel at once,
   /// so a killed process loses nothing either way; fsync guards against power loss.
   int fsync_interval_ms = 0;
+  /// > 0: the log may not grow past this many bytes; an event that would end past it is
+  /// refused as on a full disk (errno ENOSPC), nothing of it written. 0: no limit.
+  std::int64_t max_bytes = 0;
+  /// Room kept for records (EventClass::kRecord, e.g. the update marks that make journaled
+  /// measurements appliable) that measurements may not use. With max_bytes, measurements stop
+  /// this far short of it. On the disk, a spare file `<path>.reserve` of this size holds the room:
+  /// when a record meets a full disk the spare file is deleted and the record written; from
+  /// then on measurements are refused until the spare file can be made again (tried on each
+  /// measurement). 0: no reserve.
+  std::int64_t reserve_bytes = 0;
+};
+
+/// Whether an event may use the reserve (EventLogWriterOptions::reserve_bytes).
+enum class EventClass {
+  kMeasurement,  ///< refused once only the reserve is left
+  kRecord,       ///< may use the reserve
 };
 
 /// Appends events to an LCM event log. Thread-safe (one mutex).
+/// A failed write leaves the log as it was: the file is cut back to the end of the last event
+/// that was written whole and stdio's buffer is dropped, so a full disk (ENOSPC) or the
+/// max_bytes limit never leaves a torn event or a later write of the refused one; the next
+/// append() tries again (space may have been freed).
 class EventLogWriter {
  public:
   /// Opens `path` for appending (creating it); when `valid_bytes` ≥ 0 the file is first cut to
@@ -54,22 +74,37 @@ class EventLogWriter {
   EventLogWriter& operator=(const EventLogWriter&) = delete;
 
   /// Writes one event and flushes it to the kernel; fsyncs per the policy. Throws
-  /// std::runtime_error on a write error.
-  void append(const std::string& channel, std::int64_t timestamp, const void* data, int size);
+  /// std::runtime_error on a write error (nothing of the event stays in the file).
+  void append(const std::string& channel, std::int64_t timestamp, const void* data, int size,
+              EventClass kind = EventClass::kMeasurement);
   /// fsync now if anything was written since the last fsync.
   void sync();
   /// sync() if the fsync interval has passed since the last one.
   void syncIfDue();
   std::int64_t eventsWritten() const;
+  /// The file's length: the end of the last event written whole.
+  std::int64_t bytes() const;
+  /// Appends refused (write errors and the max_bytes limit).
+  std::int64_t failures() const;
   const std::string& path() const { return path_; }
 
  private:
   void syncLocked();
+  /// Cuts the file back to bytes_ after a failed write and drops stdio's buffer.
+  void rollBack();
+  /// Writes the event; false (errno set, file rolled back) on failure.
+  bool writeEvent(const std::string& channel, std::int64_t timestamp, const void* data, int size);
+  /// Makes the spare file of reserve_bytes; false if the disk has no room for it.
+  bool makeReserve();
   std::string path_;
   EventLogWriterOptions options_;
   _lcm_eventlog_t* log_ = nullptr;
   mutable std::mutex mutex_;
   std::int64_t written_ = 0;
+  std::int64_t bytes_ = 0;  ///< file length after the last whole event
+  std::int64_t failures_ = 0;
+  std::string reserve_path_;
+  bool reserve_held_ = false;  ///< the spare file exists (or no reserve is kept on disk)
   bool dirty_ = false;
   std::int64_t last_sync_us_ = 0;
 };

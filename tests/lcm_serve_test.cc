@@ -241,6 +241,7 @@ TEST(LcmServe, BadMessagesAreCountedWhileGoodOnesAreApplied) {
   ServeOptions options;
   options.refine_on_exit = false;
   options.log = &log;
+  options.log_period = std::chrono::milliseconds(0);  // every line, for the assertions on them
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();
@@ -369,6 +370,9 @@ TEST(LcmServe, CommandsRefinePublishAndSnapshot) {
   lcm::LCM lcm("memq://");
   ServeOptions options;
   options.refine_on_exit = false;
+  const std::string dir = tempJournal("snapshots");
+  std::filesystem::create_directories(dir);
+  options.snapshot_dir = dir;
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();
@@ -376,18 +380,18 @@ TEST(LcmServe, CommandsRefinePublishAndSnapshot) {
     publishInOrder(lcm, service, graph, order, k);
   }
   ASSERT_TRUE(collector.waitCovered(static_cast<std::int64_t>(order.size())));
-  const std::string snapshot = tempJournal("snapshot.g2o");
+  const std::string snapshot = dir + "/snapshot.g2o";
   for (std::int8_t kind : {command_t::REFINE, command_t::PUBLISH_FULL, command_t::SNAPSHOT}) {
     command_t c;
     c.command = kind;
-    c.path = kind == command_t::SNAPSHOT ? snapshot : "";
+    c.path = kind == command_t::SNAPSHOT ? "snapshot.g2o" : "";
     const auto b = encodeMessage(c);
     lcm.publish(service.channels().command, b.data(), static_cast<unsigned>(b.size()));
   }
   EXPECT_TRUE(collector.waitStatus([](const status_t& s) { return s.refinements == 1; }));
   // After REFINE and PUBLISH_FULL; the snapshot follows in the same command batch.
   for (int tries = 0;
-       tries < 500 && (collector.fullEstimates().size() < 2 || !std::filesystem::exists(snapshot));
+       tries < 3000 && (collector.fullEstimates().size() < 2 || !std::filesystem::exists(snapshot));
        ++tries) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -399,7 +403,7 @@ TEST(LcmServe, CommandsRefinePublishAndSnapshot) {
   EXPECT_EQ(g.numEdges(), graph.numEdges());
   const status_t st = service.status();
   EXPECT_LE(st.refine_F_after, st.refine_F_before);
-  std::remove(snapshot.c_str());
+  std::filesystem::remove_all(dir);
 }
 
 TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
@@ -717,6 +721,7 @@ TEST(LcmServe, HostilePriorsAreRefusedWithTheirReasonAndNothingElseIsLost) {
   std::ostringstream log;
   ServeOptions options;  // refine on exit, as the reference finalizes
   options.log = &log;
+  options.log_period = std::chrono::milliseconds(0);  // every line, for the assertions on them
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();

@@ -17,7 +17,6 @@
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/smoother_flags.h"
-#include "arbor/tools/serve/lcm_tuning.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
@@ -25,14 +24,14 @@ namespace {
 
 namespace po = boost::program_options;
 
-// The journal's directory --journal DIR, created if missing.
-void makeJournalDirectory(const std::string& dir) {
+// A directory of --journal DIR or --snapshot-dir DIR, created if missing.
+void makeDirectory(const std::string& dir, const std::string& what) {
   if (::mkdir(dir.c_str(), 0755) != 0 && errno != EEXIST) {
-    throw std::runtime_error("cannot create journal directory " + dir);
+    throw std::runtime_error("cannot create " + what + " directory " + dir);
   }
   struct stat st;
   if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {
-    throw std::runtime_error("journal " + dir + " is not a directory");
+    throw std::runtime_error(what + " " + dir + " is not a directory");
   }
 }
 
@@ -76,6 +75,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   serve::ServeOptions& options = line.options;
   std::string fsync = "update", publish = "changed", batch;
   bool no_refine = false;
+  long long max_senders = static_cast<long long>(options.max_senders);
   po::options_description desc("arbor serve [options]");
   desc.add_options()("help,h", "show this help")(
       "lcm-url", po::value(&line.url),
@@ -90,13 +90,22 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "estimates: changed (poses that changed), full, or N (full every N updates)")(
       "dim", po::value(&options.dim)->default_value(0), "2 or 3 (0: the first edge's)")(
       "intake-window", po::value(&options.intake_window)->default_value(options.intake_window),
-      "seqs remembered per sender for duplicate detection (older ones are refused as stale)");
+      "seqs remembered per sender for duplicate detection (older ones are refused as stale)")(
+      "max-senders", po::value(&max_senders)->default_value(max_senders),
+      "sender tables per stream (edges, priors, edge commands); messages of more senders are "
+      "refused as 'sender limit'")(
+      "snapshot-dir", po::value(&options.snapshot_dir),
+      "directory command SNAPSHOT writes into (a plain file name from the message; never over a "
+      "file this service did not create); unset: SNAPSHOT refused")(
+      "journal-max-bytes", po::value(&options.journal_max_bytes)->default_value(0),
+      "the journal is full at this size: further edges are refused, as on a full disk (0: no "
+      "limit)");
   addSmootherFlags(desc);
   desc.add_options()("status-period", po::value(&options.status_period_s)->default_value(1.0),
                      "seconds between status messages")(
       "no-refine", po::bool_switch(&no_refine),
       "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
-      "output,o", po::value(&line.output), "on exit (and for SNAPSHOT), write the estimate as g2o")(
+      "output,o", po::value(&line.output), "on exit, write the estimate as g2o")(
       "json", po::bool_switch(&line.json), "on exit, print one JSON object")(
       "batch", po::value(&batch),
       (refine::batchSolverNames(true) +
@@ -121,6 +130,18 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
     throw UsageError("--intake-window must be >= 1, not '" + std::to_string(options.intake_window) +
                      "'");
   }
+  if (max_senders < 1) {
+    throw UsageError("--max-senders must be >= 1, not '" + std::to_string(max_senders) + "'");
+  }
+  options.max_senders = static_cast<std::size_t>(max_senders);
+  if (options.journal_max_bytes < 0 ||
+      (options.journal_max_bytes > 0 &&
+       options.journal_max_bytes <= 2 * options.journal_reserve_bytes)) {
+    throw UsageError("--journal-max-bytes must be 0 or more than " +
+                     std::to_string(2 * options.journal_reserve_bytes) +
+                     " (twice the room kept for update marks), not '" +
+                     std::to_string(options.journal_max_bytes) + "'");
+  }
   if (!batch.empty()) {
     try {
       options.batch.solver = refine::parseBatchSolver(batch, "--batch", /*refinement_only=*/true);
@@ -137,7 +158,6 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
-  options.snapshot_path = line.output;
   if (!line.journal_dir.empty()) options.journal_path = line.journal_dir + "/journal.lcmlog";
   return line;
 }
@@ -149,7 +169,8 @@ int serveCommand(const std::vector<std::string>& args) {
   const std::string& url = line->url;
   const std::string& output = line->output;
   options.log = &std::cerr;
-  if (!line->journal_dir.empty()) makeJournalDirectory(line->journal_dir);
+  if (!line->journal_dir.empty()) makeDirectory(line->journal_dir, "journal");
+  if (!options.snapshot_dir.empty()) makeDirectory(options.snapshot_dir, "snapshot");
 
   // Every thread (LCM's and ours) inherits this mask; only sigwait below sees the signals.
   sigset_t signals;
@@ -158,17 +179,32 @@ int serveCommand(const std::vector<std::string>& args) {
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
-  // Two instances, one to receive and one to publish (see serve::Service); memq:// is private to
-  // an instance, so there one serves both.
-  lcm::LCM lcm(url);
-  std::unique_ptr<lcm::LCM> publisher;
-  if (url.rfind("memq://", 0) != 0) publisher = std::make_unique<lcm::LCM>(url);
-  if (!lcm.good() || (publisher && !publisher->good())) {
-    throw std::runtime_error("cannot open LCM at '" + (url.empty() ? "default" : url) + "'");
+  // Two links, one to receive and one to publish (see serve::Service), each re-created after a
+  // transport fault (serve::LinkWatch); memq:// is private to an instance, so there one serves
+  // both and is never re-created.
+  const auto log = [](const std::string& text) {
+    std::cerr << "arbor serve: " << text << std::endl;
+  };
+  serve::LinkWatchOptions receive_options;
+  receive_options.url = url;
+  receive_options.name = "receive link";
+  receive_options.probe_channel = serve::Channels::withPrefix(options.channel_prefix).link_probe;
+  receive_options.log = log;
+  serve::LinkWatchOptions publish_options = receive_options;
+  publish_options.name = "publish link";
+  publish_options.probe_channel.clear();
+  std::unique_ptr<lcm::LCM> memq;
+  std::unique_ptr<serve::LinkWatch> receive, publisher;
+  if (url.rfind("memq://", 0) == 0) {
+    memq = std::make_unique<lcm::LCM>(url);
+    if (!memq->good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
+    receive = std::make_unique<serve::LinkWatch>(*memq, receive_options);
+    publisher = std::make_unique<serve::LinkWatch>(*memq, publish_options);
+  } else {
+    receive = std::make_unique<serve::LinkWatch>(receive_options);
+    publisher = std::make_unique<serve::LinkWatch>(publish_options);
   }
-  serve::tuneLcmTransport(lcm, url);
-  if (publisher) serve::tuneLcmTransport(*publisher, url);
-  serve::Service service(lcm, publisher ? *publisher : lcm, options);
+  serve::Service service(*receive, *publisher, options);
   service.start();
   std::cerr << "arbor serve: listening on " << service.channels().edges << std::endl;
   int signal = 0;
@@ -231,6 +267,14 @@ int serveCommand(const std::vector<std::string>& args) {
         {"rejected_by_reason", command_reasons},  {"refused", s.commands_refused},
         {"refused_by_reason", refused},           {"duplicates", s.command_intake.duplicates},
         {"journal_commands", s.journal_commands},
+    };
+    nlohmann::json control = nlohmann::json::object();
+    for (const auto& [reason, count] : s.control_refused) control[reason] = count;
+    j["faults"] = {
+        {"journal_refused", s.journal_refused},
+        {"held_at_stop", s.held_at_stop},
+        {"link_outages", s.link_outages},
+        {"control_refused", control},
     };
     j["edges_disabled"] = s.edges_disabled;
     j["pairs_disabled"] = s.pairs_disabled;

@@ -16,10 +16,28 @@ std::uint64_t fingerprint(const void* data, int size) {
 
 }  // namespace
 
-EdgeIntake::EdgeIntake(int dim, std::int64_t window) : dim_(dim), window_(window) {
+EdgeIntake::EdgeIntake(int dim, std::int64_t window, std::size_t max_senders)
+    : dim_(dim), window_(window), max_senders_(max_senders) {
   if (window < 1) {
     throw std::invalid_argument("EdgeIntake: window " + std::to_string(window) + " is not >= 1");
   }
+  if (max_senders < 1) throw std::invalid_argument("EdgeIntake: max senders 0 is not >= 1");
+}
+
+EdgeIntake::Stream& EdgeIntake::stream(Kind kind) {
+  return kind == Kind::kCommand ? commands_ : kind == Kind::kPrior ? priors_ : edges_;
+}
+
+std::size_t EdgeIntake::senders(Kind kind) const {
+  const Stream& s = kind == Kind::kCommand ? commands_ : kind == Kind::kPrior ? priors_ : edges_;
+  return s.senders.size();
+}
+
+void EdgeIntake::refuse(Kind kind, const std::string& reason) {
+  IntakeCounts& c = stream(kind).counts;
+  ++c.received;
+  ++c.rejected;
+  ++c.rejected_by_reason[reason];
 }
 
 std::size_t EdgeIntake::trackedSeqs(std::int64_t sender) const {
@@ -131,7 +149,17 @@ IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, const
         stream, std::move(r), "dim",
         "a " + std::to_string(dim) + "D " + what + " on a " + std::to_string(dim_) + "D stream");
   }
-  Sender& s = stream.senders[r.sender];
+  auto known = stream.senders.find(r.sender);
+  if (known == stream.senders.end()) {
+    if (stream.senders.size() >= max_senders_) {
+      return reject(stream, std::move(r), "sender limit",
+                    "sender " + std::to_string(r.sender) + " would be sender " +
+                        std::to_string(max_senders_ + 1) + " of this stream; at most " +
+                        std::to_string(max_senders_) + " are tracked (--max-senders)");
+    }
+    known = stream.senders.emplace(r.sender, Sender()).first;
+  }
+  Sender& s = known->second;
   const std::uint64_t fp = std::max<std::uint64_t>(fingerprint(data, size), 1);  // 0: empty slot
   if (r.seq <= s.highest - window_) {
     return reject(stream, std::move(r), "stale",

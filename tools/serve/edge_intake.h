@@ -9,6 +9,9 @@
 // edge or a repeat of one applied long ago, and we cannot tell, so we never apply it (a repeat
 // applied twice would silently count one measurement twice; a refused edge is counted and logged
 // and can be sent again under a new seq).
+// Sender tables are bounded too: at most `max_senders` per stream; a message from a sender beyond
+// them is refused as "sender limit" (its table is never made), so a flood of made-up sender ids
+// costs counts, not memory. Worst case: 3 streams x max_senders x window x 8 bytes.
 // Not thread-safe: one thread (the receive thread, or the journal replay before it starts).
 #pragma once
 
@@ -54,11 +57,13 @@ struct IntakeCounts {
 class EdgeIntake {
  public:
   static constexpr std::int64_t kDefaultWindow = 65536;
+  static constexpr std::size_t kDefaultMaxSenders = 64;
 
   /// `dim` 2 or 3 fixes the stream's dimension; 0 takes it from the first accepted edge or
   /// prior. `window` (>= 1): how many of each sender's latest seq numbers are remembered
-  /// exactly (per stream).
-  explicit EdgeIntake(int dim = 0, std::int64_t window = kDefaultWindow);
+  /// exactly (per stream). `max_senders` (>= 1): sender tables per stream.
+  explicit EdgeIntake(int dim = 0, std::int64_t window = kDefaultWindow,
+                      std::size_t max_senders = kDefaultMaxSenders);
 
   /// An edge_t's bytes.
   IntakeResult admit(const void* data, int size);
@@ -69,6 +74,10 @@ class EdgeIntake {
   /// Takes back an accepted edge, prior or command that could not be kept (the journal write
   /// failed): counted as rejected under `reason`, and its (sender, seq) may be sent again.
   void revoke(const IntakeResult& accepted, const std::string& reason);
+  enum class Kind { kEdge, kPrior, kCommand };
+  /// A message of `kind` refused before it was decoded (e.g. "oversize"): received and
+  /// rejected under `reason`.
+  void refuse(Kind kind, const std::string& reason);
   const IntakeCounts& counts() const { return edges_.counts; }            ///< edges
   const IntakeCounts& priorCounts() const { return priors_.counts; }      ///< priors
   const IntakeCounts& commandCounts() const { return commands_.counts; }  ///< edge commands
@@ -76,6 +85,9 @@ class EdgeIntake {
   std::int64_t window() const { return window_; }
   /// Edge seq slots held for `sender` (0 if unknown): never more than window().
   std::size_t trackedSeqs(std::int64_t sender) const;
+  /// Sender tables held per stream (each <= max_senders()).
+  std::size_t senders(Kind kind) const;
+  std::size_t maxSenders() const { return max_senders_; }
 
  private:
   struct Sender {
@@ -97,8 +109,10 @@ class EdgeIntake {
   std::uint64_t* slot(Sender& s, std::int64_t seq, bool grow) const;
   void advance(Sender& s, std::int64_t seq) const;
 
+  Stream& stream(Kind kind);
   int dim_;
   std::int64_t window_;
+  std::size_t max_senders_;
   Stream edges_, priors_, commands_;
 };
 

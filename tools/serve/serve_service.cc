@@ -34,18 +34,39 @@ std::int64_t nowMicros() {
 }
 
 Channels Channels::withPrefix(const std::string& prefix) {
-  return {prefix + "ARBOR_EDGES",   prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
-          prefix + "ARBOR_COMMAND", prefix + "ARBOR_PRIORS",   prefix + "ARBOR_EDGE_COMMANDS"};
+  return {prefix + "ARBOR_EDGES",     prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
+          prefix + "ARBOR_COMMAND",   prefix + "ARBOR_PRIORS",   prefix + "ARBOR_EDGE_COMMANDS",
+          prefix + "ARBOR_LINK_PROBE"};
 }
 
 Service::Service(lcm::LCM& lcm, ServeOptions options) : Service(lcm, lcm, std::move(options)) {}
 
 Service::Service(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options)
-    : lcm_(receive),
-      publish_lcm_(publish),
+    : Service(nullptr, nullptr, std::move(options)) {
+  LinkWatchOptions r;
+  r.name = "receive link";
+  r.probe_channel = channels_.link_probe;
+  r.log = [this](const std::string& line) { logLine(line); };
+  LinkWatchOptions p = r;
+  p.name = "publish link";
+  p.probe_channel.clear();
+  owned_receive_ = std::make_unique<LinkWatch>(receive, r);
+  owned_publish_ = std::make_unique<LinkWatch>(publish, p);
+  receive_ = owned_receive_.get();
+  publish_ = owned_publish_.get();
+}
+
+Service::Service(LinkWatch& receive, LinkWatch& publish, ServeOptions options)
+    : Service(&receive, &publish, std::move(options)) {}
+
+Service::Service(LinkWatch* receive, LinkWatch* publish, ServeOptions options)
+    : receive_(receive),
+      publish_(publish),
       options_(std::move(options)),
       channels_(Channels::withPrefix(options_.channel_prefix)),
-      intake_(options_.dim, options_.intake_window) {
+      snapshots_(options_.snapshot_dir),
+      limiter_(options_.log_period),
+      intake_(options_.dim, options_.intake_window, options_.max_senders) {
   if (options_.dim != 0 && options_.dim != 2 && options_.dim != 3) {
     throw std::invalid_argument("serve: dim " + std::to_string(options_.dim) + " is not 2 or 3");
   }
@@ -70,16 +91,26 @@ void Service::logLine(const std::string& line) {
   *options_.log << "arbor serve: " << line << std::endl;
 }
 
+void Service::logLimited(const std::string& key, const std::string& line) {
+  std::int64_t suppressed = 0;
+  if (limiter_.allow(key, &suppressed)) logLine(LogLimiter::withSuppressed(line, suppressed));
+}
+
 void Service::start() {
   if (running_) throw std::logic_error("serve: start() twice");
   if (!options_.journal_path.empty()) replayJournal();
   if (engine_) publishEstimate(true);
   last_status_ = std::chrono::steady_clock::now();
-  subscriptions_.push_back(lcm_.subscribe(channels_.edges, &Service::onEdge, this));
-  subscriptions_.push_back(lcm_.subscribe(channels_.priors, &Service::onPrior, this));
-  subscriptions_.push_back(lcm_.subscribe(channels_.command, &Service::onCommand, this));
-  subscriptions_.push_back(lcm_.subscribe(channels_.edge_commands, &Service::onEdgeCommand, this));
-  for (auto* s : subscriptions_) s->setQueueCapacity(0);  // never drop: the queue is ours
+  // Queue capacity 0 at liblcm (LinkWatch): never dropped there, the queue is ours.
+  const auto on = [this](void (Service::*handler)(const lcm::ReceiveBuffer*, const std::string&)) {
+    return [this, handler](const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+      (this->*handler)(rbuf, channel);
+    };
+  };
+  receive_->subscribe(channels_.edges, on(&Service::onEdge));
+  receive_->subscribe(channels_.priors, on(&Service::onPrior));
+  receive_->subscribe(channels_.command, on(&Service::onCommand));
+  receive_->subscribe(channels_.edge_commands, on(&Service::onEdgeCommand));
   receive_stop_ = false;
   smoother_stop_ = false;
   smoother_thread_ = std::thread(&Service::smootherLoop, this);
@@ -92,8 +123,7 @@ void Service::stop() {
   running_ = false;
   receive_stop_ = true;
   receive_thread_.join();
-  for (auto* s : subscriptions_) lcm_.unsubscribe(s);
-  subscriptions_.clear();
+  receive_->unsubscribeAll();
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     smoother_stop_ = true;
@@ -103,7 +133,13 @@ void Service::stop() {
 
   pollBatch(true, false);  // a batch still running is waited for and applied (reseed) as usual
   if (engine_ && options_.refine_on_exit) refine(false);
-  if (journal_) journal_->sync();
+  if (journal_) {
+    try {
+      journal_->sync();
+    } catch (const std::exception& e) {
+      logLine(std::string("journal: ") + e.what());
+    }
+  }
   summary_ = ServeSummary();
   if (engine_) {
     publishEstimate(true);
@@ -116,6 +152,13 @@ void Service::stop() {
     summary_.intake = intake_.counts();
     summary_.prior_intake = intake_.priorCounts();
     summary_.command_intake = intake_.commandCounts();
+    summary_.journal_refused = journal_refused_;
+    summary_.control_refused = control_refused_;
+  }
+  summary_.link_outages = receive_->counts().outages + publish_->counts().outages;
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    summary_.held_at_stop = static_cast<std::int64_t>(queue_.size());
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
   summary_.applied = applied_;
@@ -153,23 +196,37 @@ bool Service::writeG2o(const std::string& path) const {
 }
 
 void Service::receiveLoop() {
-  bool failing = false;
-  while (!receive_stop_) {
-    armQuickAck(lcm_);
-    if (lcm_.handleTimeout(50) < 0) {
-      if (!failing) logLine("LCM receive failed (hub gone?); retrying");
-      failing = true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    } else if (failing) {
-      logLine("LCM receive works again");
-      failing = false;
-    }
+  // A dead link is noticed, logged and re-created inside handle(); state here is untouched.
+  while (!receive_stop_) receive_->handle(50);
+}
+
+bool Service::fitsLimit(int size, int limit, const std::string& channel, EdgeIntake::Kind kind) {
+  if (size <= limit) return true;
+  {
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    intake_.refuse(kind, "oversize");
   }
+  logLimited("oversize " + channel, "refused a message of " + std::to_string(size) + " bytes on " +
+                                        channel + ": over its limit of " + std::to_string(limit) +
+                                        " bytes (not decoded)");
+  return false;
+}
+
+void Service::refuseControl(const std::string& reason, const std::string& detail) {
+  {
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    ++control_refused_[reason];
+  }
+  logLimited("control " + reason, "command refused: " + detail);
 }
 
 void Service::onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   // Nothing may unwind through liblcm's C frames.
   try {
+    if (!fitsLimit(static_cast<int>(rbuf->data_size), options_.message_limits.edge, channel,
+                   EdgeIntake::Kind::kEdge)) {
+      return;
+    }
     receiveMeasurement(rbuf, channel, Incoming::kEdge);
   } catch (const std::exception& e) {
     logLine(std::string("error while receiving an edge: ") + e.what());
@@ -178,6 +235,10 @@ void Service::onEdge(const lcm::ReceiveBuffer* rbuf, const std::string& channel)
 
 void Service::onPrior(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   try {
+    if (!fitsLimit(static_cast<int>(rbuf->data_size), options_.message_limits.prior, channel,
+                   EdgeIntake::Kind::kPrior)) {
+      return;
+    }
     receiveMeasurement(rbuf, channel, Incoming::kPrior);
   } catch (const std::exception& e) {
     logLine(std::string("error while receiving a prior: ") + e.what());
@@ -186,6 +247,10 @@ void Service::onPrior(const lcm::ReceiveBuffer* rbuf, const std::string& channel
 
 void Service::onEdgeCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   try {
+    if (!fitsLimit(static_cast<int>(rbuf->data_size), options_.message_limits.edge_command, channel,
+                   EdgeIntake::Kind::kCommand)) {
+      return;
+    }
     receiveMeasurement(rbuf, channel, Incoming::kCommand);
   } catch (const std::exception& e) {
     logLine(std::string("error while receiving an edge command: ") + e.what());
@@ -235,22 +300,19 @@ void Service::receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::stri
       const std::string key = command ? "command " + r.reason
                               : prior ? "prior " + r.reason
                                       : r.reason;
-      const int n = ++logged_by_reason_[key];
-      if (n <= options_.log_limit_per_reason) {
-        std::ostringstream os;
-        os << "rejected " << what;
-        if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
-        os << ": " << r.reason << ": " << r.detail;
-        if (n == options_.log_limit_per_reason) os << " (further '" << key << "' not logged)";
-        logLine(os.str());
-      }
+      std::ostringstream os;
+      os << "rejected " << what;
+      if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
+      os << ": " << r.reason << ": " << r.detail;
+      logLimited(key, os.str());
       return;
     }
     if (r.verdict == Intake::kDuplicate) return;
     if (r.skipped > 0) {
-      logLine(std::string("gap: sender ") + std::to_string(r.sender) + " skipped " +
-              std::to_string(r.skipped) + " " + what + " seq numbers before " +
-              std::to_string(r.seq));
+      logLimited(std::string("gap ") + what, std::string("gap: sender ") +
+                                                 std::to_string(r.sender) + " skipped " +
+                                                 std::to_string(r.skipped) + " " + what +
+                                                 " seq numbers before " + std::to_string(r.seq));
     }
     // Journal before it can be applied: an accepted edge, prior or edge command is never lost.
     // All go into the one log in the order received, which is the order they are queued in.
@@ -258,8 +320,14 @@ void Service::receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::stri
       try {
         journal_->append(channel, nowMicros(), rbuf->data, size);
       } catch (const std::exception& e) {
+        // Write-ahead: what the journal does not hold is never applied. The sender may send it
+        // again under the same seq once there is room.
         intake_.revoke(r, "journal");
-        logLine(std::string(what) + " refused, the journal cannot take it: " + e.what());
+        ++journal_refused_;
+        logLimited(std::string("journal ") + what,
+                   std::string(what) + " (sender " + std::to_string(r.sender) + " seq " +
+                       std::to_string(r.seq) +
+                       ") refused, the journal cannot take it: " + e.what());
         return;
       }
     }
@@ -271,18 +339,32 @@ void Service::receiveMeasurement(const lcm::ReceiveBuffer* rbuf, const std::stri
   queue_cv_.notify_one();
 }
 
-void Service::receiveCommand(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-  command_t c;
-  std::string detail;
-  const MessageProblem p =
-      decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &c, &detail);
-  if (p != MessageProblem::kNone) {
-    logLine(std::string("rejected command: ") + toString(p) + ": " + detail);
+void Service::receiveCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  const int size = static_cast<int>(rbuf->data_size);
+  if (size > options_.message_limits.command) {
+    refuseControl("oversize", "a message of " + std::to_string(size) + " bytes on " + channel +
+                                  ": over its limit of " +
+                                  std::to_string(options_.message_limits.command) +
+                                  " bytes (not decoded)");
     return;
   }
+  command_t c;
+  std::string detail;
+  const MessageProblem p = decodeMessage(rbuf->data, size, &c, &detail);
+  if (p != MessageProblem::kNone) {
+    refuseControl(toString(p), std::string(toString(p)) + ": " + detail);
+    return;
+  }
+  bool full = false;
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
-    commands_.push_back(c);
+    full = commands_.size() >= options_.max_queued_commands;
+    if (!full) commands_.push_back(c);
+  }
+  if (full) {
+    refuseControl("queue full", std::to_string(options_.max_queued_commands) +
+                                    " commands are already waiting for the smoother");
+    return;
   }
   queue_cv_.notify_one();
 }
@@ -294,14 +376,33 @@ void Service::smootherLoop() {
     bool stopping = false;
     {
       std::unique_lock<std::mutex> lock(queue_mutex_);
-      queue_cv_.wait_for(lock, std::chrono::milliseconds(100),
-                         [&] { return !queue_.empty() || !commands_.empty() || smoother_stop_; });
-      batch.swap(queue_);
+      // A held update (its mark did not fit the journal) is tried again at hold_until_.
+      const auto ready = [&] {
+        return (!queue_.empty() && std::chrono::steady_clock::now() >= hold_until_) ||
+               !commands_.empty() || smoother_stop_;
+      };
+      queue_cv_.wait_for(lock, std::chrono::milliseconds(100), ready);
+      if (std::chrono::steady_clock::now() >= hold_until_ || smoother_stop_) batch.swap(queue_);
       commands.swap(commands_);
       stopping = smoother_stop_;
     }
     try {
-      if (!batch.empty()) applyBatch(batch, false);
+      if (!batch.empty() && !applyBatch(batch, false)) {
+        std::lock_guard<std::mutex> lock(queue_mutex_);
+        queue_.insert(queue_.begin(), std::make_move_iterator(batch.begin()),
+                      std::make_move_iterator(batch.end()));
+        hold_until_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(200);
+        held_ = static_cast<std::int64_t>(queue_.size());
+        if (stopping) {
+          logLine(std::to_string(queue_.size()) +
+                  " measurements are in the journal but not applied: the journal could not take "
+                  "their update mark; a restart from the journal applies them");
+          return;
+        }
+      } else if (!batch.empty()) {
+        std::lock_guard<std::mutex> lock(queue_mutex_);
+        held_ = 0;
+      }
       for (const auto& c : commands) handleCommand(c);
       pollBatch(false, true);  // a background batch that finished while idle
       if (std::chrono::duration<double>(std::chrono::steady_clock::now() - last_status_).count() >=
@@ -332,21 +433,41 @@ void Service::writeMark(std::int8_t kind, int edges) {
   m.edges = edges;
   m.update = updates_;
   const auto bytes = encodeMessage(m);
-  journal_->append(kMarkChannel, m.utime, bytes.data(), static_cast<int>(bytes.size()));
+  journal_->append(kMarkChannel, m.utime, bytes.data(), static_cast<int>(bytes.size()),
+                   EventClass::kRecord);
 }
 
-void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
+bool Service::journalUpdate(int n) {
+  if (!journal_) return true;
+  try {
+    writeMark(journal_mark_t::UPDATE, n);
+  } catch (const std::exception& e) {
+    logLimited("journal mark", "update of " + std::to_string(n) +
+                                   " held: the journal cannot take its mark (" + e.what() +
+                                   "); retried until it can");
+    return false;
+  }
+  // Group commit: every edge and prior of the batch is on disk before any of it is applied. The
+  // mark is in the file either way, so a failed fsync does not hold the update (that would
+  // write a second mark); it is logged.
+  if (options_.fsync_before_update) {
+    try {
+      journal_->sync();
+    } catch (const std::exception& e) {
+      logLimited("journal fsync", std::string("journal: ") + e.what());
+    }
+  }
+  return true;
+}
+
+bool Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
   // The stream's dimension comes with its first edge or prior (a command has none).
   for (const Queued& q : batch) {
     if (q.is_command) continue;
     ensureEngine(q.is_prior ? dimOf(q.prior) : (q.edge.index() == 0 ? 2 : 3));
     break;
   }
-  if (!from_journal) {
-    writeMark(journal_mark_t::UPDATE, static_cast<int>(batch.size()));
-    // Group commit: every edge and prior of the batch is on disk before any of it is applied.
-    if (journal_ && options_.fsync_before_update) journal_->sync();
-  }
+  if (!from_journal && !journalUpdate(static_cast<int>(batch.size()))) return false;
   // In the order received (and journaled): edges and priors interleaved as they came.
   std::int64_t edges = 0, rejected = 0, duplicates = 0, priors_rejected = 0, commands = 0;
   const Queued* last_edge = nullptr;
@@ -379,7 +500,7 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
     } else {
       publishStatus();
     }
-    return;
+    return true;
   }
   try {
     engine_->update();
@@ -411,7 +532,7 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
       ++journal_updates_;
     }
   }
-  if (from_journal) return;  // reseeds come from the journal's own records
+  if (from_journal) return true;  // reseeds come from the journal's own records
   engine_->noteUpdate();
   pollBatch(false, false);  // a finished batch's reseed goes into this update's estimate
   const bool full =
@@ -427,6 +548,7 @@ void Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
   }
   const int every = options_.batch.every;
   if (every > 0 && updates_ % every == 0) startBatch(false);
+  return true;
 }
 
 void Service::applyEdgeCommand(const Queued& q, bool from_journal) {
@@ -546,7 +668,16 @@ void Service::applyReseed(const estimate_t& seed, bool from_journal, refine::Bat
 
 void Service::refine(bool from_journal) {
   if (!engine_) return;
-  if (!from_journal) writeMark(journal_mark_t::REFINE, 0);
+  if (!from_journal) {
+    try {
+      writeMark(journal_mark_t::REFINE, 0);
+    } catch (const std::exception& e) {
+      // Unjournaled, a refinement would make the journal's estimate differ from ours.
+      logLine(std::string("refinement skipped: the journal cannot take its mark (") + e.what() +
+              ")");
+      return;
+    }
+  }
   const auto t0 = std::chrono::steady_clock::now();
   const double before = engine_->objective();
   try {
@@ -573,22 +704,9 @@ void Service::handleCommand(const command_t& c) {
     case command_t::PUBLISH_FULL:
       publishEstimate(true);
       break;
-    case command_t::SNAPSHOT: {
-      const std::string path = c.path.empty() ? options_.snapshot_path : c.path;
-      if (path.empty()) {
-        logLine("snapshot: no path in the command and no --output");
-      } else if (!engine_) {
-        logLine("snapshot: no estimate yet");
-      } else {
-        try {
-          engine_->writeG2o(path);
-          logLine("snapshot written to " + path);
-        } catch (const std::exception& e) {
-          logLine(std::string("snapshot failed: ") + e.what());
-        }
-      }
+    case command_t::SNAPSHOT:
+      writeSnapshot(c);
       break;
-    }
     case command_t::STATUS:
       publishStatus();
       break;
@@ -600,8 +718,35 @@ void Service::handleCommand(const command_t& c) {
   }
 }
 
+void Service::writeSnapshot(const command_t& c) {
+  if (!snapshots_.enabled()) {
+    refuseControl("snapshot no dir",
+                  "SNAPSHOT " + SnapshotDir::printable(c.path) +
+                      ": no --snapshot-dir, so nothing on the bus may write a file");
+    return;
+  }
+  if (std::string problem = SnapshotDir::checkName(c.path); !problem.empty()) {
+    refuseControl("snapshot name", "SNAPSHOT: " + problem);
+    return;
+  }
+  if (!engine_) {
+    logLine("snapshot: no estimate yet");
+    return;
+  }
+  const std::string problem =
+      snapshots_.write(c.path, [this](const std::string& path) { engine_->writeG2o(path); });
+  if (!problem.empty()) {
+    refuseControl("snapshot refused",
+                  "SNAPSHOT " + SnapshotDir::printable(c.path) + ": " + problem);
+    return;
+  }
+  logLine("snapshot written to " + snapshots_.dir() + "/" + c.path);
+}
+
 void Service::publishEstimate(bool full) {
   if (!engine_) return;
+  // What was published while the link was down is lost: the first estimate after it is full.
+  if (publish_->takeRecovered()) full = true;
   estimate_t m = engine_->estimate(full);
   m.utime = nowMicros();
   {
@@ -613,7 +758,7 @@ void Service::publishEstimate(bool full) {
   }
   const auto bytes = encodeMessage(m);
   std::lock_guard<std::mutex> lock(publish_mutex_);
-  publish_lcm_.publish(channels_.estimate, bytes.data(), static_cast<unsigned>(bytes.size()));
+  publish_->publish(channels_.estimate, bytes.data(), static_cast<unsigned>(bytes.size()));
 }
 
 status_t Service::status() const {
@@ -650,7 +795,32 @@ status_t Service::status() const {
       s.reason.push_back("command " + reason);
       s.reason_count.push_back(count);
     }
+    s.control_refused = 0;
+    for (const auto& [reason, count] : control_refused_) {
+      s.reason.push_back("control " + reason);
+      s.reason_count.push_back(count);
+      s.control_refused += count;
+    }
+    s.journal_refused = journal_refused_;
+    const auto by = [](const IntakeCounts& k, const char* reason) {
+      const auto it = k.rejected_by_reason.find(reason);
+      return it == k.rejected_by_reason.end() ? std::int64_t{0} : it->second;
+    };
+    s.refused_senders = by(c, "sender limit") + by(p, "sender limit") + by(c2, "sender limit");
+    s.refused_oversize = by(c, "oversize") + by(p, "oversize") + by(c2, "oversize");
+    if (const auto it = control_refused_.find("oversize"); it != control_refused_.end()) {
+      s.refused_oversize += it->second;
+    }
+    s.senders = static_cast<int32_t>(intake_.senders(EdgeIntake::Kind::kEdge));
   }
+  {
+    const LinkCounts r = receive_->counts(), p = publish_->counts();
+    s.receive_link_up = receive_->up();
+    s.publish_link_up = publish_->up();
+    s.link_outages = static_cast<int32_t>(r.outages + p.outages);
+    s.publish_failures = p.failed_publishes;
+  }
+  if (journal_) s.journal_bytes = journal_->bytes();
   std::lock_guard<std::mutex> lock(state_mutex_);
   s.applied = applied_;
   s.rejected += smoother_rejected_;
@@ -681,6 +851,7 @@ status_t Service::status() const {
   s.updates = updates_;
   s.queue_depth = static_cast<int32_t>(s.accepted + s.priors_accepted + s.commands_accepted -
                                        applied_ - priors_applied_ - commands_applied_);
+  s.held = held_;
   s.poses = static_cast<int32_t>(poses_);
   s.F = F_;
   s.num_reasons = static_cast<int32_t>(s.reason.size());
@@ -727,7 +898,7 @@ void Service::publishStatus() {
   const auto bytes = encodeMessage(status());
   last_status_ = std::chrono::steady_clock::now();
   std::lock_guard<std::mutex> lock(publish_mutex_);
-  publish_lcm_.publish(channels_.status, bytes.data(), static_cast<unsigned>(bytes.size()));
+  publish_->publish(channels_.status, bytes.data(), static_cast<unsigned>(bytes.size()));
 }
 
 void Service::replayJournal() {
@@ -792,8 +963,10 @@ void Service::replayJournal() {
       applyReseed(seed, true, nullptr);
     }
   }
-  journal_ = std::make_unique<EventLogWriter>(options_.journal_path, log.valid_bytes,
-                                              EventLogWriterOptions{options_.fsync_interval_ms});
+  journal_ = std::make_unique<EventLogWriter>(
+      options_.journal_path, log.valid_bytes,
+      EventLogWriterOptions{options_.fsync_interval_ms, options_.journal_max_bytes,
+                            options_.journal_reserve_bytes});
   // Accepted but not yet applied when the journal ended: the first update takes them.
   queue_.assign(std::make_move_iterator(unmarked.begin()), std::make_move_iterator(unmarked.end()));
   if (!log.events.empty()) {

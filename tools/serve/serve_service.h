@@ -7,6 +7,15 @@
 // update grouping; start() replays an existing journal in file order with the same grouping, so
 // a restart after kill -9 reproduces the estimate exactly.
 //
+// Faults (docs/lcm.md, "Faults"): the transport is two LinkWatch links (tools/serve/link_watch.h)
+// that notice a dead hub, keep every bit of the service's state and re-create themselves with
+// backoff. The journal is written ahead: a measurement the journal cannot take (full disk) is
+// refused and counted, and an update whose mark the journal cannot take is held (its
+// measurements stay queued, in the journal) until the mark fits. Nothing from the bus writes a
+// file outside --snapshot-dir or overwrites a file the service did not create; sender tables,
+// message sizes and queued commands are bounded, and every refusal is counted in status_t and
+// logged at most once a second per reason (LogLimiter).
+//
 // Batch refinement (tools/refine/batch_refiner.h): every `batch.every` updates, or on command
 // BATCH, a snapshot is solved in the background while edges keep flowing; the smoother thread
 // polls for the result between updates. With `batch.reseed` a winning batch estimate becomes the
@@ -32,15 +41,29 @@
 #include "arbor/io/lcm_messages.h"
 #include "arbor/tools/cli/latency.h"
 #include "arbor/tools/serve/edge_intake.h"
+#include "arbor/tools/serve/link_watch.h"
+#include "arbor/tools/serve/log_limiter.h"
 #include "arbor/tools/serve/serve_engine.h"
+#include "arbor/tools/serve/snapshot_dir.h"
 
 namespace arbor::serve {
 
 struct Channels {
   std::string edges, estimate, status, command, priors, edge_commands;
+  std::string link_probe;  ///< the receive link's own probe (LinkWatch)
   /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS,
-  /// ARBOR_EDGE_COMMANDS, each after `prefix`.
+  /// ARBOR_EDGE_COMMANDS, ARBOR_LINK_PROBE, each after `prefix`.
   static Channels withPrefix(const std::string& prefix);
+};
+
+/// Largest message accepted per channel, in bytes; a larger one is refused before it is decoded
+/// ("oversize"). The defaults are far above what a valid message needs (a 3D edge_t is 300
+/// bytes, a prior_t under 400, an edge_command_t under 100).
+struct MessageLimits {
+  int edge = 4096;
+  int prior = 4096;
+  int edge_command = 1024;
+  int command = 4096;  ///< command_t (its path is a file name)
 };
 
 struct ServeOptions {
@@ -55,11 +78,21 @@ struct ServeOptions {
   /// Seqs remembered per sender for exact duplicate detection; older ones are refused as stale.
   std::int64_t intake_window = EdgeIntake::kDefaultWindow;
   double status_period_s = 1.0;
-  int latency_window = 1000;      ///< status latency figures cover the last this many edges
-  refine::RefinerOptions batch;   ///< kind, every (0: only on command BATCH), reseed
-  std::string snapshot_path;      ///< where command SNAPSHOT with an empty path writes
-  std::ostream* log = nullptr;    ///< log lines (rejections, gaps, errors); nullptr: silent
-  int log_limit_per_reason = 20;  ///< log lines per rejection reason, then only counted
+  int latency_window = 1000;     ///< status latency figures cover the last this many edges
+  refine::RefinerOptions batch;  ///< kind, every (0: only on command BATCH), reseed
+  /// Where command SNAPSHOT writes its file (a plain name inside it); "" = SNAPSHOT refused.
+  std::string snapshot_dir;
+  std::size_t max_senders = EdgeIntake::kDefaultMaxSenders;  ///< sender tables per stream
+  MessageLimits message_limits;
+  std::size_t max_queued_commands = 64;  ///< command_t waiting for the smoother; more refused
+  std::int64_t journal_max_bytes = 0;    ///< > 0: the journal is full at this size (disk quota)
+  /// Journal room only update marks may use (EventLogWriterOptions::reserve_bytes), so the
+  /// measurements journaled before the disk filled can still be applied.
+  std::int64_t journal_reserve_bytes = 16384;
+  std::ostream* log = nullptr;  ///< log lines (rejections, gaps, errors); nullptr: silent
+  /// Lines a sender can provoke (refusals, gaps): at most one per reason per this period, with
+  /// the count of those held back; 0: every line.
+  std::chrono::milliseconds log_period{1000};
 };
 
 struct ServeSummary {
@@ -85,19 +118,27 @@ struct ServeSummary {
   int batches_skipped = 0, reseeds = 0, journal_reseeds = 0;
   std::vector<refine::BatchRun> batches;  ///< every batch run completed, in order
   double F_final = 0;
-  cli::LatencySummary latency;    ///< receipt → estimate published, every edge applied
-  cli::LatencySummary transport;  ///< edge utime → receipt (meaningful when clocks agree)
-  estimate_t final_estimate;      ///< full
+  cli::LatencySummary latency;       ///< receipt → estimate published, every edge applied
+  cli::LatencySummary transport;     ///< edge utime → receipt (meaningful when clocks agree)
+  estimate_t final_estimate;         ///< full
+  std::int64_t journal_refused = 0;  ///< measurements refused: the journal could not take them
+  std::int64_t held_at_stop = 0;     ///< journaled, not applied: their update mark did not fit
+  std::int64_t link_outages = 0;     ///< receive and publish links
+  std::map<std::string, std::int64_t> control_refused;  ///< command_t refusals by reason
 };
 
 class Service {
  public:
-  /// `lcm` must outlive the service; it may be shared (memq:// in tests).
+  /// `lcm` must outlive the service; it may be shared (memq:// in tests). Borrowed instances are
+  /// watched but never re-created.
   Service(lcm::LCM& lcm, ServeOptions options);
   /// Receives on `receive` and publishes on `publish`. Over tcpq:// they should be two
   /// instances: liblcm 1.3 delays what an instance receives (by up to its handle timeout) while
   /// another thread publishes on it.
   Service(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options);
+  /// Receives and publishes through links that re-create their instances after a fault; both
+  /// must outlive the service. `receive` should have a probe channel (channels().link_probe).
+  Service(LinkWatch& receive, LinkWatch& publish, ServeOptions options);
   ~Service();
   Service(const Service&) = delete;
   Service& operator=(const Service&) = delete;
@@ -118,6 +159,7 @@ class Service {
   const Channels& channels() const { return channels_; }
 
  private:
+  Service(LinkWatch* receive, LinkWatch* publish, ServeOptions options);
   struct Queued {
     bool is_prior = false;
     bool is_command = false;
@@ -145,7 +187,8 @@ class Service {
   void receiveLoop();
   void smootherLoop();
   void replayJournal();
-  void applyBatch(std::vector<Queued>& batch, bool from_journal);
+  /// False when the update could not be journaled (nothing applied; the caller holds it).
+  bool applyBatch(std::vector<Queued>& batch, bool from_journal);
   void refine(bool from_journal);
   /// Collects a finished batch (`wait`: the one in flight), journals and applies its reseed,
   /// publishes a status (and with `publish` the estimate if it reseeded); returns whether a run
@@ -158,18 +201,31 @@ class Service {
   void publishEstimate(bool full);
   void publishStatus();
   void writeMark(std::int8_t kind, int edges);
+  /// Journals an update of `n` measurements (mark, then the group fsync); false when the
+  /// journal cannot take the mark (the update must wait).
+  bool journalUpdate(int n);
+  void writeSnapshot(const command_t& c);
+  /// Whether a message of `size` bytes fits `limit`; counts and logs an oversize one.
+  bool fitsLimit(int size, int limit, const std::string& channel, EdgeIntake::Kind kind);
+  void refuseControl(const std::string& reason, const std::string& detail);
   void logLine(const std::string& line);
+  /// A line that a sender can provoke at will: at most one per `key` a second.
+  void logLimited(const std::string& key, const std::string& line);
 
-  lcm::LCM& lcm_;          ///< receive (subscriptions, handle)
-  lcm::LCM& publish_lcm_;  ///< estimates and status
+  std::unique_ptr<LinkWatch> owned_receive_, owned_publish_;  ///< over borrowed instances
+  LinkWatch* receive_;                                        ///< receive (subscriptions, handle)
+  LinkWatch* publish_;                                        ///< estimates and status
   ServeOptions options_;
   Channels channels_;
   std::unique_ptr<EventLogWriter> journal_;
+  SnapshotDir snapshots_;
+  LogLimiter limiter_;
 
   // Receive thread (and the journal replay before it starts); counts read under intake_mutex_.
   mutable std::mutex intake_mutex_;
   EdgeIntake intake_;
-  std::map<std::string, int> logged_by_reason_;
+  std::int64_t journal_refused_ = 0;
+  std::map<std::string, std::int64_t> control_refused_;  ///< command_t, by reason
 
   // Hand-over between the threads.
   std::mutex queue_mutex_;
@@ -177,6 +233,9 @@ class Service {
   std::vector<Queued> queue_;
   std::vector<command_t> commands_;
   bool smoother_stop_ = false;
+  /// An update whose mark the journal could not take waits until then before it is tried again.
+  std::chrono::steady_clock::time_point hold_until_;
+  std::atomic<std::int64_t> held_{0};  ///< measurements held so (status)
   std::atomic<bool> receive_stop_{false};
 
   // Smoother thread; the figures status() reads are under state_mutex_.
@@ -204,7 +263,6 @@ class Service {
 
   std::mutex log_mutex_;
   std::mutex publish_mutex_;
-  std::vector<lcm::Subscription*> subscriptions_;
   std::thread receive_thread_, smoother_thread_;
   bool running_ = false;
   ServeSummary summary_;

@@ -1,0 +1,258 @@
+#include "arbor/tools/serve/link_watch.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+#include <thread>
+
+#include <poll.h>
+#include <unistd.h>
+
+#include "arbor/tools/serve/lcm_tuning.h"
+
+namespace arbor::serve {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+std::string describe(const std::string& url) { return url.empty() ? "LCM's default URL" : url; }
+
+}  // namespace
+
+LinkWatch::LinkWatch(LinkWatchOptions options) : options_(std::move(options)) {
+  if (options_.backoff_min_ms < 1 || options_.backoff_max_ms < options_.backoff_min_ms) {
+    throw std::invalid_argument("LinkWatch: backoff " + std::to_string(options_.backoff_min_ms) +
+                                " .. " + std::to_string(options_.backoff_max_ms) +
+                                " ms is not 1 <= min <= max");
+  }
+  owned_ = std::make_unique<lcm::LCM>(options_.url);
+  if (!owned_->good()) {
+    throw std::runtime_error("cannot open LCM at '" + describe(options_.url) +
+                             "' (liblcm refused the URL)");
+  }
+  ++counts_.creations;
+  if (owned_->getFileno() < 0) {
+    markDown("cannot connect to " + describe(options_.url));
+  } else {
+    tuneLcmTransport(*owned_, options_.url);
+    markConnected();
+  }
+}
+
+LinkWatch::LinkWatch(lcm::LCM& borrowed, LinkWatchOptions options)
+    : options_(std::move(options)), borrowed_(&borrowed) {
+  if (borrowed.good() && borrowed.getFileno() >= 0) {
+    markConnected();
+  } else {
+    markDown("the instance has no connection");
+  }
+}
+
+void LinkWatch::markConnected() {
+  if (options_.probe_channel.empty()) {
+    markUp();
+  } else {
+    state_ = State::kProbing;
+    probe_pending_ = true;  // sent by handle(), after every subscription
+  }
+}
+
+LinkWatch::~LinkWatch() { unsubscribeAll(); }
+
+void LinkWatch::log(const std::string& key, const std::string& line) {
+  if (!options_.log) return;
+  std::int64_t suppressed = 0;
+  if (limiter_.allow(key, &suppressed)) {
+    options_.log(LogLimiter::withSuppressed(options_.name + " " + line, suppressed));
+  }
+}
+
+LinkCounts LinkWatch::counts() const {
+  std::lock_guard<std::mutex> lock(counts_mutex_);
+  return counts_;
+}
+
+void LinkWatch::dispatch(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                         Subscription* s) {
+  s->handler(rbuf, channel);
+}
+
+void LinkWatch::subscribeOn(lcm::LCM& lcm, Subscription& s) {
+  lcm::Subscription* sub = lcm.subscribeFunction(s.channel, &LinkWatch::dispatch, &s);
+  if (sub == nullptr) return;
+  sub->setQueueCapacity(0);
+  lcm_subscriptions_.push_back(sub);
+}
+
+void LinkWatch::subscribe(const std::string& channel, Handler handler) {
+  subscriptions_.push_back(
+      std::make_unique<Subscription>(Subscription{channel, std::move(handler)}));
+  if (lcm::LCM* lcm = instance(); lcm != nullptr && lcm->good()) {
+    subscribeOn(*lcm, *subscriptions_.back());
+  }
+}
+
+void LinkWatch::unsubscribeAll() {
+  lcm::LCM* lcm = instance();
+  if (lcm != nullptr && lcm->good()) {
+    for (lcm::Subscription* s : lcm_subscriptions_) lcm->unsubscribe(s);
+    if (probe_subscription_ != nullptr) lcm->unsubscribe(probe_subscription_);
+  }
+  lcm_subscriptions_.clear();
+  probe_subscription_ = nullptr;
+  subscriptions_.clear();
+}
+
+void LinkWatch::sendProbe() {
+  lcm::LCM* lcm = instance();
+  if (lcm == nullptr || !lcm->good()) return;
+  if (probe_subscription_ == nullptr) {
+    probe_subscription_ = lcm->subscribe(options_.probe_channel, &LinkWatch::onProbe, this);
+  }
+  probe_token_ = std::to_string(::getpid()) + ":" + std::to_string(++probes_sent_) + ":" +
+                 std::to_string(reinterpret_cast<std::uintptr_t>(this));
+  probe_sent_at_ = Clock::now();
+  probe_pending_ = false;
+  if (lcm->publish(options_.probe_channel, probe_token_.data(),
+                   static_cast<unsigned>(probe_token_.size())) != 0) {
+    markDown("probe could not be sent");
+  }
+}
+
+void LinkWatch::onProbe(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  const std::string token(static_cast<const char*>(rbuf->data), rbuf->data_size);
+  if (state_ == State::kProbing && token == probe_token_) markUp();
+}
+
+void LinkWatch::markDown(const std::string& why) {
+  if (state_ == State::kDown) return;
+  state_ = State::kDown;
+  up_ = false;
+  {
+    std::lock_guard<std::mutex> lock(counts_mutex_);
+    ++counts_.outages;
+  }
+  down_since_ = Clock::now();
+  backoff_ms_ = options_.backoff_min_ms;
+  next_attempt_ = down_since_ + std::chrono::milliseconds(backoff_ms_);
+  attempts_ = 0;
+  down_reason_ = why;
+  log("down",
+      std::string("down: ") + why +
+          (borrowed_ ? "; waiting for it"
+                     : "; re-creating it with backoff " + std::to_string(options_.backoff_min_ms) +
+                           " ms to " + std::to_string(options_.backoff_max_ms) + " ms"));
+}
+
+void LinkWatch::markUp() {
+  if (state_ == State::kUp) return;
+  state_ = State::kUp;
+  up_ = true;
+  if (counts().outages > 0) {
+    recovered_ = true;
+    log("up", "up again after " +
+                  std::to_string(static_cast<long long>(secondsSince(down_since_) * 1000)) +
+                  " ms down (" + std::to_string(attempts_) + " re-creations)");
+  } else {
+    log("up", "up on " + describe(options_.url));
+  }
+  attempts_ = 0;
+}
+
+bool LinkWatch::create() {
+  lcm_subscriptions_.clear();  // deleted with the old instance
+  probe_subscription_ = nullptr;
+  owned_.reset();  // closes the dead socket
+  owned_ = std::make_unique<lcm::LCM>(options_.url);
+  if (!owned_->good()) return false;
+  {
+    std::lock_guard<std::mutex> lock(counts_mutex_);
+    ++counts_.creations;
+  }
+  if (owned_->getFileno() < 0) return false;
+  tuneLcmTransport(*owned_, options_.url);
+  for (auto& s : subscriptions_) subscribeOn(*owned_, *s);
+  if (owned_->getFileno() < 0) return false;  // lost while subscribing
+  markConnected();
+  return true;
+}
+
+bool LinkWatch::retryIfDue() {
+  if (connected()) return true;
+  const auto now = Clock::now();
+  if (now < next_attempt_) return false;
+  ++attempts_;
+  if (borrowed_ != nullptr) {
+    if (borrowed_->good() && borrowed_->getFileno() >= 0) markConnected();
+  } else {
+    create();
+  }
+  if (connected()) return true;
+  backoff_ms_ = std::min(2 * backoff_ms_, options_.backoff_max_ms);
+  next_attempt_ = Clock::now() + std::chrono::milliseconds(backoff_ms_);
+  return false;
+}
+
+int LinkWatch::handle(int timeout_ms) {
+  const auto start = Clock::now();
+  lcm::LCM* lcm = instance();
+  int fd = lcm != nullptr && lcm->good() ? lcm->getFileno() : -1;
+  if (fd < 0) {
+    markDown("the connection closed");
+    if (!retryIfDue()) {
+      const auto until = std::min(next_attempt_, start + std::chrono::milliseconds(timeout_ms));
+      std::this_thread::sleep_until(until);
+      return -1;
+    }
+    lcm = instance();
+    fd = lcm->getFileno();
+    if (fd < 0) return -1;
+  }
+  if (state_ == State::kProbing &&
+      (probe_pending_ ||
+       Clock::now() - probe_sent_at_ >= std::chrono::milliseconds(options_.backoff_max_ms))) {
+    sendProbe();  // again after a while: a datagram transport may have lost the first
+    if (!connected()) return -1;
+  }
+  armQuickAck(*lcm);
+  pollfd p{fd, POLLIN, 0};
+  const int r = ::poll(&p, 1, std::max(0, timeout_ms));
+  if (r < 0) {
+    if (errno == EINTR) return 0;
+    markDown(std::string("poll failed: ") + std::strerror(errno));
+    return -1;
+  }
+  if (r == 0) return 0;
+  if (lcm->handle() != 0) {
+    markDown("receive failed (transport gone)");
+    return -1;
+  }
+  return 1;
+}
+
+bool LinkWatch::publish(const std::string& channel, const void* data, unsigned size) {
+  lcm::LCM* lcm = instance();
+  if (!connected() || lcm == nullptr || !lcm->good() || lcm->getFileno() < 0) {
+    markDown("the connection closed");
+    if (!retryIfDue()) {
+      std::lock_guard<std::mutex> lock(counts_mutex_);
+      ++counts_.failed_publishes;
+      return false;
+    }
+    lcm = instance();
+  }
+  if (lcm->publish(channel, data, size) != 0) {
+    markDown("publish failed (transport gone)");
+    std::lock_guard<std::mutex> lock(counts_mutex_);
+    ++counts_.failed_publishes;
+    return false;
+  }
+  return true;
+}
+
+}  // namespace arbor::serve

@@ -1,0 +1,112 @@
+#include "arbor/tools/serve/snapshot_dir.h"
+
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace arbor::serve {
+namespace {
+
+bool plainChar(char c) {
+  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
+         c == '_' || c == '-' || c == '+';
+}
+
+std::string systemError(const std::string& what) { return what + ": " + std::strerror(errno); }
+
+// Closes a descriptor on every path out.
+struct Fd {
+  int fd = -1;
+  ~Fd() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+}  // namespace
+
+std::string SnapshotDir::printable(const std::string& name) {
+  std::string out;
+  for (char c : name.substr(0, 80)) out += (c >= 0x20 && c < 0x7f) ? c : '?';
+  if (name.size() > 80) out += "...";
+  return "'" + out + "'";
+}
+
+std::string SnapshotDir::checkName(const std::string& name) {
+  if (name.empty()) return "no file name";
+  if (name.size() > 255) return "file name longer than 255 characters";
+  if (name.find('/') != std::string::npos) return "file name " + printable(name) + " has a '/'";
+  if (name[0] == '.') {
+    return "file name " + printable(name) + " starts with '.' (\"..\", hidden files)";
+  }
+  for (char c : name) {
+    if (!plainChar(c)) {
+      return "file name " + printable(name) +
+             " has a character other than letters, digits, . _ - +";
+    }
+  }
+  return "";
+}
+
+std::string SnapshotDir::write(const std::string& name,
+                               const std::function<void(const std::string&)>& write) {
+  if (!enabled()) return "no --snapshot-dir: the service writes no file for the bus";
+  if (std::string problem = checkName(name); !problem.empty()) return problem;
+  Fd dir;
+  dir.fd = ::open(dir_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir.fd < 0) return systemError("cannot open --snapshot-dir " + dir_);
+  // A temporary of ours: hidden, so no name from the bus can be it.
+  const std::string temp = ".arbor-snapshot-" + std::to_string(::getpid()) + "-" +
+                           std::to_string(++temporaries_) + ".tmp";
+  Fd file;
+  file.fd =
+      ::openat(dir.fd, temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+  if (file.fd < 0) return systemError("cannot create a temporary file in " + dir_);
+  const auto drop = [&] { ::unlinkat(dir.fd, temp.c_str(), 0); };
+  try {
+    // Through our own descriptor: whatever happens to the name meanwhile, this is our file.
+    write("/proc/self/fd/" + std::to_string(file.fd));
+  } catch (const std::exception& e) {
+    drop();
+    return std::string("the snapshot could not be written: ") + e.what();
+  }
+  if (::fsync(file.fd) != 0) {
+    const std::string error = systemError("cannot fsync the snapshot");
+    drop();
+    return error;
+  }
+  struct stat ours;
+  if (::fstat(file.fd, &ours) != 0) {
+    const std::string error = systemError("cannot stat the snapshot");
+    drop();
+    return error;
+  }
+  const auto created = created_.find(name);
+  struct stat there;
+  const bool exists = ::fstatat(dir.fd, name.c_str(), &there, AT_SYMLINK_NOFOLLOW) == 0;
+  if (exists && created != created_.end() && there.st_dev == created->second.first &&
+      there.st_ino == created->second.second) {
+    // A file this process wrote under that name, unchanged since: replaced in one step.
+    if (::renameat(dir.fd, temp.c_str(), dir.fd, name.c_str()) != 0) {
+      const std::string error = systemError("cannot replace " + printable(name));
+      drop();
+      return error;
+    }
+  } else if (::linkat(dir.fd, temp.c_str(), dir.fd, name.c_str(), 0) != 0) {
+    // link() never replaces: a file, symlink or device already there refuses it.
+    const std::string error = errno == EEXIST
+                                  ? printable(name) + " exists and was not written by this service"
+                                  : systemError("cannot create " + printable(name));
+    drop();
+    return error;
+  } else {
+    drop();  // the new name holds it now
+  }
+  created_[name] = {ours.st_dev, ours.st_ino};
+  return "";
+}
+
+}  // namespace arbor::serve
