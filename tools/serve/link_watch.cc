@@ -54,6 +54,7 @@ LinkWatch::LinkWatch(lcm::LCM& borrowed, LinkWatchOptions options)
 }
 
 void LinkWatch::markConnected() {
+  probes_unanswered_ = 0;
   if (options_.probe_channel.empty()) {
     markUp();
   } else {
@@ -64,12 +65,8 @@ void LinkWatch::markConnected() {
 
 LinkWatch::~LinkWatch() { unsubscribeAll(); }
 
-void LinkWatch::log(const std::string& key, const std::string& line) {
-  if (!options_.log) return;
-  std::int64_t suppressed = 0;
-  if (limiter_.allow(key, &suppressed)) {
-    options_.log(LogLimiter::withSuppressed(options_.name + " " + line, suppressed));
-  }
+void LinkWatch::log(const std::string& line) {
+  if (options_.log) options_.log(options_.name + " " + line);
 }
 
 LinkCounts LinkWatch::counts() const {
@@ -118,6 +115,7 @@ void LinkWatch::sendProbe() {
                  std::to_string(reinterpret_cast<std::uintptr_t>(this));
   probe_sent_at_ = Clock::now();
   probe_pending_ = false;
+  ++probes_unanswered_;
   if (lcm->publish(options_.probe_channel, probe_token_.data(),
                    static_cast<unsigned>(probe_token_.size())) != 0) {
     markDown("probe could not be sent");
@@ -126,11 +124,19 @@ void LinkWatch::sendProbe() {
 
 void LinkWatch::onProbe(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   const std::string token(static_cast<const char*>(rbuf->data), rbuf->data_size);
-  if (state_ == State::kProbing && token == probe_token_) markUp();
+  if (state_ == State::kProbing && token == probe_token_) {
+    probes_unanswered_ = 0;
+    markUp();
+  }
 }
 
 void LinkWatch::markDown(const std::string& why) {
   if (state_ == State::kDown) return;
+  // Up for less than the longest backoff: a flapping transport, whose backoff keeps growing
+  // (so its down/up lines come at most once per backoff_max_ms); else it starts again.
+  const bool flapping =
+      state_ != State::kNew && backoff_ms_ > 0 &&
+      Clock::now() - up_since_ < std::chrono::milliseconds(options_.backoff_max_ms);
   state_ = State::kDown;
   up_ = false;
   {
@@ -138,28 +144,29 @@ void LinkWatch::markDown(const std::string& why) {
     ++counts_.outages;
   }
   down_since_ = Clock::now();
-  backoff_ms_ = options_.backoff_min_ms;
+  backoff_ms_ =
+      flapping ? std::min(2 * backoff_ms_, options_.backoff_max_ms) : options_.backoff_min_ms;
   next_attempt_ = down_since_ + std::chrono::milliseconds(backoff_ms_);
   attempts_ = 0;
   down_reason_ = why;
-  log("down",
-      std::string("down: ") + why +
-          (borrowed_ ? "; waiting for it"
-                     : "; re-creating it with backoff " + std::to_string(options_.backoff_min_ms) +
-                           " ms to " + std::to_string(options_.backoff_max_ms) + " ms"));
+  log(std::string("down: ") + why +
+      (borrowed_ ? "; waiting for it"
+                 : "; re-creating it with backoff " + std::to_string(options_.backoff_min_ms) +
+                       " ms to " + std::to_string(options_.backoff_max_ms) + " ms"));
 }
 
 void LinkWatch::markUp() {
   if (state_ == State::kUp) return;
   state_ = State::kUp;
   up_ = true;
+  up_since_ = Clock::now();
   if (counts().outages > 0) {
     recovered_ = true;
-    log("up", "up again after " +
-                  std::to_string(static_cast<long long>(secondsSince(down_since_) * 1000)) +
-                  " ms down (" + std::to_string(attempts_) + " re-creations)");
+    log("up again after " +
+        std::to_string(static_cast<long long>(secondsSince(down_since_) * 1000)) + " ms down (" +
+        std::to_string(attempts_) + " re-creations)");
   } else {
-    log("up", "up on " + describe(options_.url));
+    log("up on " + describe(options_.url));
   }
   attempts_ = 0;
 }
@@ -202,7 +209,7 @@ int LinkWatch::handle(int timeout_ms) {
   const auto start = Clock::now();
   lcm::LCM* lcm = instance();
   int fd = lcm != nullptr && lcm->good() ? lcm->getFileno() : -1;
-  if (fd < 0) {
+  if (fd < 0 || state_ == State::kDown) {
     markDown("the connection closed");
     if (!retryIfDue()) {
       const auto until = std::min(next_attempt_, start + std::chrono::milliseconds(timeout_ms));
@@ -216,7 +223,14 @@ int LinkWatch::handle(int timeout_ms) {
   if (state_ == State::kProbing &&
       (probe_pending_ ||
        Clock::now() - probe_sent_at_ >= std::chrono::milliseconds(options_.backoff_max_ms))) {
-    sendProbe();  // again after a while: a datagram transport may have lost the first
+    // Again after a while: the Java hub can relay a client's first message before it lists
+    // that client as a receiver, and a datagram transport may drop it. A link whose probes do
+    // not come back is not trusted: it is made anew.
+    if (probes_unanswered_ >= kMaxUnansweredProbes) {
+      markDown("its probe did not come back " + std::to_string(probes_unanswered_) + " times");
+      return -1;
+    }
+    sendProbe();
     if (!connected()) return -1;
   }
   armQuickAck(*lcm);

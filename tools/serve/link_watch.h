@@ -6,11 +6,15 @@
 // descriptor < 0 or a failed handle, never an abort.
 //
 // A dead link is re-created (destroyed, lcm_create again, every subscription made again) with
-// exponential backoff, `backoff_min_ms` doubling up to `backoff_max_ms`. After each creation the
+// exponential backoff, `backoff_min_ms` doubling up to `backoff_max_ms`; a link that fails again
+// within backoff_max_ms of coming up keeps its grown backoff, so a flapping transport costs at
+// most one attempt, and one down/up pair of log lines, per backoff_max_ms. After each creation the
 // receiving link publishes a probe on its own instance; the probe coming back proves the
 // transport holds every subscription (the Java hub handles one client's messages in order), and
-// only then is the link reported up. Each state change is logged once (down, up); lines
-// repeating within a second are held back and counted (LogLimiter).
+// only then is the link reported up. A probe unanswered for backoff_max_ms is sent again (the
+// hub may relay a new client's first message before it lists that client as a receiver); after
+// three unanswered probes the link is treated as dead and re-created. Each state change is
+// logged, one line (down, with why; up, with how long it was down).
 //
 // A borrowed instance (memq:// shared in-process) is watched the same way but never re-created.
 // Not thread-safe: one thread handles; publish() is safe against other publish() calls only.
@@ -26,8 +30,6 @@
 #include <vector>
 
 #include <lcm/lcm-cpp.hpp>
-
-#include "arbor/tools/serve/log_limiter.h"
 
 namespace arbor::serve {
 
@@ -98,7 +100,7 @@ class LinkWatch {
   void markConnected();
   /// Re-creates when due; true if the link has a descriptor afterwards.
   bool retryIfDue();
-  void log(const std::string& key, const std::string& line);
+  void log(const std::string& line);
 
   LinkWatchOptions options_;
   lcm::LCM* borrowed_ = nullptr;
@@ -108,6 +110,8 @@ class LinkWatch {
   lcm::Subscription* probe_subscription_ = nullptr;
   std::string probe_token_;
   std::int64_t probes_sent_ = 0;
+  static constexpr int kMaxUnansweredProbes = 3;
+  int probes_unanswered_ = 0;  ///< since the last connection
   std::chrono::steady_clock::time_point probe_sent_at_;
 
   enum class State { kNew, kDown, kProbing, kUp };
@@ -116,14 +120,13 @@ class LinkWatch {
   bool probe_pending_ = false;  ///< a probe is to be sent by the next handle()
   std::atomic<bool> up_{false};
   std::atomic<bool> recovered_{false};
-  std::chrono::steady_clock::time_point down_since_, next_attempt_;
+  std::chrono::steady_clock::time_point down_since_, next_attempt_, up_since_;
   int backoff_ms_ = 0;
   std::int64_t attempts_ = 0;  ///< since the link went down
   std::string down_reason_;
 
   mutable std::mutex counts_mutex_;
   LinkCounts counts_;
-  LogLimiter limiter_;
 };
 
 }  // namespace arbor::serve
