@@ -141,6 +141,12 @@ TEST(SnapshotDir, WritesNewNamesAndItsOwnFilesNeverAForeignOneOrThroughASymlink)
   std::set<std::string> names;
   for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
   EXPECT_EQ(names, (std::set<std::string>{"foreign.g2o", "link.g2o", "ok.g2o"}));
+  // At most kMaxNames names ("ok.g2o" is one): a flood of names is bounded.
+  for (size_t k = 1; k < SnapshotDir::kMaxNames; ++k) {
+    EXPECT_EQ(snapshots.write("n" + std::to_string(k), writer("x")), "") << k;
+  }
+  EXPECT_NE(snapshots.write("one-more", writer("x")), "");
+  EXPECT_FALSE(fs::exists(dir + "/one-more"));
   fs::remove_all(dir);
   fs::remove_all(outside);
 }

@@ -226,7 +226,9 @@ int LinkWatch::handle(int timeout_ms) {
     // Again after a while: the Java hub can relay a client's first message before it lists
     // that client as a receiver, and a datagram transport may drop it. A link whose probes do
     // not come back is not trusted: it is made anew.
-    if (probes_unanswered_ >= kMaxUnansweredProbes) {
+    // Only over tcpq, whose hub can hold a connection that relays nothing: a datagram
+    // transport is never torn down for a lost probe (what it receives meanwhile would be lost).
+    if (probes_unanswered_ >= kMaxUnansweredProbes && options_.url.rfind("tcpq://", 0) == 0) {
       markDown("its probe did not come back " + std::to_string(probes_unanswered_) + " times");
       return -1;
     }

@@ -13,7 +13,8 @@
 // transport holds every subscription (the Java hub handles one client's messages in order), and
 // only then is the link reported up. A probe unanswered for backoff_max_ms is sent again (the
 // hub may relay a new client's first message before it lists that client as a receiver); after
-// three unanswered probes the link is treated as dead and re-created. Each state change is
+// three unanswered probes a tcpq:// link is treated as dead and re-created (other providers
+// only send it again). Each state change is
 // logged, one line (down, with why; up, with how long it was down).
 //
 // A borrowed instance (memq:// shared in-process) is watched the same way but never re-created.

@@ -28,6 +28,10 @@ struct Fd {
 
 }  // namespace
 
+SnapshotDir::~SnapshotDir() {
+  for (const auto& [name, fd] : created_) ::close(fd);
+}
+
 std::string SnapshotDir::printable(const std::string& name) {
   std::string out;
   for (char c : name.substr(0, 80)) out += (c >= 0x20 && c < 0x7f) ? c : '?';
@@ -55,6 +59,10 @@ std::string SnapshotDir::write(const std::string& name,
                                const std::function<void(const std::string&)>& write) {
   if (!enabled()) return "no --snapshot-dir: the service writes no file for the bus";
   if (std::string problem = checkName(name); !problem.empty()) return problem;
+  const auto created = created_.find(name);
+  if (created == created_.end() && created_.size() >= kMaxNames) {
+    return "already " + std::to_string(kMaxNames) + " snapshot names written; no new one";
+  }
   Fd dir;
   dir.fd = ::open(dir_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dir.fd < 0) return systemError("cannot open --snapshot-dir " + dir_);
@@ -78,17 +86,10 @@ std::string SnapshotDir::write(const std::string& name,
     drop();
     return error;
   }
-  struct stat ours;
-  if (::fstat(file.fd, &ours) != 0) {
-    const std::string error = systemError("cannot stat the snapshot");
-    drop();
-    return error;
-  }
-  const auto created = created_.find(name);
-  struct stat there;
+  struct stat there, before;
   const bool exists = ::fstatat(dir.fd, name.c_str(), &there, AT_SYMLINK_NOFOLLOW) == 0;
-  if (exists && created != created_.end() && there.st_dev == created->second.first &&
-      there.st_ino == created->second.second) {
+  if (exists && created != created_.end() && ::fstat(created->second, &before) == 0 &&
+      there.st_dev == before.st_dev && there.st_ino == before.st_ino) {
     // A file this process wrote under that name, unchanged since: replaced in one step.
     if (::renameat(dir.fd, temp.c_str(), dir.fd, name.c_str()) != 0) {
       const std::string error = systemError("cannot replace " + printable(name));
@@ -105,7 +106,9 @@ std::string SnapshotDir::write(const std::string& name,
   } else {
     drop();  // the new name holds it now
   }
-  created_[name] = {ours.st_dev, ours.st_ino};
+  if (created != created_.end()) ::close(created->second);
+  created_[name] = file.fd;  // held: the inode stays ours to recognise
+  file.fd = -1;
   return "";
 }
 

@@ -5,9 +5,13 @@
 // A file is written to a temporary name created with O_EXCL|O_NOFOLLOW, through its own
 // descriptor, then put in place: linked under the new name (link() never replaces anything: a
 // file, a symlink or a device already there refuses it), or renamed over a file this process
-// wrote earlier under that name and that is still the same inode. Not thread-safe.
+// wrote earlier under that name and that is still the same inode — it holds a descriptor on
+// each file it wrote, so that inode number cannot be reused by another file meanwhile. At most
+// kMaxNames names (a bound on descriptors and on disk use); a new name beyond is refused.
+// Not thread-safe.
 #pragma once
 
+#include <cstddef>
 #include <functional>
 #include <map>
 #include <string>
@@ -19,8 +23,13 @@ namespace arbor::serve {
 
 class SnapshotDir {
  public:
+  static constexpr std::size_t kMaxNames = 64;
+
   SnapshotDir() = default;  ///< unset: every write refused
   explicit SnapshotDir(std::string dir) : dir_(std::move(dir)) {}
+  ~SnapshotDir();
+  SnapshotDir(const SnapshotDir&) = delete;
+  SnapshotDir& operator=(const SnapshotDir&) = delete;
 
   bool enabled() const { return !dir_.empty(); }
   const std::string& dir() const { return dir_; }
@@ -35,7 +44,7 @@ class SnapshotDir {
 
  private:
   std::string dir_;
-  std::map<std::string, std::pair<dev_t, ino_t>> created_;  ///< name -> the file we wrote there
+  std::map<std::string, int> created_;  ///< name -> a descriptor on the file we wrote there
   long temporaries_ = 0;
 };
 
