@@ -65,20 +65,14 @@ OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
 }
 
 template <class G>
-RobustKernel OnlineGnc<G>::kernelAt(double mu) const {
-  return RobustKernel{options_.kernel, c2_, mu};
+RobustKernel OnlineGnc<G>::kernelAt(const Closure& c, double mu) const {
+  return RobustKernel{c.kernel, c2_, mu};
 }
 
 template <class G>
-double OnlineGnc<G>::finalWeight(double s) const {
-  switch (options_.kernel) {
-    case KernelKind::kTruncatedLeastSquares:
-      return s <= c2_ ? 1.0 : 0.0;
-    case KernelKind::kGemanMcClure:
-      return kernelAt(1.0).weight(s);
-    default:
-      return kernelAt(1.0).weight(s);
-  }
+double OnlineGnc<G>::finalWeight(const Closure& c, double s) const {
+  if (c.kernel == KernelKind::kTruncatedLeastSquares) return s <= c2_ ? 1.0 : 0.0;
+  return kernelAt(c, 1.0).weight(s);
 }
 
 // The first check: s ≤ c² settles at weight 1 (no graduation); otherwise the convex surrogate
@@ -92,9 +86,9 @@ void OnlineGnc<G>::enter(Closure* c, double s) {
     c->weight = 1.0;
     return;
   }
-  const RobustKernel k = kernelAt(1.0);
+  const RobustKernel k = kernelAt(*c, 1.0);
   c->mu = k.isGraduated() ? k.initialMu(s) : 1.0;
-  c->weight = kernelAt(c->mu).weight(s);
+  c->weight = kernelAt(*c, c->mu).weight(s);
   c->state = State::kGraduating;
 }
 
@@ -105,14 +99,14 @@ template <class G>
 double OnlineGnc<G>::graduate(Closure* c, double s) {
   c->s = s;
   ++c->steps;
-  const RobustKernel now = kernelAt(c->mu);
+  const RobustKernel now = kernelAt(*c, c->mu);
   double w;
   bool settled;
   if (now.isGraduated()) {
     c->mu = now.nextMu(options_.mu_step);
-    const RobustKernel next = kernelAt(c->mu);
+    const RobustKernel next = kernelAt(*c, c->mu);
     w = next.weight(s);
-    settled = options_.kernel == KernelKind::kTruncatedLeastSquares
+    settled = c->kernel == KernelKind::kTruncatedLeastSquares
                   ? (w == 0.0 || w == 1.0 || c->mu >= options_.max_mu)
                   : next.atKernel();
   } else {
@@ -120,10 +114,10 @@ double OnlineGnc<G>::graduate(Closure* c, double s) {
     settled = std::abs(w - c->weight) < options_.weight_tolerance;
   }
   if (!settled && c->steps >= options_.max_steps_per_closure) {
-    w = finalWeight(s);
+    w = finalWeight(*c, s);
     settled = true;
   }
-  if (settled && options_.kernel == KernelKind::kTruncatedLeastSquares) w = finalWeight(s);
+  if (settled && c->kernel == KernelKind::kTruncatedLeastSquares) w = finalWeight(*c, s);
   if (settled) c->state = State::kSettled;
   return w;
 }
@@ -142,9 +136,10 @@ void OnlineGnc<G>::setWeight(IncrementalSmoother<G>& smoother, Closure* c, doubl
 
 template <class G>
 double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key to,
-                           EdgeTrust trust, bool structural, const Edge& edge) {
-  if (odometry(from, to)) return 1.0;  // odometry: not a loop closure
+                           EdgeTrust trust, bool structural, const Edge& edge, KernelKind kernel) {
+  if (odometry(from, to) && trust != EdgeTrust::kRobust) return 1.0;  // odometry: not judged
   Closure c;
+  c.kernel = kernel == KernelKind::kNone ? options_.kernel : kernel;
   c.from = from;
   c.to = to;
   c.i = edge.i;
@@ -243,9 +238,9 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
     c.s = s;
     const bool inlier = c.weight >= 0.5;
     const bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
-    const bool drift = options_.kernel != KernelKind::kTruncatedLeastSquares &&
-                       options_.kernel != KernelKind::kGemanMcClure &&
-                       std::abs(finalWeight(s) - c.weight) > 10 * options_.weight_tolerance;
+    const bool drift = c.kernel != KernelKind::kTruncatedLeastSquares &&
+                       c.kernel != KernelKind::kGemanMcClure &&
+                       std::abs(finalWeight(c, s) - c.weight) > 10 * options_.weight_tolerance;
     if (!flip && !drift) continue;
     if (inlier || drift) {
       enter(&c, s);
@@ -326,6 +321,7 @@ std::vector<ClosureReport> OnlineGnc<G>::closures() const {
     r.graduating = c.state == State::kGraduating;
     r.steps = c.steps;
     r.factor = c.factor;
+    r.kernel = c.kernel;
     switch (c.state) {
       case State::kTrusted:
         r.status = ClosureStatus::kTrusted;

@@ -56,6 +56,7 @@
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/core/edge_trust.h"
 #include "arbor/core/factor.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/robust_kernel.h"
@@ -92,12 +93,6 @@ struct RobustOptions {
   std::string problem() const;
 };
 
-/// Whether an edge given to the online layer is weighted.
-enum class EdgeTrust {
-  kByRule,   ///< odometry (|from − to| = 1) trusted, any other edge a loop closure to judge
-  kTrusted,  ///< the sender vouches for it: weight 1 for good
-};
-
 enum class ClosureStatus {
   kInlier,    ///< weight ≥ 0.5
   kOutlier,   ///< weight < 0.5: rejected
@@ -116,6 +111,7 @@ struct ClosureReport {
   bool graduating = false;  ///< still being graduated (status by its current weight)
   int steps = 0;            ///< graduation steps it has taken
   int factor = -1;          ///< its index in the smoother (−1 until the update that adds it)
+  KernelKind kernel = KernelKind::kTruncatedLeastSquares;  ///< the kernel it is judged by
 };
 
 struct ClosureCounts {
@@ -137,9 +133,10 @@ class OnlineGnc {
   /// The first check of a new edge (dense indices) before it enters the smoother: returns the
   /// inlier weight it enters with (1, or w₀ for a closure that graduates) and records it when
   /// it is a loop closure. `structural`: the edge created one of its poses or joined two
-  /// components (trusted).
+  /// components (trusted). `kernel`: the kernel this closure graduates towards (kNone:
+  /// RobustOptions::kernel). Odometry is not judged unless `trust` is kRobust.
   double admit(const IncrementalSmoother<G>& smoother, Key from, Key to, EdgeTrust trust,
-               bool structural, const Edge& edge);
+               bool structural, const Edge& edge, KernelKind kernel = KernelKind::kNone);
   /// Before a smoother update: one graduation step of every graduating closure and the round
   /// robin of re-checks (`recheck_all`: every settled closure). Returns the weights changed.
   int step(IncrementalSmoother<G>& smoother, bool recheck_all = false);
@@ -169,13 +166,14 @@ class OnlineGnc {
     G z;               ///< the measurement (to find the factor after an update)
     int factor = -1;
     State state = State::kSettled;
+    KernelKind kernel = KernelKind::kTruncatedLeastSquares;  ///< its own (per edge)
     double mu = 0, weight = 1, s = 0;
     int steps = 0;
   };
 
-  RobustKernel kernelAt(double mu) const;
-  /// The kernel's own weight at s (TLS: 1 or 0; GM at μ = 1; Huber, Cauchy: ρ′(s)).
-  double finalWeight(double s) const;
+  RobustKernel kernelAt(const Closure& c, double mu) const;
+  /// The closure's kernel's own weight at s (TLS: 1 or 0; GM at μ = 1; Huber, Cauchy: ρ′(s)).
+  double finalWeight(const Closure& c, double s) const;
   /// The first check at s: settles at weight 1 or starts graduation from μ₀(s).
   void enter(Closure* c, double s);
   /// One graduation step at s; returns the new weight.

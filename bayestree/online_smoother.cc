@@ -178,7 +178,7 @@ void OnlineSmoother<G>::join(int from, int to, const G& z) {
 }
 
 template <class G>
-void OnlineSmoother<G>::apply(const Measurement& m, EdgeTrust trust) {
+void OnlineSmoother<G>::apply(const Measurement& m, EdgeTrust trust, KernelKind kernel) {
   auto from = index_.find(m.from);
   auto to = index_.find(m.to);
   // An edge that creates a pose or joins two components holds exactly at the estimate it
@@ -197,7 +197,8 @@ void OnlineSmoother<G>::apply(const Measurement& m, EdgeTrust trust) {
   }
   const auto edge = RelativePoseEdge<G>::make(index_.at(m.from), index_.at(m.to), m.z, m.omega);
   Factor<G> factor(edge);
-  if (gnc_) factor.setInlierWeight(gnc_->admit(smoother_, m.from, m.to, trust, structural, edge));
+  if (gnc_)
+    factor.setInlierWeight(gnc_->admit(smoother_, m.from, m.to, trust, structural, edge, kernel));
   if (!disabled_pairs_.empty() && disabled_pairs_.count(idPair(m.from, m.to)))
     factor.setInlierWeight(0.0);  // between a pair taken back: disabled until enableEdge
   smoother_.addFactor(factor);
@@ -207,7 +208,7 @@ void OnlineSmoother<G>::apply(const Measurement& m, EdgeTrust trust) {
 
 template <class G>
 EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix& omega,
-                                      EdgeTrust trust) {
+                                      EdgeTrust trust, KernelKind kernel) {
   auto reject = [&](const std::string& why) {
     ++stats_.edges_rejected;
     return EdgeResult{EdgeStatus::kRejected, why};
@@ -228,7 +229,7 @@ EdgeResult OnlineSmoother<G>::addEdge(Key from, Key to, const G& z, const Matrix
                                                     " -> " + std::to_string(to)};
     }
   same_pair.push_back(m);
-  apply(m, trust);
+  apply(m, trust, kernel);
   return EdgeResult{EdgeStatus::kAccepted, ""};
 }
 

@@ -141,9 +141,11 @@ class OnlineSmoother {
   explicit OnlineSmoother(OnlineSmootherOptions<G> options = {});
 
   /// One measurement z of pose `to` in the frame of pose `from`, with information Ω. With
-  /// robust smoothing, `trust` kTrusted keeps a loop closure out of the GNC (weight 1 for good).
+  /// robust smoothing, `trust` kTrusted keeps a loop closure out of the GNC (weight 1 for good),
+  /// kRobust judges an edge even between consecutive ids; `kernel` is the kernel this edge is
+  /// judged by (kNone: RobustOptions::kernel). Both are ignored without robust smoothing.
   EdgeResult addEdge(Key from, Key to, const G& z, const Matrix& omega,
-                     EdgeTrust trust = EdgeTrust::kByRule);
+                     EdgeTrust trust = EdgeTrust::kByRule, KernelKind kernel = KernelKind::kNone);
   /// A prior z on pose `id` in the world frame (core/prior_factors.h), with an optional sensor
   /// offset o (the prior is on x o). An unknown id starts a component there, at z o⁻¹.
   EdgeResult addPosePrior(Key id, const G& z, const Matrix& omega, const G& offset = G::Identity());
@@ -247,7 +249,7 @@ class OnlineSmoother {
   /// A new pose; creator −1 starts a component (anchored at it when `anchor`).
   int createPose(Key id, const G& value, int creator, bool anchor = true);
   /// Adds m to the smoother, creating an unknown end or a new component, or joining two.
-  void apply(const Measurement& m, EdgeTrust trust);
+  void apply(const Measurement& m, EdgeTrust trust, KernelKind kernel);
   /// Robust smoothing: graduation steps until none graduates or `max_updates` updates.
   void graduateFully(int max_updates, UpdateStats* total);
   /// The edge from → to (dense indices, in different components) joins them.

@@ -60,6 +60,11 @@ MessageProblem precheck<edge_t>(const void* data, int size, std::string* detail)
 }
 
 template <>
+MessageProblem precheck<edge_v1_t>(const void* data, int size, std::string* detail) {
+  return precheckInformationSize(data, size, kEdgeInformationSizeOffset, "an edge_v1_t", detail);
+}
+
+template <>
 MessageProblem precheck<prior_t>(const void* data, int size, std::string* detail) {
   return precheckInformationSize(data, size, kPriorInformationSizeOffset, "a prior_t", detail);
 }
@@ -178,8 +183,37 @@ EdgeDecoding toStreamEdge(const edge_t& m) {
     out.detail = "information matrix " + problem;
     return out;
   }
+  if (!edgeTrustFromField(m.trust, &e.trust, &out.detail) ||
+      !edgeKernelFromField(m.kernel, &e.kernel, &out.detail)) {
+    out.problem = MessageProblem::kTrust;
+    return out;
+  }
   out.edge = e;
   return out;
+}
+
+// The older layout as the current one: trust and kernel DEFAULT (what it meant then).
+edge_t fromV1(const edge_v1_t& v1) {
+  edge_t m;
+  m.utime = v1.utime;
+  m.sender = v1.sender;
+  m.seq = v1.seq;
+  m.from_id = v1.from_id;
+  m.to_id = v1.to_id;
+  m.dim = v1.dim;
+  for (int k = 0; k < 3; ++k) m.translation[k] = v1.translation[k];
+  for (int k = 0; k < 4; ++k) m.rotation[k] = v1.rotation[k];
+  m.information_size = v1.information_size;
+  m.information = v1.information;
+  m.trust = edge_t::TRUST_DEFAULT;
+  m.kernel = edge_t::KERNEL_DEFAULT;
+  return m;
+}
+
+std::int64_t leadingHash(const void* data, int size) {
+  std::int64_t hash = 0;
+  if (data != nullptr && size >= 8) __int64_t_decode_array(data, 0, size, &hash, 1);
+  return hash;
 }
 
 template <class G>
@@ -272,6 +306,8 @@ const char* toString(MessageProblem problem) {
       return "magnitude";
     case MessageProblem::kKind:
       return "kind";
+    case MessageProblem::kTrust:
+      return "trust";
   }
   return "unknown";
 }
@@ -312,11 +348,64 @@ MessageProblem decodeMessage(const void* data, int size, M* out, std::string* de
   return MessageProblem::kNone;
 }
 
+bool isEdgeMessage(const void* data, int size) {
+  const std::int64_t hash = leadingHash(data, size);
+  return hash == edge_t::getHash() || hash == edge_v1_t::getHash();
+}
+
+bool edgeTrustFromField(std::int8_t field, EdgeTrust* trust, std::string* detail) {
+  switch (field) {
+    case edge_t::TRUST_DEFAULT:
+      *trust = EdgeTrust::kByRule;
+      return true;
+    case edge_t::TRUST_TRUSTED:
+      *trust = EdgeTrust::kTrusted;
+      return true;
+    case edge_t::TRUST_ROBUST:
+      *trust = EdgeTrust::kRobust;
+      return true;
+  }
+  setDetail(detail, "trust " + std::to_string(field) +
+                        " is not TRUST_DEFAULT (0), TRUST_TRUSTED (1) or TRUST_ROBUST (2)");
+  return false;
+}
+
+bool edgeKernelFromField(std::int8_t field, KernelKind* kernel, std::string* detail) {
+  switch (field) {
+    case edge_t::KERNEL_DEFAULT:
+      *kernel = KernelKind::kNone;
+      return true;
+    case edge_t::KERNEL_TLS:
+      *kernel = KernelKind::kTruncatedLeastSquares;
+      return true;
+    case edge_t::KERNEL_GM:
+      *kernel = KernelKind::kGemanMcClure;
+      return true;
+    case edge_t::KERNEL_CAUCHY:
+      *kernel = KernelKind::kCauchy;
+      return true;
+    case edge_t::KERNEL_HUBER:
+      *kernel = KernelKind::kHuber;
+      return true;
+  }
+  setDetail(detail, "kernel " + std::to_string(field) +
+                        " is not KERNEL_DEFAULT (0), KERNEL_TLS (1), KERNEL_GM (2), "
+                        "KERNEL_CAUCHY (3) or KERNEL_HUBER (4)");
+  return false;
+}
+
 EdgeDecoding decodeEdge(const void* data, int size) {
   EdgeDecoding out;
   edge_t m;
-  out.problem = decodeMessage(data, size, &m, &out.detail);
-  if (!out.ok()) return out;
+  if (leadingHash(data, size) == edge_v1_t::getHash()) {
+    edge_v1_t v1;
+    out.problem = decodeMessage(data, size, &v1, &out.detail);
+    if (!out.ok()) return out;
+    m = fromV1(v1);
+  } else {
+    out.problem = decodeMessage(data, size, &m, &out.detail);
+    if (!out.ok()) return out;
+  }
   auto fail = [&](MessageProblem p, const std::string& what) {
     out.problem = p;
     out.detail = what;
@@ -494,7 +583,43 @@ edge_t makeEdgeMessage(const StreamEdge<G>& edge) {
   for (int r = 0; r < d; ++r) {
     for (int c = r; c < d; ++c) m.information.push_back(edge.omega(r, c));
   }
+  m.trust = edge.trust == EdgeTrust::kTrusted  ? edge_t::TRUST_TRUSTED
+            : edge.trust == EdgeTrust::kRobust ? edge_t::TRUST_ROBUST
+                                               : edge_t::TRUST_DEFAULT;
+  switch (edge.kernel) {
+    case KernelKind::kTruncatedLeastSquares:
+      m.kernel = edge_t::KERNEL_TLS;
+      break;
+    case KernelKind::kGemanMcClure:
+      m.kernel = edge_t::KERNEL_GM;
+      break;
+    case KernelKind::kCauchy:
+      m.kernel = edge_t::KERNEL_CAUCHY;
+      break;
+    case KernelKind::kHuber:
+      m.kernel = edge_t::KERNEL_HUBER;
+      break;
+    default:
+      m.kernel = edge_t::KERNEL_DEFAULT;
+  }
   return m;
+}
+
+template <class G>
+edge_v1_t makeEdgeV1Message(const StreamEdge<G>& edge) {
+  const edge_t m = makeEdgeMessage(edge);
+  edge_v1_t v1;
+  v1.utime = m.utime;
+  v1.sender = m.sender;
+  v1.seq = m.seq;
+  v1.from_id = m.from_id;
+  v1.to_id = m.to_id;
+  v1.dim = m.dim;
+  for (int k = 0; k < 3; ++k) v1.translation[k] = m.translation[k];
+  for (int k = 0; k < 4; ++k) v1.rotation[k] = m.rotation[k];
+  v1.information_size = m.information_size;
+  v1.information = m.information;
+  return v1;
 }
 
 template <class G>
@@ -532,6 +657,8 @@ prior_t makePriorMessage(const StreamPositionPrior<G>& prior) {
 
 template edge_t makeEdgeMessage(const StreamEdge<SE2>&);
 template edge_t makeEdgeMessage(const StreamEdge<SE3>&);
+template edge_v1_t makeEdgeV1Message(const StreamEdge<SE2>&);
+template edge_v1_t makeEdgeV1Message(const StreamEdge<SE3>&);
 template prior_t makePriorMessage(const StreamPosePrior<SE2>&);
 template prior_t makePriorMessage(const StreamPosePrior<SE3>&);
 template prior_t makePriorMessage(const StreamPositionPrior<SE2>&);
@@ -541,6 +668,7 @@ template MessageProblem decodeMessage(const void*, int, status_t*, std::string*)
 template MessageProblem decodeMessage(const void*, int, command_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, edge_v1_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, prior_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_command_t*, std::string*);
 

@@ -13,11 +13,14 @@
 #include <Eigen/Core>
 
 #include "arbor/command_t.hpp"
+#include "arbor/core/edge_trust.h"
 #include "arbor/core/pose_graph.h"
+#include "arbor/core/robust_kernel.h"
 #include "arbor/core/se2.h"
 #include "arbor/core/se3.h"
 #include "arbor/edge_command_t.hpp"
 #include "arbor/edge_t.hpp"
+#include "arbor/edge_v1_t.hpp"
 #include "arbor/estimate_t.hpp"
 #include "arbor/journal_mark_t.hpp"
 #include "arbor/prior_t.hpp"
@@ -42,6 +45,7 @@ enum class MessageProblem {
   kMagnitude,      ///< a translation component beyond kMaxTranslation (core/relative_pose_factor.h)
   kKind,           ///< prior_t: kind not POSE/POSITION, or a position prior with rotation/offset;
                    ///< edge_command_t: command not DISABLE_EDGE/ENABLE_EDGE
+  kTrust,          ///< edge_t: trust not one of TRUST_*, or kernel not one of KERNEL_*
 };
 
 const char* toString(MessageProblem problem);
@@ -57,6 +61,8 @@ struct StreamEdge {
   Key to = 0;
   G z;
   Matrix omega = Matrix::Identity();
+  EdgeTrust trust = EdgeTrust::kByRule;   ///< edge_t's trust (edge_v1_t: default)
+  KernelKind kernel = KernelKind::kNone;  ///< edge_t's kernel; kNone: KERNEL_DEFAULT
 };
 
 using AnyStreamEdge = std::variant<StreamEdge<SE2>, StreamEdge<SE3>>;
@@ -68,8 +74,17 @@ struct EdgeDecoding {
   bool ok() const { return problem == MessageProblem::kNone; }
 };
 
-/// Decodes and validates the bytes of an edge_t. Never throws.
+/// Decodes and validates the bytes of an edge_t or of the older edge_v1_t (told apart by their
+/// LCM fingerprints; an edge_v1_t has trust and kernel DEFAULT). Never throws.
 EdgeDecoding decodeEdge(const void* data, int size);
+
+/// Whether bytes start with the fingerprint of edge_t or edge_v1_t (for a journal's reader).
+bool isEdgeMessage(const void* data, int size);
+
+/// edge_t's trust and kernel fields as the API's values; false (with *detail naming the field
+/// and its value) for a value no constant of edge_t names.
+bool edgeTrustFromField(std::int8_t field, EdgeTrust* trust, std::string* detail);
+bool edgeKernelFromField(std::int8_t field, KernelKind* kernel, std::string* detail);
 
 /// A validated prior_t of kind POSE: z measures x_id o (o: the sensor offset) with information
 /// Ω (kDoF×kDoF), as PosePriorFactor.
@@ -152,6 +167,10 @@ edge_command_t makeEdgeCommandMessage(const StreamEdgeCommand& command);
 /// The edge_t of a measurement (2D: rotation[0] = angle; 3D: quaternion w x y z).
 template <class G>
 edge_t makeEdgeMessage(const StreamEdge<G>& edge);
+/// The same in the older layout (trust and kernel dropped): what a publisher built before them
+/// sends.
+template <class G>
+edge_v1_t makeEdgeV1Message(const StreamEdge<G>& edge);
 
 /// Checked decoding of our other message types (the array/string lengths are checked before
 /// the generated decoder allocates). Returns kNone on success. Never throws.
@@ -182,6 +201,8 @@ SE3 poseFromFields<SE3>(const double translation[3], const double rotation[4]);
 
 extern template edge_t makeEdgeMessage(const StreamEdge<SE2>&);
 extern template edge_t makeEdgeMessage(const StreamEdge<SE3>&);
+extern template edge_v1_t makeEdgeV1Message(const StreamEdge<SE2>&);
+extern template edge_v1_t makeEdgeV1Message(const StreamEdge<SE3>&);
 extern template prior_t makePriorMessage(const StreamPosePrior<SE2>&);
 extern template prior_t makePriorMessage(const StreamPosePrior<SE3>&);
 extern template prior_t makePriorMessage(const StreamPositionPrior<SE2>&);
@@ -191,6 +212,7 @@ extern template MessageProblem decodeMessage(const void*, int, status_t*, std::s
 extern template MessageProblem decodeMessage(const void*, int, command_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
+extern template MessageProblem decodeMessage(const void*, int, edge_v1_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, prior_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, edge_command_t*, std::string*);
 

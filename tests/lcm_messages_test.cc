@@ -52,8 +52,9 @@ MessageProblem problemOf(const edge_t& m) {
 TEST(LcmMessages, Edge2RoundTrip) {
   const StreamEdge<SE2> e = sampleEdge2();
   const auto bytes = encodeMessage(makeEdgeMessage(e));
-  // The offset of information_size that the decoder pre-checks: 109 + 8 n bytes.
-  EXPECT_EQ(bytes.size(), 109u + 8u * 6u);
+  // The offset of information_size that the decoder pre-checks: 109 + 8 n bytes, then trust
+  // and kernel (one byte each).
+  EXPECT_EQ(bytes.size(), 111u + 8u * 6u);
   const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
   ASSERT_TRUE(d.ok()) << d.detail;
   const auto& got = std::get<StreamEdge<SE2>>(d.edge);
@@ -70,13 +71,89 @@ TEST(LcmMessages, Edge2RoundTrip) {
 TEST(LcmMessages, Edge3RoundTrip) {
   const StreamEdge<SE3> e = sampleEdge3();
   const auto bytes = encodeMessage(makeEdgeMessage(e));
-  EXPECT_EQ(bytes.size(), 109u + 8u * 21u);
+  EXPECT_EQ(bytes.size(), 111u + 8u * 21u);
   const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
   ASSERT_TRUE(d.ok()) << d.detail;
   const auto& got = std::get<StreamEdge<SE3>>(d.edge);
   EXPECT_EQ(got.omega, e.omega);
   EXPECT_LT((got.z.translation() - e.z.translation()).norm(), 1e-15);
   EXPECT_NEAR(got.z.quaternion().angularDistance(e.z.quaternion()), 0, 1e-12);
+}
+
+TEST(LcmMessages, EdgeTrustAndKernelRoundTrip) {
+  StreamEdge<SE2> e = sampleEdge2();
+  for (EdgeTrust trust : {EdgeTrust::kByRule, EdgeTrust::kTrusted, EdgeTrust::kRobust}) {
+    for (KernelKind kernel : {KernelKind::kNone, KernelKind::kTruncatedLeastSquares,
+                              KernelKind::kGemanMcClure, KernelKind::kCauchy, KernelKind::kHuber}) {
+      e.trust = trust;
+      e.kernel = kernel;
+      const auto bytes = encodeMessage(makeEdgeMessage(e));
+      const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
+      ASSERT_TRUE(d.ok()) << d.detail;
+      const auto& got = std::get<StreamEdge<SE2>>(d.edge);
+      EXPECT_EQ(got.trust, trust) << toString(trust);
+      EXPECT_EQ(got.kernel, kernel) << toString(kernel);
+    }
+  }
+}
+
+// The layout before trust and kernel keeps its fingerprint (old journals and publishers) and
+// decodes as trust and kernel DEFAULT, with every other field as it was sent.
+TEST(LcmMessages, EdgeV1LayoutStillDecodes) {
+  EXPECT_EQ(static_cast<std::uint64_t>(edge_v1_t::getHash()), 0xa25c1f74f5f1a4d8ULL);
+  EXPECT_NE(edge_v1_t::getHash(), edge_t::getHash());
+  StreamEdge<SE2> e = sampleEdge2();
+  e.trust = EdgeTrust::kTrusted;  // dropped by the old layout
+  const auto bytes = encodeMessage(makeEdgeV1Message(e));
+  EXPECT_EQ(bytes.size(), 109u + 8u * 6u);
+  EXPECT_TRUE(isEdgeMessage(bytes.data(), static_cast<int>(bytes.size())));
+  const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
+  ASSERT_TRUE(d.ok()) << d.detail;
+  const auto& got = std::get<StreamEdge<SE2>>(d.edge);
+  EXPECT_EQ(got.trust, EdgeTrust::kByRule);
+  EXPECT_EQ(got.kernel, KernelKind::kNone);
+  EXPECT_EQ(got.seq, 42);
+  EXPECT_EQ(got.from, 3);
+  EXPECT_EQ(got.to, 4);
+  EXPECT_EQ(got.omega, e.omega);
+  EXPECT_NEAR(got.z.angle(), 0.3, 1e-15);
+  const auto bytes3 = encodeMessage(makeEdgeV1Message(sampleEdge3()));
+  const EdgeDecoding d3 = decodeEdge(bytes3.data(), static_cast<int>(bytes3.size()));
+  ASSERT_TRUE(d3.ok()) << d3.detail;
+  EXPECT_EQ(std::get<StreamEdge<SE3>>(d3.edge).omega, sampleEdge3().omega);
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    EXPECT_EQ(decodeEdge(bytes.data(), static_cast<int>(n)).problem, MessageProblem::kTruncated)
+        << n;
+  }
+  // The old layout's validation is the new one's.
+  edge_v1_t bad = makeEdgeV1Message(e);
+  bad.to_id = bad.from_id;
+  const auto bad_bytes = encodeMessage(bad);
+  EXPECT_EQ(decodeEdge(bad_bytes.data(), static_cast<int>(bad_bytes.size())).problem,
+            MessageProblem::kSelfLoop);
+  estimate_t other;
+  other.num_poses = 0;
+  const auto other_bytes = encodeMessage(other);
+  EXPECT_FALSE(isEdgeMessage(other_bytes.data(), static_cast<int>(other_bytes.size())));
+}
+
+TEST(LcmMessages, UnknownTrustOrKernelIsRefusedNamingTheValue) {
+  const edge_t good = makeEdgeMessage(sampleEdge2());
+  auto refused = [&](std::int8_t trust, std::int8_t kernel, const std::string& named) {
+    edge_t m = good;
+    m.trust = trust;
+    m.kernel = kernel;
+    const auto bytes = encodeMessage(m);
+    const EdgeDecoding d = decodeEdge(bytes.data(), static_cast<int>(bytes.size()));
+    EXPECT_EQ(d.problem, MessageProblem::kTrust) << named;
+    EXPECT_NE(d.detail.find(named), std::string::npos) << d.detail;
+  };
+  refused(3, 0, "trust 3");
+  refused(-1, 0, "trust -1");
+  refused(127, 0, "trust 127");
+  refused(0, 5, "kernel 5");
+  refused(1, -128, "kernel -128");
+  EXPECT_STREQ(toString(MessageProblem::kTrust), "trust");
 }
 
 TEST(LcmMessages, EveryTruncationIsRefused) {
