@@ -1,5 +1,5 @@
 // The command-line flags of robustness against false loop closures, one binder for every
-// command that has them (`arbor batch`, `arbor replay`): --robust, --kernel, --inlier-threshold,
+// command that has them (`arbor batch`, `arbor replay`, `arbor serve`): --robust, --kernel, --inlier-threshold,
 // --rejected-out, with the same help and the same checks.
 #pragma once
 

@@ -16,7 +16,9 @@
 #include "arbor/tools/cli/batch_refinement.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/cli/smoother_flags.h"
+#include "arbor/tools/serve/closure_report.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
@@ -115,6 +117,13 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
                     "a background batch every N updates (needs --batch; 0: only on command BATCH)")(
       "reseed", po::bool_switch(&options.batch.reseed),
       "a batch estimate with lower F becomes the linearisation point (journaled)");
+  addRobustFlags(desc,
+                 "robust to false loop closures: graduated non-convexity per loop closure in the "
+                 "Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; edge_t's trust and "
+                 "kernel choose per edge");
+  desc.add_options()("closures-out", po::value(&options.closures_path),
+                     "with --robust: where command CLOSURES writes the closure report (`i j "
+                     "weight status` a line)");
   if (helpRequested(args, desc)) return std::nullopt;
   const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
   options.smoother = readSmootherFlags(vm);
@@ -155,6 +164,15 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   }
   if (batch.empty() && options.batch.every > 0)
     throw UsageError("--batch-every needs --batch " + refine::batchSolverNames(true, "|"));
+  line.robust = readRobustFlags(vm, /*allow_auto=*/false);
+  if (line.robust.robust) {
+    RobustOptions robust;
+    robust.kernel = line.robust.kernel;
+    robust.threshold = line.robust.threshold;
+    options.robust = robust;
+  } else if (!options.closures_path.empty()) {
+    throw UsageError("--closures-out needs --robust");
+  }
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
@@ -216,6 +234,8 @@ int serveCommand(const std::vector<std::string>& args) {
   if (!output.empty() && !service.writeG2o(output)) {
     std::cerr << "arbor serve: no edge was applied; " << output << " not written\n";
   }
+  if (!line->robust.rejected_out.empty())
+    serve::writeRejectedEdges(line->robust.rejected_out, s.closures);
   if (line->json) {
     nlohmann::json reasons = nlohmann::json::object();
     for (const auto& [reason, count] : s.intake.rejected_by_reason) reasons[reason] = count;
@@ -279,6 +299,24 @@ int serveCommand(const std::vector<std::string>& args) {
     j["edges_disabled"] = s.edges_disabled;
     j["pairs_disabled"] = s.pairs_disabled;
     j["components"] = s.components;
+    if (options.robust) {
+      int counts[4] = {0, 0, 0, 0};
+      int graduating = 0;
+      for (const ClosureReport& c : s.closures) {
+        ++counts[static_cast<int>(c.status)];
+        graduating += c.graduating;
+      }
+      j["robust"] = {
+          {"kernel", toString(options.robust->kernel)},
+          {"inlier_threshold", s.inlier_threshold},
+          {"closures_inlier", counts[static_cast<int>(ClosureStatus::kInlier)]},
+          {"closures_outlier", counts[static_cast<int>(ClosureStatus::kOutlier)]},
+          {"closures_trusted", counts[static_cast<int>(ClosureStatus::kTrusted)]},
+          {"closures_excluded", counts[static_cast<int>(ClosureStatus::kExcluded)]},
+          {"closures_graduating", graduating},
+      };
+      if (!line->robust.rejected_out.empty()) j["rejected_out"] = line->robust.rejected_out;
+    }
     j["batches"] = nlohmann::json::array();
     for (const auto& b : s.batches) j["batches"].push_back(batchRunJson(b));
     std::cout << j.dump() << std::endl;

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
@@ -15,6 +16,7 @@ struct ServeCommandLine {
   std::string journal_dir;  ///< --journal; options.journal_path is the file inside it
   std::string output;       ///< --output
   bool json = false;
+  RobustFlags robust;  ///< --robust ... (options.robust is set from it)
   /// Everything the service takes (the smoother's by tools/cli/smoother_flags.h), but `log`.
   serve::ServeOptions options;
 };

@@ -16,8 +16,9 @@ namespace {
 template <class G>
 class EngineImpl final : public Engine {
  public:
-  EngineImpl(const SmootherOptions& options, const refine::RefinerOptions& batch)
-      : smoother_(makeOptions(options)), refiner_(batch) {}
+  EngineImpl(const SmootherOptions& options, const refine::RefinerOptions& batch,
+             const std::optional<RobustOptions>& robust)
+      : smoother_(makeOptions(options, robust)), refiner_(batch) {}
 
   int dim() const override { return G::kDim; }
 
@@ -26,7 +27,7 @@ class EngineImpl final : public Engine {
     if (e == nullptr) {
       return {EdgeStatus::kRejected, "edge of another dimension than the stream"};
     }
-    return smoother_.addEdge(e->from, e->to, e->z, e->omega);
+    return smoother_.addEdge(e->from, e->to, e->z, e->omega, e->trust, e->kernel);
   }
 
   EdgeResult addPrior(const AnyStreamPrior& any) override {
@@ -46,6 +47,10 @@ class EngineImpl final : public Engine {
   UpdateStats refine() override { return smoother_.finalize(); }
   double objective() const override { return smoother_.objective(); }
   OnlineStats stats() const override { return smoother_.stats(); }
+  std::vector<ClosureReport> closures() const override { return smoother_.closures(); }
+  double inlierThreshold() const override {
+    return smoother_.gnc() ? smoother_.gnc()->threshold() : 0.0;
+  }
 
   estimate_t estimate(bool full) override {
     estimate_t m = message(smoother_.smoother().estimate(), full);
@@ -145,9 +150,11 @@ class EngineImpl final : public Engine {
 
  private:
   using Fields = std::array<double, 7>;
-  static OnlineSmootherOptions<G> makeOptions(const SmootherOptions& s) {
+  static OnlineSmootherOptions<G> makeOptions(const SmootherOptions& s,
+                                              const std::optional<RobustOptions>& robust) {
     OnlineSmootherOptions<G> o;
     o.smoother = s;
+    o.robust = robust;
     return o;
   }
   OnlineSmoother<G> smoother_;
@@ -158,9 +165,10 @@ class EngineImpl final : public Engine {
 }  // namespace
 
 std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options,
-                                   const refine::RefinerOptions& batch) {
-  if (dim == 2) return std::make_unique<EngineImpl<SE2>>(options, batch);
-  if (dim == 3) return std::make_unique<EngineImpl<SE3>>(options, batch);
+                                   const refine::RefinerOptions& batch,
+                                   const std::optional<RobustOptions>& robust) {
+  if (dim == 2) return std::make_unique<EngineImpl<SE2>>(options, batch, robust);
+  if (dim == 3) return std::make_unique<EngineImpl<SE3>>(options, batch, robust);
   throw std::invalid_argument("makeEngine: dim " + std::to_string(dim) + " is not 2 or 3");
 }
 

@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/io/lcm_messages.h"
@@ -34,6 +35,10 @@ class Engine {
   /// F over every factor not disabled (OnlineSmoother::objective).
   virtual double objective() const = 0;
   virtual OnlineStats stats() const = 0;
+  /// With robust smoothing: every loop closure's weight and status (empty without it), and
+  /// the threshold c² in use (0 without it).
+  virtual std::vector<ClosureReport> closures() const = 0;
+  virtual double inlierThreshold() const = 0;
   /// The estimate: every pose (`full`) or the poses whose value changed since the last call.
   /// F is filled (the objective) only for a full estimate, else NaN.
   virtual estimate_t estimate(bool full) = 0;
@@ -61,9 +66,10 @@ class Engine {
   virtual ReseedResult reseed(const estimate_t& seed) = 0;
 };
 
-/// An engine for 2D (SE2) or 3D (SE3) poses; throws std::invalid_argument for another dim or
-/// batch.every < 0.
+/// An engine for 2D (SE2) or 3D (SE3) poses, with online robust smoothing when `robust` is
+/// set; throws std::invalid_argument for another dim, batch.every < 0 or bad robust options.
 std::unique_ptr<Engine> makeEngine(int dim, const SmootherOptions& options,
-                                   const refine::RefinerOptions& batch = {});
+                                   const refine::RefinerOptions& batch = {},
+                                   const std::optional<RobustOptions>& robust = std::nullopt);
 
 }  // namespace arbor::serve

@@ -1,5 +1,6 @@
 #include "arbor/tools/serve/serve_service.h"
 
+#include "arbor/tools/serve/closure_report.h"
 #include "arbor/tools/serve/lcm_tuning.h"
 
 #include <algorithm>
@@ -145,6 +146,8 @@ void Service::stop() {
     publishEstimate(true);
     summary_.final_estimate = engine_->estimate(true);
     summary_.F_final = summary_.final_estimate.F;
+    summary_.closures = engine_->closures();
+    summary_.inlier_threshold = engine_->inlierThreshold();
   }
   publishStatus();
   {
@@ -422,7 +425,9 @@ void Service::smootherLoop() {
 
 void Service::ensureEngine(int dim) {
   if (engine_) return;
-  engine_ = makeEngine(dim, options_.smoother, options_.batch);
+  engine_ = makeEngine(dim, options_.smoother, options_.batch, options_.robust);
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  inlier_threshold_ = engine_->inlierThreshold();
 }
 
 void Service::writeMark(std::int8_t kind, int edges) {
@@ -518,6 +523,7 @@ bool Service::applyBatch(std::vector<Queued>& batch, bool from_journal) {
     components_ = stats.components;
     edges_disabled_ = stats.edges_disabled;
     pairs_disabled_ = stats.pairs_disabled;
+    robust_stats_ = stats;
     smoother_rejected_ += rejected;
     smoother_duplicates_ += duplicates;
     smoother_priors_rejected_ += priors_rejected;
@@ -713,6 +719,9 @@ void Service::handleCommand(const command_t& c) {
     case command_t::BATCH:
       startBatch(true);
       break;
+    case command_t::CLOSURES:
+      writeClosures(c);
+      break;
     default:
       logLine("unknown command " + std::to_string(c.command));
   }
@@ -741,6 +750,29 @@ void Service::writeSnapshot(const command_t& c) {
     return;
   }
   logLine("snapshot written to " + snapshots_.dir() + "/" + c.path);
+}
+
+void Service::writeClosures(const command_t& c) {
+  // The file is the operator's (--closures-out), never one named over the network.
+  if (!c.path.empty()) {
+    logLine("closures: refused, the command names a path ('" + c.path +
+            "'); the report goes only to --closures-out");
+  } else if (options_.closures_path.empty()) {
+    logLine("closures: no --closures-out");
+  } else if (!options_.robust) {
+    logLine("closures: no report without --robust");
+  } else if (!engine_) {
+    logLine("closures: no estimate yet");
+  } else {
+    try {
+      const std::vector<ClosureReport> closures = engine_->closures();
+      writeClosureReport(options_.closures_path, closures);
+      logLine("closures: " + std::to_string(closures.size()) + " written to " +
+              options_.closures_path);
+    } catch (const std::exception& e) {
+      logLine(std::string("closures failed: ") + e.what());
+    }
+  }
 }
 
 void Service::publishEstimate(bool full) {
@@ -886,6 +918,16 @@ status_t Service::status() const {
   s.batch_lambda_min = last.lambda_min;
   s.batch_time_s = last.time_s;
   s.batch_reseeded = last.reseeded;
+  s.robust = options_.robust.has_value();
+  const OnlineStats& r = robust_stats_;
+  s.closures_inlier = r.closures_inlier;
+  s.closures_outlier = r.closures_outlier;
+  s.closures_trusted = r.closures_trusted;
+  s.closures_excluded = r.closures_excluded;
+  s.closures_graduating = r.closures_graduating;
+  s.closures_total =
+      r.closures_inlier + r.closures_outlier + r.closures_trusted + r.closures_excluded;
+  s.inlier_threshold = inlier_threshold_;
   return s;
 }
 
@@ -915,7 +957,6 @@ void Service::replayJournal() {
             " bytes of an incomplete event at the end");
   }
   std::deque<Queued> unmarked;
-  const std::int64_t edge_hash = edge_t::getHash();
   const std::int64_t prior_hash = prior_t::getHash();
   const std::int64_t command_hash = edge_command_t::getHash();
   const std::int64_t mark_hash = journal_mark_t::getHash();
@@ -926,7 +967,7 @@ void Service::replayJournal() {
   for (const LogEvent& event : log.events) {
     const std::int64_t hash = leadingHash(event.data);
     const int size = static_cast<int>(event.data.size());
-    if (hash == edge_hash || hash == prior_hash || hash == command_hash) {
+    if (isEdgeMessage(event.data.data(), size) || hash == prior_hash || hash == command_hash) {
       const bool prior = hash == prior_hash, command = hash == command_hash;
       IntakeResult r = command ? intake_.admitCommand(event.data.data(), size)
                        : prior ? intake_.admitPrior(event.data.data(), size)

@@ -30,6 +30,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <ostream>
 #include <string>
 #include <thread>
@@ -93,6 +94,10 @@ struct ServeOptions {
   /// Lines a sender can provoke (refusals, gaps): at most one per reason per this period, with
   /// the count of those held back; 0: every line.
   std::chrono::milliseconds log_period{1000};
+  /// Online robust smoothing of the loop closures (--robust); none: off. Per edge, edge_t's
+  /// trust and kernel refine it.
+  std::optional<RobustOptions> robust;
+  std::string closures_path;  ///< where command CLOSURES writes (--closures-out); "": refused
 };
 
 struct ServeSummary {
@@ -118,6 +123,9 @@ struct ServeSummary {
   int batches_skipped = 0, reseeds = 0, journal_reseeds = 0;
   std::vector<refine::BatchRun> batches;  ///< every batch run completed, in order
   double F_final = 0;
+  /// With robust smoothing: every loop closure at the end, the threshold c² in use.
+  std::vector<ClosureReport> closures;
+  double inlier_threshold = 0;
   cli::LatencySummary latency;       ///< receipt → estimate published, every edge applied
   cli::LatencySummary transport;     ///< edge utime → receipt (meaningful when clocks agree)
   estimate_t final_estimate;         ///< full
@@ -197,6 +205,8 @@ class Service {
   void startBatch(bool on_command);
   void applyReseed(const estimate_t& seed, bool from_journal, refine::BatchRun* run);
   void handleCommand(const command_t& command);
+  /// Command CLOSURES: the closure report to options_.closures_path.
+  void writeClosures(const command_t& command);
   void ensureEngine(int dim);
   void publishEstimate(bool full);
   void publishStatus();
@@ -248,6 +258,8 @@ class Service {
   std::int64_t commands_applied_ = 0, commands_refused_ = 0, journal_commands_ = 0;
   std::map<std::string, std::int64_t> command_refusals_;  ///< by EdgeSwitchStatus
   int edges_disabled_ = 0, pairs_disabled_ = 0;
+  OnlineStats robust_stats_;     ///< closures_* of the last update (robust smoothing)
+  double inlier_threshold_ = 0;  ///< c² in use (robust smoothing)
   std::int64_t last_command_sender_ = 0, last_command_seq_ = 0;
   std::string last_command_result_;
   std::int64_t last_sender_ = 0, last_seq_ = 0;  ///< of the last edge applied
