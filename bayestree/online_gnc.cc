@@ -309,6 +309,21 @@ ClosureCounts OnlineGnc<G>::counts() const {
 }
 
 template <class G>
+bool OnlineGnc<G>::judges(int factor) const {
+  const int id = closureOf(factor);
+  return id >= 0 &&
+         (closures_[id].state == State::kGraduating || closures_[id].state == State::kSettled);
+}
+
+template <class G>
+double OnlineGnc<G>::rho(int factor, double s) const {
+  if (!judges(factor)) return s;
+  const Closure& c = closures_[closureOf(factor)];
+  if (c.kernel == KernelKind::kTruncatedLeastSquares) return std::min(s, c2_);
+  return kernelAt(c, 1.0).rho(s);
+}
+
+template <class G>
 std::vector<ClosureReport> OnlineGnc<G>::closures() const {
   std::vector<ClosureReport> out;
   out.reserve(closures_.size());

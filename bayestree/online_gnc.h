@@ -152,6 +152,13 @@ class OnlineGnc {
   void exclude(IncrementalSmoother<G>& smoother, int factor);
   void include(IncrementalSmoother<G>& smoother, int factor);
 
+  /// Whether the GNC judges factor `factor` (a loop closure graduating or settled; not trusted,
+  /// excluded, odometry or a prior).
+  bool judges(int factor) const;
+  /// ρ of factor `factor` at s = eᵀΩe: its closure's kernel at μ = 1 when the GNC judges it
+  /// (TLS: min(s, c²)), else s. Σ of it over the factors is the robust cost Σρ.
+  double rho(int factor, double s) const;
+
   bool graduating() const { return !graduating_.empty(); }
   ClosureCounts counts() const;
   std::vector<ClosureReport> closures() const;

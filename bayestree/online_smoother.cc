@@ -329,7 +329,8 @@ UpdateStats OnlineSmoother<G>::update() {
   // The online GNC (bayestree/online_gnc.*) never reweights a disabled edge: the factors of a
   // pair taken back are excluded from it (disableEdge, and excludeDisabled for those that
   // enter while their pair is disabled).
-  gnc_->step(smoother_);  // the first graduation step rides on this update
+  gnc_->step(smoother_, recheck_all_);  // the first graduation step rides on this update
+  recheck_all_ = false;
   int first = smoother_.numFactors();
   UpdateStats total = smoother_.update();
   gnc_->resolve(smoother_);
@@ -391,6 +392,17 @@ UpdateStats OnlineSmoother<G>::recordUpdate(const UpdateStats& s) {
   stats_.last_update = s;
   indexEdgeFactors();
   return s;
+}
+
+template <class G>
+PoseGraph<G> OnlineSmoother<G>::snapshot(std::vector<char>* judged) const {
+  PoseGraph<G> graph = snapshot();
+  judged->clear();
+  const auto& fs = smoother_.factors();
+  for (size_t k = 0; k < fs.size(); ++k)  // the order snapshot() adds the edges in
+    if (!disabledFactor(fs[k]) && fs[k].relativePose() != nullptr)
+      judged->push_back(gnc_ && gnc_->judges(static_cast<int>(k)) ? 1 : 0);
+  return graph;
 }
 
 template <class G>
@@ -502,6 +514,13 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
     result.F_rebuilt = enabledCost(fresh.estimate(), fresh.factors());
     result.F_before = enabledCost(current, smoother_.factors()) + enabledCost(current, queued_);
   }
+  if (gnc_) {  // robust: Σρ, which a seed that drops a false closure lowers (F would rise)
+    // The rebuild numbers its factors anew (remap below); the GNC knows the old numbers, so
+    // both points are costed with the old factors (the same ones, the same dense poses).
+    const std::vector<G> current = smoother_.estimate(), rebuilt = fresh.estimate();
+    result.F_rebuilt = robustCost(rebuilt, smoother_.factors()) + enabledCost(rebuilt, queued_);
+    result.F_before = robustCost(current, smoother_.factors()) + enabledCost(current, queued_);
+  }
   result.applied = !only_if_lower || result.F_rebuilt < result.F_before;
   if (result.applied) {
     smoother_ = std::move(fresh);
@@ -510,7 +529,10 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
     pair_factors_.clear();  // the rebuild numbers the factors anew
     factors_indexed_ = 0;
     indexEdgeFactors();
-    if (gnc_) gnc_->remap(smoother_);  // the weights came along on the factors
+    if (gnc_) {
+      gnc_->remap(smoother_);  // the weights came along on the factors
+      recheck_all_ = true;     // the settled closures are re-checked at the new point
+    }
   }
   result.stats.time_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -680,6 +702,24 @@ double OnlineSmoother<G>::enabledCost(const std::vector<G>& x,
   for (const Factor<G>& f : fs)
     if (!disabledFactor(f)) F += f.cost(x);
   return F;
+}
+
+template <class G>
+double OnlineSmoother<G>::robustCost(const std::vector<G>& x,
+                                     const std::vector<Factor<G>>& fs) const {
+  // Σρ = Σ_judged ρ_c(s) + Σ_others s, s = eᵀΩe at x; the disabled edges left out.
+  double F = 0;
+  for (size_t k = 0; k < fs.size(); ++k) {
+    if (disabledFactor(fs[k])) continue;
+    const double cost = fs[k].cost(x);
+    F += gnc_ ? gnc_->rho(static_cast<int>(k), cost) : cost;
+  }
+  return F;
+}
+
+template <class G>
+double OnlineSmoother<G>::robustObjective() const {
+  return robustCost(smoother_.estimate(), smoother_.factors());
 }
 
 template <class G>

@@ -21,7 +21,10 @@
 //
 // Reseeding (reseed()) makes given values — typically a batch solver's estimate of a snapshot()
 // — the linearisation point and rebuilds the Bayes tree from scratch; incremental updates then
-// continue from there.
+// continue from there. With robust smoothing the closures keep their weights, a rebuild is kept
+// (only_if_lower) when it lowers Σρ, and the next update re-checks every settled closure at the
+// new point (OnlineGnc::step with recheck_all): the classification a robust batch found comes
+// in through the values it gives.
 //
 // Robust smoothing (OnlineSmootherOptions::robust, off by default): every loop closure is judged
 // and graduated by an OnlineGnc (bayestree/online_gnc.h) through the smoother's weight seam;
@@ -95,9 +98,11 @@ struct OnlineSmootherOptions {
 /// What reseed() did.
 struct ReseedResult {
   bool applied = false;  ///< the rebuilt smoother replaced the old one
-  double F_before = 0;   ///< F over every factor at the estimate before
-  double F_rebuilt = 0;  ///< F over every factor at the rebuilt estimate
-  UpdateStats stats;     ///< of the rebuild's update; time_s: the whole rebuild
+  /// F over every factor at the estimate before / at the rebuilt estimate; with robust
+  /// smoothing Σρ (robustObjective) instead, what only_if_lower compares.
+  double F_before = 0;
+  double F_rebuilt = 0;
+  UpdateStats stats;  ///< of the rebuild's update; time_s: the whole rebuild
 };
 
 struct OnlineStats {
@@ -188,6 +193,13 @@ class OnlineSmoother {
   /// the current estimate as `poses`: a problem for a batch solver with the same gauge (ids in
   /// dense order, not sorted).
   PoseGraph<G> snapshot() const;
+  /// As snapshot(), and per snapshot edge whether the online GNC judges it (*judged; all false
+  /// without robust smoothing): the edges a robust batch weights, the others it trusts.
+  PoseGraph<G> snapshot(std::vector<char>* judged) const;
+  /// The robust cost Σρ at the estimate over every factor not disabled: ρ of a judged closure
+  /// at its kernel (TLS: min(s, c²)), s = eᵀΩe of everything else (= objective() without robust
+  /// smoothing). O(m).
+  double robustObjective() const;
 
   /// The complete linearisation point reseed(values) would use, in dense order:
   /// - poses in `values` take those values, all moved by the one rigid transform that puts the
@@ -261,6 +273,10 @@ class OnlineSmoother {
   EdgeResult addPrior(Key id, const Factor<G>& prior, const G& start);
   std::vector<G> completeSeed(std::vector<G> values, const std::vector<char>& given) const;
   ReseedResult rebuild(const std::vector<G>& seed, bool only_if_lower);
+  /// Σρ (robustObjective) of `factors` at x, skipping the disabled ones; factors past the GNC's
+  /// (queued ones) count s.
+  double robustCost(const std::vector<G>& x, const std::vector<Factor<G>>& factors) const;
+  bool recheck_all_ = false;  ///< the next update re-checks every settled closure (reseed)
 
   // Taking an edge back.
   using IdPair = std::pair<Key, Key>;  ///< {min, max} of two ids

@@ -34,6 +34,13 @@ nlohmann::json batchRunJson(const BatchRun& b) {
     j["F_before_reseed"] = b.F_before_reseed;
     j["F_after_reseed"] = b.F_after_reseed;
   }
+  if (b.robust) {  // the F_* above are Σρ
+    j["robust"] = true;
+    j["judged"] = b.judged;
+    j["rejected"] = b.rejected;
+    j["inlier_threshold"] = b.threshold;
+    if (!b.rtr_skipped.empty()) j["rtr_skipped"] = b.rtr_skipped;
+  }
   if (b.rank > 0) {
     j["F_rtr"] = b.F_rtr;
     j["rtr_time_s"] = b.rtr_time_s;
@@ -48,7 +55,8 @@ std::string batchRunLine(const BatchRun& b) {
   std::ostringstream out;
   out << std::setprecision(8) << (b.final_run ? "final" : "update ")
       << (b.final_run ? "" : std::to_string(b.update)) << ": " << b.poses << " poses, " << b.edges
-      << " edges, F inc " << b.F_incremental << " lm " << b.F_lm;
+      << " edges, " << (b.robust ? "Σρ inc " : "F inc ") << b.F_incremental
+      << (b.robust ? " gnc " : " lm ") << b.F_lm;
   if (b.rank > 0) out << " rtr " << b.F_rtr;
   out << std::setprecision(3) << " (gap " << 100.0 * b.relative_gap << " %, " << b.winner
       << " wins by " << b.margin << " = " << 100.0 * b.margin_relative << " %), max diff "
@@ -57,6 +65,10 @@ std::string batchRunLine(const BatchRun& b) {
   if (b.rank > 0) {
     out << ", rank " << b.rank << " lambda_min " << b.lambda_min
         << (b.certified ? " certified" : " not certified");
+  }
+  if (b.robust) {
+    out << ", " << b.rejected << " of " << b.judged << " judged edges rejected";
+    if (!b.rtr_skipped.empty()) out << ", rtr skipped: " << b.rtr_skipped;
   }
   if (b.reseeded) out << ", reseeded (" << b.reseed_s << " s)";
   if (b.reseed_rejected) {
@@ -76,6 +88,7 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
   refine::BatchRefiner<G> refiner(refiner_options);  // throws on every < 0
   OnlineSmootherOptions<G> options;
   options.smoother = settings.smoother;
+  options.robust = settings.robust;  // the batches are robust with it (tools/refine)
   OnlineSmoother<G> smoother(options);
   LoopResult<G> result;
 
@@ -105,9 +118,13 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
   result.reseeds = refiner.reseeds();
   result.reseed_s = refiner.reseedSeconds();
 
-  const PoseGraph<G> snapshot = smoother.snapshot();
+  std::vector<char> judged;
+  const PoseGraph<G> snapshot = smoother.snapshot(&judged);
   if (loop.final_run && snapshot.numPoses() > 1 && snapshot.numEdges() > 0) {
-    refine::BatchOutcome<G> last = refine::solveSnapshot(loop.solver, snapshot);
+    refine::BatchOutcome<G> last =
+        smoother.gnc() ? refine::solveRobustSnapshot(loop.solver, snapshot, judged,
+                                                     refine::gncOptionsOf(*smoother.gnc()))
+                       : refine::solveSnapshot(loop.solver, snapshot);
     last.run.update = static_cast<std::int64_t>(r.rows.size());
     last.run.final_run = true;
     auto toGraphOrder = [&](const std::vector<G>& poses) {
@@ -117,7 +134,10 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
     };
     r.batch_poses = toGraphOrder(last.batch);
     r.batch.F_initial = last.run.F_incremental;
-    r.batch.F_final = objective(graph, r.batch_poses);
+    // Robust: F over the edges the online smoother kept, as runReplay's final batch reports.
+    r.batch.F_final = settings.robust
+                          ? objective(keepEdges(graph, keptEdges(graph, r.closures)), r.batch_poses)
+                          : objective(graph, r.batch_poses);
     r.batch.time_s = last.run.time_s;
     r.batch.iterations = last.run.iterations;
     r.batch.termination = Termination::kConverged;

@@ -225,8 +225,6 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
                      refine::batchSolverNames(true, "|"));
   }
   run.robust = readRobustFlags(vm, /*allow_auto=*/false);
-  if (run.robust.robust && run.batch)
-    throw UsageError("--robust with --batch: the batch runs in the loop are not robust yet");
   run.read.information = parseInformationPolicy(information);
   return run;
 }

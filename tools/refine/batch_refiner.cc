@@ -127,6 +127,104 @@ BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot) 
 }
 
 template <class G>
+GncOptions gncOptionsOf(const OnlineGnc<G>& online) {
+  GncOptions gnc;
+  gnc.kernel = online.options().kernel;
+  gnc.threshold = online.threshold();
+  return gnc;
+}
+
+template <class G>
+double robustCost(const PoseGraph<G>& graph, const std::vector<G>& poses,
+                  const std::vector<char>& judged, KernelKind kernel, double c2) {
+  // Σρ = F − Σ_judged (s − ρ(s)), F = Σ eᵀΩe over every edge and prior.
+  const RobustKernel k{kernel, c2, 1.0};
+  double cost = objective(graph, poses);
+  for (size_t e = 0; e < graph.edges.size(); ++e) {
+    if (!judged[e]) continue;
+    const auto& edge = graph.edges[e];
+    const double s = edge.cost(poses[edge.i], poses[edge.j]);
+    const double rho = kernel == KernelKind::kTruncatedLeastSquares ? std::min(s, c2) : k.rho(s);
+    cost -= s - rho;
+  }
+  return cost;
+}
+
+template <class G>
+BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
+                                    const std::vector<char>& judged, GncOptions gnc) {
+  requireRefining(solver);
+  if (judged.size() != snapshot.edges.size())
+    throw std::invalid_argument("solveRobustSnapshot: " + std::to_string(judged.size()) +
+                                " marks for " + std::to_string(snapshot.edges.size()) + " edges");
+  BatchOutcome<G> out;
+  BatchRun& run = out.run;
+  run.robust = true;
+  run.threshold = gnc.threshold;
+  const std::vector<G>& incremental = snapshot.poses;
+  run.poses = snapshot.numPoses();
+  run.edges = snapshot.numEdges();
+  for (char j : judged) run.judged += j;
+  auto rho = [&](const std::vector<G>& x) {
+    return robustCost(snapshot, x, judged, gnc.kernel, gnc.threshold);
+  };
+  run.F_incremental = rho(incremental);
+
+  // GNC from the incremental estimate, trusting what the online GNC trusts.
+  gnc.trust_odometry = false;
+  gnc.trusted.assign(judged.size(), 0);
+  for (size_t e = 0; e < judged.size(); ++e) gnc.trusted[e] = judged[e] ? 0 : 1;
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<G> estimate = incremental;
+  GncResult result = solveGnc(snapshot, &estimate, gnc);
+  run.lm_time_s = secondsSince(t0);
+  run.F_lm = rho(estimate);
+  run.iterations = result.iterations;
+  run.rejected = result.rejected;
+  out.batch = estimate;
+
+  // rtr: the staircase on GNC's inlier set, certifying that inlier problem.
+  std::vector<G> certified;
+  if (solver == BatchSolver::kRtr) {
+    t0 = std::chrono::steady_clock::now();
+    certified = estimate;
+    try {
+      GncResult classified = result;
+      const CertifiedInliers c = certifyInliers(snapshot, &classified, &certified);
+      run.F_rtr = rho(certified);
+      run.rank = c.rtr.rank;
+      run.lambda_min = c.rtr.lambda_min;
+      run.certified = c.rtr.certified;
+      run.rejected = classified.rejected;
+      out.batch = certified;
+    } catch (const std::exception& e) {
+      run.rtr_skipped = e.what();
+      certified.clear();
+    }
+    run.rtr_time_s = secondsSince(t0);
+  }
+  run.time_s = run.lm_time_s + run.rtr_time_s;
+  run.F_batch = rho(out.batch);
+  run.relative_gap = (run.F_incremental - run.F_batch) / std::max(run.F_batch, 1e-300);
+
+  const Verdict verdict = pickWinner(run.F_incremental, run.F_lm, run.F_rtr);
+  run.winner = verdict.winner == "lm" ? "gnc" : verdict.winner;
+  run.margin = verdict.margin;
+  run.margin_relative = verdict.margin_relative;
+  if (verdict.winner == "lm") out.best = estimate;
+  if (verdict.winner == "rtr") out.best = certified;
+  out.incremental = incremental;
+  const G inc0 = incremental[0].inverse(), bat0 = out.batch[0].inverse();
+  for (size_t k = 0; k < incremental.size(); ++k) {
+    const G a = inc0.compose(incremental[k]), b = bat0.compose(out.batch[k]);
+    run.max_translation_diff =
+        std::max(run.max_translation_diff, (a.translation() - b.translation()).norm());
+    run.max_rotation_diff = std::max(run.max_rotation_diff, rotationAngle(a, b));
+  }
+  return out;
+}
+
+template <class G>
 std::vector<G> seedValues(const OnlineSmoother<G>& smoother, const BatchOutcome<G>& outcome) {
   const size_t n = outcome.best.size();
   if (n != outcome.incremental.size() || n > static_cast<size_t>(smoother.stats().poses)) {
@@ -144,6 +242,8 @@ std::vector<G> seedValues(const OnlineSmoother<G>& smoother, const BatchOutcome<
 template <class G>
 struct BatchRefiner<G>::Flight {
   PoseGraph<G> snapshot;
+  std::vector<char> judged;       ///< robust: per snapshot edge, weighted by GNC
+  std::optional<GncOptions> gnc;  ///< robust: the smoother's kernel and c²
   std::int64_t update = 0;
   int updates_during = 0;
   BatchOutcome<G> outcome;
@@ -153,7 +253,8 @@ struct BatchRefiner<G>::Flight {
 
   void solve(BatchSolver solver) {
     try {
-      outcome = solveSnapshot(solver, snapshot);
+      outcome = gnc ? solveRobustSnapshot(solver, snapshot, judged, *gnc)
+                    : solveSnapshot(solver, snapshot);
     } catch (...) {
       error = std::current_exception();
     }
@@ -197,10 +298,15 @@ bool BatchRefiner<G>::start(const OnlineSmoother<G>& smoother, std::int64_t upda
     ++skipped_;
     return false;
   }
-  PoseGraph<G> snapshot = smoother.snapshot();
+  std::vector<char> judged;
+  PoseGraph<G> snapshot = smoother.snapshot(&judged);
   if (snapshot.numPoses() < 2 || snapshot.numEdges() == 0) return false;
   flight_ = std::make_unique<Flight>();
   flight_->snapshot = std::move(snapshot);
+  if (const OnlineGnc<G>* online = smoother.gnc()) {  // robust: GNC as the online one judges
+    flight_->gnc = gncOptionsOf(*online);
+    flight_->judged = std::move(judged);
+  }
   flight_->update = update;
   Flight* f = flight_.get();
   const BatchSolver solver = options_.solver;
@@ -273,6 +379,16 @@ std::vector<BatchRun> BatchRefiner<G>::afterUpdate(OnlineSmoother<G>& smoother,
 template std::vector<SE2> seedValues(const OnlineSmoother<SE2>&, const BatchOutcome<SE2>&);
 template std::vector<SE3> seedValues(const OnlineSmoother<SE3>&, const BatchOutcome<SE3>&);
 template BatchOutcome<SE2> solveSnapshot(BatchSolver, const PoseGraph<SE2>&);
+template BatchOutcome<SE2> solveRobustSnapshot(BatchSolver, const PoseGraph<SE2>&,
+                                               const std::vector<char>&, GncOptions);
+template BatchOutcome<SE3> solveRobustSnapshot(BatchSolver, const PoseGraph<SE3>&,
+                                               const std::vector<char>&, GncOptions);
+template GncOptions gncOptionsOf(const OnlineGnc<SE2>&);
+template GncOptions gncOptionsOf(const OnlineGnc<SE3>&);
+template double robustCost(const PoseGraph<SE2>&, const std::vector<SE2>&, const std::vector<char>&,
+                           KernelKind, double);
+template double robustCost(const PoseGraph<SE3>&, const std::vector<SE3>&, const std::vector<char>&,
+                           KernelKind, double);
 template BatchOutcome<SE3> solveSnapshot(BatchSolver, const PoseGraph<SE3>&);
 template class BatchRefiner<SE2>;
 template class BatchRefiner<SE3>;

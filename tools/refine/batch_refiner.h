@@ -10,6 +10,16 @@
 // LM and RTR wins; the report says which and by how much. With reseeding, a winning batch
 // estimate becomes the smoother's linearisation point (OnlineSmoother::reseed).
 //
+// Robust (the smoother has online robust smoothing, OnlineSmootherOptions::robust): the batch is
+// GNC (core/gnc_solver.h, the smoother's kernel and c²) from the incremental estimate over the
+// snapshot, trusting exactly the edges the online GNC trusts; for rtr then SE-Sync's staircase on
+// GNC's inlier set (certifyInliers: the certificate is of the inlier problem, not of the choice
+// of inliers). Keep-best compares Σρ (the robust cost: ρ of the judged edges, TLS min(s, c²),
+// eᵀΩe of the others) instead of F, since F counts the false closures in full; the report's
+// F_* fields then hold Σρ and the winner is "incremental", "gnc" or "rtr". A reseed carries the
+// classification through the values: OnlineSmoother::reseed keeps the rebuild only if it lowers
+// Σρ and re-checks every settled closure at the new point.
+//
 // Thread-safety: a BatchRefiner belongs to the thread that owns the smoother; only the solve of
 // a snapshot (a copy) runs on the background thread.
 #pragma once
@@ -22,6 +32,7 @@
 #include <vector>
 
 #include "arbor/bayestree/online_smoother.h"
+#include "arbor/core/gnc_solver.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/tools/refine/batch_solvers.h"
 
@@ -72,6 +83,13 @@ struct BatchRun {
   int rank = 0;
   double lambda_min = 0;
   bool certified = false;
+  // Robust (header comment): F_incremental, F_lm (GNC's), F_rtr and F_batch are Σρ.
+  bool robust = false;
+  int judged = 0;        ///< snapshot edges GNC weighted (the others trusted)
+  int rejected = 0;      ///< of them, outliers in the batch estimate (--batch's solver)
+  double threshold = 0;  ///< c² on eᵀΩe
+  /// rtr: why the staircase did not run on the inlier set ("" when it did), e.g. priors.
+  std::string rtr_skipped;
 };
 
 struct Verdict {
@@ -98,6 +116,22 @@ struct BatchOutcome {
 /// solvers throw.
 template <class G>
 BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot);
+
+/// The robust batch of a snapshot (header comment): GNC with `gnc` (its kernel and threshold;
+/// `judged` per edge: weighted, else trusted), then for rtr certifyInliers; keep-best by Σρ.
+template <class G>
+BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
+                                    const std::vector<char>& judged, GncOptions gnc);
+
+/// The GNC options of a robust batch beside `online`: its kernel and threshold c².
+template <class G>
+GncOptions gncOptionsOf(const OnlineGnc<G>& online);
+
+/// Σρ of `poses` on `graph`: for the edges marked in `judged` ρ(s) of `kernel` at c² (TLS:
+/// min(s, c²)), s = eᵀΩe for every other edge and prior.
+template <class G>
+double robustCost(const PoseGraph<G>& graph, const std::vector<G>& poses,
+                  const std::vector<char>& judged, KernelKind kernel, double c2);
 
 /// The values a reseed from `outcome` gives the snapshot's poses (the first best.size() in dense
 /// order): the winner's correction of the snapshot's incremental estimate applied on the left
