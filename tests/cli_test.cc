@@ -237,12 +237,21 @@ TEST(Cli, ReplayRobustWritesTheRejectedEdges) {
   const Result text = run("replay " + file + " --robust --kernel gm");
   ASSERT_EQ(text.status, 0) << text.out;
   EXPECT_NE(text.out.find("closures      "), std::string::npos) << text.out;
-  for (const std::string args : {"--kernel tls", "--rejected-out x.txt", "--inlier-threshold 3",
-                                 "--robust --kernel welsch", "--robust --inlier-threshold -1",
-                                 "--robust --inlier-threshold auto", "--robust --batch lm"}) {
+  for (const std::string args :
+       {"--kernel tls", "--rejected-out x.txt", "--inlier-threshold 3", "--robust --kernel welsch",
+        "--robust --inlier-threshold -1", "--robust --inlier-threshold auto"}) {
     const Result bad = run("replay " + file + " " + args);
     EXPECT_EQ(bad.status, 2) << args << ": " << bad.out;
     EXPECT_EQ(std::count(bad.out.begin(), bad.out.end(), '\n'), 1) << args << ": " << bad.out;
+  }
+  // The batches in the loop are robust with --robust (GNC, keep-best by Σρ).
+  const Result loop = run("replay " + file + " --robust --batch lm --batch-every 200 --json");
+  ASSERT_EQ(loop.status, 0) << loop.out;
+  const nlohmann::json lj = nlohmann::json::parse(loop.out);
+  ASSERT_FALSE(lj["batches"].empty());
+  for (const auto& b : lj["batches"]) {
+    EXPECT_TRUE(b["robust"].get<bool>());
+    EXPECT_LE(b["F_batch"].get<double>(), b["F_incremental"].get<double>() * (1 + 1e-9));
   }
 }
 

@@ -22,8 +22,10 @@
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tests/lcm_test_support.h"
 #include "arbor/tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/replay_order.h"
 #include "arbor/tools/cli/replay_runner.h"
+#include "arbor/tools/cli/serve_command.h"
 #include "arbor/tools/serve/closure_report.h"
 #include "arbor/tools/serve/serve_service.h"
 
@@ -301,6 +303,28 @@ TEST(LcmServeRobust, OldEdgeV1JournalReplays) {
     }
   }
   std::remove(journal.c_str());
+}
+
+TEST(LcmServeRobust, CommandLineTakesTheReplaysRobustFlags) {
+  const auto line =
+      cli::parseServeCommandLine({"--robust", "--kernel", "gm", "--inlier-threshold", "2",
+                                  "--rejected-out", "r.txt", "--closures-out", "c.txt"});
+  ASSERT_TRUE(line.has_value());
+  ASSERT_TRUE(line->options.robust.has_value());
+  EXPECT_EQ(line->options.robust->kernel, KernelKind::kGemanMcClure);
+  EXPECT_EQ(line->options.robust->threshold, 2.0);
+  EXPECT_EQ(line->robust.rejected_out, "r.txt");
+  EXPECT_EQ(line->options.closures_path, "c.txt");
+  EXPECT_FALSE(cli::parseServeCommandLine({})->options.robust.has_value());
+  for (const std::vector<std::string>& bad :
+       std::vector<std::vector<std::string>>{{"--kernel", "tls"},
+                                             {"--closures-out", "c.txt"},
+                                             {"--rejected-out", "r.txt"},
+                                             {"--robust", "--kernel", "welsch"},
+                                             {"--robust", "--inlier-threshold", "auto"},
+                                             {"--robust", "--inlier-threshold", "-1"}}) {
+    EXPECT_THROW(cli::parseServeCommandLine(bad), cli::UsageError) << bad[0];
+  }
 }
 
 // The robust periodic batch (tools/refine/batch_refiner.h) in the replay loop on the group file:
