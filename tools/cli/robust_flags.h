@@ -1,6 +1,6 @@
 // The command-line flags of robustness against false loop closures, one binder for every
-// command that has them (`arbor batch`, `arbor replay`, `arbor serve`): --robust, --kernel, --inlier-threshold,
-// --rejected-out, with the same help and the same checks.
+// command that has them (`arbor batch`, `arbor replay`, `arbor serve`): --robust, --kernel,
+// --inlier-threshold, --rejected-out, with the same help and the same checks.
 #pragma once
 
 #include <string>
