@@ -14,6 +14,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
+#include "arbor/io/edge_choice_file.h"
 #include "arbor/io/lcm_messages.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/cli/cli_common.h"
@@ -37,6 +38,7 @@ struct PublishRun {
   bool wait = false, wait_ready = false, json = false;
   double timeout_s = 60;
   ReadOptions read;
+  std::string edge_choices;  // --edge-choices FILE (io/edge_choice_file.h)
 };
 
 // Listens on ARBOR_ESTIMATE / ARBOR_STATUS while edges go out: which seq numbers of our sender
@@ -133,8 +135,18 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     throw UsageError("--skip " + std::to_string(run.skip) + " exceeds the " +
                      std::to_string(total) + " edges");
   StreamSelection selection;
-  const std::vector<StreamMessage<G>> messages =
+  std::vector<StreamMessage<G>> messages =
       streamMessages(graph, run.sender, run.skip, run.count, &selection);
+  if (!run.edge_choices.empty()) {  // edge_t's trust and kernel, per edge
+    const EdgeChoices choices = readEdgeChoicesFile(run.edge_choices);
+    checkEdgeChoices(choices, graph, run.edge_choices);
+    for (StreamMessage<G>& m : messages) {
+      if (m.is_prior) continue;
+      const EdgeChoice c = edgeChoice(choices, m.edge.from, m.edge.to);
+      m.edge.trust = c.trust;
+      m.edge.kernel = c.kernel;
+    }
+  }
   const long end = static_cast<long>(selection.last_seq);
   const size_t n = static_cast<size_t>(selection.edges);
 
@@ -241,7 +253,10 @@ int publishCommand(const std::vector<std::string>& args) {
       "timeout", po::value(&run.timeout_s)->default_value(60), "seconds for --wait/--wait-ready")(
       "information", po::value(&information)->default_value("refuse"),
       "refuse | repair | isotropic (information matrices that are not positive definite)")(
-      "json", po::bool_switch(&run.json), "print one JSON object");
+      "json", po::bool_switch(&run.json), "print one JSON object")(
+      "edge-choices", po::value(&run.edge_choices),
+      "per-edge trust and kernel into edge_t, 'FROM TO default|trusted|robust [KERNEL]' a line "
+      "(docs/files.md)");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, desc)) return 0;

@@ -47,6 +47,10 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     robust.threshold = run.robust.threshold;
     settings.robust = robust;
   }
+  if (!run.edge_choices.empty()) {
+    settings.choices = readEdgeChoicesFile(run.edge_choices);
+    checkEdgeChoices(settings.choices, graph, run.edge_choices);
+  }
   LoopResult<G> loop_result;
   const bool with_batches = run.batch.has_value();
   if (with_batches) {
@@ -201,6 +205,9 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
                  "robust to false loop closures: graduated non-convexity per loop closure in "
                  "the Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; the final batch "
                  "LM runs over the edges kept");
+  options.add_options()("edge-choices", po::value(&run.edge_choices),
+                        "with --robust: per-edge trust and kernel, 'FROM TO "
+                        "default|trusted|robust [KERNEL]' a line (docs/files.md)");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return std::nullopt;
@@ -225,6 +232,8 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
                      refine::batchSolverNames(true, "|"));
   }
   run.robust = readRobustFlags(vm, /*allow_auto=*/false);
+  if (!run.edge_choices.empty() && !run.robust.robust)
+    throw UsageError("--edge-choices needs --robust");
   run.read.information = parseInformationPolicy(information);
   return run;
 }

@@ -19,6 +19,7 @@ struct ReplayCommandLine {
   int batch_every = 0;
   SmootherOptions smoother;  ///< tools/cli/smoother_flags.h
   RobustFlags robust;        ///< tools/cli/robust_flags.h: online GNC per loop closure
+  std::string edge_choices;  ///< --edge-choices FILE (io/edge_choice_file.h), with --robust
   ReadOptions read;
 };
 

@@ -39,7 +39,9 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     for (int e : group) {
       const auto& edge = graph.edges[e];
       const Key from = graph.ids[edge.i], to = graph.ids[edge.j];
-      const EdgeResult r = smoother.addEdge(from, to, edge.measurement, edge.information);
+      const EdgeChoice choice = edgeChoice(settings.choices, from, to);
+      const EdgeResult r = smoother.addEdge(from, to, edge.measurement, edge.information,
+                                            choice.trust, choice.kernel);
       if (r.status == EdgeStatus::kDuplicate) ++result.duplicates;
       if (r.status == EdgeStatus::kRejected) {
         ++result.rejected;

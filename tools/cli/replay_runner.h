@@ -12,6 +12,7 @@
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/core/batch_solver.h"
 #include "arbor/core/pose_graph.h"
+#include "arbor/io/edge_choice_file.h"
 #include "arbor/tools/cli/latency.h"
 
 namespace arbor::cli {
@@ -24,6 +25,8 @@ struct ReplaySettings {
   /// Online robust smoothing (bayestree/online_gnc.h); the batch LM then runs over the edges
   /// it kept.
   std::optional<RobustOptions> robust;
+  /// Per-edge trust and kernel (io/edge_choice_file.h, `--edge-choices`); empty: the rules.
+  EdgeChoices choices;
 };
 
 struct UpdateRow {
