@@ -58,11 +58,12 @@ void publishBytes(lcm::LCM& lcm, const std::string& channel, const std::vector<s
   lcm.publish(channel, b.data(), static_cast<unsigned>(b.size()));
 }
 
-void sendCommand(lcm::LCM& lcm, const Service& service, std::int8_t kind) {
+void sendCommand(lcm::LCM& lcm, const Service& service, std::int8_t kind,
+                 const std::string& path = "") {
   command_t c;
   c.utime = 0;
   c.command = kind;
-  c.path = "";
+  c.path = path;
   publishBytes(lcm, service.channels().command, encodeMessage(c));
 }
 
@@ -108,7 +109,9 @@ TEST(LcmServeRobust, RejectsWhatReplayRejects) {
   lcm::LCM lcm("memq://");
   ServeOptions options;
   options.robust = RobustOptions{};
-  options.closures_path = tempPath("closures.txt");
+  options.snapshot_dir = tempPath("snapshots");
+  std::filesystem::create_directory(options.snapshot_dir);
+  const std::string report_path = options.snapshot_dir + "/closures.txt";
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();
@@ -126,9 +129,9 @@ TEST(LcmServeRobust, RejectsWhatReplayRejects) {
   EXPECT_DOUBLE_EQ(live.inlier_threshold, chiSquareThreshold(0.99, 3));
 
   // Command CLOSURES: every closure `i j weight status`, as the smoother holds them now.
-  sendCommand(lcm, service, command_t::CLOSURES);
-  ASSERT_TRUE(waitForFile(options.closures_path));
-  std::ifstream report(options.closures_path);
+  sendCommand(lcm, service, command_t::CLOSURES, "closures.txt");
+  ASSERT_TRUE(waitForFile(report_path));
+  std::ifstream report(report_path);
   int lines = 0, rejected_in_report = 0;
   for (std::string line; std::getline(report, line); ++lines) {
     std::istringstream fields(line);
@@ -158,31 +161,45 @@ TEST(LcmServeRobust, RejectsWhatReplayRejects) {
   const std::vector<LabelPair> written = readLabelsFile(rejected_path);
   EXPECT_EQ(std::set<IdPair>(written.begin(), written.end()), replay_rejected);
   std::remove(rejected_path.c_str());
-  std::remove(options.closures_path.c_str());
+  std::filesystem::remove_all(options.snapshot_dir);
 }
 
-TEST(LcmServeRobust, ClosuresCommandNeedsTheOperatorsPath) {
+// CLOSURES follows SNAPSHOT's rules: a plain name inside --snapshot-dir, refused without it and
+// for any other name, counted by reason.
+TEST(LcmServeRobust, ClosuresFollowTheSnapshotDirRules) {
+  const PoseGraph2 graph = testing::manhattanGraph(40, 4, -1, 2);
+  const std::vector<int> order = replayOrder(graph);
+  const std::string dir = tempPath("closures_dir");
+  std::filesystem::create_directory(dir);
+  {
+    lcm::LCM lcm("memq://");
+    ServeOptions options;
+    options.robust = RobustOptions{};  // no --snapshot-dir
+    Service service(lcm, options);
+    Collector collector(lcm, service.channels());
+    service.start();
+    lockstep(lcm, service, collector, edgeMessages(graph, order));
+    sendCommand(lcm, service, command_t::CLOSURES, "closures.txt");
+    sendCommand(lcm, service, command_t::STATUS);
+    ASSERT_TRUE(collector.waitStatus([](const status_t& s) { return s.control_refused > 0; }, 60));
+    service.stop();
+    EXPECT_EQ(service.summary().control_refused.count("closures no dir"), 1u);
+  }
   lcm::LCM lcm("memq://");
   ServeOptions options;
   options.robust = RobustOptions{};
-  const std::string named = tempPath("named_by_the_sender.txt");
-  options.closures_path = tempPath("operator.txt");
+  options.snapshot_dir = dir;
   Service service(lcm, options);
   Collector collector(lcm, service.channels());
   service.start();
-  const PoseGraph2 graph = testing::manhattanGraph(40, 4, -1, 2);
-  const std::vector<int> order = replayOrder(graph);
   lockstep(lcm, service, collector, edgeMessages(graph, order));
-  command_t c;
-  c.utime = 0;
-  c.command = command_t::CLOSURES;
-  c.path = named;  // refused: a message never chooses a file to write
-  publishBytes(lcm, service.channels().command, encodeMessage(c));
-  sendCommand(lcm, service, command_t::CLOSURES);  // after it, in order: the operator's file
-  ASSERT_TRUE(waitForFile(options.closures_path));
+  sendCommand(lcm, service, command_t::CLOSURES, "../outside.txt");  // refused: not a plain name
+  sendCommand(lcm, service, command_t::CLOSURES, "closures.txt");    // after it, in order
+  ASSERT_TRUE(waitForFile(dir + "/closures.txt"));
   service.stop();
-  EXPECT_FALSE(std::filesystem::exists(named));
-  std::remove(options.closures_path.c_str());
+  EXPECT_EQ(service.summary().control_refused.count("closures name"), 1u);
+  EXPECT_FALSE(std::filesystem::exists(std::filesystem::path(dir).parent_path() / "outside.txt"));
+  std::filesystem::remove_all(dir);
 }
 
 // A 2D Manhattan world with a false closure and a false second odometry edge planted. Unmarked,
@@ -306,19 +323,16 @@ TEST(LcmServeRobust, OldEdgeV1JournalReplays) {
 }
 
 TEST(LcmServeRobust, CommandLineTakesTheReplaysRobustFlags) {
-  const auto line =
-      cli::parseServeCommandLine({"--robust", "--kernel", "gm", "--inlier-threshold", "2",
-                                  "--rejected-out", "r.txt", "--closures-out", "c.txt"});
+  const auto line = cli::parseServeCommandLine(
+      {"--robust", "--kernel", "gm", "--inlier-threshold", "2", "--rejected-out", "r.txt"});
   ASSERT_TRUE(line.has_value());
   ASSERT_TRUE(line->options.robust.has_value());
   EXPECT_EQ(line->options.robust->kernel, KernelKind::kGemanMcClure);
   EXPECT_EQ(line->options.robust->threshold, 2.0);
   EXPECT_EQ(line->robust.rejected_out, "r.txt");
-  EXPECT_EQ(line->options.closures_path, "c.txt");
   EXPECT_FALSE(cli::parseServeCommandLine({})->options.robust.has_value());
   for (const std::vector<std::string>& bad :
        std::vector<std::vector<std::string>>{{"--kernel", "tls"},
-                                             {"--closures-out", "c.txt"},
                                              {"--rejected-out", "r.txt"},
                                              {"--robust", "--kernel", "welsch"},
                                              {"--robust", "--inlier-threshold", "auto"},

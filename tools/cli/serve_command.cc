@@ -121,9 +121,6 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
                  "robust to false loop closures: graduated non-convexity per loop closure in the "
                  "Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; edge_t's trust and "
                  "kernel choose per edge");
-  desc.add_options()("closures-out", po::value(&options.closures_path),
-                     "with --robust: where command CLOSURES writes the closure report (`i j "
-                     "weight status` a line)");
   if (helpRequested(args, desc)) return std::nullopt;
   const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
   options.smoother = readSmootherFlags(vm);
@@ -170,8 +167,6 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
     robust.kernel = line.robust.kernel;
     robust.threshold = line.robust.threshold;
     options.robust = robust;
-  } else if (!options.closures_path.empty()) {
-    throw UsageError("--closures-out needs --robust");
   }
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);

@@ -1,6 +1,5 @@
 #include "arbor/tools/serve/closure_report.h"
 
-#include <cstdio>
 #include <fstream>
 #include <iomanip>
 #include <stdexcept>
@@ -8,18 +7,12 @@
 namespace arbor::serve {
 
 void writeClosureReport(const std::string& path, const std::vector<ClosureReport>& closures) {
-  // Written beside it and renamed over it: a reader never sees half a report.
-  const std::string partial = path + ".partial";
-  {
-    std::ofstream out(partial);
-    out << std::setprecision(17);
-    for (const ClosureReport& c : closures)
-      out << c.from << " " << c.to << " " << c.weight << " " << toString(c.status) << "\n";
-    out.flush();
-    if (!out) throw std::runtime_error("cannot write the closure report " + partial);
-  }
-  if (std::rename(partial.c_str(), path.c_str()) != 0)
-    throw std::runtime_error("cannot rename " + partial + " to " + path);
+  std::ofstream out(path);
+  out << std::setprecision(17);
+  for (const ClosureReport& c : closures)
+    out << c.from << " " << c.to << " " << c.weight << " " << toString(c.status) << "\n";
+  out.flush();
+  if (!out) throw std::runtime_error("cannot write the closure report " + path);
 }
 
 void writeRejectedEdges(const std::string& path, const std::vector<ClosureReport>& closures) {

@@ -1,5 +1,5 @@
 // The per-edge report of robust smoothing as files: every loop closure `i j weight status` a
-// line (command CLOSURES, --closures-out), or only the rejected ones `i j` a line
+// line (command CLOSURES, into --snapshot-dir), or only the rejected ones `i j` a line
 // (--rejected-out). Ids are the senders' pose ids; the order is the order the closures arrived.
 #pragma once
 
@@ -11,7 +11,7 @@
 namespace arbor::serve {
 
 /// `i j weight status` a line (status: inlier, outlier, trusted, excluded; weight with 17
-/// significant digits), written to PATH.partial and renamed to `path`. Throws std::runtime_error
+/// significant digits). Throws std::runtime_error
 /// naming the path if it cannot be written.
 void writeClosureReport(const std::string& path, const std::vector<ClosureReport>& closures);
 

@@ -753,26 +753,35 @@ void Service::writeSnapshot(const command_t& c) {
 }
 
 void Service::writeClosures(const command_t& c) {
-  // The file is the operator's (--closures-out), never one named over the network.
-  if (!c.path.empty()) {
-    logLine("closures: refused, the command names a path ('" + c.path +
-            "'); the report goes only to --closures-out");
-  } else if (options_.closures_path.empty()) {
-    logLine("closures: no --closures-out");
-  } else if (!options_.robust) {
-    logLine("closures: no report without --robust");
-  } else if (!engine_) {
-    logLine("closures: no estimate yet");
-  } else {
-    try {
-      const std::vector<ClosureReport> closures = engine_->closures();
-      writeClosureReport(options_.closures_path, closures);
-      logLine("closures: " + std::to_string(closures.size()) + " written to " +
-              options_.closures_path);
-    } catch (const std::exception& e) {
-      logLine(std::string("closures failed: ") + e.what());
-    }
+  // Through SNAPSHOT's rules: a plain name inside the operator's --snapshot-dir, nowhere else.
+  if (!snapshots_.enabled()) {
+    refuseControl("closures no dir",
+                  "CLOSURES " + SnapshotDir::printable(c.path) +
+                      ": no --snapshot-dir, so nothing on the bus may write a file");
+    return;
   }
+  if (std::string problem = SnapshotDir::checkName(c.path); !problem.empty()) {
+    refuseControl("closures name", "CLOSURES: " + problem);
+    return;
+  }
+  if (!options_.robust) {
+    logLine("closures: no report without --robust");
+    return;
+  }
+  if (!engine_) {
+    logLine("closures: no estimate yet");
+    return;
+  }
+  const std::vector<ClosureReport> closures = engine_->closures();
+  const std::string problem = snapshots_.write(
+      c.path, [&closures](const std::string& path) { writeClosureReport(path, closures); });
+  if (!problem.empty()) {
+    refuseControl("closures refused",
+                  "CLOSURES " + SnapshotDir::printable(c.path) + ": " + problem);
+    return;
+  }
+  logLine("closures: " + std::to_string(closures.size()) + " written to " + snapshots_.dir() + "/" +
+          c.path);
 }
 
 void Service::publishEstimate(bool full) {

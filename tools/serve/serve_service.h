@@ -97,7 +97,6 @@ struct ServeOptions {
   /// Online robust smoothing of the loop closures (--robust); none: off. Per edge, edge_t's
   /// trust and kernel refine it.
   std::optional<RobustOptions> robust;
-  std::string closures_path;  ///< where command CLOSURES writes (--closures-out); "": refused
 };
 
 struct ServeSummary {
@@ -205,7 +204,7 @@ class Service {
   void startBatch(bool on_command);
   void applyReseed(const estimate_t& seed, bool from_journal, refine::BatchRun* run);
   void handleCommand(const command_t& command);
-  /// Command CLOSURES: the closure report to options_.closures_path.
+  /// Command CLOSURES: the closure report into --snapshot-dir (SNAPSHOT's rules).
   void writeClosures(const command_t& command);
   void ensureEngine(int dim);
   void publishEstimate(bool full);
