@@ -66,6 +66,11 @@ class Minimizer {
     Eigen::VectorXd delta;
     Best best{{}, F_, true};
     while (summary_.iterations < options_.max_iterations) {
+      if (cancelled()) {
+        restore(best);
+        summary_.F_final = F_;
+        return;
+      }
       ++summary_.iterations;
       if (!equations_.factorize()) {
         restore(best);
@@ -114,6 +119,7 @@ class Minimizer {
     int failures = 0;
     Eigen::VectorXd damping, delta;
     while (summary_.iterations < options_.max_iterations) {
+      if (cancelled()) return;
       ++summary_.iterations;
       damping = equations_.hessianDiagonal().cwiseMax(kMinDiagonal).cwiseMin(kMaxDiagonal) / radius;
       bool valid = equations_.factorize(&damping);
@@ -157,6 +163,7 @@ class Minimizer {
     Eigen::VectorXd scale, gauss_newton, cauchy, scaled_gradient, y, delta;
     bool linearized = true;
     while (summary_.iterations < options_.max_iterations) {
+      if (cancelled()) return;
       ++summary_.iterations;
       if (linearized) {
         scale =
@@ -220,6 +227,15 @@ class Minimizer {
   }
 
  private:
+  // The token's check before an iteration; when cancelled the summary says so (LM and dogleg
+  // hold the best point at every iteration start, Gauss–Newton restores its best first).
+  bool cancelled() {
+    if (!options_.cancel.cancelled()) return false;
+    finish(Termination::kCancelled,
+           "cancelled after " + std::to_string(summary_.iterations) + " iterations");
+    return true;
+  }
+
   struct Step {
     double F_new = 0, rho = 0;
     bool accepted = false, tiny = false;
@@ -359,6 +375,8 @@ std::string toString(Termination termination) {
       return "max_iterations";
     case Termination::kDiverged:
       return "diverged";
+    case Termination::kCancelled:
+      return "cancelled";
   }
   return "unknown";
 }

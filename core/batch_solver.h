@@ -7,15 +7,17 @@
 #include <string>
 #include <vector>
 
+#include "arbor/core/cancellation.h"
 #include "arbor/core/pose_graph.h"
 
 namespace arbor {
 
 enum class BatchMethod { kGaussNewton, kLevenbergMarquardt, kDogleg };
-enum class Termination { kConverged, kMaxIterations, kDiverged };
+enum class Termination { kConverged, kMaxIterations, kDiverged, kCancelled };
 
 std::string toString(BatchMethod method);       ///< "gn", "lm", "dogleg"
-std::string toString(Termination termination);  ///< "converged", "max_iterations", "diverged"
+std::string toString(Termination termination);  ///< "converged", "max_iterations", "diverged",
+                                                ///< "cancelled"
 /// Inverse of toString(BatchMethod); throws std::invalid_argument naming the value.
 BatchMethod parseBatchMethod(const std::string& name);
 
@@ -24,7 +26,20 @@ struct BatchOptions {
   int max_iterations = 100;
   double relative_tolerance = 1e-5;  ///< stop when (F_old − F_new)/F_old < this after a step
   bool verbose = false;              ///< per-iteration line on stderr
+  /// Checked before each iteration: once cancelled the solve stops with Termination::kCancelled
+  /// and *poses holds the best estimate so far (F_final ≤ F_initial).
+  CancellationToken cancel = {};
 };
+
+/// BatchOptions with the given method, iteration limit and tolerance (the rest default).
+inline BatchOptions batchOptions(BatchMethod method, int max_iterations,
+                                 double relative_tolerance) {
+  BatchOptions o;
+  o.method = method;
+  o.max_iterations = max_iterations;
+  o.relative_tolerance = relative_tolerance;
+  return o;
+}
 
 struct BatchSummary {
   double F_initial = 0, F_final = 0;

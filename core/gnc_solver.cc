@@ -109,14 +109,17 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
     if (!result.trusted[k]) ++result.candidates;
   }
 
+  BatchOptions inner = options.inner, outer = options.outer;
+  inner.cancel = outer.cancel = options.cancel;
   const std::vector<G> x_init = *poses;
   const std::vector<double> s_init = edgeCosts(graph, x_init);
   WeightedBatchSolver<G> solver(graph);
   std::vector<double>& w = result.weights;
   w.assign(m, 1.0);
   // x⁰: plain least squares from x_init (Algorithm 1, line 1).
-  const BatchSummary ls = solver.solve(w, poses, options.outer);
+  const BatchSummary ls = solver.solve(w, poses, outer);
   result.lm_iterations += ls.iterations;
+  result.cancelled = ls.termination == Termination::kCancelled;
   result.F_least_squares = ls.F_final;
   const std::vector<G> x_ls = *poses;
   std::vector<double> s = edgeCosts(graph, *poses);
@@ -130,7 +133,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   const bool restart = options.inner_start == GncInnerStart::kInitial;
 
   RobustKernel kernel{options.kernel, result.threshold, 1.0};
-  for (int round = 0; round < options.max_rounds; ++round) {
+  for (int round = 0; !result.cancelled && round < options.max_rounds; ++round) {
     ++result.rounds;
     kernel.threshold = result.threshold;
     if (round > 0) {  // a new threshold: GNC again from the start, at x⁰'s residuals
@@ -165,6 +168,10 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
     double previous_cost = ls.F_final;
     std::vector<double> previous(m, -1.0);
     for (int it = 0; !done && it < options.max_iterations; ++it) {
+      if (options.cancel.cancelled()) {
+        result.cancelled = true;
+        break;
+      }
       ++result.iterations;
       // The closed-form weight update at the current estimate (trusted edges stay at 1).
       bool binary = true;
@@ -181,9 +188,15 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
         break;
       }
       previous = w;
+      const std::vector<G> finished = *poses;  // the last step's estimate, kept if cancelled
       if (restart && kernel.isGraduated()) *poses = x_init;
-      const BatchSummary step = solver.solve(w, poses, options.inner);
+      const BatchSummary step = solver.solve(w, poses, inner);
       result.lm_iterations += step.iterations;
+      if (step.termination == Termination::kCancelled) {
+        *poses = finished;
+        result.cancelled = true;
+        break;
+      }
       s = edgeCosts(graph, *poses);
       const double cost = step.F_final;
       if (options.verbose) {
@@ -217,7 +230,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
     }
     if (!result.converged) result.message = "GNC iteration limit reached";
     for (int k = 0; k < m; ++k) inlier[k] = result.trusted[k] || w[k] > 0.5;
-    if (!automatic) break;
+    if (!automatic || result.cancelled) break;
     const double scale = varianceFactor(graph, *poses, s, inlier);
     const double threshold = quantile * scale;
     const double moved = std::abs(threshold - result.threshold) / result.threshold;
@@ -233,8 +246,15 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   // The inlier problem: the edges kept, each with weight 1, from the GNC estimate.
   std::vector<double> binary(m);
   for (int k = 0; k < m; ++k) binary[k] = inlier[k] ? 1.0 : 0.0;
-  const BatchSummary last = solver.solve(binary, poses, options.outer);
-  result.lm_iterations += last.iterations;
+  if (!result.cancelled) {
+    const BatchSummary last = solver.solve(binary, poses, outer);
+    result.lm_iterations += last.iterations;
+    result.cancelled = last.termination == Termination::kCancelled;
+  }
+  if (result.cancelled) {
+    result.converged = false;
+    result.message = "cancelled after " + std::to_string(result.iterations) + " GNC steps";
+  }
   s = edgeCosts(graph, *poses);
   result.inlier = inlier;
   result.rejected = 0;

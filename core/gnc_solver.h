@@ -100,10 +100,15 @@ struct GncOptions {
   std::vector<char> trusted;
   /// The solve of each weighted problem (GTSAM: Gauss–Newton, relative tolerance 1e-5, at most
   /// 100 iterations).
-  BatchOptions inner = {BatchMethod::kGaussNewton, 100, 1e-5, false};
+  BatchOptions inner = batchOptions(BatchMethod::kGaussNewton, 100, 1e-5);
   /// The plain least-squares start and the final solve of the inlier problem.
-  BatchOptions outer = {BatchMethod::kLevenbergMarquardt, 100, 1e-5, false};
+  BatchOptions outer = batchOptions(BatchMethod::kLevenbergMarquardt, 100, 1e-5);
   bool verbose = false;  ///< one line per GNC step on stderr
+  /// Checked before each GNC step and, through inner and outer (whose own tokens are replaced
+  /// by this one), inside every solve. A cancelled solve keeps the estimate of the last step
+  /// that finished (x⁰'s partial solve when cancelled in it), skips the inlier problem and sets
+  /// GncResult::cancelled.
+  CancellationToken cancel = {};
 };
 
 struct GncResult {
@@ -124,6 +129,7 @@ struct GncResult {
   double robust_cost = 0;       ///< Σ ρ(s_k) (the kernel at the last μ) + trusted s_k + priors
   double time_s = 0;
   bool converged = false;  ///< the last round stopped on its weights or cost, not the step limit
+  bool cancelled = false;  ///< stopped by GncOptions::cancel
   std::string message;     ///< why it stopped
 };
 

@@ -79,6 +79,7 @@ TcgResult truncatedCG(const SESyncProblem& problem, const PointData& p, const Ei
   Eigen::MatrixXd dir = -z;
   const double delta2 = delta * delta;
   for (int k = 0; k < options.max_tcg_iterations; ++k) {
+    if (k > 0 && options.cancel.cancelled()) return out;  // η so far: inside the region
     const Eigen::MatrixXd Hd = hessian(problem, p, dir);
     const double d_Hd = inner(dir, Hd);
     out.iterations = k + 1;
@@ -123,6 +124,10 @@ LevelResult riemannianTrustRegion(const SESyncProblem& problem, PointData p,
   double delta_max = 1e6 * initial_radius;
   double gnorm = std::sqrt(inner(p.grad, p.grad));
   for (int it = 0; it < options.max_iterations; ++it) {
+    if (options.cancel.cancelled()) {
+      out.stop = "cancelled";
+      break;
+    }
     if (gnorm < options.gradient_tolerance) {
       out.stop = "gradient";
       break;
@@ -357,6 +362,7 @@ RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses, const RtrO
   Eigen::MatrixXd X0 = Eigen::MatrixXd::Zero(d * n, options.initial_rank);
   X0.leftCols(d) = rotationBlocks(chordal);
   PointData point = evaluate(problem, std::move(X0));
+  summary.sesync_objective_initial = point.f;
   int rank = options.initial_rank;
   double radius = 0;  // each level starts with the radius the previous one ended with
   RtrOptions level_options = options;
@@ -369,6 +375,12 @@ RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses, const RtrO
     summary.rtr_iterations += level.iterations;
     summary.tcg_iterations += level.tcg_iterations;
     point = std::move(level.point);
+    if (level.stop == "cancelled" || options.cancel.cancelled()) {
+      summary.cancelled = true;
+      summary.message = "cancelled at rank " + std::to_string(rank) + " after " +
+                        std::to_string(summary.rtr_iterations) + " RTR iterations";
+      break;
+    }
     t0 = Clock::now();
     double lambda_min = 0;
     Eigen::VectorXd direction;
@@ -429,6 +441,11 @@ RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses, const RtrO
       summary.message = "not certified: reached max_rank " + std::to_string(rank);
       break;
     }
+    if (options.cancel.cancelled()) {
+      summary.cancelled = true;
+      summary.message = "cancelled at rank " + std::to_string(rank) + " before the saddle escape";
+      break;
+    }
     t0 = Clock::now();
     PointData lifted;
     const bool escaped = escapeSaddle(problem, point, eig.vector, options, &lifted);
@@ -486,7 +503,9 @@ RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses, const RtrO
   summary.F_final = summary.F_rounded;
   if (options.polish) {
     t0 = Clock::now();
-    const BatchSummary polish = solveBatch(graph, &estimate, options.polish_options);
+    BatchOptions polish_options = options.polish_options;
+    polish_options.cancel = options.cancel;
+    const BatchSummary polish = solveBatch(graph, &estimate, polish_options);
     if (options.verbose) {
       std::cerr << "polish: " << polish.iterations << " iterations, F " << polish.F_initial
                 << " -> " << polish.F_final << " (" << toString(polish.termination) << ")\n";
@@ -495,6 +514,9 @@ RtrSummary solveRtr(const PoseGraph<G>& graph, std::vector<G>* poses, const RtrO
     summary.F_final = objective(graph, estimate);
     if (polish.termination == Termination::kDiverged) {
       summary.message += "; polish diverged: " + polish.message;
+    } else if (polish.termination == Termination::kCancelled) {
+      summary.cancelled = true;
+      summary.message += "; polish cancelled";
     }
   }
   *poses = std::move(estimate);

@@ -43,15 +43,21 @@ struct RtrOptions {
   SESyncPreconditioner preconditioner = SESyncPreconditioner::kConnectionLaplacian;
   double preconditioner_max_condition = 1e5;  ///< regularisation λ = ‖P‖ / (this − 1)
   bool polish = true;                         ///< LM on the full objective after rounding
-  BatchOptions polish_options = {BatchMethod::kLevenbergMarquardt, 100, 1e-6, false};
+  BatchOptions polish_options = batchOptions(BatchMethod::kLevenbergMarquardt, 100, 1e-6);
   bool verbose = false;  ///< progress on stderr
+  /// Checked before each trust-region and tCG iteration and between the staircase's steps; a
+  /// cancelled solve rounds the last (accepted) staircase point, skips the certificate, runs
+  /// the polish with this token (so it stops at once) and sets RtrSummary::cancelled. The
+  /// polish uses this token, not polish_options.cancel.
+  CancellationToken cancel = {};
 };
 
 struct RtrSummary {
   double sesync_objective = 0;  ///< tr(Q Yᵀ Y) at the last staircase point (relaxation value)
-  double F_rounded = 0;         ///< F at the rounded estimate (before polish)
-  double F_final = 0;           ///< F after the polish (= F_rounded without it)
-  int rank = 0;                 ///< the staircase level reached
+  double sesync_objective_initial = 0;  ///< … at the (lifted) chordal start; ≥ the first level's
+  double F_rounded = 0;                 ///< F at the rounded estimate (before polish)
+  double F_final = 0;                   ///< F after the polish (= F_rounded without it)
+  int rank = 0;                         ///< the staircase level reached
   /// λ_min of the certificate at that level: of S = M − blkdiag(0, Λ) (translation-explicit
   /// form, by shift-invert Lanczos) when the relaxation is solved, else the curvature vᵀ(Q − Λ)v <
   /// 0 along the unit escape direction v found.
@@ -67,6 +73,7 @@ struct RtrSummary {
          time_polish_s = 0, time_s = 0;
   int rtr_iterations = 0;  ///< trust-region iterations over all levels
   int tcg_iterations = 0;  ///< inner iterations (Hessian-vector products) over all levels
+  bool cancelled = false;  ///< stopped by RtrOptions::cancel: an uncertified estimate
   std::string message;
 };
 

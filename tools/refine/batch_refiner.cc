@@ -64,8 +64,11 @@ Verdict pickWinner(double F_incremental, double F_lm, double F_rtr) {
 }
 
 template <class G>
-BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot) {
+BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
+                              const CancellationToken& cancel) {
   requireRefining(solver);
+  BatchSolveSettings settings;
+  settings.cancel = cancel;
   BatchOutcome<G> out;
   BatchRun& run = out.run;
   const std::vector<G>& incremental = snapshot.poses;
@@ -76,7 +79,9 @@ BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot) 
   // Plain LM from the incremental estimate: the batch itself for lm, the keep-best rival of RTR.
   auto t0 = std::chrono::steady_clock::now();
   std::vector<G> lm = incremental;
-  const BatchSolve lm_solve = runBatchSolver(BatchSolver::kLevenbergMarquardt, snapshot, &lm);
+  const BatchSolve lm_solve =
+      runBatchSolver(BatchSolver::kLevenbergMarquardt, snapshot, &lm, settings);
+  run.cancelled = lm_solve.cancelled;
   run.lm_time_s = secondsSince(t0);
   run.F_lm = objective(snapshot, lm);
 
@@ -88,9 +93,10 @@ BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot) 
   std::vector<Candidate> candidates{{"incremental", run.F_incremental, &incremental},
                                     {"lm", run.F_lm, &lm}};
   std::vector<G> rtr;
-  if (solver == BatchSolver::kRtr) {
+  if (solver == BatchSolver::kRtr && !run.cancelled) {
     t0 = std::chrono::steady_clock::now();
-    const BatchSolve s = runBatchSolver(BatchSolver::kRtr, snapshot, &rtr);
+    const BatchSolve s = runBatchSolver(BatchSolver::kRtr, snapshot, &rtr, settings);
+    run.cancelled = s.cancelled;
     run.rtr_time_s = secondsSince(t0);
     run.F_rtr = objective(snapshot, rtr);
     run.rank = s.rtr->rank;
@@ -112,7 +118,7 @@ BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot) 
   run.margin = verdict.margin;
   run.margin_relative = verdict.margin_relative;
   for (const Candidate& c : candidates) {
-    if (verdict.winner == c.name && c.poses != &incremental) out.best = *c.poses;
+    if (verdict.winner == c.name && c.poses != &incremental && !run.cancelled) out.best = *c.poses;
   }
   out.incremental = incremental;
 
@@ -177,6 +183,7 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
   auto t0 = std::chrono::steady_clock::now();
   std::vector<G> estimate = incremental;
   GncResult result = solveGnc(snapshot, &estimate, gnc);
+  run.cancelled = result.cancelled;
   run.lm_time_s = secondsSince(t0);
   run.F_lm = rho(estimate);
   run.iterations = result.iterations;
@@ -185,12 +192,15 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
 
   // rtr: the staircase on GNC's inlier set, certifying that inlier problem.
   std::vector<G> certified;
-  if (solver == BatchSolver::kRtr) {
+  if (solver == BatchSolver::kRtr && !run.cancelled) {
     t0 = std::chrono::steady_clock::now();
     certified = estimate;
     try {
       GncResult classified = result;
-      const CertifiedInliers c = certifyInliers(snapshot, &classified, &certified);
+      RtrOptions rtr;
+      rtr.cancel = gnc.cancel;
+      const CertifiedInliers c = certifyInliers(snapshot, &classified, &certified, rtr);
+      run.cancelled = c.rtr.cancelled;
       run.F_rtr = rho(certified);
       run.rank = c.rtr.rank;
       run.lambda_min = c.rtr.lambda_min;
@@ -211,8 +221,8 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
   run.winner = verdict.winner == "lm" ? "gnc" : verdict.winner;
   run.margin = verdict.margin;
   run.margin_relative = verdict.margin_relative;
-  if (verdict.winner == "lm") out.best = estimate;
-  if (verdict.winner == "rtr") out.best = certified;
+  if (verdict.winner == "lm" && !run.cancelled) out.best = estimate;
+  if (verdict.winner == "rtr" && !run.cancelled) out.best = certified;
   out.incremental = incremental;
   const G inc0 = incremental[0].inverse(), bat0 = out.batch[0].inverse();
   for (size_t k = 0; k < incremental.size(); ++k) {
@@ -251,10 +261,15 @@ struct BatchRefiner<G>::Flight {
   std::atomic<bool> done{false};
   std::thread thread;
 
-  void solve(BatchSolver solver) {
+  void solve(BatchSolver solver, const CancellationToken& cancel) {
     try {
-      outcome = gnc ? solveRobustSnapshot(solver, snapshot, judged, *gnc)
-                    : solveSnapshot(solver, snapshot);
+      if (gnc) {
+        GncOptions options = *gnc;
+        options.cancel = cancel;  // GNC hands it to its solves; the staircase gets it too
+        outcome = solveRobustSnapshot(solver, snapshot, judged, options);
+      } else {
+        outcome = solveSnapshot(solver, snapshot, cancel);
+      }
     } catch (...) {
       error = std::current_exception();
     }
@@ -310,15 +325,16 @@ bool BatchRefiner<G>::start(const OnlineSmoother<G>& smoother, std::int64_t upda
   flight_->update = update;
   Flight* f = flight_.get();
   const BatchSolver solver = options_.solver;
+  const CancellationToken cancel = options_.cancel;
   if (options_.synchronous) {
-    f->solve(solver);
+    f->solve(solver, cancel);
   } else {
-    f->thread = std::thread([f, solver] {
+    f->thread = std::thread([f, solver, cancel] {
       // The smoother's latency comes first: this thread runs at a lower priority (Linux nice is
       // per thread) and never fans out into OpenMP threads (Eigen, CHOLMOD).
       setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
       const SerialOpenMP serial;
-      f->solve(solver);
+      f->solve(solver, cancel);
     });
   }
   return true;
@@ -378,7 +394,8 @@ std::vector<BatchRun> BatchRefiner<G>::afterUpdate(OnlineSmoother<G>& smoother,
 
 template std::vector<SE2> seedValues(const OnlineSmoother<SE2>&, const BatchOutcome<SE2>&);
 template std::vector<SE3> seedValues(const OnlineSmoother<SE3>&, const BatchOutcome<SE3>&);
-template BatchOutcome<SE2> solveSnapshot(BatchSolver, const PoseGraph<SE2>&);
+template BatchOutcome<SE2> solveSnapshot(BatchSolver, const PoseGraph<SE2>&,
+                                         const CancellationToken&);
 template BatchOutcome<SE2> solveRobustSnapshot(BatchSolver, const PoseGraph<SE2>&,
                                                const std::vector<char>&, GncOptions);
 template BatchOutcome<SE3> solveRobustSnapshot(BatchSolver, const PoseGraph<SE3>&,
@@ -389,7 +406,8 @@ template double robustCost(const PoseGraph<SE2>&, const std::vector<SE2>&, const
                            KernelKind, double);
 template double robustCost(const PoseGraph<SE3>&, const std::vector<SE3>&, const std::vector<char>&,
                            KernelKind, double);
-template BatchOutcome<SE3> solveSnapshot(BatchSolver, const PoseGraph<SE3>&);
+template BatchOutcome<SE3> solveSnapshot(BatchSolver, const PoseGraph<SE3>&,
+                                         const CancellationToken&);
 template class BatchRefiner<SE2>;
 template class BatchRefiner<SE3>;
 

@@ -46,6 +46,10 @@ struct RefinerOptions {
   /// Solve on the calling thread inside start() (blocking; deterministic, for tests and
   /// reproducible comparisons) instead of in the background.
   bool synchronous = false;
+  /// Every batch the refiner runs checks this token (copies share it): cancel() stops the
+  /// batch in flight at its next iteration and every batch started later at its first (a
+  /// service that is stopping). Thread-safe; the run is then marked cancelled.
+  CancellationToken cancel = {};
 };
 
 /// One batch run on a snapshot.
@@ -70,7 +74,10 @@ struct BatchRun {
   int iterations = 0;      ///< of the --batch solver: LM iterations or RTR trust-region iterations
   int updates_during = 0;  ///< updates applied while it ran in the background
   bool final_run = false;  ///< replay: the run on the complete graph after finalize
-  bool reseeded = false;   ///< the smoother was rebuilt from the winner's estimate
+  /// Stopped by RefinerOptions::cancel: its figures are of the iterates so far, and it has no
+  /// winner estimate to reseed from (BatchOutcome::best is empty).
+  bool cancelled = false;
+  bool reseeded = false;  ///< the smoother was rebuilt from the winner's estimate
   /// A rebuild was tried but not kept: over everything the smoother holds by then (poses and
   /// edges that came after the snapshot included) it did not lower F.
   bool reseed_rejected = false;
@@ -112,13 +119,15 @@ struct BatchOutcome {
 
 /// Solves `snapshot` (its poses: the incremental estimate; gauge = its first fixed pose) and
 /// fills every figure of the run except the loop's (update, updates_during, reseed fields).
-/// Any thread. Throws std::invalid_argument for a solver whose row does not refine, and what the
-/// solvers throw.
+/// The solves check `cancel`. Any thread. Throws std::invalid_argument for a solver whose row
+/// does not refine, and what the solvers throw.
 template <class G>
-BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot);
+BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
+                              const CancellationToken& cancel = {});
 
 /// The robust batch of a snapshot (header comment): GNC with `gnc` (its kernel and threshold;
 /// `judged` per edge: weighted, else trusted), then for rtr certifyInliers; keep-best by Σρ.
+/// Every solve checks gnc.cancel; a cancelled run is marked and has no winner estimate.
 template <class G>
 BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
                                     const std::vector<char>& judged, GncOptions gnc);
@@ -150,7 +159,7 @@ class BatchRefiner {
  public:
   /// Throws std::invalid_argument on options.every < 0 or a solver whose row does not refine.
   explicit BatchRefiner(RefinerOptions options = {});
-  ~BatchRefiner();  ///< waits for a batch still running
+  ~BatchRefiner();  ///< waits for a batch still running (cancel options.cancel first to cut it)
   BatchRefiner(const BatchRefiner&) = delete;
   BatchRefiner& operator=(const BatchRefiner&) = delete;
 

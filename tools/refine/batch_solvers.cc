@@ -78,6 +78,7 @@ BatchSolve runBatchSolver(BatchSolver solver, const PoseGraph<G>& graph, std::ve
     options.max_iterations = settings.max_iterations;
     options.relative_tolerance = settings.relative_tolerance;
     options.verbose = settings.verbose;
+    options.cancel = settings.cancel;
     const BatchSummary s = solveBatch(graph, poses, options);
     out.F_initial = s.F_initial;
     out.F_final = s.F_final;
@@ -85,18 +86,24 @@ BatchSolve runBatchSolver(BatchSolver solver, const PoseGraph<G>& graph, std::ve
     out.time_s = s.time_s;
     out.termination = toString(s.termination);
     out.diverged = s.termination == Termination::kDiverged;
+    out.cancelled = s.termination == Termination::kCancelled;
     out.message = s.message;
     out.local = s;
     return out;
   }
   RtrOptions options = settings.rtr;
   options.verbose = options.verbose || settings.verbose;
+  options.cancel = settings.cancel;
   const RtrSummary s = solveRtr(graph, poses, options);
   out.F_final = s.F_final;
   out.iterations = s.rtr_iterations;
   out.time_s = s.time_s;
   out.termination =
-      s.certified ? "certified" : (s.relaxation_solved ? "relaxation_not_exact" : "not_certified");
+      s.cancelled
+          ? "cancelled"
+          : (s.certified ? "certified"
+                         : (s.relaxation_solved ? "relaxation_not_exact" : "not_certified"));
+  out.cancelled = s.cancelled;
   out.message = s.message;
   out.rtr = s;
   return out;

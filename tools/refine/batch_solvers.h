@@ -56,6 +56,8 @@ struct BatchSolveSettings {
   double relative_tolerance = 1e-5;  ///< gn, lm, dogleg: stop at a relative decrease below this
   RtrOptions rtr;                    ///< rtr
   bool verbose = false;              ///< progress on stderr
+  /// Given to the solver (BatchOptions::cancel, RtrOptions::cancel; replaces rtr.cancel).
+  CancellationToken cancel = {};
 };
 
 /// One run of any row, in the figures every solver has.
@@ -67,9 +69,10 @@ struct BatchSolve {
   int iterations = 0;  ///< gn/lm/dogleg: iterations; rtr: trust-region iterations
   double time_s = 0;
   /// gn/lm/dogleg: converged | max_iterations | diverged; rtr: certified | relaxation_not_exact
-  /// (solved but not exact) | not_certified.
+  /// (solved but not exact) | not_certified; either: cancelled.
   std::string termination;
   bool diverged = false;
+  bool cancelled = false;  ///< stopped by settings.cancel (termination "cancelled")
   std::string message;
   std::optional<BatchSummary> local;  ///< gn, lm, dogleg: core's summary
   std::optional<RtrSummary> rtr;      ///< rtr: the staircase's summary
