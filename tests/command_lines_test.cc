@@ -15,6 +15,7 @@
 #include "arbor/tools/cli/smoother_flags.h"
 #include "arbor/tools/generator/graph_generator.h"
 #include "arbor/tools/refine/batch_solvers.h"
+#include "arbor/tools/serve/lcm_tuning.h"
 
 namespace arbor::cli {
 namespace {
@@ -273,6 +274,44 @@ TEST(BatchSolverTable, EveryRowRunsThroughTheDispatch) {
       EXPECT_EQ(s.termination, "certified") << row.name;
     }
   }
+}
+
+// udpm's receive buffer: serve adds recv_buf_size to a udpm URL (its default, or --recv-buf),
+// keeps a URL's own unless --recv-buf is given, and refuses --recv-buf on another provider or below
+// 1 byte.
+TEST(ServeCommandLine, RecvBufSizesTheUdpmReceiveBuffer) {
+  const std::string base = "udpm://239.255.76.67:7700?ttl=0";
+  auto line = parseServeCommandLine({"--lcm-url", base});
+  EXPECT_EQ(line->url,
+            base + "&recv_buf_size=" + std::to_string(ServeCommandLine::kDefaultRecvBufBytes));
+  EXPECT_EQ(line->options.udpm_port, 7700);
+  line = parseServeCommandLine({"--lcm-url", base, "--recv-buf", "65536"});
+  EXPECT_EQ(line->url, base + "&recv_buf_size=65536");
+  line = parseServeCommandLine({"--lcm-url", "udpm://239.255.76.67:7701?recv_buf_size=123"});
+  EXPECT_EQ(line->url, "udpm://239.255.76.67:7701?recv_buf_size=123");  // the URL's own
+  line = parseServeCommandLine(
+      {"--lcm-url", "udpm://239.255.76.67:7701?recv_buf_size=123&ttl=0", "--recv-buf", "77"});
+  EXPECT_EQ(line->url, "udpm://239.255.76.67:7701?recv_buf_size=77&ttl=0");  // the flag's
+  line = parseServeCommandLine({"--lcm-url", "udpm://239.255.76.67", "--recv-buf", "9"});
+  EXPECT_EQ(line->url, "udpm://239.255.76.67?recv_buf_size=9");
+  EXPECT_EQ(line->options.udpm_port, 7667);
+  line = parseServeCommandLine({"--lcm-url", "tcpq://127.0.0.1:7700"});
+  EXPECT_EQ(line->url, "tcpq://127.0.0.1:7700");
+  EXPECT_LE(line->options.udpm_port, 0);
+  try {
+    parseServeCommandLine({"--lcm-url", "tcpq://127.0.0.1:7700", "--recv-buf", "65536"});
+    ADD_FAILURE() << "--recv-buf on tcpq accepted";
+  } catch (const UsageError& e) {
+    EXPECT_NE(std::string(e.what()).find("tcpq://127.0.0.1:7700"), std::string::npos) << e.what();
+  }
+  try {
+    parseServeCommandLine({"--lcm-url", base, "--recv-buf=-5"});
+    ADD_FAILURE() << "--recv-buf -5 accepted";
+  } catch (const UsageError& e) {
+    EXPECT_NE(std::string(e.what()).find("-5"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(serve::withReceiveBuffer("memq://", 100), std::invalid_argument);
+  EXPECT_EQ(serve::udpmPort("memq://"), -1);
 }
 
 }  // namespace

@@ -30,6 +30,7 @@ nlohmann::json batchRunJson(const BatchRun& b) {
                       {"reseeded", b.reseeded},
                       {"reseed_s", b.reseed_s}};
   if (b.reseed_rejected) j["reseed_rejected"] = true;
+  if (b.cancelled) j["cancelled"] = true;
   if ((b.reseeded || b.reseed_rejected) && !b.final_run) {
     j["F_before_reseed"] = b.F_before_reseed;
     j["F_after_reseed"] = b.F_after_reseed;

@@ -101,7 +101,10 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "file this service did not create); unset: SNAPSHOT refused")(
       "journal-max-bytes", po::value(&options.journal_max_bytes)->default_value(0),
       "the journal is full at this size: further edges are refused, as on a full disk (0: no "
-      "limit)");
+      "limit)")(
+      "recv-buf", po::value(&line.recv_buf_bytes),
+      "udpm: the receive buffer in bytes (LCM's recv_buf_size; capped by net.core.rmem_max; "
+      "default 4194304 unless the URL names recv_buf_size, which this flag replaces; docs/lcm.md)");
   addSmootherFlags(desc);
   desc.add_options()("status-period", po::value(&options.status_period_s)->default_value(1.0),
                      "seconds between status messages")(
@@ -172,6 +175,19 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
   if (!line.journal_dir.empty()) options.journal_path = line.journal_dir + "/journal.lcmlog";
+  if (vm.count("recv-buf") && line.recv_buf_bytes <= 0) {
+    throw UsageError("--recv-buf must be > 0 bytes, not '" + std::to_string(line.recv_buf_bytes) +
+                     "'");
+  }
+  if (serve::isUdpmUrl(line.url)) {
+    line.url =
+        line.recv_buf_bytes > 0
+            ? serve::withReceiveBuffer(line.url, line.recv_buf_bytes, serve::UrlOption::kReplace)
+            : serve::withReceiveBuffer(line.url, ServeCommandLine::kDefaultRecvBufBytes);
+    options.udpm_port = serve::udpmPort(line.url);
+  } else if (vm.count("recv-buf")) {
+    throw UsageError("--recv-buf applies to udpm:// only, not '" + line.url + "'");
+  }
   return line;
 }
 
@@ -253,6 +269,7 @@ int serveCommand(const std::vector<std::string>& args) {
         {"reseeds", s.reseeds},
         {"journal_reseeds", s.journal_reseeds},
         {"F_final", s.F_final},
+        {"recv_buf_bytes", s.recv_buf_bytes},
         {"latency_ms", {{"p50", s.latency.p50}, {"p99", s.latency.p99}, {"max", s.latency.max}}},
         {"transport_ms",
          {{"p50", s.transport.p50}, {"p99", s.transport.p99}, {"max", s.transport.max}}},

@@ -2,6 +2,7 @@
 // it gives).
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -17,6 +18,10 @@ struct ServeCommandLine {
   std::string output;       ///< --output
   bool json = false;
   RobustFlags robust;  ///< --robust ... (options.robust is set from it)
+  /// --recv-buf: udpm's receive buffer request in bytes; url then carries it as recv_buf_size
+  /// (replacing the URL's own). 0: kDefaultRecvBufBytes, unless the URL names its own.
+  std::int64_t recv_buf_bytes = 0;
+  static constexpr std::int64_t kDefaultRecvBufBytes = 4 << 20;
   /// Everything the service takes (the smoother's by tools/cli/smoother_flags.h), but `log`.
   serve::ServeOptions options;
 };

@@ -68,6 +68,7 @@ Service::Service(LinkWatch* receive, LinkWatch* publish, ServeOptions options)
       snapshots_(options_.snapshot_dir),
       limiter_(options_.log_period),
       intake_(options_.dim, options_.intake_window, options_.max_senders) {
+  options_.batch.cancel = CancellationToken();  // the service's own: stop() cancels it
   if (options_.dim != 0 && options_.dim != 2 && options_.dim != 3) {
     throw std::invalid_argument("serve: dim " + std::to_string(options_.dim) + " is not 2 or 3");
   }
@@ -112,6 +113,14 @@ void Service::start() {
   receive_->subscribe(channels_.priors, on(&Service::onPrior));
   receive_->subscribe(channels_.command, on(&Service::onCommand));
   receive_->subscribe(channels_.edge_commands, on(&Service::onEdgeCommand));
+  if (options_.udpm_port > 0) {  // the socket exists from the first subscribe on
+    const std::int64_t bytes = udpReceiveBufferBytes(options_.udpm_port);
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      recv_buf_bytes_ = bytes;
+    }
+    logLine("udpm receive buffer " + std::to_string(bytes) + " bytes (SO_RCVBUF)");
+  }
   receive_stop_ = false;
   smoother_stop_ = false;
   smoother_thread_ = std::thread(&Service::smootherLoop, this);
@@ -122,6 +131,10 @@ void Service::start() {
 void Service::stop() {
   if (!running_) return;
   running_ = false;
+  // A background batch (a whole RTR solve) stops at its next iteration; the batches the last
+  // update may still start stop at their first. The cancelled run is collected below, without a
+  // reseed.
+  options_.batch.cancel.cancel();
   receive_stop_ = true;
   receive_thread_.join();
   receive_->unsubscribeAll();
@@ -132,7 +145,7 @@ void Service::stop() {
   queue_cv_.notify_all();
   smoother_thread_.join();
 
-  pollBatch(true, false);  // a batch still running is waited for and applied (reseed) as usual
+  pollBatch(true, false);  // a batch still running was cancelled: collected, not reseeded
   if (engine_ && options_.refine_on_exit) refine(false);
   if (journal_) {
     try {
@@ -179,6 +192,8 @@ void Service::stop() {
   summary_.commands_refused = commands_refused_;
   summary_.commands_refused_by_reason = command_refusals_;
   summary_.journal_commands = journal_commands_;
+  summary_.recv_buf_bytes = std::max(
+      recv_buf_bytes_, options_.udpm_port > 0 ? udpReceiveBufferBytes(options_.udpm_port) : 0);
   summary_.edges_disabled = edges_disabled_;
   summary_.pairs_disabled = pairs_disabled_;
   summary_.journal_updates = journal_updates_;
@@ -623,7 +638,7 @@ bool Service::pollBatch(bool wait, bool publish) {
        << ": " << run->poses << " poses, F incremental " << run->F_incremental << " batch "
        << run->F_batch << ", " << run->winner << " wins by " << run->margin << " (" << run->time_s
        << " s, " << run->updates_during << " updates meanwhile)"
-       << (run->reseeded ? ", reseeded" : "");
+       << (run->reseeded ? ", reseeded" : "") << (run->cancelled ? ", cancelled" : "");
     logLine(os.str());
   }
   {
@@ -937,6 +952,9 @@ status_t Service::status() const {
   s.closures_total =
       r.closures_inlier + r.closures_outlier + r.closures_trusted + r.closures_excluded;
   s.inlier_threshold = inlier_threshold_;
+  s.batch_cancelled = last.cancelled;
+  // Read live: the link may have re-created the socket since start() (0 while it is down).
+  s.recv_buf_bytes = options_.udpm_port > 0 ? udpReceiveBufferBytes(options_.udpm_port) : 0;
   return s;
 }
 

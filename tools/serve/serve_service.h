@@ -79,8 +79,10 @@ struct ServeOptions {
   /// Seqs remembered per sender for exact duplicate detection; older ones are refused as stale.
   std::int64_t intake_window = EdgeIntake::kDefaultWindow;
   double status_period_s = 1.0;
-  int latency_window = 1000;     ///< status latency figures cover the last this many edges
-  refine::RefinerOptions batch;  ///< kind, every (0: only on command BATCH), reseed
+  int latency_window = 1000;  ///< status latency figures cover the last this many edges
+  /// kind, every (0: only on command BATCH), reseed; its cancel token is replaced by the
+  /// service's own, which stop() cancels.
+  refine::RefinerOptions batch;
   /// Where command SNAPSHOT writes its file (a plain name inside it); "" = SNAPSHOT refused.
   std::string snapshot_dir;
   std::size_t max_senders = EdgeIntake::kDefaultMaxSenders;  ///< sender tables per stream
@@ -97,6 +99,9 @@ struct ServeOptions {
   /// Online robust smoothing of the loop closures (--robust); none: off. Per edge, edge_t's
   /// trust and kernel refine it.
   std::optional<RobustOptions> robust;
+  /// udpm: the port the receive instance listens on; start() reads that socket's SO_RCVBUF for
+  /// status_t's recv_buf_bytes (serve::udpReceiveBufferBytes). <= 0: not udpm.
+  int udpm_port = -1;
 };
 
 struct ServeSummary {
@@ -132,6 +137,7 @@ struct ServeSummary {
   std::int64_t held_at_stop = 0;     ///< journaled, not applied: their update mark did not fit
   std::int64_t link_outages = 0;     ///< receive and publish links
   std::map<std::string, std::int64_t> control_refused;  ///< command_t refusals by reason
+  std::int64_t recv_buf_bytes = 0;  ///< udpm: the receive socket's SO_RCVBUF (status_t's)
 };
 
 class Service {
@@ -153,8 +159,9 @@ class Service {
   /// Replays the journal (if any), publishes the replayed estimate, subscribes and starts the
   /// receive and smoother threads. Throws std::runtime_error if the journal cannot be used.
   void start();
-  /// Stops receiving, applies every queued edge in one last update, refines (option), flushes
-  /// the journal, publishes the final full estimate and status, joins the threads.
+  /// Stops receiving, cancels a batch in flight (its run is kept, marked cancelled, without a
+  /// reseed), applies every queued edge in one last update, refines (option), flushes the
+  /// journal, publishes the final full estimate and status, joins the threads.
   void stop();
   /// Counters and figures so far (thread-safe).
   status_t status() const;
@@ -268,6 +275,7 @@ class Service {
   std::vector<refine::BatchRun> batch_runs_;
   int batches_skipped_ = 0, reseeds_ = 0, journal_reseeds_ = 0;
   double F_ = 0;
+  std::int64_t recv_buf_bytes_ = 0;
   std::vector<double> latencies_ms_;  ///< every applied edge and prior
   std::vector<double> transport_ms_;  ///< every applied edge and prior
   std::chrono::steady_clock::time_point last_status_;
