@@ -19,6 +19,7 @@
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/cli/smoother_flags.h"
 #include "arbor/tools/serve/closure_report.h"
+#include "arbor/tools/serve/lcm_tuning.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
