@@ -1,6 +1,7 @@
 #include "arbor/bayestree/bayes_tree.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -37,11 +38,14 @@ void BayesTree<D>::freeClique(int id) {
   c.pending.resize(0, 0);
   c.pending_cols = 0;
   free_cliques.push_back(id);
+  freed_since_release_.push_back(id);
 }
 
 template <int D>
 void BayesTree<D>::releaseFreeStorage() {
-  for (int c : free_cliques) cliques[c].storage.fit(0);
+  for (int c : freed_since_release_)
+    if (!cliques[c].in_use) cliques[c].storage.fit(0);
+  freed_since_release_.clear();
 }
 
 template <int D>
@@ -80,6 +84,7 @@ void BayesTree<D>::removeTop(const std::vector<int>& marked, Top* top) {
       c = cliques[c].parent;
     }
   for (int c : removed_) {
+    flops -= cliqueFlops(cliques[c].frontals.size(), cliques[c].separator.size());
     for (int v : cliques[c].frontals) top->variables.push_back(v);
     for (int ch : cliques[c].children)
       if (cliques[ch].removed_stamp != stamp) top->orphans.push_back(ch);
@@ -154,6 +159,12 @@ void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
       if (++steps > nc) fail(name + " lies on a parent cycle");
   }
   if (in_use != num_cliques) fail("clique count mismatch");
+  double sum_flops = 0;
+  for (const CliqueD& c : cliques)
+    if (c.in_use) sum_flops += cliqueFlops(c.frontals.size(), c.separator.size());
+  if (std::abs(sum_flops - flops) > 1e-9 * std::max(1.0, sum_flops))
+    fail("flops " + std::to_string(flops) + " is not the cliques' sum " +
+         std::to_string(sum_flops));
   for (int r : roots)
     if (r < 0 || r >= nc || !cliques[r].in_use || cliques[r].parent != -1)
       fail("root " + std::to_string(r) + " is not a live parentless clique");

@@ -31,6 +31,17 @@ class BayesTree {
   std::vector<int> clique_of;     ///< variable → clique where it is frontal (−1: fixed / new)
   std::vector<int> free_cliques;  ///< ids of cliques not in use, to recycle
   int num_cliques = 0;            ///< cliques in use
+  /// Flops of factorising the cliques in use (Σ cliqueFlops): removeTop takes the removed
+  /// cliques' off, addFlops (the top elimination) adds the new ones'.
+  double flops = 0;
+
+  /// F³/3 + F²S + FS² for a clique of `frontals` and `separator` variables (F = D·frontals,
+  /// S = D·separator): its dense Cholesky, the off-diagonal solve and the Schur complement.
+  static double cliqueFlops(size_t frontals, size_t separator) {
+    const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
+    return F * F * F / 3 + F * F * S + F * S * S;
+  }
+  void addFlops(const CliqueD& c) { flops += cliqueFlops(c.frontals.size(), c.separator.size()); }
 
   /// slots[v] = v's position (in variables) among clique c's frontals then separator, until
   /// clearSlots.
@@ -52,7 +63,8 @@ class BayesTree {
   int allocClique();
   /// Returns clique `id` to the free list (its storage kept for recycling).
   void freeClique(int id);
-  /// Frees the storage of the cliques left on the free list (those not recycled hold none).
+  /// Frees the storage of the cliques freed since the last call and not recycled (those on the
+  /// free list hold none). O(cliques freed since then), not O(free list).
   void releaseFreeStorage();
 
   bool isAncestorOrSelf(int ancestor, int c) const;
@@ -76,7 +88,7 @@ class BayesTree {
   /// pointed to by clique_of, none also in its separator; a root has an empty separator and is
   /// among the roots, a non-root a live parent that lists it, a non-empty separator inside the
   /// parent's variables (running intersection); children point back; no parent cycle; the
-  /// count of cliques; every variable not fixed and not `awaiting(v)` (about to be eliminated)
+  /// count of cliques and their flops; every variable not fixed and not `awaiting(v)` (about to be eliminated)
   /// frontal exactly once, fixed ones never; every factor (arity(), key(k)) held by the clique
   /// of one of its variables.
   template <class Factor>
@@ -89,6 +101,7 @@ class BayesTree {
  private:
   int remove_stamp_ = 0;
   std::vector<int> removed_, stack_;
+  std::vector<int> freed_since_release_;  // may hold ids recycled since (skipped: in use)
 };
 
 }  // namespace arbor::bayestree

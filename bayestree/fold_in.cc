@@ -109,7 +109,11 @@ int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
   const int start = startClique(f, ctx, *tree);
   int later;
   separatorsToExtend(f, start, ctx, *tree, &later, &path_);
-  for (int c : path_) cliques[c].extendSeparator(later, &extend_buf_);
+  for (int c : path_) {  // each separator grows by one variable: its flops with it
+    const size_t nf = cliques[c].frontals.size(), ns = cliques[c].separator.size();
+    tree->flops += BayesTree<D>::cliqueFlops(nf, ns + 1) - BayesTree<D>::cliqueFlops(nf, ns);
+    cliques[c].extendSeparator(later, &extend_buf_);
+  }
   // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
   typename Factor<G>::Linearization A;
   e.linearizeWeighted(ctx.theta, &A);

@@ -53,6 +53,8 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->cliques_solved += s.cliques_solved;
   total->cliques_updated += s.cliques_updated;
   total->cliques_on_helpers += s.cliques_on_helpers;
+  total->batch_reeliminations += s.batch_reeliminations;
+  total->variables_checked += s.variables_checked;
 }
 
 int threadCount(int requested) {
@@ -82,7 +84,15 @@ void validate(const SmootherOptions& o) {
     bad("finalize_relative_tolerance", o.finalize_relative_tolerance, "≥ 0");
   if (o.finalize_max_iterations < 1)
     bad("finalize_max_iterations", o.finalize_max_iterations, "≥ 1");
+  if (!(o.batch.top_share > 0 && o.batch.top_share <= 1))
+    bad("batch.top_share", o.batch.top_share, "in (0, 1]");
+  if (!(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1))
+    bad("batch.reorder_decay", o.batch.reorder_decay, "0 or ≥ 1");
 }
+
+// The decay check (BatchSwitchOptions::reorder_decay) waits until the tree's factorisation
+// costs at least this many flops: below it a re-ordering saves less than the check costs.
+constexpr double kMinDecayCheckFlops = 1e6;
 
 /// How one pass of Alg. 6 runs.
 struct StepOptions {
@@ -131,6 +141,24 @@ struct IncrementalSmoother<G>::Impl {
   // A pass's lists (reused).
   std::vector<int> touched, relin, to_linearize, marked;
   typename bayestree::BayesTree<D>::Top top;
+  // updatedPoses(): the poses of the last update (each once: updated_stamp[v] == publish_stamp),
+  // every variable when updated_all; `moved` waits for the next update (transformPoses).
+  std::vector<int> updated, moved, updated_stamp;
+  int publish_stamp = 0;
+  bool updated_all = false;
+  // Alg. 5's candidates: the variables solved since the last relinearisation check (each once:
+  // is_candidate), the only ones whose Δ can have crossed β; every variable when check_all
+  // (after a step that set Δ everywhere: dogleg, relinearizeAll).
+  std::vector<int> relin_candidates;
+  std::vector<char> is_candidate;
+  bool check_all = false;
+  // The batch switch (BatchSwitchOptions): the variables (not fixed), the tree's flops when its
+  // ordering was last compared with a fresh one (or made afresh), and a re-ordering found due.
+  int num_variables = 0;
+  double flops_reference = 0;
+  bool reorder_due = false;
+  bayestree::RowList fresh_rows;
+  std::vector<int> fresh_vars;
 
   explicit Impl(const SmootherOptions& o)
       : opt(o), threads(threadCount(o.threads)), dogleg_radius(o.dogleg_initial_radius) {
@@ -150,7 +178,12 @@ struct IncrementalSmoother<G>::Impl {
     factors.addVariable();
     threads.addVariable();
     mark.push_back(0);
-    if (!is_fixed) new_vars.push_back(index);
+    updated_stamp.push_back(0);
+    is_candidate.push_back(0);
+    if (!is_fixed) {
+      new_vars.push_back(index);
+      ++num_variables;
+    }
     return index;
   }
 
@@ -179,6 +212,7 @@ struct IncrementalSmoother<G>::Impl {
                                   " is not a fixed pose");
     fixed[v] = 0;
     new_vars.push_back(v);
+    ++num_variables;
     for (int f : factors.var_factors[v]) {
       const Factor<G>& e = factors.factors[f];
       for (int k = 0; k < e.arity(); ++k)
@@ -196,6 +230,7 @@ struct IncrementalSmoother<G>::Impl {
         throw std::invalid_argument("IncrementalSmoother::transformPoses: index " +
                                     std::to_string(v) + " out of range");
     for (int v : poses) mark[v] = 1;
+    moved.insert(moved.end(), poses.begin(), poses.end());
     for (int v : poses) {
       theta[v] = T.compose(theta[v]);
       theta[v].normalize();
@@ -255,6 +290,46 @@ struct IncrementalSmoother<G>::Impl {
   // the others are folded in by a second pass: the linear system, hence the step, is that of
   // one update with all of them.
   UpdateStats update() {
+    beginUpdated();
+    UpdateStats st = updatePasses();
+    finishUpdated();
+    return st;
+  }
+
+  // updatedPoses(): starts the list with the poses moved since the last update.
+  void beginUpdated() {
+    ++publish_stamp;
+    updated.clear();
+    updated_all = false;
+    for (int v : moved) noteUpdated(v);
+    moved.clear();
+  }
+  void noteUpdated(int v) {
+    if (updated_stamp[v] == publish_stamp) return;
+    updated_stamp[v] = publish_stamp;
+    updated.push_back(v);
+  }
+  void finishUpdated() {
+    if (updated_all) {
+      updated.clear();
+      for (int v = 0; v < numPoses(); ++v)
+        if (!fixed[v]) updated.push_back(v);
+    }
+    std::sort(updated.begin(), updated.end());
+  }
+  // After a solve: its variables are updated and are the next relinearisation check's
+  // candidates.
+  void noteSolved() {
+    for (int v : partial_solve.solved_variables) {
+      noteUpdated(v);
+      if (!is_candidate[v]) {
+        is_candidate[v] = 1;
+        relin_candidates.push_back(v);
+      }
+    }
+  }
+
+  UpdateStats updatePasses() {
     ++update_count;
     StepOptions pass;
     pass.check_relinearization = update_count % opt.relinearize_skip == 0;
@@ -359,9 +434,23 @@ struct IncrementalSmoother<G>::Impl {
     if (pass.relinearize_all) {
       for (int v = 0; v < n; ++v)
         if (!fixed[v]) relin.push_back(v);
-    } else if (pass.check_relinearization) {
+    } else if (pass.check_relinearization && check_all) {
       for (int v = 0; v < n; ++v)
         if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
+      st->variables_checked = n;
+    } else if (pass.check_relinearization) {
+      // Only a variable solved since the last check can have crossed β (every other one was
+      // below it then, or relinearised and solved since). In index order, as a scan of all
+      // would list them.
+      std::sort(relin_candidates.begin(), relin_candidates.end());
+      for (int v : relin_candidates)
+        if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
+      st->variables_checked = static_cast<int>(relin_candidates.size());
+    }
+    if (pass.relinearize_all || pass.check_relinearization) {
+      for (int v : relin_candidates) is_candidate[v] = 0;
+      relin_candidates.clear();
+      check_all = false;
     }
     for (int v : relin) {
       theta[v] = theta[v].retract(delta[v]);
@@ -425,6 +514,23 @@ struct IncrementalSmoother<G>::Impl {
     for (int v : touched)
       if (tree.clique_of[v] < 0) top.variables.push_back(v);
     tree.removeTop(marked, &top);
+    // Extension (docs/design.md, "Never costlier than batch"): a top of more than a share of
+    // the variables, or a tree whose ordering has decayed, is re-eliminated as the whole graph
+    // in a fresh ordering (the touched variables still last).
+    const bool batch =
+        !relinearize_all && !top.variables.empty() &&
+        (reorder_due || static_cast<double>(top.variables.size()) >
+                            opt.batch.top_share * static_cast<double>(num_variables));
+    if (batch) {
+      marked.clear();
+      for (int c = 0; c < static_cast<int>(tree.cliques.size()); ++c)
+        if (tree.cliques[c].in_use) marked.push_back(c);
+      for (int oc : top.orphans) tree.cliques[oc].parent = -1;  // its parent is freed
+      top.orphans.clear();  // every orphan is removed with the rest
+      tree.removeTop(marked, &top);
+      st->batch_reeliminations = 1;
+      reorder_due = false;
+    }
     // Alg. 4 steps 2–6: linearise (what is left of step 2), add the orphans' cached factors,
     // re-order (constrained: the touched variables last, unless everything is re-eliminated),
     // eliminate into new cliques and insert the orphans back.
@@ -437,7 +543,53 @@ struct IncrementalSmoother<G>::Impl {
     st->cliques_reeliminated += out.cliques;
     st->variables_reeliminated += out.variables;
     tree.releaseFreeStorage();  // cliques not recycled hold no memory
+    if (relinearize_all || batch)
+      flops_reference = tree.flops;  // a fresh ordering
+    else if (opt.batch.reorder_decay > 0 &&
+             tree.flops > opt.batch.reorder_decay * std::max(flops_reference, kMinDecayCheckFlops))
+      checkOrderingDecay();
     return !top.variables.empty();
+  }
+
+  // BatchSwitchOptions::reorder_decay: the tree's flops against those of the whole graph in a
+  // fresh ordering; the next re-elimination re-orders when they exceed decay × fresh. Either
+  // way the next comparison waits until the tree's flops have grown by the decay factor again.
+  void checkOrderingDecay() {
+    if (tree.flops > opt.batch.reorder_decay * freshOrderingFlops()) reorder_due = true;
+    flops_reference = tree.flops;
+  }
+
+  // Flops of factorising every variable in the tree in a fresh ordering (the one the top
+  // elimination would choose for a top of all of them, unconstrained). O(n + m).
+  double freshOrderingFlops() {
+    std::vector<int>& slot = threads.lanes[0].slot;
+    std::vector<int>& vars = fresh_vars;
+    vars.clear();
+    for (int v = 0; v < numPoses(); ++v)
+      if (!fixed[v] && tree.clique_of[v] >= 0) {
+        slot[v] = static_cast<int>(vars.size());
+        vars.push_back(v);
+      }
+    const int n = static_cast<int>(vars.size());
+    fresh_rows.clear();
+    for (const Factor<G>& e : factors.factors) {
+      int keys = 0;
+      for (int k = 0; k < e.arity(); ++k) keys += slot[e.key(k)] >= 0 ? 1 : 0;
+      if (keys < 2) continue;
+      for (int k = 0; k < e.arity(); ++k)
+        if (slot[e.key(k)] >= 0) fresh_rows.add(slot[e.key(k)]);
+      fresh_rows.endRow();
+    }
+    for (int v : vars) slot[v] = -1;
+    const std::vector<int> group(static_cast<size_t>(n), 0);
+    const bayestree::EliminationPlan plan = bayestree::planElimination(
+        n, fresh_rows,
+        n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, fresh_rows, group)
+                                   : bayestree::constrainedColamd(n, fresh_rows, group));
+    double flops = 0;
+    for (const bayestree::SymbolicClique& c : plan.cliques)
+      flops += bayestree::BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
+    return flops;
   }
 
   // Tops of at least this many variables are ordered by nested dissection
@@ -455,7 +607,12 @@ struct IncrementalSmoother<G>::Impl {
                           opt.wildfire_threshold, opt.dogleg ? nullptr : &delta, &threads);
     st->cliques_solved += out.solved;
     st->cliques_on_helpers += out.on_helpers;
-    if (opt.dogleg && tree_changed) doglegStep();
+    noteSolved();
+    if (opt.dogleg && tree_changed) {
+      doglegStep();  // sets Δ everywhere
+      updated_all = true;
+      check_all = true;
+    }
   }
 
   // Σ w eᵀΩe at θ ⊞ x for every pose (w = 1 for every factor unless `weighted`): the dogleg and
@@ -483,6 +640,8 @@ struct IncrementalSmoother<G>::Impl {
     const auto t0 = Clock::now();
     UpdateStats total;
     if (!queued.empty() || !new_vars.empty()) accumulate(&total, update());
+    beginUpdated();
+    updated_all = true;  // every Δ is set (and may be halved) below
     double F_prev = objectiveAt(delta);
     StepOptions everything;
     everything.relinearize_all = true;
@@ -507,6 +666,8 @@ struct IncrementalSmoother<G>::Impl {
       F_prev = F_new;
       if (change < opt.finalize_relative_tolerance) break;
     }
+    check_all = true;  // the halving set Δ outside the solve
+    finishUpdated();
     total.time_s = secondsSince(t0);
     return total;
   }
@@ -583,6 +744,14 @@ G IncrementalSmoother<G>::estimate(int index) const {
                             " out of range");
   if (impl_->fixed[index]) return impl_->theta[index];
   return impl_->theta[index].retract(impl_->delta[index]);
+}
+template <class G>
+const std::vector<int>& IncrementalSmoother<G>::updatedPoses() const {
+  return impl_->updated;
+}
+template <class G>
+double IncrementalSmoother<G>::factorizationFlops() const {
+  return impl_->tree.flops;
 }
 template <class G>
 const std::vector<G>& IncrementalSmoother<G>::linearizationPoint() const {

@@ -24,6 +24,22 @@
 
 namespace arbor {
 
+/// When an update re-eliminates the whole graph with a fresh ordering instead of its top
+/// (docs/design.md, "Never costlier than batch"). The linear system is the same either way, so
+/// the estimate is too (to rounding, and to the wildfire threshold of the partial solve).
+struct BatchSwitchOptions {
+  /// An update whose top to re-eliminate (Alg. 4 step 1; it holds the relinearised variables'
+  /// cliques too) has more than this share of the variables re-eliminates all of them, ordered
+  /// afresh by CCOLAMD with the touched variables last (as GTSAM's ISAM2 re-orders in batch past
+  /// a share of the variables). 1: never.
+  double top_share = 0.65;
+  /// The tree is re-ordered (its next re-elimination is the whole graph's) when the flops of
+  /// factorising it in its incremental ordering (Σ F³/3 + F²S + FS² over its cliques) exceed this
+  /// many times a fresh ordering's. The fresh ordering is computed only when the tree's flops
+  /// have grown by this factor since the last comparison, so checks are amortised. 0: never.
+  double reorder_decay = 2.0;
+};
+
 struct SmootherOptions {
   /// Fluid relinearisation thresholds β (Kaess et al., IJRR 2012, Alg. 5) on |Δ|∞ of the
   /// translational and the rotational part of a variable's tangent; GTSAM's default is 0.1 for
@@ -61,6 +77,7 @@ struct SmootherOptions {
   /// core, at most 4. The BLAS should then run one thread per call (a multi-threaded OpenBLAS
   /// competes for the same cores): the constructor calls useOneBlasThread (core/blas_threads.h).
   int threads = 0;
+  BatchSwitchOptions batch;  ///< when an update re-eliminates the whole graph
 };
 
 struct UpdateStats {
@@ -76,6 +93,12 @@ struct UpdateStats {
   /// of the cliques re-eliminated and solved, those done by the smoother's helper threads
   /// (SmootherOptions::threads)
   int cliques_on_helpers = 0;
+  /// 1 when this update re-eliminated the whole graph with a fresh ordering (BatchSwitchOptions:
+  /// its top was too large, or the tree's ordering had decayed)
+  int batch_reeliminations = 0;
+  /// variables whose Δ the relinearisation check (Alg. 5) examined: those solved since the
+  /// previous check, not every variable
+  int variables_checked = 0;
   double time_s = 0.0;
 };
 
@@ -146,6 +169,15 @@ class IncrementalSmoother {
 
   std::vector<G> estimate() const;  ///< θ ⊞ Δ for every pose (O(n))
   G estimate(int index) const;
+  /// The poses whose estimate the last update() (or relinearizeAll()) may have changed, in
+  /// increasing order: those of the cliques it solved, the new ones and those moved by
+  /// transformPoses since the update before (every variable after a dogleg step or
+  /// relinearizeAll). O(what the update touched); a pose not listed kept its estimate bit for
+  /// bit.
+  const std::vector<int>& updatedPoses() const;
+  /// Flops of factorising the Bayes tree in its current ordering (Σ F³/3 + F²S + FS² over its
+  /// cliques, F and S the frontal and separator dimensions), kept up to date by every update.
+  double factorizationFlops() const;
   const std::vector<G>& linearizationPoint() const;
   const std::vector<Tangent>& delta() const;  ///< Δ per pose (zero for fixed poses)
   double objective() const;                   ///< F = Σ eᵀΩe at estimate() (O(m))

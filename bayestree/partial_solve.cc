@@ -38,7 +38,10 @@ typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool f
       if (changed_[v]) return true;
     return false;
   };
-  for (Lane& l : threads->lanes) l.solved = 0;
+  for (Lane& l : threads->lanes) {
+    l.solved = 0;
+    l.solved_list.clear();
+  }
   // Depth-first from the roots on this thread, until a subtree worth sharing waits (the oldest
   // entry of the stack is the largest subtree waiting): small walks never involve a helper.
   auto worth_sharing = [&](const std::deque<int>& pending) {
@@ -82,8 +85,11 @@ typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool f
     });
   }
   Output out;
+  solved_variables.clear();
   for (size_t l = 0; l < threads->lanes.size(); ++l) {
     Lane& lane = threads->lanes[l];
+    solved_variables.insert(solved_variables.end(), lane.solved_list.begin(),
+                            lane.solved_list.end());
     out.solved += lane.solved;
     if (l > 0) out.on_helpers += lane.solved;
     for (int v : lane.changed_list) changed_[v] = 0;
@@ -122,6 +128,7 @@ void PartialSolve<D>::solveClique(const Clique<D>& c, bool full, double threshol
     }
     delta_newton[v] = xv;
     if (delta) (*delta)[v] = xv;
+    lane->solved_list.push_back(v);
   }
 }
 

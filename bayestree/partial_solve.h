@@ -27,6 +27,9 @@ class PartialSolve {
 
   std::vector<Vec> delta_newton;  ///< the Gauss–Newton solution of the Bayes tree, per pose
   std::vector<Vec> delta_seen;    ///< Δ_newton as last propagated to the cliques below
+  /// The frontals of the cliques the last run() solved (each once; in no particular order when
+  /// helper threads took part): the only variables whose Δ it can have changed.
+  std::vector<int> solved_variables;
 
   /// A new pose (Δ = 0).
   void addVariable();

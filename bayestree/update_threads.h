@@ -23,7 +23,8 @@ struct Lane {
   DoubleBuffer h;  ///< the clique's assembled Hessian
   std::vector<double> diag, x;
   std::vector<int> child_slots, changed_list;
-  std::deque<int> pending;                            ///< cliques this thread is to back-substitute
+  std::vector<int> solved_list;  ///< frontals of the cliques this thread solved (partial_solve.h)
+  std::deque<int> pending;       ///< cliques this thread is to back-substitute
   int solved = 0, eliminated = 0, indeterminate = 0;  ///< cliques, in the current walk
 };
 

@@ -77,9 +77,12 @@ std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::Repl
         other_ms.push_back(row.latency_ms);
       }
       slice.edges = row.edges_so_far;
+      slice.batch_updates += row.batch_reeliminations;
+      slice.peak_rss_mb = static_cast<double>(row.peak_rss_kb) / 1024;
     }
     if (relin_ms.empty() && other_ms.empty()) continue;
     slice.poses = known;
+    slice.rss_per_pose_kb = known > 0 ? 1024 * slice.peak_rss_mb / known : 0;
     slice.relin_updates = static_cast<int>(relin_ms.size());
     if (!relin_ms.empty()) {
       const cli::LatencySummary l = cli::summarizeLatency(relin_ms);
@@ -103,8 +106,8 @@ void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices)
   out << "| poses | edges | factorisation MFlop | factorisation ms, block / CHOLMOD | relin. "
          "updates | relin. p50 "
          "ms | relin. max ms | relinearised | relin. / factorisation | other updates | other p50 "
-         "ms | other p99 ms |\n"
-      << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+         "ms | other p99 ms | batch updates | peak RSS MB | RSS / pose KB |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const GrowthSlice& s : slices) {
     const bool timed = s.factorization_ms > 0;
     out << "| " << s.poses << " | " << s.edges << " | " << fmt("%.1f", s.factorization_flops / 1e6)
@@ -113,7 +116,8 @@ void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices)
         << fmt("%.3f", s.relin_max_ms) << " | " << fmt("%.0f%%", 100 * s.relin_share) << " | "
         << (timed && s.relin_updates > 0 ? fmt("%.1f", s.relin_p50_ms / s.factorization_ms) : "—")
         << " | " << s.other_updates << " | " << fmt("%.3f", s.other_p50_ms) << " | "
-        << fmt("%.3f", s.other_p99_ms) << " |\n";
+        << fmt("%.3f", s.other_p99_ms) << " | " << s.batch_updates << " | "
+        << fmt("%.0f", s.peak_rss_mb) << " | " << fmt("%.2f", s.rss_per_pose_kb) << " |\n";
   }
 }
 

@@ -33,6 +33,10 @@ struct GrowthSlice {
   double relin_share = 0;   ///< their mean variables relinearised / poses known
   int other_updates = 0;    ///< the rest
   double other_p50_ms = 0, other_p99_ms = 0;
+  int batch_updates = 0;  ///< updates that re-eliminated the whole graph (BatchSwitchOptions)
+  /// The process's peak RSS after the slice's last update (getrusage, = VmHWM): the smoother,
+  /// the loaded graph and the process's baseline; and it per pose known.
+  double peak_rss_mb = 0, rss_per_pose_kb = 0;
 };
 
 /// Splits `replay` (one row per update of cli::replayGroups(graph, per_pose), as replayInto

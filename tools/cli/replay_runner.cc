@@ -9,6 +9,7 @@
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/core/gnc_solver.h"
 #include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/peak_rss.h"
 #include "arbor/tools/cli/replay_order.h"
 
 namespace arbor::cli {
@@ -62,6 +63,8 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     result.rows.push_back({static_cast<int>(result.rows.size()) + 1, fed, ms,
                            s.cliques_reeliminated, s.variables_relinearized, s.cliques_updated,
                            s.cliques_solved});
+    result.rows.back().batch_reeliminations = s.batch_reeliminations;
+    result.rows.back().peak_rss_kb = peakRssKb();
     if (hooks.after_update) hooks.after_update(smoother, result.rows.back());
   }
   // Priors on poses that no edge reaches: each starts a component of its own, in one update.

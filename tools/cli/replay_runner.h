@@ -35,8 +35,10 @@ struct UpdateRow {
   double latency_ms = 0;
   int cliques_reeliminated = 0;
   int variables_relinearized = 0;
-  int cliques_updated = 0;  ///< cliques given a rank update instead of re-eliminated
-  int cliques_solved = 0;   ///< cliques re-solved by back-substitution
+  int cliques_updated = 0;       ///< cliques given a rank update instead of re-eliminated
+  int cliques_solved = 0;        ///< cliques re-solved by back-substitution
+  int batch_reeliminations = 0;  ///< 1: the whole graph re-eliminated (BatchSwitchOptions)
+  long peak_rss_kb = 0;          ///< the process's peak RSS after the update (cli/peak_rss.h)
 };
 
 template <class G>

@@ -78,7 +78,15 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "order re-eliminated tops of at least N variables by nested dissection (-1: automatic, "
       "0: always)")(
       "threads", po::value<int>()->default_value(d.threads),
-      "threads per update, sharing independent subtrees (0: one per core, at most 4)");
+      "threads per update, sharing independent subtrees (0: one per core, at most 4)")(
+      "batch-top-share",
+      po::value<double>()->default_value(d.batch.top_share, text(d.batch.top_share)),
+      "re-eliminate the whole graph in a fresh ordering when the top of an update holds more "
+      "than this share of the variables (1: never)")(
+      "reorder-decay",
+      po::value<double>()->default_value(d.batch.reorder_decay, text(d.batch.reorder_decay)),
+      "re-order the tree when factorising it in its incremental ordering costs more than this "
+      "many times a fresh ordering (0: never)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -119,6 +127,12 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   require(o.nested_dissection_min >= -1, "nested-dissection-min", ">= -1", o.nested_dissection_min);
   o.threads = valueOf(vm, "threads", o.threads);
   require(o.threads >= 0, "threads", ">= 0", o.threads);
+  o.batch.top_share = valueOf(vm, "batch-top-share", o.batch.top_share);
+  require(o.batch.top_share > 0 && o.batch.top_share <= 1, "batch-top-share", "in (0, 1]",
+          o.batch.top_share);
+  o.batch.reorder_decay = valueOf(vm, "reorder-decay", o.batch.reorder_decay);
+  require(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1, "reorder-decay", "0 or >= 1",
+          o.batch.reorder_decay);
   return o;
 }
 
@@ -142,6 +156,10 @@ std::string describeSmoother(const SmootherOptions& o) {
   if (o.nested_dissection_min != d.nested_dissection_min)
     out << ", nested dissection from " << o.nested_dissection_min << " variables";
   if (o.threads != d.threads) out << ", " << o.threads << " thread(s)";
+  if (o.batch.top_share != d.batch.top_share)
+    out << ", batch past a top share of " << o.batch.top_share;
+  if (o.batch.reorder_decay != d.batch.reorder_decay)
+    out << ", re-order at decay " << o.batch.reorder_decay;
   if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
       o.finalize_max_iterations != d.finalize_max_iterations) {
     out << ", final pass to " << o.finalize_relative_tolerance << " in at most "

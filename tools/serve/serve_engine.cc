@@ -43,8 +43,19 @@ class EngineImpl final : public Engine {
                                                        : smoother_.enableEdge(c.from, c.to);
   }
 
-  UpdateStats update() override { return smoother_.update(); }
-  UpdateStats refine() override { return smoother_.finalize(); }
+  // The poses an update may have changed (IncrementalSmoother::updatedPoses) wait for the next
+  // "changed" message. The engine's OnlineSmoother runs one smoother update per update() (no
+  // robust layer, whose graduation would run several), so the last update's list is complete.
+  UpdateStats update() override {
+    const UpdateStats st = smoother_.update();
+    noteChanged(smoother_.smoother().updatedPoses());
+    return st;
+  }
+  UpdateStats refine() override {
+    const UpdateStats st = smoother_.finalize();
+    noteChanged(smoother_.smoother().updatedPoses());
+    return st;
+  }
   double objective() const override { return smoother_.objective(); }
   OnlineStats stats() const override { return smoother_.stats(); }
   std::vector<ClosureReport> closures() const override { return smoother_.closures(); }
@@ -53,7 +64,7 @@ class EngineImpl final : public Engine {
   }
 
   estimate_t estimate(bool full) override {
-    estimate_t m = message(smoother_.smoother().estimate(), full);
+    estimate_t m = full ? message(smoother_.smoother().estimate(), true) : changedMessage();
     m.F = full ? objective() : std::numeric_limits<double>::quiet_NaN();
     return m;
   }
@@ -92,7 +103,9 @@ class EngineImpl final : public Engine {
     for (size_t k = 0; k < n; ++k) {
       values[seed.ids[k]] = poseFromFields<G>(seed.translation[k].data(), seed.rotation[k].data());
     }
-    return smoother_.reseed(values, /*only_if_lower=*/true);
+    const ReseedResult result = smoother_.reseed(values, /*only_if_lower=*/true);
+    for (int k = 0; k < smoother_.smoother().numPoses(); ++k) noteChanged(k);  // rebuilt
+    return result;
   }
 
  private:
@@ -114,6 +127,46 @@ class EngineImpl final : public Engine {
       m.translation.emplace_back(f.begin(), f.begin() + 3);
       m.rotation.emplace_back(f.begin() + 3, f.end());
     }
+    m.num_poses = static_cast<int32_t>(m.ids.size());
+    return m;
+  }
+
+  void noteChanged(int k) {
+    if (static_cast<size_t>(k) >= is_changed_.size()) is_changed_.resize(k + 1, 0);
+    if (is_changed_[k]) return;
+    is_changed_[k] = 1;
+    changed_.push_back(k);
+  }
+  void noteChanged(const std::vector<int>& poses) {
+    for (int k : poses) noteChanged(k);
+  }
+
+  /// The "changed" message: of the poses updates may have changed since the last message and
+  /// those new since (fixed ones included), those whose fields differ from what was published
+  /// (dense order). O(poses listed), not O(all poses).
+  estimate_t changedMessage() {
+    const IncrementalSmoother<G>& s = smoother_.smoother();
+    const std::vector<Key>& ids = smoother_.ids();
+    const int n = s.numPoses();
+    for (int k = static_cast<int>(published_.size()); k < n; ++k) noteChanged(k);
+    published_.resize(static_cast<size_t>(n));
+    std::sort(changed_.begin(), changed_.end());
+    estimate_t m;
+    m.dim = G::kDim;
+    m.full = false;
+    m.total_poses = n;
+    for (int k : changed_) {
+      is_changed_[k] = 0;
+      if (k >= n) continue;
+      Fields f;
+      poseToFields(s.estimate(k), f.data(), f.data() + 3);
+      if (f == published_[k]) continue;
+      published_[k] = f;
+      m.ids.push_back(ids[k]);
+      m.translation.emplace_back(f.begin(), f.begin() + 3);
+      m.rotation.emplace_back(f.begin() + 3, f.end());
+    }
+    changed_.clear();
     m.num_poses = static_cast<int32_t>(m.ids.size());
     return m;
   }
@@ -160,6 +213,8 @@ class EngineImpl final : public Engine {
   OnlineSmoother<G> smoother_;
   refine::BatchRefiner<G> refiner_;
   std::vector<Fields> published_;  ///< per dense index: the values last put in a message
+  std::vector<int> changed_;       ///< poses to compare at the next "changed" message
+  std::vector<char> is_changed_;   ///< per dense index: listed in changed_
 };
 
 }  // namespace

@@ -1,0 +1,221 @@
+// Tests of the batch switch (SmootherOptions::batch: the whole graph re-eliminated in a fresh
+// ordering) and of the update path's bounded work (updatedPoses, the relinearisation check over
+// the variables solved since the last check): deterministic counts and estimates, no timing.
+
+#include <algorithm>
+#include <random>
+#include <vector>
+
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/tests/random_graphs.h"
+
+#include <gtest/gtest.h>
+
+namespace arbor {
+namespace {
+
+using testing::diagonalInformation;
+using testing::isotropicNoise;
+
+/// A random walk of n poses with odometry and `loops` loop closures to random older poses (a
+/// loop at pose k is added with it), noisy measurements; the edges grouped per new pose.
+template <class G>
+std::vector<std::vector<RelativePoseEdge<G>>> randomWalk(int n, int loops, unsigned seed,
+                                                         std::vector<G>* truth) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  truth->assign(1, G());
+  for (int k = 1; k < n; ++k) {
+    typename G::Tangent step = isotropicNoise<G>(rng, 0.3);
+    step(0) += 1.0;
+    truth->push_back(truth->back().compose(G::Exp(step)));
+  }
+  const auto omega = diagonalInformation<G>(100.0, 400.0);
+  auto measured = [&](int i, int j) {
+    return (*truth)[i].between((*truth)[j]).compose(G::Exp(isotropicNoise<G>(rng, 0.05)));
+  };
+  std::vector<std::vector<RelativePoseEdge<G>>> by_pose(n);
+  for (int k = 1; k < n; ++k)
+    by_pose[k].push_back(RelativePoseEdge<G>::make(k - 1, k, measured(k - 1, k), omega));
+  std::uniform_int_distribution<int> pick(2, n - 1);
+  for (int l = 0; l < loops; ++l) {
+    const int j = pick(rng);
+    const int i = std::uniform_int_distribution<int>(0, j - 2)(rng);
+    by_pose[j].push_back(RelativePoseEdge<G>::make(i, j, measured(i, j), omega));
+  }
+  return by_pose;
+}
+
+/// Feeds pose k and its edges, then update(), for every k; `check(smoother, stats)` after each.
+template <class G, class Check>
+void replay(const std::vector<std::vector<RelativePoseEdge<G>>>& by_pose, IncrementalSmoother<G>* s,
+            Check check) {
+  s->addFixedPose(G());
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    s->addPose(s->estimate(odo.i).compose(odo.measurement));
+    for (const auto& e : by_pose[k]) s->addFactor(e);
+    check(*s, s->update());
+  }
+}
+
+SmootherOptions inlineOptions() {
+  SmootherOptions o;
+  o.threads = 1;
+  o.wildfire_threshold = 0;  // every clique below a change is solved: exact comparisons
+  o.batch.top_share = 1;     // never batch
+  o.batch.reorder_decay = 0;
+  return o;
+}
+
+// The batch path re-eliminates the same linear system in another ordering, so its estimate is
+// the inline path's to rounding, after every update (and the same variables relinearise).
+template <class G>
+void expectBatchEqualsInline(unsigned seed) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
+  IncrementalSmoother<G> inline_smoother(inlineOptions());
+  std::vector<std::vector<G>> inline_estimates;
+  replay(by_pose, &inline_smoother, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
+    EXPECT_EQ(st.batch_reeliminations, 0);
+    inline_estimates.push_back(s.estimate());
+  });
+  SmootherOptions o = inlineOptions();
+  o.batch.top_share = 0.2;
+  o.batch.reorder_decay = 1.0;
+  IncrementalSmoother<G> batch_smoother(o);
+  int batches = 0;
+  size_t u = 0;
+  replay(by_pose, &batch_smoother, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
+    batches += st.batch_reeliminations;
+    const std::vector<G> x = s.estimate();
+    for (size_t v = 0; v < x.size(); ++v)
+      ASSERT_LT(inline_estimates[u][v].between(x[v]).Log().norm(), 1e-8)
+          << "update " << u + 1 << ", pose " << v;
+    ++u;
+  });
+  batch_smoother.checkInvariants();
+  EXPECT_GT(batches, 10);
+  EXPECT_NEAR(batch_smoother.objective(), inline_smoother.objective(),
+              1e-9 * inline_smoother.objective());
+}
+
+TEST(BatchSwitch, EqualsInline2D) {
+  expectBatchEqualsInline<SE2>(11);
+  expectBatchEqualsInline<SE2>(12);
+}
+TEST(BatchSwitch, EqualsInline3D) {
+  expectBatchEqualsInline<SE3>(21);
+  expectBatchEqualsInline<SE3>(22);
+}
+
+// A top of all variables (a share of 1 never switches; a share just below it switches only
+// for the largest tops).
+TEST(BatchSwitch, DefaultSwitchesOnLargeTopsOnly) {
+  std::vector<SE2> truth;
+  const auto by_pose = randomWalk<SE2>(400, 40, 5, &truth);
+  SmootherOptions o;
+  o.threads = 1;
+  IncrementalSmoother2 s(o);
+  int n = 0;
+  replay(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
+    ++n;
+    ASSERT_NO_THROW(sm.checkInvariants()) << "update " << n << " batch " << st.batch_reeliminations << " folded " << st.cliques_updated;
+    if (st.batch_reeliminations)
+      EXPECT_GT(st.variables_reeliminated, o.batch.top_share * (sm.numPoses() - 1));
+    else
+      EXPECT_LE(st.variables_reeliminated, o.batch.top_share * (sm.numPoses() - 1) + 1e-9);
+  });
+  s.checkInvariants();
+  EXPECT_GT(s.factorizationFlops(), 0);
+}
+
+TEST(BatchSwitch, RejectsBadOptions) {
+  SmootherOptions o;
+  o.batch.top_share = 0;
+  EXPECT_THROW(IncrementalSmoother2{o}, std::invalid_argument);
+  o.batch.top_share = 1.5;
+  EXPECT_THROW(IncrementalSmoother2{o}, std::invalid_argument);
+  o = {};
+  o.batch.reorder_decay = 0.5;
+  EXPECT_THROW(IncrementalSmoother2{o}, std::invalid_argument);
+}
+
+// updatedPoses lists every pose whose estimate changed: the others keep theirs bit for bit.
+template <class G>
+void expectUnlistedPosesUnchanged(unsigned seed) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(250, 40, seed, &truth);
+  SmootherOptions o;
+  o.threads = 1;
+  IncrementalSmoother<G> s(o);
+  std::vector<G> before;
+  size_t listed = 0, updates = 0;
+  replay(by_pose, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats&) {
+    const std::vector<int>& updated = sm.updatedPoses();
+    ASSERT_TRUE(std::is_sorted(updated.begin(), updated.end()));
+    ASSERT_TRUE(std::adjacent_find(updated.begin(), updated.end()) == updated.end());
+    std::vector<char> listed_now(sm.numPoses(), 0);
+    for (int v : updated) listed_now[v] = 1;
+    EXPECT_TRUE(listed_now[sm.numPoses() - 1]) << "the new pose";
+    const std::vector<G> x = sm.estimate();
+    for (size_t v = 0; v < before.size(); ++v)
+      if (!listed_now[v]) {
+        ASSERT_TRUE(x[v].translation() == before[v].translation() &&
+                    x[v].rotation() == before[v].rotation())
+            << "pose " << v << " not listed but moved";
+      }
+    listed += updated.size();
+    ++updates;
+    before = x;
+  });
+  EXPECT_LT(listed, updates * static_cast<size_t>(s.numPoses()) / 2) << "not everything, always";
+  s.relinearizeAll();
+  EXPECT_EQ(static_cast<int>(s.updatedPoses().size()), s.numPoses() - 1);  // all but the fixed
+}
+
+TEST(UpdatedPoses, UnlistedPosesKeepTheirEstimate2D) { expectUnlistedPosesUnchanged<SE2>(31); }
+TEST(UpdatedPoses, UnlistedPosesKeepTheirEstimate3D) { expectUnlistedPosesUnchanged<SE3>(32); }
+
+TEST(UpdatedPoses, IncludesMovedPoses) {
+  IncrementalSmoother2 s;
+  s.addFixedPose(SE2());
+  const int a = s.addPose(SE2(1, 0, 0));
+  const int b = s.addPose(SE2(2, 0, 0));
+  const auto omega = diagonalInformation<SE2>(1, 1);
+  s.addFactor(RelativePoseEdge<SE2>::make(0, a, SE2(1, 0, 0), omega));
+  s.update();
+  s.addFactor(RelativePoseEdge<SE2>::make(a, b, SE2(1, 0, 0), omega));
+  s.update();
+  s.transformPoses({b}, SE2(0, 1, 0));
+  s.update();
+  const std::vector<int>& u = s.updatedPoses();
+  EXPECT_TRUE(std::find(u.begin(), u.end(), b) != u.end());
+}
+
+// The work of an update follows what it touches, not the graph: on a long walk, each update's
+// relinearisation check examines exactly the variables solved since the check before (with
+// relinearize_skip 1: the previous update's), and an odometry step lists few poses, however
+// many the graph holds.
+TEST(BoundedWork, RelinearizationCheckVisitsOnlySolvedVariables) {
+  std::vector<SE2> truth;
+  const int n = 3000;
+  const auto by_pose = randomWalk<SE2>(n, 0, 41, &truth);
+  SmootherOptions o;
+  o.threads = 1;
+  o.relinearize_skip = 1;
+  IncrementalSmoother2 s(o);
+  size_t previous_updated = 0;
+  int k = 0;
+  size_t max_updated_late = 0;
+  replay(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
+    ++k;
+    EXPECT_EQ(static_cast<size_t>(st.variables_checked), previous_updated) << "update " << k;
+    previous_updated = sm.updatedPoses().size();
+    if (k > n / 2) max_updated_late = std::max(max_updated_late, previous_updated);
+  });
+  EXPECT_LT(max_updated_late, 100u) << "an odometry step touches a bounded part of the walk";
+}
+
+}  // namespace
+}  // namespace arbor
