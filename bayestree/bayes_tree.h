@@ -88,9 +88,9 @@ class BayesTree {
   /// pointed to by clique_of, none also in its separator; a root has an empty separator and is
   /// among the roots, a non-root a live parent that lists it, a non-empty separator inside the
   /// parent's variables (running intersection); children point back; no parent cycle; the
-  /// count of cliques and their flops; every variable not fixed and not `awaiting(v)` (about to be eliminated)
-  /// frontal exactly once, fixed ones never; every factor (arity(), key(k)) held by the clique
-  /// of one of its variables.
+  /// count of cliques and their flops; every variable not fixed and not `awaiting(v)` (about to be
+  /// eliminated) frontal exactly once, fixed ones never; every factor (arity(), key(k)) held by the
+  /// clique of one of its variables.
   template <class Factor>
   void checkInvariants(const std::vector<Factor>& factors, const std::vector<char>& fixed,
                        const std::function<bool(int)>& awaiting) const;

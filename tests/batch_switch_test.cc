@@ -120,7 +120,8 @@ TEST(BatchSwitch, DefaultSwitchesOnLargeTopsOnly) {
   int n = 0;
   replay(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
     ++n;
-    ASSERT_NO_THROW(sm.checkInvariants()) << "update " << n << " batch " << st.batch_reeliminations << " folded " << st.cliques_updated;
+    ASSERT_NO_THROW(sm.checkInvariants()) << "update " << n << " batch " << st.batch_reeliminations
+                                          << " folded " << st.cliques_updated;
     if (st.batch_reeliminations)
       EXPECT_GT(st.variables_reeliminated, o.batch.top_share * (sm.numPoses() - 1));
     else

@@ -141,14 +141,15 @@ class EngineImpl final : public Engine {
     for (int k : poses) noteChanged(k);
   }
 
-  /// The "changed" message: of the poses updates may have changed since the last message and
-  /// those new since (fixed ones included), those whose fields differ from what was published
+  /// The "changed" message: the poses new since the last message (fixed ones included) and, of
+  /// those updates may have changed since, the ones whose fields differ from what was published
   /// (dense order). O(poses listed), not O(all poses).
   estimate_t changedMessage() {
     const IncrementalSmoother<G>& s = smoother_.smoother();
     const std::vector<Key>& ids = smoother_.ids();
     const int n = s.numPoses();
-    for (int k = static_cast<int>(published_.size()); k < n; ++k) noteChanged(k);
+    const int first_new = static_cast<int>(published_.size());  // never published: always sent
+    for (int k = first_new; k < n; ++k) noteChanged(k);
     published_.resize(static_cast<size_t>(n));
     std::sort(changed_.begin(), changed_.end());
     estimate_t m;
@@ -160,7 +161,7 @@ class EngineImpl final : public Engine {
       if (k >= n) continue;
       Fields f;
       poseToFields(s.estimate(k), f.data(), f.data() + 3);
-      if (f == published_[k]) continue;
+      if (k < first_new && f == published_[k]) continue;
       published_[k] = f;
       m.ids.push_back(ids[k]);
       m.translation.emplace_back(f.begin(), f.begin() + 3);
