@@ -57,6 +57,8 @@ const std::vector<Field>& fields() {
        [](const SmootherOptions& o) { return o.finalize_max_iterations; }},
       {"nested_dissection_min", [](const SmootherOptions& o) { return o.nested_dissection_min; }},
       {"threads", [](const SmootherOptions& o) { return o.threads; }},
+      {"batch.top_share", [](const SmootherOptions& o) { return o.batch.top_share; }},
+      {"batch.reorder_decay", [](const SmootherOptions& o) { return o.batch.reorder_decay; }},
   };
   return all;
 }
@@ -93,7 +95,11 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
                                          "--nested-dissection-min",
                                          "50",
                                          "--threads",
-                                         "2"};
+                                         "2",
+                                         "--batch-top-share",
+                                         "0.5",
+                                         "--reorder-decay",
+                                         "3"};
   SmootherOptions expected;
   expected.relinearize_threshold_translation = 0.3;
   expected.relinearize_threshold_rotation = 0.2;
@@ -108,6 +114,8 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
   expected.finalize_max_iterations = 4;
   expected.nested_dissection_min = 50;
   expected.threads = 2;
+  expected.batch.top_share = 0.5;
+  expected.batch.reorder_decay = 3;
   // Every field is set away from its default, so a flag that is dropped shows.
   for (const Field& f : fields()) EXPECT_NE(f.get(expected), f.get(SmootherOptions{})) << f.name;
   expectSame(replaySmoother(args), expected, "replay");
@@ -146,6 +154,9 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
       {"--finalize-max-iterations", "0"},
       {"--nested-dissection-min", "-2"},
       {"--threads", "-1"},
+      {"--batch-top-share", "0"},
+      {"--batch-top-share", "1.5"},
+      {"--reorder-decay", "0.5"},
   };
   for (const auto& [flag, value] : bad) {
     for (const bool serve : {false, true}) {
