@@ -833,6 +833,24 @@ auto IncrementalSmoother<G>::jointMarginalCovariance(int a, int b) const
 }
 
 template <class G>
+auto IncrementalSmoother<G>::predictionCovariance(
+    int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
+    const Eigen::Matrix<double, kDoF, kDoF>& A_b) const -> Eigen::Matrix<double, kDoF, kDoF> {
+  const Impl& m = *impl_;
+  for (int v : {a, b}) {
+    if (v < 0 || v >= m.numPoses())
+      throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
+                              std::to_string(v) + ": out of range (" +
+                              std::to_string(m.numPoses()) + " poses)");
+    if (!m.fixed[v] && m.tree.clique_of[v] < 0)
+      throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
+                             std::to_string(v) +
+                             ": not in the Bayes tree yet (call update() first)");
+  }
+  return bayestree::TreeMarginals<kDoF>::predicted(m.tree, {a, b}, {A_a, A_b});
+}
+
+template <class G>
 auto IncrementalSmoother<G>::marginalCovariances() const
     -> std::vector<Eigen::Matrix<double, kDoF, kDoF>> {
   const Impl& m = *impl_;

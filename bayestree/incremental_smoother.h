@@ -206,6 +206,14 @@ class IncrementalSmoother {
   /// The joint covariance [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] of poses a and b (as marginalCovariance;
   /// Σ_ab = 0 between components), e.g. for a Mahalanobis gate on a candidate edge a → b.
   Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> jointMarginalCovariance(int a, int b) const;
+  /// A Σ Aᵀ for a candidate factor on poses a and b with whitened Jacobian blocks A_a, A_b
+  /// (Σ their joint covariance, as jointMarginalCovariance): the covariance its whitened residual
+  /// is predicted with, beside the factor's own I. One forward substitution along the two poses'
+  /// paths to the root (TreeMarginals::predicted), no clique joint; a fixed pose contributes
+  /// nothing. Throws as jointMarginalCovariance.
+  Eigen::Matrix<double, kDoF, kDoF> predictionCovariance(
+      int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
+      const Eigen::Matrix<double, kDoF, kDoF>& A_b) const;
   /// Every pose's marginal covariance (as marginalCovariance), in one walk down the tree that
   /// holds the joints of one path at a time (not the cache). Throws std::logic_error if a pose
   /// has not been through update() yet.

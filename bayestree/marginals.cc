@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
+#include <utility>
 
 #include <Eigen/Core>
 
@@ -200,6 +202,60 @@ template <int D>
 int TreeMarginals<D>::cachedCliques() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return static_cast<int>(cached_.size());
+}
+
+// With H = RᵀR (R the tree's square-root information, block row [Lᵀ | Bᵀ] per clique, [L; B]
+// as stored), Σ = R⁻¹R⁻ᵀ and so A Σ Aᵀ = YᵀY with Y = R⁻ᵀAᵀ, i.e. RᵀY = Aᵀ. Rᵀ is lower
+// triangular in elimination order (children before parents); its block column of clique c is
+// [L; B] on [frontals; separator], so, children first,
+//
+//   Y_c = L⁻¹ (Aᵀ_{f_c} − Σ_k B_k[f_c] Y_k)   (k: the cliques whose separator holds f_c),
+//
+// and Y is zero outside the cliques on the variables' paths to the root: a clique pushes
+// −B_c Y_c onto its separator, which is frontal in its ancestors only.
+template <int D>
+Eigen::MatrixXd TreeMarginals<D>::predicted(const BayesTree<D>& tree, const std::vector<int>& vars,
+                                            const std::vector<Eigen::MatrixXd>& blocks) {
+  const int m = blocks.empty() ? 0 : static_cast<int>(blocks.front().rows());
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(m, m);
+  // The cliques on the paths, each once, deepest first.
+  std::vector<std::pair<int, int>> order;        // (−depth, clique)
+  std::unordered_map<int, Eigen::MatrixXd> rhs;  // variable → its rows of Aᵀ − pushed terms
+  for (size_t k = 0; k < vars.size(); ++k) {
+    const int v = vars[k];
+    if (v < 0 || v >= static_cast<int>(tree.clique_of.size()) || tree.clique_of[v] < 0) continue;
+    auto [it, fresh] = rhs.try_emplace(v, Eigen::MatrixXd::Zero(D, m));
+    it->second += blocks[k].transpose();
+    std::vector<int> path;
+    for (int c = tree.clique_of[v]; c >= 0; c = tree.cliques[c].parent) path.push_back(c);
+    for (size_t q = 0; q < path.size(); ++q)
+      order.emplace_back(-static_cast<int>(path.size() - 1 - q), path[q]);
+  }
+  std::sort(order.begin(), order.end());
+  order.erase(std::unique(order.begin(), order.end()), order.end());
+  Eigen::MatrixXd Y, pushed;
+  for (const auto& [depth, c] : order) {
+    const Clique<D>& k = tree.cliques[c];
+    const int nf = static_cast<int>(k.frontals.size());
+    Y = Eigen::MatrixXd::Zero(k.F, m);
+    bool any = false;
+    for (int f = 0; f < nf; ++f) {
+      auto it = rhs.find(k.frontals[f]);
+      if (it == rhs.end()) continue;
+      Y.middleRows(f * D, D) = it->second;
+      any = true;
+    }
+    if (!any) continue;
+    k.LS().topRows(k.F).template triangularView<Eigen::Lower>().solveInPlace(Y);
+    out.noalias() += Y.transpose() * Y;
+    if (k.Sn == 0) continue;
+    pushed.noalias() = k.LS().bottomRows(k.Sn) * Y;
+    for (size_t b = 0; b < k.separator.size(); ++b) {
+      auto [it, fresh] = rhs.try_emplace(k.separator[b], Eigen::MatrixXd::Zero(D, m));
+      it->second -= pushed.middleRows(static_cast<int>(b) * D, D);
+    }
+  }
+  return out;
 }
 
 template class TreeMarginals<3>;

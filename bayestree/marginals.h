@@ -62,6 +62,12 @@ class TreeMarginals {
   /// down the tree that keeps a clique's joint only until its children have read it (the
   /// cache is neither used nor changed). out must have an entry per variable.
   static void all(const BayesTree<D>& tree, std::vector<Block>* out);
+  /// A Σ Aᵀ for a linear map A = [A_1 … A_k] on variables vars[k] (A_k: m×D, `blocks[k]`),
+  /// without forming Σ (see predicted() in marginals.cc): one forward substitution along the
+  /// variables' paths to the root, O(Σ over those cliques of (F + Sn)·F·m). A variable with
+  /// clique_of < 0 (a constant) contributes nothing. The cache is neither used nor changed.
+  static Eigen::MatrixXd predicted(const BayesTree<D>& tree, const std::vector<int>& vars,
+                                   const std::vector<Eigen::MatrixXd>& blocks);
   /// Cliques whose joint is cached now.
   int cachedCliques() const;
 

@@ -6,6 +6,8 @@
 #include <map>
 #include <stdexcept>
 
+#include <boost/math/distributions/chi_squared.hpp>
+
 namespace arbor {
 namespace {
 
@@ -18,7 +20,44 @@ bool samePose(const SE3& a, const SE3& b) {
 
 bool odometry(Key from, Key to) { return from - to == 1 || to - from == 1; }
 
+// The q-quantile of v (0 ≤ q ≤ 1, v not empty), by selection.
+double quantile(std::vector<double>* v, double q) {
+  const size_t k = std::min(v->size() - 1, static_cast<size_t>(q * static_cast<double>(v->size())));
+  std::nth_element(v->begin(), v->begin() + static_cast<long>(k), v->end());
+  return (*v)[k];
+}
+
 }  // namespace
+
+double estimateNoiseScale(std::vector<double> m, int dof, double c2, double tail_factor,
+                          double tail_quantile) {
+  const double t = tail_factor * c2;
+  const boost::math::chi_squared_distribution<double> chi2(dof);
+  const double Ft = boost::math::cdf(chi2, t);
+  const double q_median = boost::math::quantile(chi2, 0.5 * Ft);          // F⁻¹(F(t)/2)
+  const double q_tail = boost::math::quantile(chi2, tail_quantile * Ft);  // F⁻¹(q F(t))
+  double sigma2 = 1.0;
+  std::vector<double> kept;
+  for (int round = 0; round < 50; ++round) {
+    kept.clear();
+    for (double x : m)
+      if (x <= t * sigma2) kept.push_back(x);
+    if (kept.size() < 3) break;
+    const double next =
+        std::max(quantile(&kept, 0.5) / q_median, quantile(&kept, tail_quantile) / q_tail);
+    const bool done = std::abs(next - sigma2) <= 1e-9 * sigma2;
+    sigma2 = next;
+    if (done || !(sigma2 > 0)) break;
+  }
+  return sigma2 > 0 ? sigma2 : 1.0;
+}
+
+const char* toString(EntryTest entry) {
+  return entry == EntryTest::kInnovation ? "innovation" : "residual";
+}
+const char* toString(NoiseScale scale) {
+  return scale == NoiseScale::kEstimated ? "estimated" : "given";
+}
 
 std::string RobustOptions::problem() const {
   auto bad = [](const std::string& field, double value, const std::string& want) {
@@ -39,6 +78,11 @@ std::string RobustOptions::problem() const {
   if (!(recheck_margin >= 1) || !std::isfinite(recheck_margin))
     return bad("recheck_margin", recheck_margin, "finite and >= 1");
   if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
+  if (!(entry_band >= 1) || !std::isfinite(entry_band))
+    return bad("entry_band", entry_band, "finite and >= 1");
+  if (scale_min_samples < 1) return bad("scale_min_samples", scale_min_samples, ">= 1");
+  if (!(tail_factor > 1) || !std::isfinite(tail_factor))
+    return bad("tail_factor", tail_factor, "finite and > 1");
   return "";
 }
 
@@ -60,8 +104,53 @@ template <class G>
 OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
   const std::string problem = options_.problem();
   if (!problem.empty()) throw std::invalid_argument(problem);
-  c2_ = options_.threshold > 0 ? options_.threshold
-                               : chiSquareThreshold(options_.confidence, G::kDoF);
+  c2_given_ = options_.threshold > 0 ? options_.threshold
+                                     : chiSquareThreshold(options_.confidence, G::kDoF);
+  c2_ = c2_given_;
+}
+
+// σ̂² from the innovations so far, once there are scale_min_samples of them; re-estimated on
+// every new one up to 64, then when their number has grown by an eighth (O(k) each).
+template <class G>
+void OnlineGnc<G>::observe(double m) {
+  if (options_.scale != NoiseScale::kEstimated || !std::isfinite(m)) return;
+  innovations_.push_back(m);
+  const size_t n = innovations_.size();
+  if (n < static_cast<size_t>(options_.scale_min_samples) || n < next_estimate_) return;
+  scale_ = estimateNoiseScale(innovations_, G::kDoF, c2_given_, options_.tail_factor,
+                              options_.confidence);
+  c2_ = options_.tail_factor * c2_given_ * scale_;  // the estimator's own truncation
+  next_estimate_ = n < 64 ? n + 1 : n + n / 8;
+}
+
+// (E): m = rᵀ(I + A Σ Aᵀ)⁻¹r, r the whitened residual at the estimate, A the whitened Jacobian
+// at the linearisation point (the tangent Σ is of), Σ the poses' joint covariance in the tree.
+template <class G>
+double OnlineGnc<G>::innovation(const IncrementalSmoother<G>& smoother, const Edge& edge,
+                                double s) const {
+  if (options_.entry == EntryTest::kResidual) return s;
+  using Matrix = typename Edge::Matrix;
+  using Vector = typename Edge::Vector;
+  const auto& theta = smoother.linearizationPoint();
+  Matrix A_i, A_j;
+  Vector r_theta;
+  edge.linearize(theta[static_cast<size_t>(edge.i)], theta[static_cast<size_t>(edge.j)], &A_i, &A_j,
+                 &r_theta);
+  Matrix P;
+  try {
+    P = smoother.predictionCovariance(edge.i, A_i, edge.j, A_j);
+  } catch (const std::logic_error&) {
+    return s;  // a pose not through an update yet: no Σ
+  }
+  const Vector r =
+      edge.sqrt_information_t * edge.error(smoother.estimate(edge.i), smoother.estimate(edge.j));
+  const double m = r.dot((Matrix::Identity() + P).ldlt().solve(r));
+  return std::isfinite(m) ? std::min(m, s) : s;
+}
+
+template <class G>
+bool OnlineGnc<G>::binaryKernel(const Closure& c) const {
+  return c.kernel == KernelKind::kTruncatedLeastSquares || c.kernel == KernelKind::kGemanMcClure;
 }
 
 template <class G>
@@ -78,12 +167,18 @@ double OnlineGnc<G>::finalWeight(const Closure& c, double s) const {
 // The first check: s ≤ c² settles at weight 1 (no graduation); otherwise the convex surrogate
 // at μ₀ = initialMu(s) and w₀ = ρ′_μ₀(s) (Huber, Cauchy: w₀ = ρ′(s)).
 template <class G>
-void OnlineGnc<G>::enter(Closure* c, double s) {
+void OnlineGnc<G>::enter(Closure* c, double s, double m, bool may_reject) {
   c->s = s;
+  c->judged_c2 = c2_;
   c->steps = 0;
-  if (s <= c2_) {
+  if (m <= c2_) {
     c->state = State::kSettled;
     c->weight = 1.0;
+    return;
+  }
+  if (may_reject && binaryKernel(*c) && m > options_.entry_band * c2_) {
+    c->state = State::kSettled;
+    c->weight = 0.0;
     return;
   }
   const RobustKernel k = kernelAt(*c, 1.0);
@@ -148,7 +243,10 @@ double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key
   if (trust == EdgeTrust::kTrusted || structural) {
     c.state = State::kTrusted;
   } else {
-    enter(&c, edge.cost(smoother.estimate(edge.i), smoother.estimate(edge.j)));
+    const double s = edge.cost(smoother.estimate(edge.i), smoother.estimate(edge.j));
+    const double m = innovation(smoother, edge, s);
+    observe(m);
+    enter(&c, s, m, /*may_reject=*/true);
   }
   const int id = static_cast<int>(closures_.size());
   closures_.push_back(c);
@@ -237,13 +335,29 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
     const double s = residual(smoother, c);
     c.s = s;
     const bool inlier = c.weight >= 0.5;
+    if (!inlier && c.weight == 0.0 && options_.entry == EntryTest::kInnovation && binaryKernel(c)) {
+      // A closure at weight 0 is not in Σ: its innovation is (E) again, judged as on entry
+      // against the c² in use now — once that has grown by a tenth since it was last judged
+      // (σ̂² after the warm-up), and in finalize() (a path to the root each: not every update).
+      if (!recheck_all && c2_ <= 1.1 * c.judged_c2) continue;
+      c.judged_c2 = c2_;
+      const double m = innovation(
+          smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s);
+      if (m > c2_) continue;
+      c.state = State::kSettled;
+      c.weight = 1.0;
+      ++totals_.regraduated;
+      smoother.setFactorWeight(c.factor, 1.0);
+      ++changed;
+      continue;
+    }
     const bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
     const bool drift = c.kernel != KernelKind::kTruncatedLeastSquares &&
                        c.kernel != KernelKind::kGemanMcClure &&
                        std::abs(finalWeight(c, s) - c.weight) > 10 * options_.weight_tolerance;
     if (!flip && !drift) continue;
     if (inlier || drift) {
-      enter(&c, s);
+      enter(&c, s, s, /*may_reject=*/false);
     } else {  // an outlier the estimate now agrees with: back at weight 1
       c.state = State::kSettled;
       c.weight = 1.0;
@@ -284,7 +398,10 @@ void OnlineGnc<G>::include(IncrementalSmoother<G>& smoother, int factor) {
   const int id = closureOf(factor);
   if (id < 0 || closures_[id].state != State::kExcluded) return;
   Closure& c = closures_[id];
-  enter(&c, residual(smoother, c));
+  const double s = residual(smoother, c);
+  enter(&c, s,
+        innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s),
+        /*may_reject=*/true);
   if (c.state == State::kGraduating) graduating_.push_back(id);
   smoother.setFactorWeight(c.factor, c.weight);
 }

@@ -12,13 +12,36 @@
 // "trusted". Priors are never weighted. Every other edge is a loop closure and is judged.
 //
 // One closure's life (the kernel ρ_μ on s = eᵀΩe, core/robust_kernel.h; c² the threshold):
-//   first check   s₀ at the estimate before the closure enters (what the graph without it
-//                 says). s₀ ≤ c²: weight 1, settled inlier, no graduation — so on clean data
-//                 where every closure passes, the factors and hence the estimate are the plain
-//                 smoother's, bit for bit (w = 1 changes nothing in Factor::linearizeWeighted).
-//   entry         otherwise the closure enters with the convex surrogate: μ₀ = initialMu(s₀)
+//   first check   the innovation m at the estimate before the closure enters (what the graph
+//                 without it says; RobustOptions::entry). With r the closure's whitened residual
+//                 there, A its whitened Jacobian on its two poses and Σ their joint covariance
+//                 in the Bayes tree,
+//                   m = rᵀ (I + A Σ Aᵀ)⁻¹ r                                             (E)
+//                 is what adding it at weight 1 raises the linearised objective by (the least
+//                 squares update's own cost); TLS gives it weight 1 iff that is below the c²
+//                 weight 0 costs. So m ≤ c²: weight 1, settled inlier, no graduation — on clean
+//                 data where every closure passes, the factors and hence the estimate are the
+//                 plain smoother's, bit for bit (w = 1 changes nothing in
+//                 Factor::linearizeWeighted). TLS, GM with m > entry_band·c²: weight 0, settled
+//                 outlier (it pulls nothing, so its cliques are not re-eliminated again). A · Σ ·
+//                 Aᵀ is one forward substitution along the two poses' paths to the root
+//                 (IncrementalSmoother::predictionCovariance). EntryTest::kResidual judges s₀
+//                 instead (m = s₀: Σ = 0), and so does a closure to a pose not in the tree yet.
+//   entry         m in (c², entry_band·c²] (any m > c² for Huber, Cauchy): the closure enters
+//                 with the convex surrogate: μ₀ = initialMu(s₀)
 //                 (TLS: c²/(2s₀ − c²); GM: 2s₀/c²) and w₀ = ρ′_μ₀(s₀), as GNC starts from the
 //                 largest residual (Yang et al., RA-L 2020, Alg. 1) — here the closure's own.
+//
+// The threshold on an estimated noise scale (RobustOptions::scale). Files' Ω are often too
+// confident; with the model right, the innovations of the true closures are χ²_d (d = kDoF),
+// with Ω too confident by a factor σ², σ²χ²_d. NoiseScale::kEstimated estimates σ̂² from the
+// innovations of every judged closure so far (estimateNoiseScale: a median, truncated at
+// tail_factor·c² to leave the false closures out and corrected for that truncation, and the same
+// from the `confidence` quantile for heavy tails, the larger of the two) once scale_min_samples of
+// them are in; before that, and with NoiseScale::kGiven, σ̂² = 1 and c² is the given one. After it
+// the threshold in use is the estimator's own truncation, tail_factor · c² · σ̂²: what it counts as
+// a false closure is what is rejected (on correctly modelled data σ̂² ≈ 1; on the shared real and
+// M3500 files about 0.02, their true closures' innovations being heavy-tailed on intel).
 //   graduation    before each of the following smoother updates: s at the current estimate,
 //                 μ ← μ·step (TLS) or μ/step (GM), w = ρ′_μ(s), setFactorWeight(w). At most
 //                 RobustOptions::steps_per_update steps per OnlineSmoother::update (the first
@@ -37,9 +60,11 @@
 // what makes it slow on large graphs (shared/reference/robust-anchors.tsv: M3500 186 s).
 // Here the closures graduating now are stepped, and the settled ones are re-checked at the
 // kernel in a bounded round robin (RobustOptions::rechecks_per_update per update, all of them
-// in finalize()): a settled outlier whose residual the updates since brought within c² is taken
-// back (weight 1), a settled inlier whose residual grew beyond recheck_margin·c² graduates again
-// from μ₀ at that residual. These are the "affected" closures of riSAM, found by looking rather
+// in finalize()): a settled outlier at weight 0 whose innovation (E) is within the c² in use,
+// re-judged once c² has grown by a tenth since its last judgement and in finalize() (with the
+// residual test, on every re-check: whose s is within recheck_margin·c²) is taken back (weight 1),
+// a settled inlier whose residual grew beyond recheck_margin·c² graduates again from μ₀ at that
+// residual. These are the "affected" closures of riSAM, found by looking rather
 // than through the tree; the margin keeps a true closure in the χ² tail from flapping.
 //
 // Excluding a closure (exclude/include, by smoother factor index): the GNC stops weighting it
@@ -63,6 +88,28 @@
 
 namespace arbor {
 
+/// How a new loop closure is first judged (header comment, "first check").
+enum class EntryTest {
+  kInnovation,  ///< m = rᵀ(I + AΣAᵀ)⁻¹r, Σ from the Bayes tree
+  kResidual,    ///< m = s₀ = rᵀr (Σ taken as 0)
+};
+/// The scale of Ω the threshold is put on.
+enum class NoiseScale {
+  kEstimated,  ///< σ̂² from the closures' innovations (estimateNoiseScale)
+  kGiven,      ///< Ω at its word: σ̂² = 1
+};
+const char* toString(EntryTest entry);   ///< "innovation", "residual"
+const char* toString(NoiseScale scale);  ///< "estimated", "given"
+
+/// σ̂² from innovations m_k (RobustOptions::scale, header comment), d degrees of freedom, c² the
+/// given threshold: from σ² = 1, keep the m_k ≤ tail_factor·c²·σ², and with t = tail_factor·c²,
+/// F the χ²_d distribution, q = tail_quantile (RobustOptions::confidence),
+///   σ² ← max(median(kept) / F⁻¹(F(t)/2), q-quantile(kept) / F⁻¹(q F(t)))
+/// (the median and the q-quantile of χ²_d truncated at t: for χ² data the two agree, a heavy
+/// tail raises the second), to a fixed point (≤ 50 rounds). 1 with fewer than 3 kept.
+double estimateNoiseScale(std::vector<double> m, int dof, double c2, double tail_factor,
+                          double tail_quantile);
+
 struct RobustOptions {
   /// The kernel the closures graduate towards: tls (default) or gm graduate (GNC); huber and
   /// cauchy are reweighted without graduation (IRLS). Not none.
@@ -85,6 +132,18 @@ struct RobustOptions {
   int rechecks_per_update = 16;
   /// A settled inlier graduates again when its s exceeds this many times c² (≥ 1).
   double recheck_margin = 2.0;
+  /// The first check of a new closure (header comment): the innovation (default) or s₀.
+  EntryTest entry = EntryTest::kInnovation;
+  /// TLS, GM: a closure whose first check exceeds entry_band·c² enters at weight 0; between c²
+  /// and that it graduates (≥ 1).
+  double entry_band = 2.0;
+  /// The scale of Ω the threshold is put on (header comment).
+  NoiseScale scale = NoiseScale::kEstimated;
+  /// Innovations needed before σ̂² is estimated (≥ 1); before, σ̂² = 1.
+  int scale_min_samples = 20;
+  /// The truncation of estimateNoiseScale: innovations beyond tail_factor·c²·σ̂² count as false
+  /// closures (> 1).
+  double tail_factor = 3.0;
   /// Rounds of finalize(): graduate to the end, re-check every closure, relinearise all; again
   /// while a re-check changed a weight (≥ 1).
   int finalize_rounds = 3;
@@ -162,7 +221,11 @@ class OnlineGnc {
   bool graduating() const { return !graduating_.empty(); }
   ClosureCounts counts() const;
   std::vector<ClosureReport> closures() const;
-  double threshold() const { return c2_; }  ///< c² in use
+  /// c² in use: the given c² (warm-up, NoiseScale::kGiven), then tail_factor · c² · σ̂².
+  double threshold() const { return c2_; }
+  /// σ̂² (1 until scale_min_samples innovations, and with NoiseScale::kGiven).
+  double noiseScale() const { return scale_; }
+  int noiseSamples() const { return static_cast<int>(innovations_.size()); }
   const RobustOptions& options() const { return options_; }
 
  private:
@@ -175,14 +238,24 @@ class OnlineGnc {
     State state = State::kSettled;
     KernelKind kernel = KernelKind::kTruncatedLeastSquares;  ///< its own (per edge)
     double mu = 0, weight = 1, s = 0;
+    double judged_c2 = 0;  ///< c² in use when it was last judged by its innovation
     int steps = 0;
   };
 
   RobustKernel kernelAt(const Closure& c, double mu) const;
+  /// TLS, GM: kernels whose settled weight is (near) binary, so a closure may enter at 0.
+  bool binaryKernel(const Closure& c) const;
   /// The closure's kernel's own weight at s (TLS: 1 or 0; GM at μ = 1; Huber, Cauchy: ρ′(s)).
   double finalWeight(const Closure& c, double s) const;
-  /// The first check at s: settles at weight 1 or starts graduation from μ₀(s).
-  void enter(Closure* c, double s);
+  /// The first check at s with innovation m (m = s: the residual test): settles at weight 1,
+  /// at weight 0 (m > entry_band·c², TLS and GM, with `may_reject`) or starts graduation from
+  /// μ₀(s).
+  void enter(Closure* c, double s, double m, bool may_reject);
+  /// (E) for the edge at the smoother's estimate; s when Σ is not there (EntryTest::kResidual,
+  /// a pose not in the tree yet).
+  double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s) const;
+  /// Records an innovation and re-estimates σ̂² and c² (NoiseScale::kEstimated).
+  void observe(double m);
   /// One graduation step at s; returns the new weight.
   double graduate(Closure* c, double s);
   double residual(const IncrementalSmoother<G>& smoother, const Closure& c) const;
@@ -192,7 +265,11 @@ class OnlineGnc {
   int closureOf(int factor) const;
 
   RobustOptions options_;
+  double c2_given_ = 0;  ///< RobustOptions::threshold or the χ² quantile
   double c2_ = 0;
+  double scale_ = 1.0;
+  std::vector<double> innovations_;
+  size_t next_estimate_ = 0;  ///< innovations_.size() at which σ̂² is estimated next
   std::vector<Closure> closures_;
   std::vector<int> unresolved_;  ///< closures added since the last resolve()
   std::vector<int> graduating_;  ///< closures graduating, by id

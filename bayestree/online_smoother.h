@@ -133,6 +133,11 @@ struct OnlineStats {
   int closures_graduating = 0;
   int graduation_steps = 0;
   int graduation_updates = 0;
+  /// With robust smoothing: c² in use (OnlineGnc::threshold), σ̂² (OnlineGnc::noiseScale,
+  /// 1 without robust smoothing) and the innovations it is estimated from.
+  double closure_threshold = 0;
+  double noise_scale = 1;
+  int noise_samples = 0;
 };
 
 template <class G>

@@ -45,6 +45,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     RobustOptions robust;
     robust.kernel = run.robust.kernel;
     robust.threshold = run.robust.threshold;
+    robust.entry = run.entry;
+    robust.scale = run.noise_scale;
     settings.robust = robust;
   }
   if (!run.edge_choices.empty()) {
@@ -107,6 +109,11 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
       j["robust"] = {
           {"kernel", toString(run.robust.kernel)},
           {"inlier_threshold", c2},
+          {"entry", toString(run.entry)},
+          {"noise_scale_mode", toString(run.noise_scale)},
+          {"threshold_in_use", online.closure_threshold},
+          {"noise_scale", online.noise_scale},
+          {"noise_samples", online.noise_samples},
           {"F_kept", F_kept},
           {"closures_inlier", online.closures_inlier},
           {"closures_outlier", online.closures_outlier},
@@ -149,6 +156,10 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     std::cout << std::setprecision(4) << "robust        GNC-" << toString(run.robust.kernel)
               << " per loop closure, online, c² " << c2
               << (run.robust.threshold > 0 ? " (given)" : " (χ² 0.99 quantile)") << "\n"
+              << "entry         " << toString(run.entry) << " test; noise scale "
+              << toString(run.noise_scale) << ": σ̂² " << online.noise_scale << " from "
+              << online.noise_samples << " innovations, c² in use " << online.closure_threshold
+              << "\n"
               << "closures      " << online.closures_inlier << " inlier, "
               << online.closures_outlier << " outlier (rejected), " << online.closures_trusted
               << " trusted, " << online.closures_graduating << " still graduating; "
@@ -208,6 +219,14 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   options.add_options()("edge-choices", po::value(&run.edge_choices),
                         "with --robust: per-edge trust and kernel, 'FROM TO "
                         "default|trusted|robust [KERNEL]' a line (docs/files.md)");
+  std::string entry = "innovation", noise_scale = "estimated";
+  options.add_options()(
+      "entry", po::value(&entry)->default_value(entry),
+      "with --robust, how a new loop closure is first judged: innovation (r'(I + A S A')^-1 r, "
+      "S the poses' covariance in the Bayes tree) or residual (r'r)")(
+      "noise-scale", po::value(&noise_scale)->default_value(noise_scale),
+      "with --robust, the scale of the information matrices the threshold is put on: estimated "
+      "(from the loop closures' innovations) or given (as the file says)");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return std::nullopt;
@@ -234,6 +253,14 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   run.robust = readRobustFlags(vm, /*allow_auto=*/false);
   if (!run.edge_choices.empty() && !run.robust.robust)
     throw UsageError("--edge-choices needs --robust");
+  if (entry != "innovation" && entry != "residual")
+    throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
+  if (noise_scale != "estimated" && noise_scale != "given")
+    throw UsageError("--noise-scale must be estimated or given, not '" + noise_scale + "'");
+  run.entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
+  run.noise_scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
+  if (!run.robust.robust && (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted()))
+    throw UsageError("--entry and --noise-scale need --robust");
   run.read.information = parseInformationPolicy(information);
   return run;
 }

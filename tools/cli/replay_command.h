@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_gnc.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/refine/batch_solvers.h"
@@ -20,6 +21,9 @@ struct ReplayCommandLine {
   SmootherOptions smoother;  ///< tools/cli/smoother_flags.h
   RobustFlags robust;        ///< tools/cli/robust_flags.h: online GNC per loop closure
   std::string edge_choices;  ///< --edge-choices FILE (io/edge_choice_file.h), with --robust
+  /// --entry innovation|residual, --noise-scale estimated|given (with --robust).
+  EntryTest entry = EntryTest::kInnovation;
+  NoiseScale noise_scale = NoiseScale::kEstimated;
   ReadOptions read;
 };
 
