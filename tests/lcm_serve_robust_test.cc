@@ -348,6 +348,9 @@ TEST(RobustBatch, ReplayBatchesNeverWorseInRobustCostThanOnline) {
   const PoseGraph2 graph = groupFile();
   cli::ReplaySettings settings;
   settings.robust = RobustOptions{};
+  // Ω at its word: the batch takes the online threshold, here the χ² quantile (with the
+  // estimated noise scale it is tail_factor·c²·σ̂², σ̂² moving with the closures).
+  settings.robust->scale = NoiseScale::kGiven;
   for (const refine::BatchSolver solver :
        {refine::BatchSolver::kLevenbergMarquardt, refine::BatchSolver::kRtr}) {
     cli::BatchLoopSettings loop;
