@@ -11,7 +11,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libspectra-dev
   libceres-dev nlohmann-json3-dev
   libopenblas0-pthread libopenblas-pthread-dev
-  python3-matplotlib
+  python3-matplotlib python3-numpy python3-pytest python3-dev python3-pybind11 pybind11-dev
 )
 
 missing=()

@@ -6,8 +6,12 @@
 #      asking (unless the BLAS is not OpenBLAS);
 #   2. compiles pkg_config_check.cc with `pkg-config --cflags --libs arbor` alone
 #      (PKG_CONFIG_PATH into the prefix) and runs it.
+#   3. with PYTHON (ARBOR_PYTHON on): imports the installed module `arbor` (PYTHONPATH into
+#      the prefix's PYTHON_DIR) and replays each DATA file with it to the same F
+#      (python_consumer.py).
 # Variables: BUILD_DIR, SOURCE_DIR, WORK_DIR, LIBDIR (CMAKE_INSTALL_LIBDIR), DATA (files
-# separated by |), CXX, LAUNCHER (may be empty), PKG_CONFIG.
+# separated by |), CXX, LAUNCHER (may be empty), PKG_CONFIG; PYTHON and PYTHON_DIR (relative
+# to the prefix) when the module is built.
 cmake_minimum_required(VERSION 3.19)  # string(JSON)
 string(REPLACE "|" ";" DATA "${DATA}")
 
@@ -56,6 +60,11 @@ foreach(file ${DATA})
   message(STATUS "${file}: arbor replay F_final ${expected}; consumer ${out}")
   if(NOT out MATCHES "blas_threads (1|none)\n")
     message(FATAL_ERROR "the consumer's OpenBLAS does not run one thread per call:\n${out}")
+  endif()
+  if(PYTHON)
+    run(${CMAKE_COMMAND} -E env PYTHONPATH=${prefix}/${PYTHON_DIR} --unset=OPENBLAS_NUM_THREADS
+        ${PYTHON} ${SOURCE_DIR}/tests/consumer/python_consumer.py ${prefix} ${file} ${expected})
+    message(STATUS "${out}")
   endif()
 endforeach()
 

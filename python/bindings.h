@@ -1,0 +1,28 @@
+// The parts of the module `arbor` (docs/python.md), each defined in its own file and called by
+// arbor_module.cc in this order (later parts use the classes of earlier ones).
+#pragma once
+
+#include <string>
+
+#include <pybind11/pybind11.h>
+
+#include "arbor/core/robust_kernel.h"
+
+namespace arbor::python {
+
+/// The robust options of `solve` and the online smoother (docs/python.md, "Robust"): the
+/// command line's robust flags (--kernel, --inlier-threshold with chi2/auto) as one object.
+struct RobustSettings {
+  KernelKind kernel = KernelKind::kTruncatedLeastSquares;
+  /// c² on eᵀΩe when > 0; ≤ 0: the χ² quantile of the edge's dimension at `confidence`.
+  double threshold = 0.0;
+  double confidence = 0.99;
+  /// Batch only: scale the χ² quantile by the estimated variance factor ("auto").
+  bool estimate_scale = false;
+};
+
+void defineGraphs(pybind11::module_& m);    ///< Graph2, Graph3, read()
+void defineSolve(pybind11::module_& m);     ///< RobustOptions, SolveResult, solve()
+void defineSmoother(pybind11::module_& m);  ///< OnlineSmoother2, OnlineSmoother3
+
+}  // namespace arbor::python

@@ -1,0 +1,269 @@
+// arbor.OnlineSmoother2 / OnlineSmoother3: the online smoother (bayestree/online_smoother.h)
+// with poses named by ids, edges and priors in any order, updates, the estimate and statistics
+// as numpy arrays and dicts, and marginal and joint covariances from the Bayes tree.
+#include <algorithm>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <pybind11/stl.h>
+
+#include "arbor/bayestree/online_smoother.h"
+#include "bindings.h"
+#include "conversions.h"
+
+namespace arbor::python {
+namespace {
+
+py::dict statsDict(const UpdateStats& s) {
+  py::dict d;
+  d["new_factors"] = s.new_factors;
+  d["new_variables"] = s.new_variables;
+  d["cliques_reeliminated"] = s.cliques_reeliminated;
+  d["variables_reeliminated"] = s.variables_reeliminated;
+  d["cliques_updated"] = s.cliques_updated;
+  d["variables_relinearized"] = s.variables_relinearized;
+  d["indeterminate_cliques"] = s.indeterminate_cliques;
+  d["cliques_solved"] = s.cliques_solved;
+  d["time_s"] = s.time_s;
+  return d;
+}
+
+py::dict statsDict(const OnlineStats& s) {
+  py::dict d;
+  d["poses"] = s.poses;
+  d["edges_accepted"] = s.edges_accepted;
+  d["edges_duplicate"] = s.edges_duplicate;
+  d["edges_rejected"] = s.edges_rejected;
+  d["priors_accepted"] = s.priors_accepted;
+  d["priors_rejected"] = s.priors_rejected;
+  d["components"] = s.components;
+  d["joins"] = s.joins;
+  d["anchors_released"] = s.anchors_released;
+  d["updates"] = s.updates;
+  d["total_update_time_s"] = s.total_update_time_s;
+  d["edges_disabled"] = s.edges_disabled;
+  d["pairs_disabled"] = s.pairs_disabled;
+  d["closures_inlier"] = s.closures_inlier;
+  d["closures_outlier"] = s.closures_outlier;
+  d["closures_trusted"] = s.closures_trusted;
+  d["closures_excluded"] = s.closures_excluded;
+  d["closures_graduating"] = s.closures_graduating;
+  d["last_update"] = statsDict(s.last_update);
+  return d;
+}
+
+/// "accepted" or "duplicate"; a rejected edge or prior raises ValueError with its reason.
+std::string statusOrThrow(const EdgeResult& r) {
+  if (r.status == EdgeStatus::kRejected) throw std::invalid_argument(r.reason);
+  return toString(r.status);
+}
+
+void throwUnlessApplied(const EdgeSwitchResult& r) {
+  if (!r.applied()) throw std::invalid_argument(r.reason);
+}
+
+template <class G>
+OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, int threads,
+                                   double relinearize_translation, double relinearize_rotation,
+                                   int relinearize_skip, double wildfire, bool dogleg) {
+  OnlineSmootherOptions<G> o;
+  if (threads < 0)
+    throw std::invalid_argument("threads must be >= 0, not " + std::to_string(threads));
+  if (relinearize_skip < 1)
+    throw std::invalid_argument("relinearize_skip must be >= 1, not " +
+                                std::to_string(relinearize_skip));
+  if (!(relinearize_translation >= 0) || !(relinearize_rotation >= 0) || !(wildfire >= 0))
+    throw std::invalid_argument("relinearisation and wildfire thresholds must be >= 0");
+  o.smoother.threads = threads;
+  o.smoother.relinearize_threshold_translation = relinearize_translation;
+  o.smoother.relinearize_threshold_rotation = relinearize_rotation;
+  o.smoother.relinearize_skip = relinearize_skip;
+  o.smoother.wildfire_threshold = wildfire;
+  o.smoother.dogleg = dogleg;
+  if (robust) {
+    if (robust->estimate_scale)
+      throw std::invalid_argument(
+          "RobustOptions.estimate_scale is for batch solves only (the online smoother's "
+          "threshold is given or the chi2 quantile)");
+    RobustOptions r;
+    r.kernel = robust->kernel;
+    r.threshold = robust->threshold;
+    r.confidence = robust->confidence;
+    const std::string problem = r.problem();
+    if (!problem.empty()) throw std::invalid_argument(problem);
+    o.robust = r;
+  }
+  return o;
+}
+
+template <class G>
+void defineSmootherOf(py::module_& m, const char* name) {
+  using Smoother = OnlineSmoother<G>;
+  constexpr int k = G::kDoF;
+  constexpr int d = G::kDim;
+  const SmootherOptions defaults;
+  py::class_<Smoother>(m, name,
+                       "The online smoother: poses named by ids, edges and priors in any order, "
+                       "an incremental update at a time (docs/python.md).")
+      .def(
+          py::init([](const std::optional<RobustSettings>& robust, int threads, double rt,
+                      double rr, int skip, double wildfire, bool dogleg) {
+            return std::make_unique<Smoother>(
+                optionsOf<G>(robust, threads, rt, rr, skip, wildfire, dogleg));
+          }),
+          py::arg("robust") = py::none(), py::arg("threads") = defaults.threads,
+          py::arg("relinearize_threshold_translation") = defaults.relinearize_threshold_translation,
+          py::arg("relinearize_threshold_rotation") = defaults.relinearize_threshold_rotation,
+          py::arg("relinearize_skip") = defaults.relinearize_skip,
+          py::arg("wildfire_threshold") = defaults.wildfire_threshold,
+          py::arg("dogleg") = defaults.dogleg,
+          "robust: an arbor.RobustOptions (online GNC per loop closure, as `arbor replay "
+          "--robust`); the rest as `arbor replay`'s smoother flags (threads 0: one per core, "
+          "at most 4; the estimate does not depend on it).")
+      .def(
+          "add_edge",
+          [](Smoother& s, Key from, Key to, const Eigen::VectorXd& z,
+             const Eigen::MatrixXd& information, bool trusted) {
+            return statusOrThrow(s.addEdge(from, to, poseFromArray<G>(z, "measurement"),
+                                           squareFromArray<k>(information, "information"),
+                                           trusted ? EdgeTrust::kTrusted : EdgeTrust::kByRule));
+          },
+          py::arg("from_id"), py::arg("to_id"), py::arg("measurement"), py::arg("information"),
+          py::arg("trusted") = false,
+          "Adds the measurement of pose to_id in the frame of from_id with its information "
+          "matrix; returns 'accepted' or 'duplicate', raises ValueError if rejected.")
+      .def(
+          "add_pose_prior",
+          [](Smoother& s, Key id, const Eigen::VectorXd& z, const Eigen::MatrixXd& information,
+             const std::optional<Eigen::VectorXd>& offset) {
+            const G o = offset ? poseFromArray<G>(*offset, "offset") : G::Identity();
+            return statusOrThrow(s.addPosePrior(id, poseFromArray<G>(z, "prior"),
+                                                squareFromArray<k>(information, "information"), o));
+          },
+          py::arg("id"), py::arg("prior"), py::arg("information"), py::arg("offset") = py::none(),
+          "A prior on pose id in the world frame (on id·offset with a sensor offset).")
+      .def(
+          "add_position_prior",
+          [](Smoother& s, Key id, const Eigen::VectorXd& p, const Eigen::MatrixXd& information) {
+            if (p.size() != d || !p.allFinite())
+              throw std::invalid_argument("position: expected " + std::to_string(d) +
+                                          " finite numbers, got " + std::to_string(p.size()));
+            return statusOrThrow(
+                s.addPositionPrior(id, p, squareFromArray<d>(information, "information")));
+          },
+          py::arg("id"), py::arg("position"), py::arg("information"),
+          "A prior on the position of pose id in the world frame (GPS in a local frame).")
+      .def(
+          "disable_edge",
+          [](Smoother& s, Key a, Key b) { throwUnlessApplied(s.disableEdge(a, b)); },
+          py::arg("from_id"), py::arg("to_id"),
+          "Takes back every edge between the two ids (from the next update on); raises "
+          "ValueError with the reason when refused.")
+      .def(
+          "enable_edge", [](Smoother& s, Key a, Key b) { throwUnlessApplied(s.enableEdge(a, b)); },
+          py::arg("from_id"), py::arg("to_id"))
+      .def(
+          "update",
+          [](Smoother& s) {
+            UpdateStats st;
+            {
+              py::gil_scoped_release release;
+              st = s.update();
+            }
+            return statsDict(st);
+          },
+          "One incremental update over the edges and priors added since the last; returns its "
+          "statistics.")
+      .def(
+          "finalize",
+          [](Smoother& s) {
+            UpdateStats st;
+            {
+              py::gil_scoped_release release;
+              st = s.finalize();
+            }
+            return statsDict(st);
+          },
+          "Relinearises everything and iterates to convergence (the end of a replay).")
+      .def("objective", &Smoother::objective,
+           "F = Σ eᵀΩe at the estimate (disabled edges left out)")
+      .def("has_pose", &Smoother::hasPose, py::arg("id"))
+      .def_property_readonly("num_poses", [](const Smoother& s) { return s.stats().poses; })
+      .def(
+          "estimate", [](const Smoother& s, Key id) { return poseToArray(s.estimate(id)); },
+          py::arg("id"))
+      .def(
+          "estimates",
+          [](const Smoother& s) {
+            const std::map<Key, G> all = s.estimates();
+            std::vector<Key> ids;
+            std::vector<G> poses;
+            for (const auto& [id, x] : all) {
+              ids.push_back(id);
+              poses.push_back(x);
+            }
+            return py::make_tuple(idsToArray(ids), posesToArray(poses));
+          },
+          "(ids ascending, poses one row each: n×3 [x y θ] or n×7 [x y z qx qy qz qw])")
+      .def(
+          "stats", [](const Smoother& s) { return statsDict(s.stats()); },
+          "The online layer's counts and the last update's statistics.")
+      .def(
+          "marginal_covariance",
+          [](const Smoother& s, Key id) {
+            typename Smoother::Matrix c;
+            {
+              py::gil_scoped_release release;
+              c = s.marginalCovariance(id);
+            }
+            return Eigen::MatrixXd(c);
+          },
+          py::arg("id"),
+          "The k×k marginal covariance of pose id (k = 3 in 2D, 6 in 3D; tangent order "
+          "[translation; rotation] of x ⊞ τ), after the last update, relative to its "
+          "component's anchor.")
+      .def(
+          "joint_marginal_covariance",
+          [](const Smoother& s, Key a, Key b) {
+            Eigen::Matrix<double, 2 * k, 2 * k> c;
+            {
+              py::gil_scoped_release release;
+              c = s.jointMarginalCovariance(a, b);
+            }
+            return Eigen::MatrixXd(c);
+          },
+          py::arg("a"), py::arg("b"),
+          "The 2k×2k joint covariance [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] of poses a and b.")
+      .def(
+          "closures",
+          [](const Smoother& s) {
+            py::list out;
+            for (const ClosureReport& c : s.closures()) {
+              py::dict r;
+              r["from_id"] = c.from;
+              r["to_id"] = c.to;
+              r["weight"] = c.weight;
+              r["residual"] = c.residual;
+              r["status"] = toString(c.status);
+              r["graduating"] = c.graduating;
+              out.append(r);
+            }
+            return out;
+          },
+          "With robust options: every loop closure's weight and status (inlier, outlier, "
+          "trusted, excluded).")
+      .def("__repr__", [name](const Smoother& s) {
+        return std::string("<arbor.") + name + ": " + std::to_string(s.stats().poses) + " poses, " +
+               std::to_string(s.stats().updates) + " updates>";
+      });
+}
+
+}  // namespace
+
+void defineSmoother(py::module_& m) {
+  defineSmootherOf<SE2>(m, "OnlineSmoother2");
+  defineSmootherOf<SE3>(m, "OnlineSmoother3");
+}
+
+}  // namespace arbor::python

@@ -1,0 +1,238 @@
+// arbor.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
+// (tools/refine/batch_solvers.h: lm, gn, dogleg, rtr) from any initialisation, optionally
+// robust (GNC, as `arbor batch --robust`), and arbor.RobustOptions.
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <pybind11/stl.h>
+
+#include "arbor/core/gnc_solver.h"
+#include "arbor/core/initialization.h"
+#include "arbor/tools/refine/batch_solvers.h"
+#include "bindings.h"
+#include "conversions.h"
+#include "graph_object.h"
+
+namespace arbor::python {
+namespace {
+
+using refine::BatchSolver;
+
+/// What solve() returns (arbor.SolveResult).
+struct SolveOutcome {
+  std::string solver, init, termination, message;
+  double F_initial = 0, F_final = 0, time_s = 0;
+  int iterations = 0;
+  // rtr: the certificate of global optimality.
+  std::optional<bool> certified;
+  std::optional<int> rank;
+  std::optional<double> lambda_min;
+  // robust: the inlier threshold used, F over the edges kept, the edges rejected (from, to).
+  bool robust = false;
+  double threshold = 0, F_inliers = 0;
+  std::vector<std::pair<Key, Key>> rejected;
+  std::vector<Key> ids;
+  RowMatrix estimate;
+};
+
+struct SolveRequest {
+  std::string solver = "lm";
+  std::optional<std::string> init;  ///< none: "file" when the file has poses, else "odometry"
+  int max_iterations = 100;
+  double relative_tolerance = 1e-5;
+  std::optional<RobustSettings> robust;
+  bool verbose = false;
+};
+
+InitMethod initOf(const SolveRequest& q, bool has_initial_estimate) {
+  return parseInitMethod(q.init.value_or(has_initial_estimate ? "file" : "odometry"));
+}
+
+void fillRtr(const RtrSummary& s, SolveOutcome* out) {
+  out->certified = s.certified;
+  out->rank = s.rank;
+  out->lambda_min = s.lambda_min;
+  out->termination =
+      s.certified ? "certified" : (s.relaxation_solved ? "relaxation_not_exact" : "not_certified");
+  out->message = s.message;
+}
+
+// As `arbor batch --robust`: GNC from the initialisation; with rtr, the certifiable solver on
+// the inlier problem.
+template <class G>
+void solveRobust(const PoseGraph<G>& graph, const SolveRequest& q, BatchSolver solver,
+                 const refine::BatchSolveSettings& settings, std::vector<G>* poses,
+                 SolveOutcome* out) {
+  GncOptions options;
+  options.kernel = q.robust->kernel;
+  options.threshold = q.robust->threshold;
+  options.confidence = q.robust->confidence;
+  options.estimate_scale = q.robust->estimate_scale;
+  options.outer.max_iterations = q.max_iterations;
+  options.outer.relative_tolerance = q.relative_tolerance;
+  options.verbose = q.verbose;
+  GncResult gnc = solveGnc(graph, poses, options);
+  out->F_initial = gnc.F_least_squares;
+  out->iterations = gnc.iterations;
+  out->time_s = gnc.time_s;
+  out->termination = gnc.converged ? "converged" : "max_iterations";
+  out->message = gnc.message;
+  if (solver == BatchSolver::kRtr) {
+    RtrOptions rtr = settings.rtr;
+    rtr.verbose = q.verbose;
+    const CertifiedInliers certified = certifyInliers(graph, &gnc, poses, rtr);
+    fillRtr(certified.rtr, out);
+    out->time_s += certified.rtr.time_s;
+  }
+  out->robust = true;
+  out->threshold = gnc.threshold;
+  out->F_final = gnc.F_all;
+  out->F_inliers = gnc.F_inliers;
+  for (int k = 0; k < graph.numEdges(); ++k)
+    if (!gnc.trusted[k] && !gnc.inlier[k])
+      out->rejected.emplace_back(graph.ids[graph.edges[k].i], graph.ids[graph.edges[k].j]);
+}
+
+template <class G>
+SolveOutcome solve(const GraphObject<G>& object, const SolveRequest& q) {
+  const PoseGraph<G>& graph = object.graph;
+  const BatchSolver solver = refine::parseBatchSolver(q.solver, "solver");
+  const bool own_start = refine::info(solver).own_start;
+  if (own_start && q.init && *q.init != "chordal" && !q.robust)
+    throw std::invalid_argument("solver " + q.solver +
+                                " starts from its own chordal relaxation: init must be None or "
+                                "'chordal', not '" +
+                                *q.init + "'");
+  if (q.max_iterations < 1)
+    throw std::invalid_argument("max_iterations must be >= 1, not " +
+                                std::to_string(q.max_iterations));
+  if (!(q.relative_tolerance >= 0))
+    throw std::invalid_argument("relative_tolerance must be >= 0, not " +
+                                std::to_string(q.relative_tolerance));
+  refine::BatchSolveSettings settings;
+  settings.max_iterations = q.max_iterations;
+  settings.relative_tolerance = q.relative_tolerance;
+  settings.verbose = q.verbose;
+
+  SolveOutcome out;
+  out.solver = refine::toString(solver);
+  std::vector<G> poses;
+  {
+    py::gil_scoped_release release;
+    if (own_start && !q.robust) {
+      out.init = "chordal";
+      poses = chordalInitialization(graph);
+      out.F_initial = objective(graph, poses);
+      const refine::BatchSolve s = refine::runBatchSolver(solver, graph, &poses, settings);
+      fillRtr(*s.rtr, &out);
+      out.F_final = s.F_final;
+      out.iterations = s.iterations;
+      out.time_s = s.time_s;
+    } else {
+      const InitMethod init = initOf(q, graph.has_initial_estimate);
+      out.init = toString(init);
+      poses = initialize(graph, init);
+      if (q.robust) {
+        solveRobust(graph, q, solver, settings, &poses, &out);
+      } else {
+        const refine::BatchSolve s = refine::runBatchSolver(solver, graph, &poses, settings);
+        out.F_initial = s.F_initial;
+        out.F_final = s.F_final;
+        out.iterations = s.iterations;
+        out.time_s = s.time_s;
+        out.termination = s.termination;
+        out.message = s.message;
+      }
+    }
+  }
+  out.ids = graph.ids;
+  out.estimate = posesToArray(poses);
+  return out;
+}
+
+template <class G>
+void defineSolveOf(py::module_& m) {
+  m.def(
+      "solve",
+      [](const GraphObject<G>& graph, const std::string& solver,
+         const std::optional<std::string>& init, int max_iterations, double relative_tolerance,
+         const std::optional<RobustSettings>& robust, bool verbose) {
+        return solve(
+            graph, SolveRequest{solver, init, max_iterations, relative_tolerance, robust, verbose});
+      },
+      py::arg("graph"), py::arg("solver") = "lm", py::arg("init") = py::none(),
+      py::arg("max_iterations") = 100, py::arg("relative_tolerance") = 1e-5,
+      py::arg("robust") = py::none(), py::arg("verbose") = false,
+      "Solves the graph in batch. solver: lm | gn | dogleg | rtr (rtr: the certifiable solver, "
+      "from its own chordal relaxation); init: odometry | spanning-tree | chordal | file "
+      "(default: file when the file has poses, else odometry); robust: an arbor.RobustOptions "
+      "(GNC as `arbor batch --robust`). Returns an arbor.SolveResult.");
+}
+
+}  // namespace
+
+void defineSolve(py::module_& m) {
+  py::class_<RobustSettings>(m, "RobustOptions",
+                             "Robustness against false loop closures (the robust flags of "
+                             "`arbor batch` and `arbor replay`).")
+      .def(py::init([](const std::string& kernel, double threshold, double confidence,
+                       bool estimate_scale) {
+             RobustSettings s;
+             s.kernel = parseKernelKind(kernel);
+             if (s.kernel == KernelKind::kNone)
+               throw std::invalid_argument("kernel must be tls, gm, cauchy or huber, not 'none'");
+             if (!(threshold >= 0))
+               throw std::invalid_argument("threshold must be >= 0 (0: the chi2 quantile), not " +
+                                           std::to_string(threshold));
+             if (!(confidence > 0 && confidence < 1))
+               throw std::invalid_argument("confidence must be in (0, 1), not " +
+                                           std::to_string(confidence));
+             s.threshold = threshold;
+             s.confidence = confidence;
+             s.estimate_scale = estimate_scale;
+             return s;
+           }),
+           py::arg("kernel") = "tls", py::arg("threshold") = 0.0, py::arg("confidence") = 0.99,
+           py::arg("estimate_scale") = false,
+           "kernel: tls | gm | cauchy | huber; threshold: c² on eᵀΩe (0: the χ² quantile of the "
+           "edge's dimension at `confidence`); estimate_scale (batch only): scale that quantile "
+           "by the estimated variance factor (--inlier-threshold auto).")
+      .def_property_readonly("kernel", [](const RobustSettings& s) { return toString(s.kernel); })
+      .def_readonly("threshold", &RobustSettings::threshold)
+      .def_readonly("confidence", &RobustSettings::confidence)
+      .def_readonly("estimate_scale", &RobustSettings::estimate_scale)
+      .def("__repr__", [](const RobustSettings& s) {
+        return "<arbor.RobustOptions kernel=" + toString(s.kernel) +
+               " threshold=" + std::to_string(s.threshold) + ">";
+      });
+
+  py::class_<SolveOutcome>(m, "SolveResult", "What arbor.solve returns.")
+      .def_readonly("solver", &SolveOutcome::solver)
+      .def_readonly("init", &SolveOutcome::init)
+      .def_readonly("F_initial", &SolveOutcome::F_initial)
+      .def_readonly("F_final", &SolveOutcome::F_final)
+      .def_readonly("iterations", &SolveOutcome::iterations)
+      .def_readonly("termination", &SolveOutcome::termination)
+      .def_readonly("message", &SolveOutcome::message)
+      .def_readonly("time_s", &SolveOutcome::time_s)
+      .def_readonly("certified", &SolveOutcome::certified, "rtr: certified optimal; else None")
+      .def_readonly("rank", &SolveOutcome::rank, "rtr: the staircase's rank; else None")
+      .def_readonly("lambda_min", &SolveOutcome::lambda_min, "rtr: the certificate's λ_min")
+      .def_readonly("robust", &SolveOutcome::robust)
+      .def_readonly("threshold", &SolveOutcome::threshold, "robust: c² used")
+      .def_readonly("F_inliers", &SolveOutcome::F_inliers, "robust: F over the edges kept")
+      .def_readonly("rejected", &SolveOutcome::rejected, "robust: (from, to) of rejected edges")
+      .def_property_readonly("ids", [](const SolveOutcome& s) { return idsToArray(s.ids); })
+      .def_readonly("estimate", &SolveOutcome::estimate,
+                    "the estimate, one row per id (n×3 [x y θ] or n×7 [x y z qx qy qz qw])")
+      .def("__repr__", [](const SolveOutcome& s) {
+        return "<arbor.SolveResult " + s.solver + " F_final=" + std::to_string(s.F_final) + " " +
+               s.termination + ">";
+      });
+  defineSolveOf<SE2>(m);
+  defineSolveOf<SE3>(m);
+}
+
+}  // namespace arbor::python

@@ -1,0 +1,62 @@
+# Bad input raises a Python exception carrying the C++ message (the one `arbor` prints).
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import arbor
+
+
+def test_malformed_file(tmp_path, arbor_cli):
+    path = tmp_path / "bad.g2o"
+    path.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 nan 0 1\n")
+    with pytest.raises(arbor.FileError) as error:
+        arbor.read(str(path))
+    message = str(error.value)
+    assert message.startswith(f"{path}:3: ")
+    assert isinstance(error.value, RuntimeError)
+    cli = subprocess.run([arbor_cli.path, "batch", str(path)], capture_output=True, text=True)
+    assert cli.returncode != 0
+    assert message in cli.stderr
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(arbor.FileError, match="cannot open"):
+        arbor.read(str(tmp_path / "none.g2o"))
+
+
+def test_bad_options(data_dir):
+    graph = arbor.read(os.path.join(data_dir, "manhattan_2d.g2o"))
+    with pytest.raises(ValueError, match="solver must be lm, gn, dogleg or rtr, not 'foo'"):
+        arbor.solve(graph, solver="foo")
+    with pytest.raises(ValueError, match="'sideways'"):
+        arbor.solve(graph, init="sideways")
+    with pytest.raises(ValueError, match="information must be refuse, repair or isotropic"):
+        arbor.read(os.path.join(data_dir, "manhattan_2d.g2o"), information="maybe")
+    with pytest.raises(ValueError, match="kernel"):
+        arbor.RobustOptions(kernel="none")
+    with pytest.raises(ValueError, match="estimate_scale"):
+        arbor.OnlineSmoother2(robust=arbor.RobustOptions(estimate_scale=True))
+
+
+def test_bad_edges_and_ids():
+    s = arbor.OnlineSmoother2()
+    with pytest.raises(ValueError, match="bad information: not positive definite"):
+        s.add_edge(0, 1, [1, 0, 0], -np.eye(3))
+    with pytest.raises(ValueError, match="expected 3 numbers"):
+        s.add_edge(0, 1, [1, 0], np.eye(3))
+    with pytest.raises(ValueError, match="expected a 3x3 matrix"):
+        s.add_edge(0, 1, [1, 0, 0], np.eye(6))
+    assert s.add_edge(0, 1, [1, 0, 0], np.eye(3)) == "accepted"
+    assert s.add_edge(0, 1, [1, 0, 0], np.eye(3)) == "duplicate"
+    s.update()
+    with pytest.raises(ValueError, match="7"):
+        s.estimate(7)
+    with pytest.raises(ValueError, match="7"):
+        s.marginal_covariance(7)
+    with pytest.raises(ValueError):
+        s.disable_edge(0, 1)  # a bridge: refused with the reason
+    s3 = arbor.OnlineSmoother3()
+    with pytest.raises(ValueError, match="quaternion norm"):
+        s3.add_edge(0, 1, [1, 0, 0, 0, 0, 0, 2], np.eye(6))

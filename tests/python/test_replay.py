@@ -1,0 +1,44 @@
+# A data/ file replayed through arbor.OnlineSmoother2/3 reaches the F `arbor replay` prints.
+import os
+
+import numpy as np
+import pytest
+
+import arbor
+from replay import replay
+
+
+@pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
+def test_replay_matches_the_cli(name, data_dir, arbor_cli):
+    path = os.path.join(data_dir, name)
+    graph = arbor.read(path)
+    smoother, F = replay(graph)
+    expected = arbor_cli("replay", path)
+    assert F == pytest.approx(expected["F_final"], rel=1e-9)
+    assert smoother.objective() == pytest.approx(F, rel=1e-9)
+    stats = smoother.stats()
+    assert stats["poses"] == graph.num_poses == expected["poses"]
+    assert stats["edges_accepted"] == graph.num_edges
+    assert stats["updates"] == graph.num_edges + 1  # one per edge, then finalize
+
+
+def test_estimate_rows(data_dir):
+    graph = arbor.read(os.path.join(data_dir, "sphere_3d.g2o"))
+    smoother, _ = replay(graph)
+    ids, poses = smoother.estimates()
+    assert poses.shape == (graph.num_poses, 7)
+    assert np.array_equal(ids, np.sort(ids))
+    assert np.allclose(np.linalg.norm(poses[:, 3:], axis=1), 1.0)
+    assert np.array_equal(smoother.estimate(int(ids[5])), poses[5])
+    # The anchor (the first pose seen) stays at the identity.
+    assert np.allclose(smoother.estimate(int(graph.edges[0, 0])), [0, 0, 0, 0, 0, 0, 1])
+
+
+def test_robust_replay_rejects_false_closures(data_dir):
+    graph = arbor.read(os.path.join(data_dir, "manhattan_2d_group_0.1.g2o"))
+    smoother, _ = replay(graph, robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    closures = smoother.closures()
+    assert closures
+    statuses = {c["status"] for c in closures}
+    assert statuses <= {"inlier", "outlier", "trusted", "excluded"}
+    assert smoother.stats()["closures_outlier"] == sum(c["status"] == "outlier" for c in closures)
