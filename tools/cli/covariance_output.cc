@@ -78,12 +78,15 @@ void writeBatchCovariancesFile(const std::string& path, const PoseGraph<G>& grap
             [&](std::ostream& out) { writeCovariances<G::kDoF>(out, graph.ids, covariances); });
 }
 
+template <int D>
+void writeCovariancesFile(const std::string& path, const std::vector<Key>& ids,
+                          const std::vector<Eigen::Matrix<double, D, D>>& covariances) {
+  writeFile(path, [&](std::ostream& out) { writeCovariances<D>(out, ids, covariances); });
+}
+
 template <class G>
 void writeCovariancesFile(const std::string& path, const OnlineSmoother<G>& smoother) {
-  const auto covariances = smoother.smoother().marginalCovariances();
-  writeFile(path, [&](std::ostream& out) {
-    writeCovariances<G::kDoF>(out, smoother.ids(), covariances);
-  });
+  writeCovariancesFile<G::kDoF>(path, smoother.ids(), smoother.smoother().marginalCovariances());
 }
 
 template void writeCovariances<3>(std::ostream&, const std::vector<Key>&,
@@ -98,6 +101,10 @@ template void writeBatchCovariancesFile(const std::string&, const PoseGraph2&,
                                         const std::vector<SE2>&);
 template void writeBatchCovariancesFile(const std::string&, const PoseGraph3&,
                                         const std::vector<SE3>&);
+template void writeCovariancesFile<3>(const std::string&, const std::vector<Key>&,
+                                      const std::vector<Eigen::Matrix<double, 3, 3>>&);
+template void writeCovariancesFile<6>(const std::string&, const std::vector<Key>&,
+                                      const std::vector<Eigen::Matrix<double, 6, 6>>&);
 template void writeCovariancesFile(const std::string&, const OnlineSmoother2&);
 template void writeCovariancesFile(const std::string&, const OnlineSmoother3&);
 

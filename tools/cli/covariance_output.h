@@ -33,9 +33,16 @@ template <class G>
 void writeBatchCovariancesFile(const std::string& path, const PoseGraph<G>& graph,
                                const std::vector<G>& poses);
 
+/// covariances[k] of id ids[k], written to `path` by ascending id; throws std::runtime_error if
+/// it cannot be written.
+template <int D>
+void writeCovariancesFile(const std::string& path, const std::vector<Key>& ids,
+                          const std::vector<Eigen::Matrix<double, D, D>>& covariances);
+
 /// Every known pose of `smoother` (its linear system after the last update or finalize), by id,
-/// to `path`: what `arbor replay --covariances` writes. Throws std::runtime_error if it cannot
-/// be written, std::logic_error if a pose has not been through update() yet.
+/// to `path` (what `arbor replay --covariances` writes, from ReplayResult::covariances). Throws
+/// std::runtime_error if it cannot be written, std::logic_error if a pose has not been through
+/// update() yet.
 template <class G>
 void writeCovariancesFile(const std::string& path, const OnlineSmoother<G>& smoother);
 

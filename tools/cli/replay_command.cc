@@ -17,6 +17,7 @@
 #include "arbor/tools/cli/batch_refinement.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/covariance_output.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/cli/smoother_flags.h"
 
@@ -41,6 +42,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   settings.smoother = run.smoother;
   settings.per_pose = run.step == "pose";
   settings.finalize = run.finalize;
+  settings.covariances = !run.covariances.empty();
   if (run.robust.robust) {
     RobustOptions robust;
     robust.kernel = run.robust.kernel;
@@ -66,7 +68,9 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   }
   const ReplayResult<G>& r = loop_result.replay;
   for (const auto& line : r.rejections) std::cerr << "arbor replay: " << line << "\n";
-  if (!run.output.empty()) writeG2oFile(run.output, graph, r.poses);
+  if (!run.output.empty()) writeEstimateFile(run.output, run.format, graph, r.poses);
+  if (!run.covariances.empty())
+    writeCovariancesFile<G::kDoF>(run.covariances, r.covariance_ids, r.covariances);
   if (!run.latency_csv.empty()) writeLatencyCsv(run.latency_csv, r.rows);
   const double gap = (r.F_final - r.batch.F_final) / r.batch.F_final;
   const LatencySummary& lat = r.latency;
@@ -124,6 +128,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
       };
       if (!run.robust.rejected_out.empty()) j["rejected_out"] = run.robust.rejected_out;
     }
+    if (!run.output.empty()) j["output"] = {{"path", run.output}, {"format", toString(run.format)}};
+    if (!run.covariances.empty()) j["covariances"] = run.covariances;
     if (with_batches) {
       j["batch"] = refine::toString(*run.batch);
       j["batch_every"] = run.batch_every;
@@ -182,6 +188,9 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
               << " s rebuilding)\n";
     for (const BatchRun& b : loop_result.batches) std::cout << "  " << batchRunLine(b) << "\n";
   }
+  if (!run.output.empty())
+    std::cout << "output        " << run.output << " (" << toString(run.format) << ")\n";
+  if (!run.covariances.empty()) std::cout << "covariances   " << run.covariances << "\n";
   std::cout << "peak RSS      " << peakRssMb() << " MiB\n";
   return 0;
 }
@@ -190,7 +199,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
 
 std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args) {
   ReplayCommandLine run;
-  std::string information = "refuse", batch;
+  std::string information = "refuse", batch, format = "g2o";
   bool no_finalize = false;
   po::options_description options("arbor replay FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
@@ -203,9 +212,15 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       "skip the final relinearise-all pass (report the raw incremental estimate)")(
       "information", po::value(&information)->default_value("refuse"),
       "refuse | repair | isotropic (information matrices that are not positive definite)")(
-      "output,o", po::value(&run.output), "write the final estimate as g2o")(
-      "latency-csv", po::value(&run.latency_csv), "one row per update")(
-      "json", po::bool_switch(&run.json), "print one JSON object")(
+      "output,o", po::value(&run.output), "write the final estimate (as --format)")(
+      "format", po::value(&format)->default_value("g2o"),
+      "of -o: g2o (the graph with the estimate) | tum (`id tx ty tz qx qy qz qw` a line) | kitti "
+      "(3x4 [R t] row-major a line, by ascending id); docs/files.md")(
+      "covariances", po::value(&run.covariances),
+      "write every pose's marginal covariance from the final Bayes tree, `id` and the upper "
+      "triangle a line (docs/files.md)")("latency-csv", po::value(&run.latency_csv),
+                                         "one row per update")("json", po::bool_switch(&run.json),
+                                                               "print one JSON object")(
       "batch", po::value(&batch),
       (refine::batchSolverNames(true) + ": batch runs in the loop and after finalize").c_str())(
       "batch-every", po::value(&run.batch_every)->default_value(0),
@@ -261,6 +276,13 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   run.noise_scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
   if (!run.robust.robust && (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted()))
     throw UsageError("--entry and --noise-scale need --robust");
+  try {
+    run.format = parseTrajectoryFormat(format);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(std::string("--format: ") + e.what());
+  }
+  if (vm.count("format") && !vm["format"].defaulted() && run.output.empty())
+    throw UsageError("--format needs --output");
   run.read.information = parseInformationPolicy(information);
   return run;
 }

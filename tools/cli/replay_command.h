@@ -8,6 +8,7 @@
 #include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/io/trajectory_writer.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/refine/batch_solvers.h"
 
@@ -15,6 +16,8 @@ namespace arbor::cli {
 
 struct ReplayCommandLine {
   std::string file, output, latency_csv, step = "edge";
+  TrajectoryFormat format = TrajectoryFormat::kG2o;  ///< --format of --output
+  std::string covariances;  ///< --covariances FILE: every pose's marginal at the end
   bool json = false, finalize = true, reseed = false;
   std::optional<refine::BatchSolver> batch;  ///< --batch: a row that refines; none: no loop
   int batch_every = 0;

@@ -101,6 +101,10 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
   result.F_final = objective(graph, result.poses);
   result.online = smoother.stats();
   result.closures = smoother.closures();
+  if (settings.covariances) {
+    result.covariance_ids = smoother.ids();
+    result.covariances = smoother.smoother().marginalCovariances();
+  }
   return result;
 }
 

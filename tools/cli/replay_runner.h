@@ -27,6 +27,9 @@ struct ReplaySettings {
   std::optional<RobustOptions> robust;
   /// Per-edge trust and kernel (io/edge_choice_file.h, `--edge-choices`); empty: the rules.
   EdgeChoices choices;
+  /// Every pose's marginal covariance from the final smoother's Bayes tree (after the final
+  /// pass): ReplayResult::covariances.
+  bool covariances = false;
 };
 
 struct UpdateRow {
@@ -57,6 +60,10 @@ struct ReplayResult {
   std::vector<G> batch_poses;           ///< the batch LM estimate
   OnlineStats online;                   ///< the online layer's counts at the end
   std::vector<ClosureReport> closures;  ///< with settings.robust: every loop closure
+  /// With settings.covariances: each known pose's marginal covariance (of the final smoother's
+  /// linear system; zero for an anchor), of id covariance_ids[k].
+  std::vector<Key> covariance_ids;
+  std::vector<Eigen::Matrix<double, G::kDoF, G::kDoF>> covariances;
 };
 
 /// The graph's edges the robust replay kept: false for an edge whose (from, to) ids a rejected
