@@ -1,5 +1,6 @@
 #include "arbor/io/lcm_messages.h"
 
+#include <charconv>
 #include <cmath>
 #include <exception>
 #include <sstream>
@@ -91,6 +92,33 @@ MessageProblem precheck<command_t>(const void* data, int size, std::string* deta
     return MessageProblem::kMalformed;
   }
   return MessageProblem::kNone;
+}
+
+// An array of `count` elements of `bytes` each must fit the `size − offset` bytes left.
+MessageProblem precheckCount(std::int32_t count, int bytes, int size, int offset,
+                             const std::string& what, std::string* detail) {
+  if (count < 0 || static_cast<std::int64_t>(count) * bytes > size - offset) {
+    setDetail(detail, what + " " + std::to_string(count) + " does not fit " + std::to_string(size) +
+                          " bytes");
+    return count < 0 ? MessageProblem::kMalformed : MessageProblem::kTruncated;
+  }
+  return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<covariance_t>(const void* data, int size, std::string* detail) {
+  constexpr int kNumIdsOffset = 8 + 8 + 8;  // hash, utime, request
+  std::int32_t n = 0, dim = 0;
+  if (!readInt32(data, size, kNumIdsOffset, &n)) return MessageProblem::kTruncated;
+  MessageProblem p = precheckCount(n, 8, size, kNumIdsOffset + 4, "num_ids", detail);
+  if (p != MessageProblem::kNone) return p;
+  const int dim_offset = kNumIdsOffset + 4 + 8 * n + 8;  // ids, update
+  if (!readInt32(data, size, dim_offset, &dim)) return MessageProblem::kTruncated;
+  if (dim < 0 || dim > 1 << 12) {
+    setDetail(detail, "dim " + std::to_string(dim) + " is out of range");
+    return MessageProblem::kMalformed;
+  }
+  return precheckCount(dim * dim, 8, size, dim_offset + 4, "dim × dim", detail);
 }
 
 template <>
@@ -394,6 +422,23 @@ bool edgeKernelFromField(std::int8_t field, KernelKind* kernel, std::string* det
   return false;
 }
 
+std::vector<Key> covarianceIds(const std::string& path) {
+  std::istringstream in(path);
+  std::vector<Key> ids;
+  std::string word;
+  while (in >> word) {
+    Key id = -1;
+    const auto end = std::from_chars(word.data(), word.data() + word.size(), id);
+    if (end.ec != std::errc() || end.ptr != word.data() + word.size() || id < 0)
+      throw std::invalid_argument("covariance: '" + word + "' in '" + path + "' is not a pose id");
+    ids.push_back(id);
+  }
+  if (ids.size() != 1 && ids.size() != 2)
+    throw std::invalid_argument("covariance needs 1 or 2 pose ids, not " +
+                                std::to_string(ids.size()) + " ('" + path + "')");
+  return ids;
+}
+
 EdgeDecoding decodeEdge(const void* data, int size) {
   EdgeDecoding out;
   edge_t m;
@@ -666,6 +711,7 @@ template prior_t makePriorMessage(const StreamPositionPrior<SE3>&);
 template MessageProblem decodeMessage(const void*, int, estimate_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, status_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, command_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, covariance_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_v1_t*, std::string*);

@@ -18,6 +18,7 @@
 #include "arbor/core/robust_kernel.h"
 #include "arbor/core/se2.h"
 #include "arbor/core/se3.h"
+#include "arbor/covariance_t.hpp"
 #include "arbor/edge_command_t.hpp"
 #include "arbor/edge_t.hpp"
 #include "arbor/edge_v1_t.hpp"
@@ -177,6 +178,10 @@ edge_v1_t makeEdgeV1Message(const StreamEdge<G>& edge);
 template <class M>
 MessageProblem decodeMessage(const void* data, int size, M* out, std::string* detail = nullptr);
 
+/// The pose ids of a COVARIANCE command's `path` ("12" or "12 57": one or two decimal ids ≥ 0,
+/// separated by spaces). Throws std::invalid_argument naming the text otherwise.
+std::vector<Key> covarianceIds(const std::string& path);
+
 /// The encoded bytes of a message (with its type hash).
 template <class M>
 std::vector<std::uint8_t> encodeMessage(const M& message) {
@@ -210,6 +215,7 @@ extern template prior_t makePriorMessage(const StreamPositionPrior<SE3>&);
 extern template MessageProblem decodeMessage(const void*, int, estimate_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, status_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, command_t*, std::string*);
+extern template MessageProblem decodeMessage(const void*, int, covariance_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, journal_mark_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, edge_v1_t*, std::string*);

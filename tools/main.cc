@@ -30,7 +30,8 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
       {"spy", {arbor::cli::spyCommand, "lcm-spy with Arbor's message types (a GUI)"}},
       {"command",
        {arbor::cli::commandCommand,
-        "take an edge back from arbor serve, or give it back (disable|enable FROM TO)"}},
+        "take an edge back from arbor serve, or give it back (disable|enable FROM TO), or ask it "
+        "for covariances (covariance ID [ID2])"}},
   };
   return table;
 }

@@ -15,5 +15,7 @@ int serveCommand(const std::vector<std::string>& args);
 int publishCommand(const std::vector<std::string>& args);
 int spyCommand(const std::vector<std::string>& args);
 int commandCommand(const std::vector<std::string>& args);
+/// `arbor command covariance ID [ID2]` (commandCommand hands it over).
+int covarianceCommand(const std::vector<std::string>& args);
 
 }  // namespace arbor::cli

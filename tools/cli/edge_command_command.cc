@@ -81,12 +81,16 @@ class CommandWatcher {
 }  // namespace
 
 int commandCommand(const std::vector<std::string>& args) {
+  if (!args.empty() && args[0] == "covariance")
+    return covarianceCommand(std::vector<std::string>(args.begin() + 1, args.end()));
   std::string kind, url, prefix;
   Key from = 0, to = 0;
   std::int64_t sender = 1, seq = 0;
   bool wait = false, json = false;
   double timeout_s = 10;
-  po::options_description desc("arbor command disable|enable FROM TO [options]");
+  po::options_description desc(
+      "arbor command disable|enable FROM TO [options]\n"
+      "arbor command covariance ID [ID2] [options]   (arbor command covariance --help)");
   desc.add_options()("help,h", "show this help")(
       "kind", po::value(&kind)->required(),
       "disable (take back every edge between FROM and TO) or enable (give them back)")(

@@ -69,6 +69,12 @@ class EngineImpl final : public Engine {
     return m;
   }
 
+  Eigen::MatrixXd covariance(const std::vector<Key>& ids) const override {
+    if (ids.size() == 1) return smoother_.marginalCovariance(ids[0]);
+    if (ids.size() == 2) return smoother_.jointMarginalCovariance(ids[0], ids[1]);
+    throw std::invalid_argument("covariance of " + std::to_string(ids.size()) + " poses (1 or 2)");
+  }
+
   const refine::RefinerOptions& batchOptions() const override { return refiner_.options(); }
   bool startBatch(std::int64_t update) override { return refiner_.start(smoother_, update); }
   void noteUpdate() override { refiner_.noteUpdate(); }

@@ -42,6 +42,11 @@ class Engine {
   /// The estimate: every pose (`full`) or the poses whose value changed since the last call.
   /// F is filled (the objective) only for a full estimate, else NaN.
   virtual estimate_t estimate(bool full) = 0;
+  /// The marginal covariance of one pose (k×k) or the joint covariance of two (2k×2k) after the
+  /// last update (OnlineSmoother::marginalCovariance / jointMarginalCovariance). Throws
+  /// std::out_of_range for an unknown id, std::logic_error for a pose not through an update
+  /// yet, std::invalid_argument for another count than 1 or 2.
+  virtual Eigen::MatrixXd covariance(const std::vector<Key>& ids) const = 0;
   /// Writes the estimate and the edges applied so far but the disabled ones as g2o (the first
   /// pose is FIXed).
   virtual void writeG2o(const std::string& path) const = 0;

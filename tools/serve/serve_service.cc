@@ -35,9 +35,9 @@ std::int64_t nowMicros() {
 }
 
 Channels Channels::withPrefix(const std::string& prefix) {
-  return {prefix + "ARBOR_EDGES",     prefix + "ARBOR_ESTIMATE", prefix + "ARBOR_STATUS",
-          prefix + "ARBOR_COMMAND",   prefix + "ARBOR_PRIORS",   prefix + "ARBOR_EDGE_COMMANDS",
-          prefix + "ARBOR_LINK_PROBE"};
+  return {prefix + "ARBOR_EDGES",      prefix + "ARBOR_ESTIMATE",  prefix + "ARBOR_STATUS",
+          prefix + "ARBOR_COMMAND",    prefix + "ARBOR_PRIORS",    prefix + "ARBOR_EDGE_COMMANDS",
+          prefix + "ARBOR_LINK_PROBE", prefix + "ARBOR_COVARIANCE"};
 }
 
 Service::Service(lcm::LCM& lcm, ServeOptions options) : Service(lcm, lcm, std::move(options)) {}
@@ -737,6 +737,9 @@ void Service::handleCommand(const command_t& c) {
     case command_t::CLOSURES:
       writeClosures(c);
       break;
+    case command_t::COVARIANCE:
+      publishCovariance(c);
+      break;
     default:
       logLine("unknown command " + std::to_string(c.command));
   }
@@ -797,6 +800,36 @@ void Service::writeClosures(const command_t& c) {
   }
   logLine("closures: " + std::to_string(closures.size()) + " written to " + snapshots_.dir() + "/" +
           c.path);
+}
+
+void Service::publishCovariance(const command_t& c) {
+  covariance_t m;
+  m.request = c.utime;
+  m.num_ids = 0;
+  m.dim = 0;
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    m.update = updates_;
+  }
+  try {
+    m.ids = covarianceIds(c.path);  // throws on anything but one or two ids
+    m.num_ids = static_cast<std::int32_t>(m.ids.size());
+    if (!engine_) throw std::runtime_error("no estimate yet");
+    const Eigen::MatrixXd sigma = engine_->covariance(m.ids);
+    m.dim = static_cast<std::int32_t>(sigma.rows());
+    m.matrix.assign(m.dim, std::vector<double>(m.dim));
+    for (int r = 0; r < m.dim; ++r)
+      for (int k = 0; k < m.dim; ++k) m.matrix[r][k] = sigma(r, k);
+  } catch (const std::exception& e) {  // bad ids, an unknown id, a pose not updated yet
+    m.dim = 0;
+    m.matrix.clear();
+    m.error = e.what();
+    logLimited("covariance refused", "covariance refused: " + m.error);
+  }
+  m.utime = nowMicros();
+  const auto bytes = encodeMessage(m);
+  std::lock_guard<std::mutex> lock(publish_mutex_);
+  publish_->publish(channels_.covariance, bytes.data(), static_cast<unsigned>(bytes.size()));
 }
 
 void Service::publishEstimate(bool full) {

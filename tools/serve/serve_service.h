@@ -52,8 +52,9 @@ namespace arbor::serve {
 struct Channels {
   std::string edges, estimate, status, command, priors, edge_commands;
   std::string link_probe;  ///< the receive link's own probe (LinkWatch)
+  std::string covariance;  ///< answers to command COVARIANCE
   /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS,
-  /// ARBOR_EDGE_COMMANDS, ARBOR_LINK_PROBE, each after `prefix`.
+  /// ARBOR_EDGE_COMMANDS, ARBOR_LINK_PROBE, ARBOR_COVARIANCE, each after `prefix`.
   static Channels withPrefix(const std::string& prefix);
 };
 
@@ -213,6 +214,9 @@ class Service {
   void handleCommand(const command_t& command);
   /// Command CLOSURES: the closure report into --snapshot-dir (SNAPSHOT's rules).
   void writeClosures(const command_t& command);
+  /// Command COVARIANCE: the covariance of the ids in its path, or the refusal, on
+  /// channels_.covariance.
+  void publishCovariance(const command_t& command);
   void ensureEngine(int dim);
   void publishEstimate(bool full);
   void publishStatus();

@@ -1,0 +1,152 @@
+// arbor command covariance ID [ID2]: asks `arbor serve` for the marginal covariance of pose ID
+// (or the joint covariance of ID and ID2) with command COVARIANCE on ARBOR_COMMAND (the ids in
+// its path, its utime the request) and prints the covariance_t answer from ARBOR_COVARIANCE
+// (docs/lcm.md).
+#include <chrono>
+#include <condition_variable>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include <lcm/lcm-cpp.hpp>
+#include <nlohmann/json.hpp>
+
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/serve_service.h"
+
+namespace arbor::cli {
+namespace {
+
+namespace po = boost::program_options;
+
+// Listens on ARBOR_COVARIANCE (its own LCM instance and thread) for the answer to `request`.
+class AnswerWatcher {
+ public:
+  AnswerWatcher(lcm::LCM& lcm, const std::string& channel, std::int64_t request)
+      : lcm_(lcm), request_(request) {
+    sub_ = lcm_.subscribe(channel, &AnswerWatcher::onAnswer, this);
+    sub_->setQueueCapacity(0);
+    thread_ = std::thread([this] {
+      while (!stop_) {
+        serve::armQuickAck(lcm_);
+        lcm_.handleTimeout(20);
+      }
+    });
+  }
+  ~AnswerWatcher() {
+    stop_ = true;
+    thread_.join();
+    lcm_.unsubscribe(sub_);
+  }
+  AnswerWatcher(const AnswerWatcher&) = delete;
+  AnswerWatcher& operator=(const AnswerWatcher&) = delete;
+  bool wait(double timeout_s, covariance_t* out) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const bool done =
+        cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return answered_; });
+    if (done) *out = answer_;
+    return done;
+  }
+
+ private:
+  void onAnswer(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    covariance_t m;
+    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &m) != MessageProblem::kNone)
+      return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (m.request != request_ || answered_) return;
+    answered_ = true;
+    answer_ = m;
+    cv_.notify_all();
+  }
+  lcm::LCM& lcm_;
+  std::int64_t request_;
+  lcm::Subscription* sub_ = nullptr;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool answered_ = false;
+  covariance_t answer_;
+  volatile bool stop_ = false;
+  std::thread thread_;
+};
+
+}  // namespace
+
+int covarianceCommand(const std::vector<std::string>& args) {
+  std::vector<Key> ids;
+  std::string url, prefix;
+  bool json = false;
+  double timeout_s = 10;
+  po::options_description desc("arbor command covariance ID [ID2] [options]");
+  desc.add_options()("help,h", "show this help")(
+      "id", po::value(&ids)->required()->multitoken(),
+      "pose id (its marginal covariance), or two (their joint covariance)")(
+      "lcm-url", po::value(&url), "LCM provider URL (default: LCM's default)")(
+      "channel-prefix", po::value(&prefix), "prefix of the ARBOR_* channels")(
+      "timeout", po::value(&timeout_s)->default_value(10), "seconds to wait for the answer")(
+      "json", po::bool_switch(&json), "print one JSON object");
+  po::positional_options_description positional;
+  positional.add("id", -1);
+  if (helpRequested(args, desc)) return 0;
+  parseArguments(args, desc, positional);
+  if (ids.size() != 1 && ids.size() != 2)
+    throw UsageError("covariance needs one or two pose ids, not " + std::to_string(ids.size()));
+  if (!(timeout_s > 0)) throw UsageError("--timeout must be > 0");
+  for (Key id : ids)
+    if (id < 0) throw UsageError("pose ids must be >= 0, not " + std::to_string(id));
+
+  command_t c;
+  c.utime = serve::nowMicros();  // the request the answer names
+  c.command = command_t::COVARIANCE;
+  c.path = std::to_string(ids[0]) + (ids.size() == 2 ? " " + std::to_string(ids[1]) : "");
+  const std::int64_t request = c.utime;
+
+  lcm::LCM lcm(url);
+  if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
+  serve::tuneLcmTransport(lcm, url);
+  lcm::LCM listen(url);
+  if (!listen.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
+  serve::tuneLcmTransport(listen, url);
+  const serve::Channels channels = serve::Channels::withPrefix(prefix);
+  AnswerWatcher watcher(listen, channels.covariance, request);
+  const auto bytes = encodeMessage(c);
+  if (lcm.publish(channels.command, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
+    throw std::runtime_error("LCM publish failed on " + channels.command);
+  covariance_t answer;
+  if (!watcher.wait(timeout_s, &answer)) {
+    std::cerr << "arbor command: no answer on " << channels.covariance << " within " << timeout_s
+              << " s (is arbor serve running?)\n";
+    return 1;
+  }
+  if (json) {
+    nlohmann::json j = {{"ids", answer.ids},
+                        {"request", answer.request},
+                        {"update", answer.update},
+                        {"dim", answer.dim},
+                        {"matrix", answer.matrix}};
+    if (!answer.error.empty()) j["error"] = answer.error;
+    std::cout << j.dump() << std::endl;
+  } else if (answer.error.empty()) {
+    std::cout << (ids.size() == 1 ? "marginal covariance of " : "joint covariance of ") << ids[0]
+              << (ids.size() == 2 ? " and " + std::to_string(ids[1]) : "") << " after update "
+              << answer.update << " (" << answer.dim << "x" << answer.dim
+              << ", per pose [translation; rotation]):\n"
+              << std::setprecision(9);
+    for (const auto& row : answer.matrix) {
+      for (size_t k = 0; k < row.size(); ++k) std::cout << (k ? " " : "") << row[k];
+      std::cout << "\n";
+    }
+  }
+  if (!answer.error.empty()) {
+    std::cerr << "arbor command: covariance refused: " << answer.error << "\n";
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace arbor::cli
