@@ -17,7 +17,7 @@ def test_replay_matches_the_cli(name, data_dir, arbor_cli):
     assert F == pytest.approx(expected["F_final"], rel=1e-9)
     assert smoother.objective() == pytest.approx(F, rel=1e-9)
     stats = smoother.stats()
-    assert stats["poses"] == graph.num_poses == expected["poses"]
+    assert stats["poses"] == graph.num_poses == expected["nodes"]
     assert stats["edges_accepted"] == graph.num_edges
     assert stats["updates"] == graph.num_edges + 1  # one per edge, then finalize
 
@@ -42,3 +42,37 @@ def test_robust_replay_rejects_false_closures(data_dir):
     statuses = {c["status"] for c in closures}
     assert statuses <= {"inlier", "outlier", "trusted", "excluded"}
     assert smoother.stats()["closures_outlier"] == sum(c["status"] == "outlier" for c in closures)
+
+
+@pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
+def test_replay_covariances_and_tum_output(name, data_dir, arbor_cli, tmp_path):
+    """`arbor replay --covariances OUT -o OUT --format tum` writes what the module computes."""
+    path = os.path.join(data_dir, name)
+    covariances, tum = tmp_path / "cov.txt", tmp_path / "estimate.tum"
+    report = arbor_cli("replay", path, "--covariances", str(covariances), "-o", str(tum),
+                       "--format", "tum")
+    assert report["covariances"] == str(covariances)
+    assert report["output"] == {"path": str(tum), "format": "tum"}
+    graph = arbor.read(path)
+    smoother, _ = replay(graph)
+    k = 3 if graph.dimension == 2 else 6
+    upper = np.triu_indices(k)
+    lines = covariances.read_text().splitlines()
+    assert len(lines) == graph.num_poses
+    ids = []
+    for line in lines:
+        fields = line.split()
+        ids.append(int(fields[0]))
+        # The module's measurements went through numpy rows ([x y θ], quaternions), so the two
+        # replays agree to rounding, not bit for bit.
+        expected = smoother.marginal_covariance(ids[-1])[upper]
+        got = np.array([float(x) for x in fields[1:]])
+        assert np.abs(got - expected).max() <= 1e-8 * max(np.abs(expected).max(), 1e-300), ids[-1]
+    assert ids == sorted(ids)
+    rows = np.loadtxt(tum)
+    estimate_ids, poses = smoother.estimates()
+    assert np.array_equal(rows[:, 0], estimate_ids)
+    if graph.dimension == 3:
+        assert np.allclose(rows[:, 1:], poses, rtol=0, atol=1e-9)
+    else:
+        assert np.allclose(rows[:, 1:3], poses[:, :2], rtol=0, atol=1e-9)
