@@ -11,9 +11,9 @@
 //
 // and Σ_ss lies inside the joint covariance of the parent's variables (running intersection):
 // the joint of a clique's [frontals; separator] follows from its parent's, top-down from the
-// root, where Σ = (RᵀR)⁻¹. A query computes the joints on the path from its clique to the root
-// only, and keeps them (with X) until the tree changes: the paper's dynamic programming over the
-// entries of Σ that are needed, per clique instead of per entry, so a second query on the same
+// root, where Σ = (RᵀR)⁻¹. A joint query computes the joints on the path from its clique to the
+// root only, and keeps them (with X) until the tree changes: the paper's dynamic programming over
+// the entries of Σ that are needed, per clique instead of per entry, so a second query on the same
 // path, or one below a clique already computed, costs only its own cliques.
 //
 // Two variables a, b in cliques c_a ≠ c_b: with l their lowest common ancestor, a and b are
@@ -21,6 +21,16 @@
 // l's child gives x_a = T_a x_{V_a} + (noise of those cliques) with V_a ⊂ vars(l) (GTSAM's
 // "shortcut"); so Σ_ab = T_a Σ_l[V_a, V_b] T_bᵀ, with T_a = I and V_a = {a} when c_a = l. Cliques
 // in different trees (components) are independent: Σ_ab = 0.
+//
+// One variable's marginal alone needs no joint: with Σ = (RᵀR)⁻¹ over the whole tree's square
+// root R (the cliques' [R S] rows, in elimination order),
+//
+//   Σ_vv = YᵀY,   Y = R⁻ᵀ E_v   (E_v: the identity's D columns of v),                  (2)
+//
+// and Rᵀ Y = E_v is a forward substitution whose solution is zero before v and off the path
+// from v's clique to the root (a clique's rows couple its frontals only to themselves and,
+// through S, to its separator, which is frontal higher up the path). marginal() solves it along
+// the path unless the clique's joint is cached already.
 //
 // Each is the covariance of the linear system the tree holds: of the tangent τ at the
 // linearisation point θ (x = θ ⊞ τ), in the gauge of the fixed poses (constants, not in the
@@ -54,7 +64,8 @@ class TreeMarginals {
     return *this;
   }
 
-  /// Σ_vv of variable v; v must be frontal in some clique (tree.clique_of[v] ≥ 0).
+  /// Σ_vv of variable v; v must be frontal in some clique (tree.clique_of[v] ≥ 0). From the
+  /// cached joint of its clique when there is one, else by the path solve (2) (caching nothing).
   Block marginal(const BayesTree<D>& tree, long version, int v);
   /// [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]]; a variable with clique_of < 0 (a constant) has zero rows.
   JointBlock joint(const BayesTree<D>& tree, long version, int a, int b);
@@ -86,6 +97,8 @@ class TreeMarginals {
   /// x_v = T x_{V} + noise, V ⊂ variables of clique l, from v's clique c (a descendant of l).
   void shortcut(const BayesTree<D>& tree, int v, int c, int l, std::vector<int>* V,
                 Eigen::MatrixXd* T);
+  /// (2) for variable v along the path from its clique to the root.
+  Block pathMarginal(const BayesTree<D>& tree, int v);
   /// Position of v (block index) among clique c's frontals then separator.
   static int position(const Clique<D>& c, int v);
 
@@ -94,7 +107,9 @@ class TreeMarginals {
   std::vector<Entry> cache_;  ///< per clique id
   std::vector<int> cached_;   ///< clique ids with an entry
   std::vector<int> path_;
-  std::vector<int> mark_;  ///< per clique, for the lowest common ancestor
+  std::vector<int> mark_;             ///< per clique, for the lowest common ancestor
+  std::vector<int> path_index_;       ///< per clique: its place on pathMarginal's path, or −1
+  std::vector<Eigen::MatrixXd> rhs_;  ///< pathMarginal: r_c, then y_c, per clique of the path
   int mark_stamp_ = 0;
 };
 
