@@ -119,38 +119,49 @@ void TreeMarginals<D>::shortcut(const BayesTree<D>& tree, int v, int c, int l, s
 // r_s −= B y_c for the separator's rows (frontal rows of cliques above on the path).
 template <int D>
 typename TreeMarginals<D>::Block TreeMarginals<D>::pathMarginal(const BayesTree<D>& tree, int v) {
+  using Rows = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, D>>;
+  // The path, each clique's rows in one buffer (offset_ per path entry), and each frontal's row
+  // in it (row_of_ per variable), so a separator variable finds its rows in O(1).
   path_.clear();
-  for (int p = tree.clique_of[v]; p >= 0; p = tree.cliques[p].parent) path_.push_back(p);
-  path_index_.resize(tree.cliques.size(), -1);
-  if (rhs_.size() < path_.size()) rhs_.resize(path_.size());
-  for (size_t k = 0; k < path_.size(); ++k) {
-    path_index_[path_[k]] = static_cast<int>(k);
-    rhs_[k].setZero(tree.cliques[path_[k]].F, D);
+  offset_.clear();
+  int rows = 0, max_sn = 0;
+  for (int p = tree.clique_of[v]; p >= 0; p = tree.cliques[p].parent) {
+    const Clique<D>& q = tree.cliques[p];
+    path_.push_back(p);
+    offset_.push_back(rows);
+    row_of_.resize(std::max(row_of_.size(), tree.clique_of.size()), -1);
+    for (size_t f = 0; f < q.frontals.size(); ++f)
+      row_of_[q.frontals[f]] = rows + static_cast<int>(f) * D;
+    rows += q.F;
+    max_sn = std::max(max_sn, q.Sn);
   }
-  rhs_[0].middleRows(position(tree.cliques[path_[0]], v) * D, D).setIdentity();
+  buffer_.assign(static_cast<size_t>(rows + max_sn) * D, 0.0);
+  Rows r(buffer_.data(), rows, D);  // r_c, then y_c, per clique of the path
+  r.template middleRows<D>(row_of_[v]).setIdentity();
   Block sigma = Block::Zero();
-  Eigen::MatrixXd By;
-  for (size_t k = 0; k < path_.size(); ++k) {
+  bool off_path = false;
+  for (size_t k = 0; k < path_.size() && !off_path; ++k) {
     const Clique<D>& q = tree.cliques[path_[k]];
-    Eigen::MatrixXd& y = rhs_[k];
+    auto y = r.middleRows(offset_[k], q.F);
     q.LS().topRows(q.F).template triangularView<Eigen::Lower>().solveInPlace(y);
     sigma.noalias() += y.transpose() * y;
     if (q.Sn == 0) continue;
+    Rows By(buffer_.data() + static_cast<size_t>(rows) * D, q.Sn, D);
     By.noalias() = q.LS().bottomRows(q.Sn) * y;
     for (size_t b = 0; b < q.separator.size(); ++b) {
-      const int s = q.separator[b];
-      const int owner = tree.clique_of[s];
-      const int at = owner >= 0 ? path_index_[owner] : -1;
+      const int at = row_of_[q.separator[b]];
       if (at < 0) {
-        for (int c : path_) path_index_[c] = -1;
-        throw std::logic_error("TreeMarginals: separator variable " + std::to_string(s) +
-                               " is not frontal on its clique's path to the root");
+        off_path = true;
+        break;
       }
-      rhs_[at].middleRows(position(tree.cliques[owner], s) * D, D) -=
-          By.middleRows(static_cast<int>(b) * D, D);
+      r.template middleRows<D>(at) -= By.template middleRows<D>(static_cast<int>(b) * D);
     }
   }
-  for (int c : path_) path_index_[c] = -1;
+  for (int c : path_)
+    for (int f : tree.cliques[c].frontals) row_of_[f] = -1;
+  if (off_path)
+    throw std::logic_error("TreeMarginals: a separator variable of variable " + std::to_string(v) +
+                           "'s path is not frontal on it");
   return sigma;
 }
 
@@ -158,12 +169,14 @@ template <int D>
 typename TreeMarginals<D>::Block TreeMarginals<D>::marginal(const BayesTree<D>& tree, long version,
                                                             int v) {
   std::lock_guard<std::mutex> lock(mutex_);
-  sync(tree, version);
   const int c = tree.clique_of[v];
-  const int at = position(tree.cliques[c], v) * D;
-  // A clique whose joint is cached (by joint()) answers at once; else the path solve (2), which
-  // costs O(Σ (F² + F·Sn) D) on the path instead of the joints' O(Σ (F + Sn)³).
-  if (cache_[c].joint.size() != 0) return cache_[c].joint.template block<D, D>(at, at);
+  // A clique whose joint is cached for this version (by joint()) answers at once; else the path
+  // solve (2), which costs O(Σ (F² + F·Sn) D) on the path instead of the joints'
+  // O(Σ (F + Sn)³), and leaves the cache as it is.
+  if (version == version_ && c < static_cast<int>(cache_.size()) && cache_[c].joint.size() != 0) {
+    const int at = position(tree.cliques[c], v) * D;
+    return cache_[c].joint.template block<D, D>(at, at);
+  }
   return pathMarginal(tree, v);
 }
 

@@ -107,9 +107,12 @@ class TreeMarginals {
   std::vector<Entry> cache_;  ///< per clique id
   std::vector<int> cached_;   ///< clique ids with an entry
   std::vector<int> path_;
-  std::vector<int> mark_;             ///< per clique, for the lowest common ancestor
-  std::vector<int> path_index_;       ///< per clique: its place on pathMarginal's path, or −1
-  std::vector<Eigen::MatrixXd> rhs_;  ///< pathMarginal: r_c, then y_c, per clique of the path
+  std::vector<int> mark_;  ///< per clique, for the lowest common ancestor
+  // pathMarginal's scratch: per path clique its first row, per variable its row (−1: not a
+  // frontal of the path), the rows r_c / y_c and B y_c.
+  std::vector<int> offset_;
+  std::vector<int> row_of_;
+  std::vector<double> buffer_;
   int mark_stamp_ = 0;
 };
 
