@@ -42,6 +42,7 @@
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tests/lcm_test_support.h"
 #include "private_network.h"
+#include "process_support.h"
 #include "shared_data.h"
 
 extern char** environ;
@@ -52,101 +53,12 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-// A child process with stdout and stderr in files; killed (SIGKILL) and reaped on destruction.
-class Process {
- public:
-  Process(const std::vector<std::string>& argv, const std::string& out, const std::string& err)
-      : out_(out), err_(err) {
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    if (posix_spawnp(&pid_, args[0], &actions, nullptr, args.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~Process() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      int status;
-      waitpid(pid_, &status, 0);
-    }
-  }
-  bool started() const { return pid_ > 0; }
-  void signal(int sig) {
-    if (pid_ > 0) ::kill(pid_, sig);
-  }
-  /// Exit code after a normal exit, -signal if killed, -1000 on timeout (still running).
-  int wait(double timeout_s) {
-    const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-    while (pid_ > 0) {
-      int status = 0;
-      const pid_t r = waitpid(pid_, &status, WNOHANG);
-      if (r == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
-      }
-      if (Clock::now() > end) return -1000;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return -1;
-  }
-  std::string out() const { return readFile(out_); }
-  std::string err() const { return readFile(err_); }
-
- private:
-  pid_t pid_ = -1;
-  std::string out_, err_;
-};
-
-int freePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  addr.sin_port = 0;
-  bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-  socklen_t len = sizeof addr;
-  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  close(fd);
-  return ntohs(addr.sin_port);
-}
-
-bool portOpen(int port) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  addr.sin_port = htons(static_cast<uint16_t>(port));
-  const bool ok = connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
-  close(fd);
-  return ok;
-}
-
-// Runs a command to completion; stdout only (stderr to a file beside it).
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
-
-RunResult run(const std::vector<std::string>& argv, const std::string& stem,
-              double timeout_s = 60) {
-  Process p(argv, stem + ".out", stem + ".err");
-  RunResult r;
-  r.status = p.wait(timeout_s);
-  r.out = p.out();
-  r.err = p.err();
-  return r;
-}
+using arbor::testing::freePort;
+using arbor::testing::portOpen;
+using arbor::testing::Process;
+using arbor::testing::readFile;
+using arbor::testing::run;
+using arbor::testing::RunResult;
 
 // Listens to the estimates of a channel prefix over tcpq (its own LCM handle thread).
 class EstimateListener {
