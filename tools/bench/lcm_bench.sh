@@ -16,19 +16,9 @@
 #              hub does; a cold hub adds ~0.1-0.2 ms per message until ~10^4 messages went by.
 set -euo pipefail
 transport=${TRANSPORT:-tcpq}
-if [ "$transport" = udpm ] && [ -z "${ARBOR_PRIVATE_NETWORK:-}" ]; then
-  export ARBOR_PRIVATE_NETWORK=1
-  unshare --net true 2>/dev/null && exec unshare --net -- bash "$0" "$@"
-  exec unshare -rn -- bash "$0" "$@"
-fi
 if [ "$transport" = udpm ]; then
-  ip link set lo up
-  ip link set lo multicast on
-  ip route add 224.0.0.0/4 dev lo
-  if [ "$(ip -o link show | wc -l)" != 1 ]; then
-    echo "lcm_bench.sh: not in a private network namespace (interfaces besides lo); stopping" >&2
-    exit 1
-  fi
+  source "$(dirname "$0")/private_network.sh"
+  enter_private_network "$@"
 fi
 build=${1:-build}
 shared=${2:-../shared}

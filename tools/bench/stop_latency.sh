@@ -8,18 +8,8 @@
 # usage: tools/bench/stop_latency.sh [BUILD_DIR] [DATASET_FILE]
 # Environment: RUNS=5 COUNT=-1 SOLVER=rtr EVERY=20 SERVE_FLAGS=... (e.g. --no-refine)
 set -euo pipefail
-if [ -z "${ARBOR_PRIVATE_NETWORK:-}" ]; then
-  export ARBOR_PRIVATE_NETWORK=1
-  unshare --net true 2>/dev/null && exec unshare --net -- bash "$0" "$@"
-  exec unshare -rn -- bash "$0" "$@"
-fi
-ip link set lo up
-ip link set lo multicast on
-ip route add 224.0.0.0/4 dev lo
-if [ "$(ip -o link show | wc -l)" != 1 ]; then
-  echo "stop_latency.sh: not in a private network namespace; stopping" >&2
-  exit 1
-fi
+source "$(dirname "$0")/private_network.sh"
+enter_private_network "$@"
 build=${1:-build}
 file=${2:-../shared/datasets/M3500.g2o}
 arbor="$build/tools/arbor"

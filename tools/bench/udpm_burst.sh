@@ -8,18 +8,8 @@
 # usage: tools/bench/udpm_burst.sh [BUILD_DIR]
 # Environment: EDGES=60000 SIZES="106496 524288 1048576 4194304" RUNS=1
 set -euo pipefail
-if [ -z "${ARBOR_PRIVATE_NETWORK:-}" ]; then
-  export ARBOR_PRIVATE_NETWORK=1
-  unshare --net true 2>/dev/null && exec unshare --net -- bash "$0" "$@"
-  exec unshare -rn -- bash "$0" "$@"
-fi
-ip link set lo up
-ip link set lo multicast on
-ip route add 224.0.0.0/4 dev lo
-if [ "$(ip -o link show | wc -l)" != 1 ]; then
-  echo "udpm_burst.sh: not in a private network namespace; stopping" >&2
-  exit 1
-fi
+source "$(dirname "$0")/private_network.sh"
+enter_private_network "$@"
 build=${1:-build}
 arbor="$build/tools/arbor"
 url="udpm://239.255.76.67:7667?ttl=0"
