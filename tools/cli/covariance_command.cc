@@ -3,79 +3,22 @@
 // its path, its utime the request) and prints the covariance_t answer from ARBOR_COVARIANCE
 // (docs/lcm.md).
 #include <chrono>
-#include <condition_variable>
 #include <iomanip>
 #include <iostream>
 #include <memory>
-#include <mutex>
-#include <thread>
 
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
 #include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/answer_watcher.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/serve/lcm_tuning.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
-namespace {
-
 namespace po = boost::program_options;
-
-// Listens on ARBOR_COVARIANCE (its own LCM instance and thread) for the answer to `request`.
-class AnswerWatcher {
- public:
-  AnswerWatcher(lcm::LCM& lcm, const std::string& channel, std::int64_t request)
-      : lcm_(lcm), request_(request) {
-    sub_ = lcm_.subscribe(channel, &AnswerWatcher::onAnswer, this);
-    sub_->setQueueCapacity(0);
-    thread_ = std::thread([this] {
-      while (!stop_) {
-        serve::armQuickAck(lcm_);
-        lcm_.handleTimeout(20);
-      }
-    });
-  }
-  ~AnswerWatcher() {
-    stop_ = true;
-    thread_.join();
-    lcm_.unsubscribe(sub_);
-  }
-  AnswerWatcher(const AnswerWatcher&) = delete;
-  AnswerWatcher& operator=(const AnswerWatcher&) = delete;
-  bool wait(double timeout_s, covariance_t* out) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    const bool done =
-        cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return answered_; });
-    if (done) *out = answer_;
-    return done;
-  }
-
- private:
-  void onAnswer(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-    covariance_t m;
-    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &m) != MessageProblem::kNone)
-      return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (m.request != request_ || answered_) return;
-    answered_ = true;
-    answer_ = m;
-    cv_.notify_all();
-  }
-  lcm::LCM& lcm_;
-  std::int64_t request_;
-  lcm::Subscription* sub_ = nullptr;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  bool answered_ = false;
-  covariance_t answer_;
-  volatile bool stop_ = false;
-  std::thread thread_;
-};
-
-}  // namespace
 
 int covarianceCommand(const std::vector<std::string>& args) {
   std::vector<Key> ids;
@@ -113,12 +56,14 @@ int covarianceCommand(const std::vector<std::string>& args) {
   if (!listen.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
   serve::tuneLcmTransport(listen, url);
   const serve::Channels channels = serve::Channels::withPrefix(prefix);
-  AnswerWatcher watcher(listen, channels.covariance, request);
+  AnswerWatcher<covariance_t> watcher(
+      listen, channels.covariance,
+      [request](const covariance_t& m) { return m.request == request; });
   const auto bytes = encodeMessage(c);
   if (lcm.publish(channels.command, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
     throw std::runtime_error("LCM publish failed on " + channels.command);
   covariance_t answer;
-  if (!watcher.wait(timeout_s, &answer)) {
+  if (!watcher.waitAnswer(timeout_s, &answer)) {
     std::cerr << "arbor command: no answer on " << channels.covariance << " within " << timeout_s
               << " s (is arbor serve running?)\n";
     return 1;

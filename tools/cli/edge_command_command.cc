@@ -2,83 +2,20 @@
 // with one edge_command_t on ARBOR_EDGE_COMMANDS (docs/lcm.md); with --wait, waits for the
 // service's status naming this command and prints what the smoother did.
 #include <chrono>
-#include <condition_variable>
 #include <iostream>
-#include <mutex>
-#include <thread>
 
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
 #include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/answer_watcher.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/serve/lcm_tuning.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::cli {
-namespace {
-
 namespace po = boost::program_options;
-
-// Waits on ARBOR_STATUS for the status whose last command is (sender, seq).
-class CommandWatcher {
- public:
-  CommandWatcher(lcm::LCM& lcm, const std::string& channel, std::int64_t sender, std::int64_t seq)
-      : lcm_(lcm), sender_(sender), seq_(seq) {
-    sub_ = lcm_.subscribe(channel, &CommandWatcher::onStatus, this);
-    sub_->setQueueCapacity(0);
-    thread_ = std::thread([this] {
-      while (!stop_) {
-        serve::armQuickAck(lcm_);
-        lcm_.handleTimeout(20);
-      }
-    });
-  }
-  ~CommandWatcher() {
-    stop_ = true;
-    thread_.join();
-    lcm_.unsubscribe(sub_);
-  }
-  CommandWatcher(const CommandWatcher&) = delete;
-  CommandWatcher& operator=(const CommandWatcher&) = delete;
-  bool waitStatus(double timeout_s) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return seen_; });
-  }
-  bool waitResult(double timeout_s, status_t* out) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    const bool done =
-        cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return answered_; });
-    if (done) *out = answer_;
-    return done;
-  }
-
- private:
-  void onStatus(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-    status_t s;
-    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &s) != MessageProblem::kNone)
-      return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    seen_ = true;
-    if (s.last_command_sender == sender_ && s.last_command_seq == seq_ && !answered_) {
-      answered_ = true;
-      answer_ = s;
-    }
-    cv_.notify_all();
-  }
-  lcm::LCM& lcm_;
-  std::int64_t sender_, seq_;
-  lcm::Subscription* sub_ = nullptr;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  bool seen_ = false, answered_ = false;
-  status_t answer_;
-  volatile bool stop_ = false;
-  std::thread thread_;
-};
-
-}  // namespace
 
 int commandCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "covariance")
@@ -134,13 +71,17 @@ int commandCommand(const std::vector<std::string>& args) {
   // The watcher has its own instance (liblcm 1.3 delays what an instance receives while another
   // thread publishes on it) and sees a status before the command goes out: the service is up.
   std::unique_ptr<lcm::LCM> listen;
-  std::unique_ptr<CommandWatcher> watcher;
+  std::unique_ptr<AnswerWatcher<status_t>> watcher;
   if (wait) {
     listen = std::make_unique<lcm::LCM>(url);
     if (!listen->good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
     serve::tuneLcmTransport(*listen, url);
-    watcher = std::make_unique<CommandWatcher>(*listen, channels.status, sender, seq);
-    if (!watcher->waitStatus(timeout_s)) {
+    // The status whose last command is (sender, seq) answers it.
+    watcher = std::make_unique<AnswerWatcher<status_t>>(
+        *listen, channels.status, [sender, seq](const status_t& s) {
+          return s.last_command_sender == sender && s.last_command_seq == seq;
+        });
+    if (!watcher->waitAny(timeout_s)) {
       std::cerr << "arbor command: no status from a server on " << channels.status << " within "
                 << timeout_s << " s\n";
       return 1;
@@ -150,7 +91,7 @@ int commandCommand(const std::vector<std::string>& args) {
   if (lcm.publish(channels.edge_commands, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
     throw std::runtime_error("LCM publish failed on " + channels.edge_commands);
   status_t answer;
-  const bool answered = wait && watcher->waitResult(timeout_s, &answer);
+  const bool answered = wait && watcher->waitAnswer(timeout_s, &answer);
   const bool refused = answered && answer.last_command_result.rfind("refused", 0) == 0;
   if (json) {
     nlohmann::json j = {{"command", kind},  {"from", from}, {"to", to},
