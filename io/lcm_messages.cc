@@ -293,15 +293,6 @@ PriorDecoding toStreamPrior(const prior_t& m) {
   return out;
 }
 
-template <class G>
-int dimOfPrior(const StreamPosePrior<G>&) {
-  return G::kDim;
-}
-template <class G>
-int dimOfPrior(const StreamPositionPrior<G>&) {
-  return G::kDim;
-}
-
 }  // namespace
 
 const char* toString(MessageProblem problem) {
@@ -530,10 +521,6 @@ PriorDecoding decodePrior(const void* data, int size) {
   return m.dim == 2 ? toStreamPrior<SE2>(m) : toStreamPrior<SE3>(m);
 }
 
-const char* toString(StreamEdgeCommand::Kind kind) {
-  return kind == StreamEdgeCommand::Kind::kDisable ? "disable" : "enable";
-}
-
 EdgeCommandDecoding decodeEdgeCommand(const void* data, int size) {
   EdgeCommandDecoding out;
   edge_command_t m;
@@ -578,38 +565,6 @@ edge_command_t makeEdgeCommandMessage(const StreamEdgeCommand& command) {
   m.from_id = command.from;
   m.to_id = command.to;
   return m;
-}
-
-int dimOf(const AnyStreamPrior& prior) {
-  return std::visit([](const auto& p) { return dimOfPrior(p); }, prior);
-}
-
-void poseToFields(const SE2& pose, double translation[3], double rotation[4]) {
-  translation[0] = pose.x();
-  translation[1] = pose.y();
-  translation[2] = 0;
-  rotation[0] = pose.angle();
-  rotation[1] = rotation[2] = rotation[3] = 0;
-}
-
-void poseToFields(const SE3& pose, double translation[3], double rotation[4]) {
-  for (int k = 0; k < 3; ++k) translation[k] = pose.translation()[k];
-  const Eigen::Quaterniond& q = pose.quaternion();
-  rotation[0] = q.w();
-  rotation[1] = q.x();
-  rotation[2] = q.y();
-  rotation[3] = q.z();
-}
-
-template <>
-SE2 poseFromFields<SE2>(const double translation[3], const double rotation[4]) {
-  return SE2(translation[0], translation[1], rotation[0]);
-}
-
-template <>
-SE3 poseFromFields<SE3>(const double translation[3], const double rotation[4]) {
-  return SE3(Eigen::Quaterniond(rotation[0], rotation[1], rotation[2], rotation[3]),
-             Eigen::Vector3d(translation[0], translation[1], translation[2]));
 }
 
 template <class G>

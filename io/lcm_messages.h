@@ -23,6 +23,7 @@
 #include "arbor/edge_t.hpp"
 #include "arbor/edge_v1_t.hpp"
 #include "arbor/estimate_t.hpp"
+#include "arbor/io/stream_measurements.h"
 #include "arbor/journal_mark_t.hpp"
 #include "arbor/prior_t.hpp"
 #include "arbor/status_t.hpp"
@@ -51,23 +52,6 @@ enum class MessageProblem {
 
 const char* toString(MessageProblem problem);
 
-/// A validated edge_t: z measures pose `to` in the frame of pose `from`, with information Ω.
-template <class G>
-struct StreamEdge {
-  using Matrix = Eigen::Matrix<double, G::kDoF, G::kDoF>;
-  std::int64_t utime = 0;
-  std::int64_t sender = 0;
-  std::int64_t seq = 0;
-  Key from = 0;
-  Key to = 0;
-  G z;
-  Matrix omega = Matrix::Identity();
-  EdgeTrust trust = EdgeTrust::kByRule;   ///< edge_t's trust (edge_v1_t: default)
-  KernelKind kernel = KernelKind::kNone;  ///< edge_t's kernel; kNone: KERNEL_DEFAULT
-};
-
-using AnyStreamEdge = std::variant<StreamEdge<SE2>, StreamEdge<SE3>>;
-
 struct EdgeDecoding {
   MessageProblem problem = MessageProblem::kNone;
   std::string detail;  ///< human-readable: what exactly was wrong
@@ -87,39 +71,6 @@ bool isEdgeMessage(const void* data, int size);
 bool edgeTrustFromField(std::int8_t field, EdgeTrust* trust, std::string* detail);
 bool edgeKernelFromField(std::int8_t field, KernelKind* kernel, std::string* detail);
 
-/// A validated prior_t of kind POSE: z measures x_id o (o: the sensor offset) with information
-/// Ω (kDoF×kDoF), as PosePriorFactor.
-template <class G>
-struct StreamPosePrior {
-  using Matrix = Eigen::Matrix<double, G::kDoF, G::kDoF>;
-  std::int64_t utime = 0;
-  std::int64_t sender = 0;
-  std::int64_t seq = 0;
-  Key id = 0;
-  G z;
-  G offset;  ///< identity: no offset
-  Matrix omega = Matrix::Identity();
-};
-
-/// A validated prior_t of kind POSITION: p measures t(x_id) with information Ω (kDim×kDim), as
-/// PositionPriorFactor.
-template <class G>
-struct StreamPositionPrior {
-  using Matrix = Eigen::Matrix<double, G::kDim, G::kDim>;
-  std::int64_t utime = 0;
-  std::int64_t sender = 0;
-  std::int64_t seq = 0;
-  Key id = 0;
-  typename G::Translation p = G::Translation::Zero();
-  Matrix omega = Matrix::Identity();
-};
-
-using AnyStreamPrior = std::variant<StreamPosePrior<SE2>, StreamPosePrior<SE3>,
-                                    StreamPositionPrior<SE2>, StreamPositionPrior<SE3>>;
-
-/// 2 or 3: the dimension of a prior's poses.
-int dimOf(const AnyStreamPrior& prior);
-
 struct PriorDecoding {
   MessageProblem problem = MessageProblem::kNone;
   std::string detail;    ///< human-readable: what exactly was wrong
@@ -135,20 +86,6 @@ template <class G>
 prior_t makePriorMessage(const StreamPosePrior<G>& prior);
 template <class G>
 prior_t makePriorMessage(const StreamPositionPrior<G>& prior);
-
-/// A validated edge_command_t: take back (kDisable) or give back (kEnable) every accepted edge
-/// between poses `from` and `to` (OnlineSmoother::disableEdge / enableEdge).
-struct StreamEdgeCommand {
-  enum class Kind { kDisable, kEnable };
-  std::int64_t utime = 0;
-  std::int64_t sender = 0;
-  std::int64_t seq = 0;
-  Kind kind = Kind::kDisable;
-  Key from = 0;
-  Key to = 0;
-};
-
-const char* toString(StreamEdgeCommand::Kind kind);  ///< "disable" | "enable"
 
 struct EdgeCommandDecoding {
   MessageProblem problem = MessageProblem::kNone;
@@ -191,18 +128,6 @@ std::vector<std::uint8_t> encodeMessage(const M& message) {
   }
   return bytes;
 }
-
-/// Pose value as LCM fields: translation x y z (z = 0 in 2D); rotation angle,0,0,0 (2D) or
-/// quaternion w x y z (3D).
-void poseToFields(const SE2& pose, double translation[3], double rotation[4]);
-void poseToFields(const SE3& pose, double translation[3], double rotation[4]);
-/// Inverse of poseToFields (no validation: use on trusted values).
-template <class G>
-G poseFromFields(const double translation[3], const double rotation[4]);
-template <>
-SE2 poseFromFields<SE2>(const double translation[3], const double rotation[4]);
-template <>
-SE3 poseFromFields<SE3>(const double translation[3], const double rotation[4]);
 
 extern template edge_t makeEdgeMessage(const StreamEdge<SE2>&);
 extern template edge_t makeEdgeMessage(const StreamEdge<SE3>&);

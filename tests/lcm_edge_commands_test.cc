@@ -159,7 +159,8 @@ EdgeSwitchResult feed(OnlineSmoother2& smoother, const Message& m) {
              : smoother.enableEdge(d.command.from, d.command.to);
 }
 
-void expectSameEstimate(const estimate_t& m, const OnlineSmoother2& reference) {
+template <class Message>  // estimate_t or Estimate
+void expectSameEstimate(const Message& m, const OnlineSmoother2& reference) {
   const auto expected = reference.estimates();
   ASSERT_EQ(m.num_poses, static_cast<int>(expected.size()));
   for (int k = 0; k < m.num_poses; ++k) {
@@ -288,7 +289,7 @@ TEST(LcmServe, JournalRestartReplaysEdgeCommandsInTheirOrder) {
   while (!messages[first_command].is_command) ++first_command;
   const size_t half = first_command + 10;  // the disable and some edges after it
   const std::string journal = testing::tempPath("arbor_lcm_commands", "journal.lcmlog");
-  estimate_t before;
+  Estimate before;
   {
     lcm::LCM lcm("memq://");
     ServeOptions options;

@@ -146,7 +146,7 @@ ServeOptions reseedingJournalOptions(const std::string& journal, refine::BatchSo
 
 // Restarts a service from `journal` (no batches of its own: the reseeds come from the journal)
 // and expects the very estimate `before`, with `reseeds` reseeds replayed.
-void expectRestartReproduces(const std::string& journal, const estimate_t& before, int reseeds) {
+void expectRestartReproduces(const std::string& journal, const Estimate& before, int reseeds) {
   lcm::LCM lcm("memq://");
   ServeOptions options;
   options.refine_on_exit = false;
@@ -169,7 +169,7 @@ TEST(LcmServeBatch, JournalRestartAfterReseedsReproducesTheEstimate) {
   const std::vector<int> order = replayOrder(graph);
   const size_t half = order.size() / 2;
   const std::string journal = tempPath("journal.lcmlog");
-  estimate_t before;
+  Estimate before;
   int reseeds = 0;
   {
     lcm::LCM lcm("memq://");
@@ -194,7 +194,7 @@ TEST(LcmServeBatch, JournalRestartAfterBackgroundReseedsReproducesTheEstimate) {
   const PoseGraph2 graph = noisyGraph(300, 0.2, 11);
   const std::vector<int> order = replayOrder(graph);
   const std::string journal = tempPath("background.lcmlog");
-  estimate_t before;
+  Estimate before;
   ServeSummary first;
   {
     lcm::LCM lcm("memq://");

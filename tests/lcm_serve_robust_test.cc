@@ -281,7 +281,7 @@ TEST(LcmServeRobust, OldEdgeV1JournalReplays) {
   const PoseGraph2 graph = testing::manhattanGraph(80, 4, -1, 7);
   const std::vector<int> order = replayOrder(graph);
   const std::string journal = tempPath("v1.lcmlog");
-  estimate_t first;
+  Estimate first;
   {
     lcm::LCM lcm("memq://");
     ServeOptions options;
@@ -401,7 +401,7 @@ TEST(RobustBatch, ServeReseedJournalRestartReproduces) {
   std::vector<int> order = replayOrder(graph);
   order.resize(1200);
   const std::string journal = tempPath("reseed.lcmlog");
-  estimate_t before;
+  Estimate before;
   std::vector<ClosureReport> closures;
   int reseeds = 0;
   {

@@ -43,7 +43,8 @@ using testing::streamEdge;
 
 PoseGraph2 smallGraph() { return testing::manhattanGraph(150, 4, -1, 3); }  // default noise
 
-void expectSamePoses(const estimate_t& m, const std::map<Key, SE2>& expected, double tol) {
+template <class Message>  // estimate_t or Estimate
+void expectSamePoses(const Message& m, const std::map<Key, SE2>& expected, double tol) {
   ASSERT_EQ(m.num_poses, static_cast<int>(expected.size()));
   for (int k = 0; k < m.num_poses; ++k) {
     const SE2& e = expected.at(m.ids[k]);
@@ -411,7 +412,7 @@ TEST(LcmServe, JournalRestartReproducesTheEstimateExactly) {
   const std::vector<int> order = replayOrder(graph);
   const size_t half = order.size() / 2;
   const std::string journal = tempJournal("journal.lcmlog");
-  estimate_t before;
+  Estimate before;
   {
     lcm::LCM lcm("memq://");
     ServeOptions options;
@@ -637,7 +638,7 @@ TEST(LcmServe, JournalRestartReplaysPriorsInTheirOrderAmongTheEdges) {
   for (size_t k = 0; k < half; ++k) ++(messages[k].is_prior ? half_priors : half_edges);
   ASSERT_GT(half_priors, 3);
   const std::string journal = tempJournal("priors.lcmlog");
-  estimate_t before;
+  Estimate before;
   {
     lcm::LCM lcm("memq://");
     ServeOptions options;

@@ -23,7 +23,7 @@ struct Published {
   }
 };
 
-void apply(const estimate_t& m, std::map<std::int64_t, Published>* state) {
+void apply(const Estimate& m, std::map<std::int64_t, Published>* state) {
   for (int k = 0; k < m.num_poses; ++k) (*state)[m.ids[k]] = {m.translation[k], m.rotation[k]};
 }
 
@@ -53,13 +53,13 @@ TEST(ServeEngine, ChangedMessagesAddUpToTheFullEstimate) {
     send(k - 1, k);
     if (k > 10 && u(rng) < 0.2) send(std::uniform_int_distribution<int>(0, k - 5)(rng), k);
     engine->update();
-    const estimate_t changed = engine->estimate(false);
+    const Estimate changed = engine->estimate(false);
     EXPECT_FALSE(changed.full);
     EXPECT_EQ(changed.total_poses, k + 1);
     changed_total += changed.num_poses;
     apply(changed, &state);
     if (k % 25 == 0) {
-      const estimate_t full = engine->estimate(true);
+      const Estimate full = engine->estimate(true);
       ASSERT_EQ(full.num_poses, k + 1);
       std::map<std::int64_t, Published> expected;
       apply(full, &expected);

@@ -311,7 +311,7 @@ void expectFullJournalKeepsWriteAhead(const std::string& journal, std::int64_t m
   options.refine_on_exit = false;
   std::ostringstream log;
   options.log = &log;
-  estimate_t live;
+  Estimate live;
   ServeSummary summary;
   status_t last;
   {

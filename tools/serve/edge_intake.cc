@@ -3,18 +3,16 @@
 #include <algorithm>
 #include <stdexcept>
 
-namespace arbor::serve {
-namespace {
+#include "arbor/io/lcm_messages.h"
 
-// FNV-1a, 64 bit: identifies the exact bytes of a message.
-std::uint64_t fingerprint(const void* data, int size) {
+namespace arbor::serve {
+
+std::uint64_t EdgeIntake::fingerprint(const void* data, int size) {
   std::uint64_t h = 1469598103934665603ULL;
   const auto* p = static_cast<const unsigned char*>(data);
   for (int k = 0; k < size; ++k) h = (h ^ p[k]) * 1099511628211ULL;
   return h ^ static_cast<std::uint64_t>(size);
 }
-
-}  // namespace
 
 EdgeIntake::EdgeIntake(int dim, std::int64_t window, std::size_t max_senders)
     : dim_(dim), window_(window), max_senders_(max_senders) {
@@ -95,54 +93,98 @@ void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason)
 }
 
 IntakeResult EdgeIntake::admit(const void* data, int size) {
+  EdgeDecoding d = decodeEdge(data, size);
+  if (!d.ok()) {
+    ++edges_.counts.received;
+    return reject(edges_, IntakeResult(), toString(d.problem), d.detail);
+  }
+  return admitEdge(std::move(d.edge), fingerprint(data, size));
+}
+
+IntakeResult EdgeIntake::admitPrior(const void* data, int size) {
+  PriorDecoding d = decodePrior(data, size);
+  if (!d.ok()) {
+    ++priors_.counts.received;
+    IntakeResult r;
+    r.is_prior = true;
+    return reject(priors_, std::move(r), toString(d.problem), d.detail);
+  }
+  return admitPrior(std::move(d.prior), fingerprint(data, size));
+}
+
+IntakeResult EdgeIntake::admitCommand(const void* data, int size) {
+  EdgeCommandDecoding d = decodeEdgeCommand(data, size);
+  if (!d.ok()) {
+    ++commands_.counts.received;
+    IntakeResult r;
+    r.is_command = true;
+    return reject(commands_, std::move(r), toString(d.problem), d.detail);
+  }
+  return admitCommand(d.command, fingerprint(data, size));
+}
+
+IntakeResult EdgeIntake::admit(const Arrival& a) {
+  if (!a.problem.empty()) {
+    Stream& s = stream(a.kind);
+    ++s.counts.received;
+    IntakeResult r;
+    r.is_prior = a.kind == Kind::kPrior;
+    r.is_command = a.kind == Kind::kCommand;
+    return reject(s, std::move(r), a.problem, a.detail);
+  }
+  switch (a.kind) {
+    case Kind::kPrior:
+      return admitPrior(a.prior, a.fingerprint);
+    case Kind::kCommand:
+      return admitCommand(a.command, a.fingerprint);
+    case Kind::kEdge:
+      break;
+  }
+  return admitEdge(a.edge, a.fingerprint);
+}
+
+IntakeResult EdgeIntake::admitEdge(AnyStreamEdge edge, std::uint64_t fp) {
   ++edges_.counts.received;
   IntakeResult r;
-  EdgeDecoding d = decodeEdge(data, size);
-  if (!d.ok()) return reject(edges_, std::move(r), toString(d.problem), d.detail);
   std::visit(
       [&](const auto& e) {
         r.sender = e.sender;
         r.seq = e.seq;
       },
-      d.edge);
-  const int dim = d.edge.index() == 0 ? 2 : 3;
-  r = admitSeq(edges_, std::move(r), dim, data, size);
-  if (r.verdict == Intake::kAccepted) r.edge = std::move(d.edge);
+      edge);
+  const int dim = edge.index() == 0 ? 2 : 3;
+  r = admitSeq(edges_, std::move(r), dim, fp);
+  if (r.verdict == Intake::kAccepted) r.edge = std::move(edge);
   return r;
 }
 
-IntakeResult EdgeIntake::admitPrior(const void* data, int size) {
+IntakeResult EdgeIntake::admitPrior(AnyStreamPrior prior, std::uint64_t fp) {
   ++priors_.counts.received;
   IntakeResult r;
   r.is_prior = true;
-  PriorDecoding d = decodePrior(data, size);
-  if (!d.ok()) return reject(priors_, std::move(r), toString(d.problem), d.detail);
   std::visit(
       [&](const auto& p) {
         r.sender = p.sender;
         r.seq = p.seq;
       },
-      d.prior);
-  r = admitSeq(priors_, std::move(r), dimOf(d.prior), data, size);
-  if (r.verdict == Intake::kAccepted) r.prior = std::move(d.prior);
+      prior);
+  r = admitSeq(priors_, std::move(r), dimOf(prior), fp);
+  if (r.verdict == Intake::kAccepted) r.prior = std::move(prior);
   return r;
 }
 
-IntakeResult EdgeIntake::admitCommand(const void* data, int size) {
+IntakeResult EdgeIntake::admitCommand(const StreamEdgeCommand& command, std::uint64_t fp) {
   ++commands_.counts.received;
   IntakeResult r;
   r.is_command = true;
-  EdgeCommandDecoding d = decodeEdgeCommand(data, size);
-  if (!d.ok()) return reject(commands_, std::move(r), toString(d.problem), d.detail);
-  r.sender = d.command.sender;
-  r.seq = d.command.seq;
-  r = admitSeq(commands_, std::move(r), dim_, data, size);  // a command has no dimension
-  if (r.verdict == Intake::kAccepted) r.command = d.command;
+  r.sender = command.sender;
+  r.seq = command.seq;
+  r = admitSeq(commands_, std::move(r), dim_, fp);  // a command has no dimension
+  if (r.verdict == Intake::kAccepted) r.command = command;
   return r;
 }
 
-IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, const void* data,
-                                  int size) {
+IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents) {
   const char* what = r.is_command ? "edge command" : r.is_prior ? "prior" : "edge";
   if (dim_ != 0 && dim != dim_) {
     return reject(
@@ -160,7 +202,7 @@ IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, const
     known = stream.senders.emplace(r.sender, Sender()).first;
   }
   Sender& s = known->second;
-  const std::uint64_t fp = std::max<std::uint64_t>(fingerprint(data, size), 1);  // 0: empty slot
+  const std::uint64_t fp = std::max<std::uint64_t>(contents, 1);  // 0: empty slot
   if (r.seq <= s.highest - window_) {
     return reject(stream, std::move(r), "stale",
                   "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +

@@ -22,7 +22,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "arbor/io/lcm_messages.h"
+#include "arbor/io/stream_measurements.h"
+#include "arbor/tools/serve/stream_types.h"
 
 namespace arbor::serve {
 
@@ -65,16 +66,26 @@ class EdgeIntake {
   explicit EdgeIntake(int dim = 0, std::int64_t window = kDefaultWindow,
                       std::size_t max_senders = kDefaultMaxSenders);
 
-  /// An edge_t's bytes.
+  /// An edge_t's bytes (decodeEdge, then admitEdge with the bytes' fingerprint).
   IntakeResult admit(const void* data, int size);
   /// A prior_t's bytes.
   IntakeResult admitPrior(const void* data, int size);
   /// An edge_command_t's bytes.
   IntakeResult admitCommand(const void* data, int size);
+  /// A validated edge, whatever carried it: the seq accounting alone. `fingerprint` identifies
+  /// the message's exact contents (duplicate against "seq reused"; fingerprint() of its bytes).
+  IntakeResult admitEdge(AnyStreamEdge edge, std::uint64_t fingerprint);
+  IntakeResult admitPrior(AnyStreamPrior prior, std::uint64_t fingerprint);
+  IntakeResult admitCommand(const StreamEdgeCommand& command, std::uint64_t fingerprint);
+  /// An arrival from a transport: refused under its `problem` when it has one, else admitted
+  /// by its kind.
+  IntakeResult admit(const Arrival& arrival);
+  /// FNV-1a (64 bit) of a message's bytes: what the byte entry points use as its fingerprint.
+  static std::uint64_t fingerprint(const void* data, int size);
   /// Takes back an accepted edge, prior or command that could not be kept (the journal write
   /// failed): counted as rejected under `reason`, and its (sender, seq) may be sent again.
   void revoke(const IntakeResult& accepted, const std::string& reason);
-  enum class Kind { kEdge, kPrior, kCommand };
+  using Kind = MeasurementKind;
   /// A message of `kind` refused before it was decoded (e.g. "oversize"): received and
   /// rejected under `reason`.
   void refuse(Kind kind, const std::string& reason);
@@ -105,7 +116,7 @@ class EdgeIntake {
                       const std::string& detail);
   /// The seq accounting of a decoded message of `dim` (r.sender, r.seq set): accepted,
   /// duplicate or rejected ("dim", "stale", "seq reused").
-  IntakeResult admitSeq(Stream& stream, IntakeResult r, int dim, const void* data, int size);
+  IntakeResult admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents);
   std::uint64_t* slot(Sender& s, std::int64_t seq, bool grow) const;
   void advance(Sender& s, std::int64_t seq) const;
 

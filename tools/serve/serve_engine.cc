@@ -63,8 +63,8 @@ class EngineImpl final : public Engine {
     return smoother_.gnc() ? smoother_.gnc()->threshold() : 0.0;
   }
 
-  estimate_t estimate(bool full) override {
-    estimate_t m = full ? message(smoother_.smoother().estimate(), true) : changedMessage();
+  Estimate estimate(bool full) override {
+    Estimate m = full ? message(smoother_.smoother().estimate(), true) : changedMessage();
     m.F = full ? objective() : std::numeric_limits<double>::quiet_NaN();
     return m;
   }
@@ -81,7 +81,7 @@ class EngineImpl final : public Engine {
   bool batchInFlight() const override { return refiner_.inFlight(); }
   int batchesSkipped() const override { return refiner_.skipped(); }
 
-  std::optional<refine::BatchRun> collectBatch(bool wait, estimate_t* seed) override {
+  std::optional<refine::BatchRun> collectBatch(bool wait, Estimate* seed) override {
     seed->num_poses = 0;
     std::optional<refine::BatchOutcome<G>> done = refiner_.collect(wait);
     if (!done) return std::nullopt;
@@ -95,7 +95,7 @@ class EngineImpl final : public Engine {
     return done->run;
   }
 
-  ReseedResult reseed(const estimate_t& seed) override {
+  ReseedResult reseed(const Estimate& seed) override {
     if (seed.dim != G::kDim) {
       throw std::invalid_argument("reseed: a " + std::to_string(seed.dim) + "D estimate for a " +
                                   std::to_string(G::kDim) + "D stream");
@@ -117,9 +117,9 @@ class EngineImpl final : public Engine {
  private:
   /// poses (dense order) as a message: all (`full`) or those whose fields changed since the
   /// last message; remembers what it put in.
-  estimate_t message(const std::vector<G>& poses, bool full) {
+  Estimate message(const std::vector<G>& poses, bool full) {
     const std::vector<Key>& ids = smoother_.ids();
-    estimate_t m;
+    Estimate m;
     m.dim = G::kDim;
     m.full = full;
     m.total_poses = static_cast<int32_t>(poses.size());
@@ -150,7 +150,7 @@ class EngineImpl final : public Engine {
   /// The "changed" message: the poses new since the last message (fixed ones included) and, of
   /// those updates may have changed since, the ones whose fields differ from what was published
   /// (dense order). O(poses listed), not O(all poses).
-  estimate_t changedMessage() {
+  Estimate changedMessage() {
     const IncrementalSmoother<G>& s = smoother_.smoother();
     const std::vector<Key>& ids = smoother_.ids();
     const int n = s.numPoses();
@@ -158,7 +158,7 @@ class EngineImpl final : public Engine {
     for (int k = first_new; k < n; ++k) noteChanged(k);
     published_.resize(static_cast<size_t>(n));
     std::sort(changed_.begin(), changed_.end());
-    estimate_t m;
+    Estimate m;
     m.dim = G::kDim;
     m.full = false;
     m.total_poses = n;

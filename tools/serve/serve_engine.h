@@ -1,7 +1,7 @@
 // The smoother behind `arbor serve`: an OnlineSmoother of the stream's dimension, with the
-// estimate turned into estimate_t messages (every pose, or only those changed since the last
-// message) and written as g2o, and a refine::BatchRefiner beside it (batch runs on snapshots in
-// the background; reseeding goes through estimate_t values so that the journal can hold them).
+// estimate turned into Estimate values (every pose, or only those changed since the last one)
+// and written as g2o, and a refine::BatchRefiner beside it (batch runs on snapshots in the
+// background; reseeding goes through Estimate values so that the journal can hold them).
 // Not thread-safe: the smoother thread owns it.
 #pragma once
 
@@ -12,8 +12,9 @@
 #include <vector>
 
 #include "arbor/bayestree/online_smoother.h"
-#include "arbor/io/lcm_messages.h"
+#include "arbor/io/stream_measurements.h"
 #include "arbor/tools/refine/batch_refiner.h"
+#include "arbor/tools/serve/stream_types.h"
 
 namespace arbor::serve {
 
@@ -41,7 +42,7 @@ class Engine {
   virtual double inlierThreshold() const = 0;
   /// The estimate: every pose (`full`) or the poses whose value changed since the last call.
   /// F is filled (the objective) only for a full estimate, else NaN.
-  virtual estimate_t estimate(bool full) = 0;
+  virtual Estimate estimate(bool full) = 0;
   /// The marginal covariance of one pose (k×k) or the joint covariance of two (2k×2k) after the
   /// last update (OnlineSmoother::marginalCovariance / jointMarginalCovariance). Throws
   /// std::out_of_range for an unknown id, std::logic_error for a pose not through an update
@@ -61,14 +62,14 @@ class Engine {
   virtual int batchesSkipped() const = 0;
   /// The batch in flight once finished (`wait`: waits for it); nullopt if none. With reseeding
   /// and a winning batch estimate, *seed gets the complete new linearisation point (every pose,
-  /// a full estimate_t; else num_poses = 0) for the caller to journal and apply with reseed().
+  /// a full Estimate; else num_poses = 0) for the caller to journal and apply with reseed().
   /// Rethrows a solver's exception.
-  virtual std::optional<refine::BatchRun> collectBatch(bool wait, estimate_t* seed) = 0;
+  virtual std::optional<refine::BatchRun> collectBatch(bool wait, Estimate* seed) = 0;
   /// Rebuilds the smoother with the poses of `seed` (read back from its fields, so a journaled
   /// copy reproduces it bit for bit) as the linearisation point (OnlineSmoother::reseed).
   /// Throws std::invalid_argument on another dim, ragged arrays or an unknown id.
   /// The rebuild is kept only if it lowers F over everything the smoother holds.
-  virtual ReseedResult reseed(const estimate_t& seed) = 0;
+  virtual ReseedResult reseed(const Estimate& seed) = 0;
 };
 
 /// An engine for 2D (SE2) or 3D (SE3) poses, with online robust smoothing when `robust` is

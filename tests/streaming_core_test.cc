@@ -1,0 +1,261 @@
+// The streaming core without a transport (tools/serve/streaming_core.h): an in-memory adapter
+// hands measurements straight to StreamingCore::receive() and keeps what the core publishes, an
+// in-memory journal implements JournalSink. Driven so, the core gives the LCM service's estimate
+// bit for bit on the same stream (lockstep over memq://), a restart from the in-memory journal
+// reproduces the estimate bit for bit with the seq state rebuilt, and the LCM service's event-log
+// journal replays in the memory-driven core to the LCM run's estimate: one core, two adapters.
+#include <algorithm>
+#include <condition_variable>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "arbor/tests/lcm_test_support.h"
+#include "arbor/tools/serve/journal_sink.h"
+#include "arbor/tools/serve/lcm_event_journal.h"
+#include "arbor/tools/serve/serve_service.h"
+#include "arbor/tools/serve/streaming_core.h"
+
+namespace arbor::serve {
+namespace {
+
+using testing::Collector;
+using testing::edgeBytes;
+using testing::replayOrder;
+using testing::streamEdge;
+
+constexpr double kGuardS = 60;  // a failure guard only
+
+/// The outbound side of a transport kept in memory: every estimate and status the core
+/// publishes, and a wait for the estimate covering an edge's seq.
+class MemoryPublisher final : public Publisher {
+ public:
+  void publishEstimate(const Estimate& e) override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (e.full) full_.push_back(e);
+    last_seq_ = std::max(last_seq_, e.last_seq);
+    ++estimates_;
+    cv_.notify_all();
+  }
+  void publishStatus(const CoreStatus& s) override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    status_ = s;
+    ++statuses_;
+  }
+  void publishCovariance(const CovarianceAnswer&) override {}
+  bool waitCovered(std::int64_t seq) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(kGuardS),
+                        [&] { return last_seq_ >= seq; });
+  }
+  std::vector<Estimate> full() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return full_;
+  }
+  int estimates() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return estimates_;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<Estimate> full_;
+  std::int64_t last_seq_ = 0;
+  int estimates_ = 0;
+  int statuses_ = 0;
+  CoreStatus status_;
+};
+
+/// A journal held in memory: the entries as the core wrote them, shared with the test so that
+/// a second core can be started from them.
+class MemoryJournal final : public JournalSink {
+ public:
+  explicit MemoryJournal(std::shared_ptr<std::vector<JournalEntry>> entries)
+      : entries_(std::move(entries)) {}
+  void replay(const std::function<void(JournalEntry&&)>& entry,
+              const std::function<void(const std::string&)>&) override {
+    for (JournalEntry e : *entries_) entry(std::move(e));  // copies: the journal keeps them
+  }
+  void appendMeasurement(const Arrival& arrival) override {
+    JournalEntry e;
+    e.type = JournalEntry::Type::kMeasurement;
+    e.arrival = arrival;
+    e.arrival.wire = nullptr;
+    e.arrival.wire_size = 0;
+    entries_->push_back(std::move(e));
+  }
+  void appendMark(JournalEntry::Type type, int measurements, std::int64_t) override {
+    JournalEntry e;
+    e.type = type;
+    e.measurements = measurements;
+    entries_->push_back(std::move(e));
+  }
+  void appendReseed(const Estimate& seed) override {
+    JournalEntry e;
+    e.type = JournalEntry::Type::kReseed;
+    e.seed = seed;
+    entries_->push_back(std::move(e));
+  }
+  void sync() override {}
+  void syncIfDue() override {}
+  std::int64_t bytes() const override { return static_cast<std::int64_t>(entries_->size()); }
+  std::string name() const override { return "memory"; }
+
+ private:
+  std::shared_ptr<std::vector<JournalEntry>> entries_;
+};
+
+/// An edge as the in-memory transport hands it over: typed, no bytes, z carried as the pose
+/// fields x y θ (as every transport carries a pose: the LCM path's z is SE2(x, y, θ) too); its
+/// fingerprint is the FNV-1a of its fields (what identifies the message for this transport).
+Arrival memoryArrival(StreamEdge<SE2> e) {
+  double t[3], r[4];
+  poseToFields(e.z, t, r);
+  e.z = poseFromFields<SE2>(t, r);
+  Arrival a;
+  a.kind = MeasurementKind::kEdge;
+  a.edge = e;
+  std::vector<double> fields = {static_cast<double>(e.sender),
+                                static_cast<double>(e.seq),
+                                static_cast<double>(e.from),
+                                static_cast<double>(e.to),
+                                e.z.x(),
+                                e.z.y(),
+                                e.z.angle()};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) fields.push_back(e.omega(r, c));
+  a.fingerprint = EdgeIntake::fingerprint(fields.data(), static_cast<int>(fields.size() * 8));
+  return a;
+}
+
+PoseGraph2 graph() { return testing::manhattanGraph(120, 4, -1, 11); }
+
+void expectBitForBit(const Estimate& a, const Estimate& b) {
+  ASSERT_EQ(a.num_poses, b.num_poses);
+  ASSERT_GT(a.num_poses, 0);
+  EXPECT_EQ(a.ids, b.ids);
+  EXPECT_EQ(a.translation, b.translation);
+  EXPECT_EQ(a.rotation, b.rotation);
+}
+
+/// edges [first, last) of `order` in lockstep through the memory adapter (seq = position + 1).
+void feedMemory(StreamingCore& core, MemoryPublisher& out, const PoseGraph2& g,
+                const std::vector<int>& order, size_t first, size_t last) {
+  for (size_t k = first; k < last; ++k) {
+    const auto seq = static_cast<std::int64_t>(k) + 1;
+    core.receive(memoryArrival(streamEdge(g, order[k], seq)));
+    ASSERT_TRUE(out.waitCovered(seq)) << "edge " << k;
+  }
+}
+
+/// The LCM service on the same edges in lockstep over memq://; its final estimate.
+Estimate lcmRun(const PoseGraph2& g, const std::vector<int>& order, const std::string& journal) {
+  lcm::LCM lcm("memq://");
+  EXPECT_TRUE(lcm.good());
+  ServeOptions options;
+  options.journal_path = journal;
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  for (size_t k = 0; k < order.size(); ++k) {
+    const auto seq = static_cast<std::int64_t>(k) + 1;
+    const auto bytes = edgeBytes(g, order[k], seq);
+    lcm.publish(service.channels().edges, bytes.data(), static_cast<unsigned>(bytes.size()));
+    EXPECT_TRUE(collector.waitCovered(seq, kGuardS)) << "edge " << k;
+  }
+  service.stop();
+  EXPECT_EQ(service.summary().applied, static_cast<std::int64_t>(order.size()));
+  return service.summary().final_estimate;
+}
+
+TEST(StreamingCore, InMemoryAdapterGivesTheLcmServicesEstimateBitForBit) {
+  const PoseGraph2 g = graph();
+  const std::vector<int> order = replayOrder(g);
+  const Estimate over_lcm = lcmRun(g, order, "");
+
+  MemoryPublisher out;
+  auto entries = std::make_shared<std::vector<JournalEntry>>();
+  StreamingCore core(out, std::make_unique<MemoryJournal>(entries), StreamingOptions{});
+  core.start();
+  feedMemory(core, out, g, order, 0, order.size());
+  core.stop();
+  const ServeSummary& s = core.summary();
+  EXPECT_EQ(s.applied, static_cast<std::int64_t>(order.size()));
+  EXPECT_EQ(s.updates, static_cast<std::int64_t>(order.size()));  // one update per edge
+  EXPECT_EQ(s.intake.gaps, 0);
+  EXPECT_EQ(out.estimates(), static_cast<int>(order.size()) + 1);  // + the final one
+  expectBitForBit(s.final_estimate, over_lcm);
+  EXPECT_EQ(s.F_final, over_lcm.F);
+  // Write-ahead through the seam: every edge, then a mark per update and the exit refinement's.
+  int measurements = 0, marks = 0, refines = 0;
+  for (const JournalEntry& e : *entries) {
+    measurements += e.type == JournalEntry::Type::kMeasurement;
+    marks += e.type == JournalEntry::Type::kUpdateMark;
+    refines += e.type == JournalEntry::Type::kRefineMark;
+  }
+  EXPECT_EQ(measurements, static_cast<int>(order.size()));
+  EXPECT_EQ(marks, static_cast<int>(order.size()));
+  EXPECT_EQ(refines, 1);
+}
+
+TEST(StreamingCore, RestartFromTheInMemoryJournalReproducesTheEstimateBitForBit) {
+  const PoseGraph2 g = graph();
+  const std::vector<int> order = replayOrder(g);
+  const size_t half = order.size() / 2;
+  auto entries = std::make_shared<std::vector<JournalEntry>>();
+  StreamingOptions options;
+  options.refine_on_exit = false;  // the live estimate at the kill point
+  Estimate live;
+  {
+    MemoryPublisher out;
+    StreamingCore core(out, std::make_unique<MemoryJournal>(entries), options);
+    core.start();
+    feedMemory(core, out, g, order, 0, half);
+    core.stop();
+    live = core.summary().final_estimate;
+  }
+  MemoryPublisher out;
+  StreamingCore core(out, std::make_unique<MemoryJournal>(entries), options);
+  core.start();  // replays: the first full estimate published is the journal's
+  ASSERT_FALSE(out.full().empty());
+  expectBitForBit(out.full().front(), live);
+  // The seq state came back with it: a repeat of seq 1 is a duplicate, the rest no gap.
+  core.receive(memoryArrival(streamEdge(g, order[0], 1)));
+  feedMemory(core, out, g, order, half, order.size());
+  core.stop();
+  const ServeSummary& s = core.summary();
+  EXPECT_EQ(s.journal_edges, static_cast<std::int64_t>(half));
+  EXPECT_EQ(s.applied, static_cast<std::int64_t>(order.size()));
+  EXPECT_EQ(s.intake.duplicates, 1);
+  EXPECT_EQ(s.intake.gaps, 0);
+}
+
+TEST(StreamingCore, TheLcmEventJournalReplaysInTheMemoryDrivenCore) {
+  const PoseGraph2 g = graph();
+  const std::vector<int> order = replayOrder(g);
+  const std::string path = testing::tempPath("arbor_streaming_core", "journal.lcmlog");
+  const Estimate over_lcm = lcmRun(g, order, path);
+  MemoryPublisher out;
+  StreamingOptions options;
+  options.refine_on_exit = false;
+  StreamingCore core(
+      out,
+      std::make_unique<LcmEventJournal>(path, Channels::withPrefix(""), EventLogWriterOptions{}),
+      options);
+  core.start();
+  ASSERT_FALSE(out.full().empty());
+  expectBitForBit(out.full().front(), over_lcm);  // its updates and its exit refinement
+  core.stop();
+  EXPECT_EQ(core.summary().journal_edges, static_cast<std::int64_t>(order.size()));
+  std::remove(path.c_str());
+}
+
+}  // namespace
+}  // namespace arbor::serve

@@ -1,0 +1,59 @@
+// The journal seam of the streaming core: where every accepted measurement is written before it
+// is applied, with the marks of the update grouping and every reseed's values, and what a restart
+// reads back to reproduce the estimate bit for bit. The LCM event log (tools/serve/lcm_journal.h)
+// is one implementation; any other keeps the same contract:
+//  - append*() either keeps the whole entry or nothing of it, and throws std::runtime_error when
+//    it keeps nothing (a full disk): the core then refuses the measurement, or holds the update;
+//  - marks may use room that measurements may not (so what was journaled can still be applied);
+//  - replay() hands back every entry in the order written, then appends after the last whole one.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "arbor/tools/serve/stream_types.h"
+
+namespace arbor::serve {
+
+/// One entry read back from a journal, in file order.
+struct JournalEntry {
+  enum class Type {
+    kMeasurement,  ///< an accepted edge, prior or edge command (`arrival`)
+    kUpdateMark,   ///< the next `measurements` not yet covered by a mark went into one update
+    kRefineMark,   ///< a refinement (relinearise all, iterate) ran here
+    kReseed,       ///< the complete new linearisation point `seed` was applied here
+    kUnreadable,   ///< an entry that could not be used (`problem` says why): skipped
+  };
+  Type type = Type::kUnreadable;
+  Arrival arrival;       ///< kMeasurement (`wire` null: the entry's lifetime ends with it)
+  int measurements = 0;  ///< kUpdateMark
+  Estimate seed;         ///< kReseed
+  std::string problem;   ///< kUnreadable
+};
+
+class JournalSink {
+ public:
+  virtual ~JournalSink() = default;
+  /// Reads every entry written so far into `entry`, in order, reporting damage and torn tails
+  /// through `note`, then opens the journal to append after the last whole entry. Called once,
+  /// before any append. Throws std::runtime_error if the journal cannot be used.
+  virtual void replay(const std::function<void(JournalEntry&&)>& entry,
+                      const std::function<void(const std::string&)>& note) = 0;
+  /// An accepted measurement (its bytes as received when `arrival.wire` is set).
+  virtual void appendMeasurement(const Arrival& arrival) = 0;
+  /// An update of `measurements` entries (kUpdateMark) or a refinement (kRefineMark, 0), after
+  /// `update` updates; may use the room kept for marks.
+  virtual void appendMark(JournalEntry::Type type, int measurements, std::int64_t update) = 0;
+  /// A reseed's complete linearisation point, before it is applied.
+  virtual void appendReseed(const Estimate& seed) = 0;
+  /// fsync now / when the fsync interval has passed (no-ops where that means nothing).
+  virtual void sync() = 0;
+  virtual void syncIfDue() = 0;
+  /// The journal's size in bytes (status).
+  virtual std::int64_t bytes() const = 0;
+  /// Its name in log lines (the file's path).
+  virtual std::string name() const = 0;
+};
+
+}  // namespace arbor::serve

@@ -1,0 +1,25 @@
+// The LCM channels of `arbor serve` (docs/lcm.md's table), each after the --channel-prefix.
+#pragma once
+
+#include <string>
+
+namespace arbor::serve {
+
+struct Channels {
+  std::string edges, estimate, status, command, priors, edge_commands;
+  std::string link_probe;  ///< the receive link's own probe (LinkWatch)
+  std::string covariance;  ///< answers to command COVARIANCE
+  /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS,
+  /// ARBOR_EDGE_COMMANDS, ARBOR_LINK_PROBE, ARBOR_COVARIANCE, each after `prefix`.
+  static Channels withPrefix(const std::string& prefix) {
+    return {prefix + "ARBOR_EDGES",      prefix + "ARBOR_ESTIMATE",  prefix + "ARBOR_STATUS",
+            prefix + "ARBOR_COMMAND",    prefix + "ARBOR_PRIORS",    prefix + "ARBOR_EDGE_COMMANDS",
+            prefix + "ARBOR_LINK_PROBE", prefix + "ARBOR_COVARIANCE"};
+  }
+};
+
+/// The journal's own channels (inside the event log only).
+inline constexpr const char* kJournalMarkChannel = "ARBOR_JOURNAL_MARK";
+inline constexpr const char* kJournalReseedChannel = "ARBOR_JOURNAL_RESEED";
+
+}  // namespace arbor::serve

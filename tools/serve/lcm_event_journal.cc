@@ -1,0 +1,131 @@
+#include "arbor/tools/serve/lcm_event_journal.h"
+
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include "arbor/io/lcm_messages.h"
+#include "arbor/tools/serve/lcm_mapping.h"
+
+namespace arbor::serve {
+namespace {
+
+std::int64_t leadingHash(const std::vector<std::uint8_t>& data) {
+  std::int64_t h = 0;
+  for (size_t k = 0; k < 8 && k < data.size(); ++k) h = (h << 8) | data[k];
+  return data.size() < 8 ? 0 : h;
+}
+
+/// A measurement's bytes when the transport kept none: its LCM message.
+std::vector<std::uint8_t> encodeMeasurement(const Arrival& a) {
+  switch (a.kind) {
+    case MeasurementKind::kPrior:
+      return std::visit([](const auto& p) { return encodeMessage(makePriorMessage(p)); }, a.prior);
+    case MeasurementKind::kCommand:
+      return encodeMessage(makeEdgeCommandMessage(a.command));
+    case MeasurementKind::kEdge:
+      break;
+  }
+  return std::visit([](const auto& e) { return encodeMessage(makeEdgeMessage(e)); }, a.edge);
+}
+
+}  // namespace
+
+LcmEventJournal::LcmEventJournal(std::string path, Channels channels, EventLogWriterOptions options)
+    : path_(std::move(path)), channels_(std::move(channels)), options_(options) {}
+
+EventLogWriter& LcmEventJournal::writer() {
+  if (!writer_) throw std::logic_error("journal " + path_ + ": appended to before replay()");
+  return *writer_;
+}
+
+void LcmEventJournal::replay(const std::function<void(JournalEntry&&)>& entry,
+                             const std::function<void(const std::string&)>& note) {
+  const EventLogContents log = readEventLog(path_);
+  for (const auto& [first, end] : log.damaged) {
+    note("journal " + path_ + ": bytes " + std::to_string(first) + " to " + std::to_string(end) +
+         " are not events (damaged); skipped, the events after them are replayed and the bytes "
+         "stay in the file");
+  }
+  if (log.valid_bytes < log.file_bytes) {
+    note("journal " + path_ + ": dropping " + std::to_string(log.file_bytes - log.valid_bytes) +
+         " bytes of an incomplete event at the end");
+  }
+  const std::int64_t prior_hash = prior_t::getHash();
+  const std::int64_t command_hash = edge_command_t::getHash();
+  const std::int64_t mark_hash = journal_mark_t::getHash();
+  const std::int64_t reseed_hash = estimate_t::getHash();
+  for (const LogEvent& event : log.events) {
+    const std::int64_t hash = leadingHash(event.data);
+    const int size = static_cast<int>(event.data.size());
+    JournalEntry e;
+    if (isEdgeMessage(event.data.data(), size) || hash == prior_hash || hash == command_hash) {
+      const MeasurementKind kind = hash == prior_hash     ? MeasurementKind::kPrior
+                                   : hash == command_hash ? MeasurementKind::kCommand
+                                                          : MeasurementKind::kEdge;
+      e.type = JournalEntry::Type::kMeasurement;
+      e.arrival = arrivalFromBytes(kind, event.data.data(), size);
+      e.arrival.wire = nullptr;  // the event's bytes do not outlive this loop
+      e.arrival.wire_size = 0;
+    } else if (hash == mark_hash) {
+      journal_mark_t m;
+      if (decodeMessage(event.data.data(), size, &m) != MessageProblem::kNone) continue;
+      if (m.kind == journal_mark_t::UPDATE) {
+        e.type = JournalEntry::Type::kUpdateMark;
+        e.measurements = m.edges;
+      } else if (m.kind == journal_mark_t::REFINE) {
+        e.type = JournalEntry::Type::kRefineMark;
+      } else {
+        continue;
+      }
+    } else if (hash == reseed_hash && event.channel == kJournalReseedChannel) {
+      estimate_t seed;
+      if (decodeMessage(event.data.data(), size, &seed) != MessageProblem::kNone) {
+        e.type = JournalEntry::Type::kUnreadable;
+        e.problem = "a reseed record could not be used";
+      } else {
+        e.type = JournalEntry::Type::kReseed;
+        e.seed = fromMessage(seed);
+      }
+    } else {
+      continue;  // not ours (e.g. lcm-logger's other channels)
+    }
+    entry(std::move(e));
+  }
+  writer_ = std::make_unique<EventLogWriter>(path_, log.valid_bytes, options_);
+}
+
+void LcmEventJournal::appendMeasurement(const Arrival& a) {
+  const std::string& channel = a.kind == MeasurementKind::kPrior     ? channels_.priors
+                               : a.kind == MeasurementKind::kCommand ? channels_.edge_commands
+                                                                     : channels_.edges;
+  if (a.wire != nullptr) {
+    writer().append(channel, nowMicros(), a.wire, a.wire_size);
+    return;
+  }
+  const std::vector<std::uint8_t> bytes = encodeMeasurement(a);
+  writer().append(channel, nowMicros(), bytes.data(), static_cast<int>(bytes.size()));
+}
+
+void LcmEventJournal::appendMark(JournalEntry::Type type, int measurements, std::int64_t update) {
+  journal_mark_t m;
+  m.utime = nowMicros();
+  m.kind =
+      type == JournalEntry::Type::kRefineMark ? journal_mark_t::REFINE : journal_mark_t::UPDATE;
+  m.edges = measurements;
+  m.update = update;
+  const auto bytes = encodeMessage(m);
+  writer().append(kJournalMarkChannel, m.utime, bytes.data(), static_cast<int>(bytes.size()),
+                  EventClass::kRecord);
+}
+
+void LcmEventJournal::appendReseed(const Estimate& seed) {
+  const auto bytes = encodeMessage(toMessage(seed));
+  writer().append(kJournalReseedChannel, seed.utime, bytes.data(), static_cast<int>(bytes.size()));
+}
+
+void LcmEventJournal::sync() { writer().sync(); }
+void LcmEventJournal::syncIfDue() { writer().syncIfDue(); }
+std::int64_t LcmEventJournal::bytes() const { return writer_ ? writer_->bytes() : 0; }
+
+}  // namespace arbor::serve
