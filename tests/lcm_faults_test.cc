@@ -1,5 +1,6 @@
 // `arbor serve` over tcpq:// when its transport fails: Debian's LCM hub (java lcm.lcm.TCPService
-// on loopback, a port of each test's own) absent at start, killed mid-stream and restarted.
+// on loopback, a port of each test's own) absent at start, killed mid-stream and restarted, and
+// a "hub" that accepts the connection and never answers (liblcm's handshake has no timeout).
 // The service never aborts, keeps its state, re-creates its links with backoff and resumes; every
 // edge accepted before the fault is in the final estimate, which equals `arbor replay`'s; on
 // SIGTERM during an outage it still writes the estimate and the journal. Every wait is on a
@@ -14,7 +15,14 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 #include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <mutex>
 
 #include "arbor/io/lcm_journal.h"
 #include "arbor/io/lcm_messages.h"
@@ -57,6 +65,58 @@ std::vector<std::int64_t> journalSeqs(const std::string& path) {
   }
   return seqs;
 }
+
+// A "hub" on a loopback port that accepts every connection and never writes a byte: what
+// liblcm's tcpq handshake (a blocking recv() of the hub's answer) would wait on forever.
+class SilentHub {
+ public:
+  explicit SilentHub(int port) {
+    listener_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    const int on = 1;
+    ::setsockopt(listener_, SOL_SOCKET, SO_REUSEADDR, &on, sizeof(on));
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(static_cast<std::uint16_t>(port));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    listening_ = ::bind(listener_, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0 &&
+                 ::listen(listener_, 16) == 0;
+    thread_ = std::thread([this] {
+      while (!stop_) {
+        pollfd p{listener_, POLLIN, 0};
+        if (::poll(&p, 1, 50) <= 0) continue;
+        const int fd = ::accept(listener_, nullptr, nullptr);
+        if (fd < 0) continue;
+        std::lock_guard<std::mutex> lock(mutex_);
+        accepted_.push_back(fd);  // held open, never written to
+      }
+    });
+  }
+  ~SilentHub() {
+    stop_ = true;
+    thread_.join();
+    const linger reset{1, 0};  // close with a reset: no TIME_WAIT to keep the port from the hub
+    for (int fd : accepted_) {
+      ::setsockopt(fd, SOL_SOCKET, SO_LINGER, &reset, sizeof(reset));
+      ::close(fd);
+    }
+    ::close(listener_);
+  }
+  SilentHub(const SilentHub&) = delete;
+  SilentHub& operator=(const SilentHub&) = delete;
+  bool listening() const { return listening_; }
+  size_t accepted() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return accepted_.size();
+  }
+
+ private:
+  int listener_ = -1;
+  bool listening_ = false;
+  std::atomic<bool> stop_{false};
+  std::mutex mutex_;
+  std::vector<int> accepted_;
+  std::thread thread_;
+};
 
 int edgesOf(const std::string& file) {
   return std::visit([](const auto& g) { return g.numEdges(); }, readPoseGraphFile(file));
@@ -224,6 +284,31 @@ TEST_F(LcmFaults, SigtermDuringAnOutageStillWritesTheEstimateAndTheJournal) {
   EXPECT_EQ(static_cast<int>(journalSeqs(journal + "/journal.lcmlog").size()), half);
   ASSERT_TRUE(fs::exists(out)) << serve->err();
   EXPECT_EQ(edgesOf(out), half);
+}
+
+TEST_F(LcmFaults, HubThatNeverAnswersTheHandshakeNeitherHangsServeNorKeepsItFromRecovering) {
+  const std::string file = graph();
+  const int edges = edgesOf(file);
+  auto silent = std::make_unique<SilentHub>(port_);
+  ASSERT_TRUE(silent->listening());
+  auto serve = startServe({"--journal", path("journal")});
+  // Down with the reason, never stuck in liblcm's handshake: it goes on checking the hub.
+  ASSERT_TRUE(waitUntil([&] {
+    return serve->err().find("did not answer LCM's handshake") != std::string::npos;
+  })) << serve->err();
+  ASSERT_TRUE(waitLinkDown(*serve, 1)) << serve->err();
+  ASSERT_TRUE(waitUntil([&] { return silent->accepted() >= 3; })) << serve->err();
+  EXPECT_EQ(serve->wait(0), -1000) << "serve ended at a silent hub: " << serve->err();
+  silent.reset();
+  startHub();
+  ASSERT_TRUE(waitLinkUp(*serve, 1)) << serve->err();
+  const RunResult pub = publish(file, {});
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  const nlohmann::json j = stopServe(*serve);
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  EXPECT_EQ(j.at("gaps").get<int>(), 0);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
 }
 
 }  // namespace

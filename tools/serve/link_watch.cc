@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor/tools/serve/tcpq_handshake.h"
 
 namespace arbor::serve {
 namespace {
@@ -29,6 +30,16 @@ LinkWatch::LinkWatch(LinkWatchOptions options) : options_(std::move(options)) {
     throw std::invalid_argument("LinkWatch: backoff " + std::to_string(options_.backoff_min_ms) +
                                 " .. " + std::to_string(options_.backoff_max_ms) +
                                 " ms is not 1 <= min <= max");
+  }
+  std::string host;
+  int port = 0;
+  tcpq_ = tcpqHostPort(options_.url, &host, &port);  // else lcm_create judges the URL
+  if (tcpq_) {
+    last_check_problem_ = tcpqHandshakeProblem(options_.url, options_.handshake_timeout_ms);
+    if (!last_check_problem_.empty()) {
+      markDown("cannot connect to " + describe(options_.url) + ": " + last_check_problem_);
+      return;
+    }
   }
   owned_ = std::make_unique<lcm::LCM>(options_.url);
   if (!owned_->good()) {
@@ -175,6 +186,22 @@ bool LinkWatch::create() {
   lcm_subscriptions_.clear();  // deleted with the old instance
   probe_subscription_ = nullptr;
   owned_.reset();  // closes the dead socket
+  if (tcpq_) {
+    // The hub must answer a handshake first: liblcm's own would block forever on a silent one.
+    if (!hub_check_.valid()) {
+      hub_check_ = std::async(std::launch::async, tcpqHandshakeProblem, options_.url,
+                              options_.handshake_timeout_ms);
+      return false;
+    }
+    if (hub_check_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
+    const std::string problem = hub_check_.get();
+    if (!problem.empty()) {
+      if (problem != last_check_problem_) log("still down: " + problem);
+      last_check_problem_ = problem;
+      return false;
+    }
+    last_check_problem_.clear();
+  }
   owned_ = std::make_unique<lcm::LCM>(options_.url);
   if (!owned_->good()) return false;
   {

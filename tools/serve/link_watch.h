@@ -17,6 +17,12 @@
 // only send it again). Each state change is
 // logged, one line (down, with why; up, with how long it was down).
 //
+// Over tcpq:// every creation is preceded by a bounded check of the hub's handshake
+// (tools/serve/tcpq_handshake.h; liblcm's own blocks without a timeout): a hub that accepts the
+// connection and never answers leaves the link down, logged, and retried like an absent one. The
+// check runs on a thread of its own after the first (at construction it runs inline), so neither
+// the receive nor the publishing thread waits for it.
+//
 // A borrowed instance (memq:// shared in-process) is watched the same way but never re-created.
 // Not thread-safe: one thread handles; publish() is safe against other publish() calls only.
 #pragma once
@@ -25,6 +31,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -43,6 +50,8 @@ struct LinkWatchOptions {
   /// the link is up as soon as it has a descriptor). Only a receiving link needs one.
   std::string probe_channel;
   std::function<void(const std::string&)> log;  ///< state changes; nullptr: silent
+  /// tcpq://: how long the hub may take to answer the handshake check before each creation.
+  int handshake_timeout_ms = 2000;
 };
 
 struct LinkCounts {
@@ -125,6 +134,10 @@ class LinkWatch {
   int backoff_ms_ = 0;
   std::int64_t attempts_ = 0;  ///< since the link went down
   std::string down_reason_;
+
+  bool tcpq_ = false;                   ///< owned tcpq:// link: check the hub before creating
+  std::future<std::string> hub_check_;  ///< a handshake check in flight (tcpq)
+  std::string last_check_problem_;      ///< the last check's answer, logged when it changes
 
   mutable std::mutex counts_mutex_;
   LinkCounts counts_;
