@@ -28,6 +28,7 @@
 #include "arbor/tests/lcm_test_support.h"
 #include "arbor/tools/cli/replay_order.h"
 #include "arbor/tools/generator/graph_generator.h"
+#include "arbor/tools/serve/lcm_mapping.h"
 #include "arbor/tools/serve/serve_service.h"
 
 namespace arbor::serve {
@@ -363,6 +364,74 @@ TEST(LcmServe, GapsAreReportedAndFilledByLateEdges) {
   service.stop();
   EXPECT_EQ(service.summary().intake.gaps, 0);
   EXPECT_EQ(service.summary().applied, 20);
+}
+
+// Gaps per sender: counted in the intake's sender tables (a skip adds, a late edge or a revoke
+// moves them), summing to the stream's gaps; status_t lists the 16 senders with the most.
+TEST(EdgeIntake, GapsPerSenderSumToTheStreamsGaps) {
+  const PoseGraph2 graph = smallGraph();
+  EdgeIntake intake;
+  const auto send = [&](std::int64_t sender, std::int64_t seq) {
+    const auto bytes = edgeBytes(streamEdge(graph, 0, seq, sender));
+    return intake.admit(bytes.data(), static_cast<int>(bytes.size()));
+  };
+  for (std::int64_t seq : {1, 2, 5}) send(1, seq);   // 3 and 4 missing
+  for (std::int64_t seq : {1, 4, 10}) send(2, seq);  // 2, 3, 5..9 missing
+  for (std::int64_t seq : {1, 2, 3}) send(3, seq);   // none missing
+  EXPECT_EQ(send(1, 3).verdict, Intake::kAccepted);  // late: fills one of sender 1's
+  const IntakeResult revoked = send(3, 4);
+  intake.revoke(revoked, "journal");  // taken back: a gap of sender 3's
+  using Gaps = std::vector<std::pair<std::int64_t, std::int64_t>>;
+  EXPECT_EQ(intake.gapsBySender(EdgeIntake::Kind::kEdge), (Gaps{{1, 1}, {2, 7}, {3, 1}}));
+  EXPECT_EQ(intake.counts().gaps, 9);
+  EXPECT_TRUE(intake.gapsBySender(EdgeIntake::Kind::kPrior).empty());
+
+  // status_t: most first, ties by sender, at most 16; the rest only in the total.
+  CoreStatus core;
+  for (std::int64_t sender = 1; sender <= 20; ++sender)
+    core.edge_gaps_by_sender.emplace_back(sender, sender % 5 == 0 ? 100 : sender);
+  const status_t st = toMessage(core);
+  ASSERT_EQ(st.gap_senders, 16);
+  EXPECT_EQ(st.gap_sender[0], 5);
+  EXPECT_EQ(st.gap_count[0], 100);
+  EXPECT_EQ(st.gap_sender[3], 20);
+  EXPECT_EQ(st.gap_sender[4], 19);
+  EXPECT_EQ(st.gap_count[4], 19);
+  EXPECT_EQ(st.gap_sender[15], 6);  // 1, 2, 3 and 4 have the fewest: not listed
+}
+
+TEST(LcmServe, StatusListsTheGapsOfEachSender) {
+  const PoseGraph2 graph = smallGraph();
+  const std::vector<int> order = replayOrder(graph);
+  lcm::LCM lcm("memq://");
+  ServeOptions options;
+  options.refine_on_exit = false;
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  // Sender 1 sends the stream with seq 4..6 missing; sender 2 repeats its first edge as seq 1
+  // and 5 (2..4 missing; the smoother drops the repeated measurement, the intake counts seqs).
+  for (size_t k = 0; k < 12; ++k) {
+    if (k >= 3 && k < 6) continue;
+    publishInOrder(lcm, service, graph, order, k);
+  }
+  for (std::int64_t seq : {1, 5}) {
+    const auto bytes = edgeBytes(streamEdge(graph, order[0], seq, 2));
+    lcm.publish(service.channels().edges, bytes.data(), static_cast<unsigned>(bytes.size()));
+  }
+  command_t c;
+  c.command = command_t::STATUS;
+  const auto cb = encodeMessage(c);
+  lcm.publish(service.channels().command, cb.data(), static_cast<unsigned>(cb.size()));
+  ASSERT_TRUE(collector.waitStatus([](const status_t& s) { return s.received == 11; }));
+  const status_t s = collector.status();
+  EXPECT_EQ(s.gaps, 6);
+  ASSERT_EQ(s.gap_senders, 2);
+  EXPECT_EQ(s.gap_sender[0], 1);  // 3 each: the lower sender first
+  EXPECT_EQ(s.gap_count[0], 3);
+  EXPECT_EQ(s.gap_sender[1], 2);
+  EXPECT_EQ(s.gap_count[1], 3);
+  service.stop();
 }
 
 TEST(LcmServe, CommandsRefinePublishAndSnapshot) {

@@ -38,6 +38,16 @@ void EdgeIntake::refuse(Kind kind, const std::string& reason) {
   ++c.rejected_by_reason[reason];
 }
 
+std::vector<std::pair<std::int64_t, std::int64_t>> EdgeIntake::gapsBySender(Kind kind) const {
+  const Stream& s = kind == Kind::kCommand ? commands_ : kind == Kind::kPrior ? priors_ : edges_;
+  std::vector<std::pair<std::int64_t, std::int64_t>> out;
+  for (const auto& [sender, table] : s.senders) {
+    if (table.gaps > 0) out.emplace_back(sender, table.gaps);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
 std::size_t EdgeIntake::trackedSeqs(std::int64_t sender) const {
   const auto it = edges_.senders.find(sender);
   return it == edges_.senders.end() ? 0 : it->second.ring.size();
@@ -85,6 +95,7 @@ void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason)
   if (accepted.seq > s.highest - window_) {
     if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
   }
+  ++s.gaps;
   IntakeCounts& c = stream.counts;
   --c.accepted;
   ++c.gaps;  // its seq is missing now, until it is sent again
@@ -224,9 +235,11 @@ IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::
                         " was already received with other contents");
     }
     --stream.counts.gaps;  // a late message fills a gap reported before
+    --s.gaps;
   } else {
     r.skipped = r.seq - s.highest - 1;
     stream.counts.gaps += r.skipped;
+    s.gaps += r.skipped;
     advance(s, r.seq);
   }
   *slot(s, r.seq, true) = fp;

@@ -20,6 +20,7 @@
 #include <map>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "arbor/io/stream_measurements.h"
@@ -96,6 +97,9 @@ class EdgeIntake {
   std::int64_t window() const { return window_; }
   /// Edge seq slots held for `sender` (0 if unknown): never more than window().
   std::size_t trackedSeqs(std::int64_t sender) const;
+  /// Per sender of `kind` with gaps: (sender, seq numbers not received), in sender order; the
+  /// counts sum to the stream's IntakeCounts::gaps. At most max_senders() entries.
+  std::vector<std::pair<std::int64_t, std::int64_t>> gapsBySender(Kind kind) const;
   /// Sender tables held per stream (each <= max_senders()).
   std::size_t senders(Kind kind) const;
   std::size_t maxSenders() const { return max_senders_; }
@@ -103,6 +107,7 @@ class EdgeIntake {
  private:
   struct Sender {
     std::int64_t highest = 0;  ///< highest seq seen (seq numbers start at 1)
+    std::int64_t gaps = 0;     ///< seq numbers below highest not received (or revoked)
     /// Ring over the window: slot (seq − 1) mod W holds the hash of seq's bytes, 0 = not
     /// received. Grown on demand up to W slots.
     std::vector<std::uint64_t> ring;

@@ -259,6 +259,17 @@ status_t toMessage(const CoreStatus& k) {
   s.inlier_threshold = k.inlier_threshold;
   s.batch_cancelled = last.cancelled;
   s.recv_buf_bytes = k.transport.recv_buf_bytes;
+  // The senders with the most gaps, most first (ties: lower sender first), at most 16.
+  std::vector<std::pair<std::int64_t, std::int64_t>> gaps = k.edge_gaps_by_sender;
+  std::stable_sort(gaps.begin(), gaps.end(),
+                   [](const auto& a, const auto& b) { return a.second > b.second; });
+  constexpr int kListed = static_cast<int>(sizeof(s.gap_sender) / sizeof(s.gap_sender[0]));
+  s.gap_senders = static_cast<std::int32_t>(std::min<size_t>(gaps.size(), kListed));
+  for (int k2 = 0; k2 < kListed; ++k2) {
+    const bool listed = k2 < s.gap_senders;
+    s.gap_sender[k2] = listed ? gaps[static_cast<size_t>(k2)].first : 0;
+    s.gap_count[k2] = listed ? gaps[static_cast<size_t>(k2)].second : 0;
+  }
   return s;
 }
 

@@ -730,6 +730,7 @@ CoreStatus StreamingCore::status() const {
     s.control_refused = control_refused_;
     s.journal_refused = journal_refused_;
     s.edge_senders = static_cast<std::int64_t>(intake_.senders(MeasurementKind::kEdge));
+    s.edge_gaps_by_sender = intake_.gapsBySender(MeasurementKind::kEdge);
   }
   s.held = held_;
   if (journal_) s.journal_bytes = journal_->bytes();

@@ -58,7 +58,9 @@ struct CoreStatus {
   std::int64_t journal_refused = 0;                     ///< measurements the journal could not take
   std::int64_t journal_bytes = 0;
   std::int64_t edge_senders = 0;  ///< edge sender tables held
-  std::int64_t held = 0;          ///< journaled measurements waiting for their update mark
+  /// (sender, edge seq numbers not received) for every edge sender with gaps, sender order.
+  std::vector<std::pair<std::int64_t, std::int64_t>> edge_gaps_by_sender;
+  std::int64_t held = 0;  ///< journaled measurements waiting for their update mark
   std::int64_t applied = 0, updates = 0, poses = 0, pending = 0;
   std::int64_t smoother_rejected = 0, smoother_duplicates = 0;
   std::int64_t priors_applied = 0, smoother_priors_rejected = 0;
