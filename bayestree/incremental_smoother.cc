@@ -22,6 +22,7 @@
 
 #include <Eigen/Core>
 
+#include "arbor/bayestree/async_relinearization.h"
 #include "arbor/bayestree/bayes_tree.h"
 #include "arbor/bayestree/dogleg_step.h"
 #include "arbor/bayestree/fold_in.h"
@@ -55,6 +56,8 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->cliques_on_helpers += s.cliques_on_helpers;
   total->batch_reeliminations += s.batch_reeliminations;
   total->variables_checked += s.variables_checked;
+  total->async_started += s.async_started;
+  total->async_swapped += s.async_swapped;
 }
 
 int threadCount(int requested) {
@@ -88,6 +91,12 @@ void validate(const SmootherOptions& o) {
     bad("batch.top_share", o.batch.top_share, "in (0, 1]");
   if (!(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1))
     bad("batch.reorder_decay", o.batch.reorder_decay, "0 or ≥ 1");
+  if (o.async.min_variables < 1) bad("async.min_variables", o.async.min_variables, "≥ 1");
+  if (o.async.swap_after_updates < 0)
+    bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
+  if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
+    throw std::invalid_argument(
+        "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
 }
 
 // The decay check (BatchSwitchOptions::reorder_decay) waits until the tree's factorisation
@@ -159,6 +168,13 @@ struct IncrementalSmoother<G>::Impl {
   bool reorder_due = false;
   bayestree::RowList fresh_rows;
   std::vector<int> fresh_vars;
+  // RelinearizationMode::kAsync (bayestree/async_relinearization.h): the job in flight, what
+  // changed since its snapshot that the swap folds in besides the poses and factors added since
+  // (poses moved, factors reweighted, anchors released), and whether the second core is taken.
+  bayestree::AsyncRelinearization<G> async;
+  std::vector<int> moved_since_snapshot, reweighted_since_snapshot, released_since_snapshot;
+  int pass_first_factor = 0;  // the first factor of the current pass (the snapshot's end)
+  bool second_core_busy = false;
 
   explicit Impl(const SmootherOptions& o)
       : opt(o), threads(threadCount(o.threads)), dogleg_radius(o.dogleg_initial_radius) {
@@ -213,6 +229,7 @@ struct IncrementalSmoother<G>::Impl {
     fixed[v] = 0;
     new_vars.push_back(v);
     ++num_variables;
+    if (async.pending()) released_since_snapshot.push_back(v);
     for (int f : factors.var_factors[v]) {
       const Factor<G>& e = factors.factors[f];
       for (int k = 0; k < e.arity(); ++k)
@@ -231,6 +248,8 @@ struct IncrementalSmoother<G>::Impl {
                                     std::to_string(v) + " out of range");
     for (int v : poses) mark[v] = 1;
     moved.insert(moved.end(), poses.begin(), poses.end());
+    if (async.pending())
+      moved_since_snapshot.insert(moved_since_snapshot.end(), poses.begin(), poses.end());
     for (int v : poses) {
       theta[v] = T.compose(theta[v]);
       theta[v].normalize();
@@ -267,6 +286,7 @@ struct IncrementalSmoother<G>::Impl {
     if (e.inlierWeight() == w) return;
     e.setInlierWeight(w);
     to_relinearize.push_back(f);
+    if (async.pending()) reweighted_since_snapshot.push_back(f);
     for (int k = 0; k < e.arity(); ++k)
       if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
   }
@@ -331,8 +351,21 @@ struct IncrementalSmoother<G>::Impl {
 
   UpdateStats updatePasses() {
     ++update_count;
+    // RelinearizationMode::kAsync: a finished background relinearisation is swapped in first;
+    // while one is in flight, no check runs (its variables wait for the swap).
+    const int swapped = async.pending() && asyncSwapDue() ? swapInRelinearized() : -1;
     StepOptions pass;
-    pass.check_relinearization = update_count % opt.relinearize_skip == 0;
+    pass.check_relinearization = update_count % opt.relinearize_skip == 0 && !async.pending();
+    if (swapped >= 0) {
+      UpdateStats st = runPasses(pass);
+      st.async_swapped = 1;
+      st.variables_relinearized += swapped;
+      return st;
+    }
+    return runPasses(pass);
+  }
+
+  UpdateStats runPasses(const StepOptions& pass) {
     if (!opt.rank_updates || opt.dogleg || new_vars.empty() || queued.size() < 2 ||
         !to_touch.empty())
       return step(pass);
@@ -354,6 +387,144 @@ struct IncrementalSmoother<G>::Impl {
     return st;
   }
 
+  // ---- Asynchronous relinearisation (RelinearizationMode::kAsync) ---------------------------
+
+  // At a check that marked M (`relin`, not yet applied): when M is large, the second core free
+  // and no job in flight, snapshots what the re-elimination reads — the factors of the tree
+  // (those before this pass's), Θ with Θ_M := Θ_M ⊕ Δ_M, the poses held fixed (the gauge poses
+  // and those not in the tree yet) — and starts the background job. O(n + m) copies.
+  bool startAsyncRelinearization(UpdateStats* st) {
+    if (opt.relinearize != RelinearizationMode::kAsync || second_core_busy || async.pending() ||
+        static_cast<int>(relin.size()) < opt.async.min_variables)
+      return false;
+    const int n = numPoses();
+    bayestree::RelinearizationSnapshot<G> s;
+    s.theta = theta;
+    s.fixed.resize(static_cast<size_t>(n));
+    for (int v = 0; v < n; ++v) s.fixed[v] = fixed[v] || tree.clique_of[v] < 0 ? 1 : 0;
+    s.factors.assign(factors.factors.begin(), factors.factors.begin() + pass_first_factor);
+    s.relinearized = relin;
+    std::sort(s.relinearized.begin(), s.relinearized.end());
+    for (int v : s.relinearized) {
+      s.theta_before.push_back(theta[v]);
+      s.theta[v] = theta[v].retract(delta[v]);
+      s.theta[v].normalize();
+    }
+    s.update = update_count;
+    s.nested_dissection_min = nestedDissectionMin();
+    moved_since_snapshot.clear();
+    reweighted_since_snapshot.clear();
+    released_since_snapshot.clear();
+    async.start(std::move(s), opt.async.synchronous);
+    st->async_started = 1;
+    return true;
+  }
+
+  // The swap's update: the job is done (or, with swap_after_updates, this is its update: wait).
+  bool asyncSwapDue() const {
+    if (opt.async.swap_after_updates > 0)
+      return update_count >= async.snapshot().update + opt.async.swap_after_updates;
+    return async.done();
+  }
+
+  // Replaces the tree, Θ, Δ and the linearisations with the job's, and queues for this update
+  // everything that arrived since the snapshot, as one ordinary pass folds it in: the factors
+  // added since (they keep their indices), the poses new to the job's graph (added since, or not
+  // in the tree then, or released since: their neighbours' cliques are re-eliminated), the poses
+  // moved since (their Θ moved alike, their factors relinearised) and the factors reweighted
+  // since. Each factor is then linearised at the job's Θ, as relinearising at the snapshot and
+  // then applying the later updates inline would have it.
+  int swapInRelinearized() {
+    bayestree::RelinearizationSnapshot<G> snap;
+    bayestree::RelinearizedTree<G> job;
+    async.take(&snap, &job);
+    const int n = numPoses();
+    const int n_snap = static_cast<int>(snap.theta.size());
+    const int f_snap = static_cast<int>(snap.factors.size());
+    // Θ: the snapshot's, moved since as the owner's poses were (θ ← T θ for every move, i.e.
+    // θ_now θ_then⁻¹ on the left; a pose not relinearised had θ_then = the snapshot's).
+    std::vector<G> new_theta = std::move(snap.theta);
+    std::sort(moved_since_snapshot.begin(), moved_since_snapshot.end());
+    moved_since_snapshot.erase(
+        std::unique(moved_since_snapshot.begin(), moved_since_snapshot.end()),
+        moved_since_snapshot.end());
+    for (int v : moved_since_snapshot) {
+      if (v >= n_snap) continue;
+      const auto it = std::lower_bound(snap.relinearized.begin(), snap.relinearized.end(), v);
+      if (it == snap.relinearized.end() || *it != v) {
+        new_theta[v] = theta[v];
+        continue;
+      }
+      const G& before = snap.theta_before[static_cast<size_t>(it - snap.relinearized.begin())];
+      new_theta[v] = theta[v].compose(before.inverse()).compose(new_theta[v]);
+      new_theta[v].normalize();
+    }
+    for (int v = n_snap; v < n; ++v) new_theta.push_back(theta[v]);
+    // The factors added since the snapshot go first in the queue (their indices stay), with the
+    // weights they have now.
+    std::vector<Factor<G>> requeued(factors.factors.begin() + f_snap, factors.factors.end());
+    requeued.insert(requeued.end(), queued.begin(), queued.end());
+    std::vector<std::pair<int, double>> weights;
+    for (int f : reweighted_since_snapshot)
+      if (f < f_snap) weights.emplace_back(f, factors.factors[f].inlierWeight());
+    std::vector<int> pending_relinearize;
+    for (int f : to_relinearize)
+      if (f < f_snap) pending_relinearize.push_back(f);
+    // The job's state becomes the smoother's.
+    theta = std::move(new_theta);
+    tree = std::move(job.tree);
+    factors = std::move(job.factors);
+    partial_solve = std::move(job.solve);
+    delta = std::move(job.delta);
+    for (int v = n_snap; v < n; ++v) {
+      tree.addVariable();
+      factors.addVariable();
+      partial_solve.addVariable();
+      delta.push_back(Vec::Zero());
+    }
+    queued = std::move(requeued);
+    to_relinearize = std::move(pending_relinearize);
+    auto relinearizeFactor = [&](int f) {
+      to_relinearize.push_back(f);
+      const Factor<G>& e = factors.factors[f];
+      for (int k = 0; k < e.arity(); ++k)
+        if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
+    };
+    for (const auto& [f, w] : weights) {
+      factors.factors[f].setInlierWeight(w);
+      relinearizeFactor(f);
+    }
+    for (int v : moved_since_snapshot)
+      if (v < n_snap)
+        for (int f : factors.var_factors[v]) relinearizeFactor(f);
+    // The variables the job held fixed that are not (not in the tree then, or released since),
+    // and every variable added since: new to the job's tree.
+    new_vars.clear();
+    for (int v = 0; v < n_snap; ++v) {
+      if (!snap.fixed[v] || fixed[v]) continue;
+      new_vars.push_back(v);
+      for (int f : factors.var_factors[v]) {
+        const Factor<G>& e = factors.factors[f];
+        for (int k = 0; k < e.arity(); ++k)
+          if (e.key(k) != v && !fixed[e.key(k)]) to_touch.push_back(e.key(k));
+      }
+    }
+    for (int v = n_snap; v < n; ++v)
+      if (!fixed[v]) new_vars.push_back(v);
+    moved_since_snapshot.clear();
+    reweighted_since_snapshot.clear();
+    released_since_snapshot.clear();
+    // Every Δ is the job's: the next check scans every variable; the ordering is fresh.
+    for (int v : relin_candidates) is_candidate[v] = 0;
+    relin_candidates.clear();
+    check_all = true;
+    flops_reference = tree.flops;
+    reorder_due = false;
+    updated_all = true;
+    marginals = bayestree::TreeMarginals<D>();
+    return static_cast<int>(snap.relinearized.size());
+  }
+
   // One pass of IJRR 2012 Alg. 6, "One step of the iSAM2 algorithm".
   UpdateStats step(const StepOptions& pass) {
     const auto t0 = Clock::now();
@@ -362,6 +533,7 @@ struct IncrementalSmoother<G>::Impl {
     // Alg. 6 steps 1–2, "Add any new factors F := F ∪ F′" and "Initialize any new variables Θ′
     // and add Θ := Θ ∪ Θ′" (the poses were added by addPose, the factors queued by addFactor).
     const NewFactors added = addNewFactorsAndVariables(&st);
+    pass_first_factor = added.first;
     // Alg. 6 step 3, "Fluid relinearization with Alg. 5 yields marked variables M".
     relinearizeVariables(pass, &st);
     // Alg. 4 step 2, "Relinearize all factors required to recreate top" (those of M), and the
@@ -452,6 +624,9 @@ struct IncrementalSmoother<G>::Impl {
       relin_candidates.clear();
       check_all = false;
     }
+    // RelinearizationMode::kAsync: a large M goes to the background job; this pass goes on
+    // with the old linearisation point.
+    if (!pass.relinearize_all && startAsyncRelinearization(st)) relin.clear();
     for (int v : relin) {
       theta[v] = theta[v].retract(delta[v]);
       theta[v].normalize();
@@ -639,6 +814,13 @@ struct IncrementalSmoother<G>::Impl {
   UpdateStats relinearizeAll() {
     const auto t0 = Clock::now();
     UpdateStats total;
+    if (async.pending()) {  // everything is relinearised below: the job is not needed
+      async.abandon();
+      moved_since_snapshot.clear();
+      reweighted_since_snapshot.clear();
+      released_since_snapshot.clear();
+      check_all = true;  // the snapshot's check consumed its candidates
+    }
     if (!queued.empty() || !new_vars.empty()) accumulate(&total, update());
     beginUpdated();
     updated_all = true;  // every Δ is set (and may be halved) below
@@ -730,6 +912,14 @@ UpdateStats IncrementalSmoother<G>::update() {
 template <class G>
 UpdateStats IncrementalSmoother<G>::relinearizeAll() {
   return impl_->relinearizeAll();
+}
+template <class G>
+bool IncrementalSmoother<G>::relinearizationPending() const {
+  return impl_->async.pending();
+}
+template <class G>
+void IncrementalSmoother<G>::setSecondCoreBusy(bool busy) {
+  impl_->second_core_busy = busy;
 }
 template <class G>
 std::vector<G> IncrementalSmoother<G>::estimate() const {

@@ -40,6 +40,33 @@ struct BatchSwitchOptions {
   double reorder_decay = 2.0;
 };
 
+/// Where Alg. 5's relinearisation happens (docs/design.md, "Asynchronous relinearisation").
+enum class RelinearizationMode {
+  /// On the update path: a check's marked variables are relinearised and their cliques
+  /// re-eliminated in that update (Kaess et al., IJRR 2012, Alg. 4).
+  kInline,
+  /// A check that marks at least AsyncRelinearizationOptions::min_variables takes a snapshot
+  /// (the factors, Θ with Θ_M ⊕ Δ_M, the fixed poses); a background thread linearises every
+  /// factor there and eliminates the whole graph in a fresh ordering, while updates go on on
+  /// the old tree without relinearising; the first update after it is ready folds what arrived
+  /// since the snapshot into the new tree as one ordinary pass and swaps it in. The estimate
+  /// is then the one relinearising at the snapshot and applying the later updates inline gives.
+  kAsync,
+};
+
+/// The asynchronous mode's settings (RelinearizationMode::kAsync).
+struct AsyncRelinearizationOptions {
+  /// A check that marks fewer variables relinearises inline (a small top costs less than the
+  /// snapshot and the whole-graph elimination).
+  int min_variables = 64;
+  /// The job runs on the calling thread when the snapshot is taken (deterministic; tests).
+  bool synchronous = false;
+  /// 0: the swap happens at the first update that finds the job done. d > 0: exactly at the
+  /// d-th update after the snapshot's, which waits for the job if it is still running
+  /// (deterministic whatever the scheduling; tests).
+  int swap_after_updates = 0;
+};
+
 struct SmootherOptions {
   /// Fluid relinearisation thresholds β (Kaess et al., IJRR 2012, Alg. 5) on |Δ|∞ of the
   /// translational and the rotational part of a variable's tangent; GTSAM's default is 0.1 for
@@ -78,6 +105,11 @@ struct SmootherOptions {
   /// competes for the same cores): the constructor calls useOneBlasThread (core/blas_threads.h).
   int threads = 0;
   BatchSwitchOptions batch;  ///< when an update re-eliminates the whole graph
+  /// Inline (the default: every estimate is the exact iSAM2 one of its update) or on a
+  /// background thread (bounded latency on graphs whose relinearisation steps re-eliminate most
+  /// of the tree). Async needs Gauss–Newton (not dogleg).
+  RelinearizationMode relinearize = RelinearizationMode::kInline;
+  AsyncRelinearizationOptions async;
 };
 
 struct UpdateStats {
@@ -99,6 +131,11 @@ struct UpdateStats {
   /// variables whose Δ the relinearisation check (Alg. 5) examined: those solved since the
   /// previous check, not every variable
   int variables_checked = 0;
+  /// RelinearizationMode::kAsync: 1 when this update took a snapshot and started the
+  /// background relinearisation, 1 when it swapped the relinearised tree in (with the
+  /// variables that snapshot relinearised in variables_relinearized)
+  int async_started = 0;
+  int async_swapped = 0;
   double time_s = 0.0;
 };
 
@@ -166,6 +203,13 @@ class IncrementalSmoother {
   /// repeated until F changes by less than finalize_relative_tolerance (relative) or
   /// finalize_max_iterations. Adds queued factors first. Returns the summed stats.
   UpdateStats relinearizeAll();
+  /// RelinearizationMode::kAsync: whether a background relinearisation has been started and not
+  /// yet swapped in (it is swapped in by a later update()).
+  bool relinearizationPending() const;
+  /// RelinearizationMode::kAsync: while `busy`, no background relinearisation starts and a
+  /// check relinearises inline (the second core is taken, e.g. by a batch refinement: one
+  /// background job at a time, docs/design.md). One already running goes on.
+  void setSecondCoreBusy(bool busy);
 
   std::vector<G> estimate() const;  ///< θ ⊞ Δ for every pose (O(n))
   G estimate(int index) const;

@@ -235,6 +235,8 @@ class OnlineSmoother {
   std::map<Key, G> estimates() const;  ///< every known pose (O(n))
   OnlineStats stats() const;
   const IncrementalSmoother<G>& smoother() const { return smoother_; }
+  /// IncrementalSmoother::setSecondCoreBusy (a background batch refinement runs meanwhile).
+  void setSecondCoreBusy(bool busy) { smoother_.setSecondCoreBusy(busy); }
   /// Dense smoother index → id.
   const std::vector<Key>& ids() const { return ids_; }
   /// The component of a known pose: its representative dense index (equal for poses of one

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor/tests/random_walks.h"
 
 #include <gtest/gtest.h>
 
@@ -15,36 +15,7 @@ namespace arbor {
 namespace {
 
 using testing::diagonalInformation;
-using testing::isotropicNoise;
-
-/// A random walk of n poses with odometry and `loops` loop closures to random older poses (a
-/// loop at pose k is added with it), noisy measurements; the edges grouped per new pose.
-template <class G>
-std::vector<std::vector<RelativePoseEdge<G>>> randomWalk(int n, int loops, unsigned seed,
-                                                         std::vector<G>* truth) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  truth->assign(1, G());
-  for (int k = 1; k < n; ++k) {
-    typename G::Tangent step = isotropicNoise<G>(rng, 0.3);
-    step(0) += 1.0;
-    truth->push_back(truth->back().compose(G::Exp(step)));
-  }
-  const auto omega = diagonalInformation<G>(100.0, 400.0);
-  auto measured = [&](int i, int j) {
-    return (*truth)[i].between((*truth)[j]).compose(G::Exp(isotropicNoise<G>(rng, 0.05)));
-  };
-  std::vector<std::vector<RelativePoseEdge<G>>> by_pose(n);
-  for (int k = 1; k < n; ++k)
-    by_pose[k].push_back(RelativePoseEdge<G>::make(k - 1, k, measured(k - 1, k), omega));
-  std::uniform_int_distribution<int> pick(2, n - 1);
-  for (int l = 0; l < loops; ++l) {
-    const int j = pick(rng);
-    const int i = std::uniform_int_distribution<int>(0, j - 2)(rng);
-    by_pose[j].push_back(RelativePoseEdge<G>::make(i, j, measured(i, j), omega));
-  }
-  return by_pose;
-}
+using testing::randomWalk;
 
 /// Feeds pose k and its edges, then update(), for every k; `check(smoother, stats)` after each.
 template <class G, class Check>

@@ -86,7 +86,14 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "reorder-decay",
       po::value<double>()->default_value(d.batch.reorder_decay, text(d.batch.reorder_decay)),
       "re-order the tree when factorising it in its incremental ordering costs more than this "
-      "many times a fresh ordering (0: never)");
+      "many times a fresh ordering (0: never)")(
+      "relinearize",
+      po::value<std::string>()->default_value(
+          d.relinearize == RelinearizationMode::kAsync ? "async" : "inline"),
+      "inline: relinearise in the update (exact iSAM2); async: a check marking many variables "
+      "relinearises the whole graph on a background thread and swaps it in at a later update")(
+      "async-min-variables", po::value<int>()->default_value(d.async.min_variables),
+      "with --relinearize async: a check marking fewer variables relinearises inline");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -133,6 +140,15 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   o.batch.reorder_decay = valueOf(vm, "reorder-decay", o.batch.reorder_decay);
   require(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1, "reorder-decay", "0 or >= 1",
           o.batch.reorder_decay);
+  if (vm.count("relinearize")) {
+    const std::string mode = vm["relinearize"].as<std::string>();
+    require(mode == "inline" || mode == "async", "relinearize", "inline or async", mode);
+    o.relinearize = mode == "async" ? RelinearizationMode::kAsync : RelinearizationMode::kInline;
+  }
+  o.async.min_variables = valueOf(vm, "async-min-variables", o.async.min_variables);
+  require(o.async.min_variables >= 1, "async-min-variables", ">= 1", o.async.min_variables);
+  if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
+    throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
 }
 
@@ -160,6 +176,11 @@ std::string describeSmoother(const SmootherOptions& o) {
     out << ", batch past a top share of " << o.batch.top_share;
   if (o.batch.reorder_decay != d.batch.reorder_decay)
     out << ", re-order at decay " << o.batch.reorder_decay;
+  if (o.relinearize == RelinearizationMode::kAsync) {
+    out << ", async relinearisation";
+    if (o.async.min_variables != d.async.min_variables)
+      out << " from " << o.async.min_variables << " variables";
+  }
   if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
       o.finalize_max_iterations != d.finalize_max_iterations) {
     out << ", final pass to " << o.finalize_relative_tolerance << " in at most "

@@ -16,7 +16,8 @@ namespace arbor::cli {
 ///   translation B, --relinearize-threshold-rotation B, --relinearize-skip K, --wildfire A,
 ///   --full-backsubstitution, --no-rank-updates, --dogleg, --dogleg-radius R,
 ///   --dogleg-min-radius R, --finalize-rel-tol X, --finalize-max-iterations N,
-///   --nested-dissection-min N, --threads N, --batch-top-share S, --reorder-decay X.
+///   --nested-dissection-min N, --threads N, --batch-top-share S, --reorder-decay X,
+///   --relinearize inline|async, --async-min-variables N.
 void addSmootherFlags(boost::program_options::options_description& options,
                       const SmootherOptions& defaults = {});
 

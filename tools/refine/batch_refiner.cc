@@ -252,8 +252,9 @@ std::vector<G> seedValues(const OnlineSmoother<G>& smoother, const BatchOutcome<
 template <class G>
 struct BatchRefiner<G>::Flight {
   PoseGraph<G> snapshot;
-  std::vector<char> judged;       ///< robust: per snapshot edge, weighted by GNC
-  std::optional<GncOptions> gnc;  ///< robust: the smoother's kernel and c²
+  OnlineSmoother<G>* busy = nullptr;  ///< told its second core is free again by collect
+  std::vector<char> judged;           ///< robust: per snapshot edge, weighted by GNC
+  std::optional<GncOptions> gnc;      ///< robust: the smoother's kernel and c²
   std::int64_t update = 0;
   int updates_during = 0;
   BatchOutcome<G> outcome;
@@ -308,8 +309,8 @@ bool BatchRefiner<G>::running() const {
 }
 
 template <class G>
-bool BatchRefiner<G>::start(const OnlineSmoother<G>& smoother, std::int64_t update) {
-  if (flight_) {
+bool BatchRefiner<G>::start(OnlineSmoother<G>& smoother, std::int64_t update) {
+  if (flight_ || smoother.smoother().relinearizationPending()) {
     ++skipped_;
     return false;
   }
@@ -323,6 +324,8 @@ bool BatchRefiner<G>::start(const OnlineSmoother<G>& smoother, std::int64_t upda
     flight_->judged = std::move(judged);
   }
   flight_->update = update;
+  flight_->busy = &smoother;
+  if (!options_.synchronous) smoother.setSecondCoreBusy(true);
   Flight* f = flight_.get();
   const BatchSolver solver = options_.solver;
   const CancellationToken cancel = options_.cancel;
@@ -350,6 +353,7 @@ std::optional<BatchOutcome<G>> BatchRefiner<G>::collect(bool wait) {
   if (!flight_ || (!wait && !flight_->done.load())) return std::nullopt;
   if (flight_->thread.joinable()) flight_->thread.join();
   std::unique_ptr<Flight> f = std::move(flight_);
+  f->busy->setSecondCoreBusy(false);
   if (f->error) std::rethrow_exception(f->error);
   BatchOutcome<G> out = std::move(f->outcome);
   out.run.update = f->update;

@@ -172,7 +172,11 @@ class BatchRefiner {
   /// Snapshots `smoother` and solves it in the background (or here when synchronous). Returns
   /// false without starting when a batch is in flight (counted in skipped()) or when the
   /// snapshot has fewer than 2 poses.
-  bool start(const OnlineSmoother<G>& smoother, std::int64_t update);
+  /// One background job at a time on the second core (docs/design.md, "Asynchronous
+  /// relinearisation"): a due run is skipped and counted while the smoother's background
+  /// relinearisation is pending, and while a run is in flight the smoother relinearises inline
+  /// (OnlineSmoother::setSecondCoreBusy, cleared by collect).
+  bool start(OnlineSmoother<G>& smoother, std::int64_t update);
   /// Counts an update applied while a batch is still running.
   void noteUpdate();
   /// The batch in flight once it has finished (`wait`: waits for it); nullopt if none (or not

@@ -1,0 +1,151 @@
+#include "arbor/bayestree/async_relinearization.h"
+
+#include <ctime>
+#include <utility>
+
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include "arbor/bayestree/top_elimination.h"
+#include "arbor/bayestree/update_threads.h"
+
+namespace arbor::bayestree {
+namespace {
+
+double threadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+}  // namespace
+
+template <class G>
+RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s) {
+  const double cpu0 = threadCpuSeconds();
+  RelinearizedTree<G> out;
+  const int n = static_cast<int>(s.theta.size());
+  UpdateThreads threads(1);
+  for (int v = 0; v < n; ++v) {
+    out.tree.addVariable();
+    out.factors.addVariable();
+    out.solve.addVariable();
+    threads.addVariable();
+  }
+  out.delta.assign(static_cast<size_t>(n), typename G::Tangent(G::Tangent::Zero()));
+  std::vector<int> all_factors(s.factors.size());
+  for (size_t f = 0; f < s.factors.size(); ++f) {
+    out.factors.add(s.factors[f]);
+    all_factors[f] = static_cast<int>(f);
+  }
+  std::vector<int> variables;
+  for (int v = 0; v < n; ++v)
+    if (!s.fixed[v]) variables.push_back(v);
+  // Alg. 4 with J = every variable (relinearizeAll's pass): Alg. 4 step 2 linearises every
+  // factor at Θ, steps 4–5 order the whole graph afresh (unconstrained) and eliminate it; no
+  // orphans. Then Alg. 7 over every clique.
+  const std::vector<int> no_orphans;
+  const typename TopElimination<G>::Input in{
+      variables, no_orphans, nullptr, all_factors, s.theta, s.fixed, s.nested_dissection_min};
+  TopElimination<G> elimination;
+  const auto eliminated = elimination.run(in, &out.tree, &out.factors, &threads);
+  out.cliques = eliminated.cliques;
+  out.indeterminate = eliminated.indeterminate;
+  out.tree.releaseFreeStorage();
+  out.solve.run(&out.tree, /*full=*/true, 0.0, &out.delta, &threads);
+  out.cpu_seconds = threadCpuSeconds() - cpu0;
+  return out;
+}
+
+template <class G>
+void AsyncRelinearization<G>::Job::run() {
+  try {
+    result = relinearizeSnapshot(snapshot);
+  } catch (...) {
+    error = std::current_exception();
+  }
+  done.store(true);
+}
+
+template <class G>
+AsyncRelinearization<G>::~AsyncRelinearization() {
+  join();
+}
+
+template <class G>
+AsyncRelinearization<G>::AsyncRelinearization(const AsyncRelinearization& other) {
+  if (!other.job_) return;
+  other.join();
+  job_ = std::make_unique<Job>();
+  job_->snapshot = other.job_->snapshot;
+  job_->result = other.job_->result;
+  job_->error = other.job_->error;
+  job_->done.store(true);
+}
+
+template <class G>
+AsyncRelinearization<G>& AsyncRelinearization<G>::operator=(const AsyncRelinearization& other) {
+  if (this != &other) {
+    AsyncRelinearization copy(other);
+    *this = std::move(copy);
+  }
+  return *this;
+}
+
+template <class G>
+AsyncRelinearization<G>& AsyncRelinearization<G>::operator=(AsyncRelinearization&& other) noexcept {
+  if (this != &other) {
+    join();
+    job_ = std::move(other.job_);
+  }
+  return *this;
+}
+
+template <class G>
+void AsyncRelinearization<G>::join() const {
+  if (job_ && job_->thread.joinable()) job_->thread.join();
+}
+
+template <class G>
+void AsyncRelinearization<G>::start(RelinearizationSnapshot<G> snapshot, bool synchronous) {
+  join();
+  job_ = std::make_unique<Job>();
+  job_->snapshot = std::move(snapshot);
+  Job* job = job_.get();
+  if (synchronous) {
+    job->run();
+    return;
+  }
+  job->thread = std::thread([job] {
+    // The update path comes first: this thread runs at a lower priority (Linux nice is per
+    // thread), as the background batch refinement does.
+    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+    job->run();
+  });
+}
+
+template <class G>
+void AsyncRelinearization<G>::take(RelinearizationSnapshot<G>* snapshot,
+                                   RelinearizedTree<G>* result) {
+  join();
+  std::unique_ptr<Job> job = std::move(job_);
+  if (job->error) std::rethrow_exception(job->error);
+  *snapshot = std::move(job->snapshot);
+  *result = std::move(job->result);
+}
+
+template <class G>
+void AsyncRelinearization<G>::abandon() {
+  join();
+  job_.reset();
+}
+
+template struct RelinearizedTree<SE2>;
+template struct RelinearizedTree<SE3>;
+template RelinearizedTree<SE2> relinearizeSnapshot(const RelinearizationSnapshot<SE2>&);
+template RelinearizedTree<SE3> relinearizeSnapshot(const RelinearizationSnapshot<SE3>&);
+template class AsyncRelinearization<SE2>;
+template class AsyncRelinearization<SE3>;
+
+}  // namespace arbor::bayestree

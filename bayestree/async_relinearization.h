@@ -1,0 +1,97 @@
+// Asynchronous relinearisation (docs/design.md, "Asynchronous relinearisation"; our extension of
+// Kaess et al., "iSAM2: Incremental smoothing and mapping using the Bayes tree", IJRR 2012): the
+// snapshot the owner thread takes at a relinearisation check (the factors, Θ with Θ_M ⊕ Δ_M, the
+// poses held fixed), the background job that linearises every factor at that Θ and eliminates the
+// whole graph in a fresh ordering into a new Bayes tree (Alg. 4 with J = every variable, as
+// relinearizeAll does, then Alg. 7 over every clique), and the handle that owns at most one such
+// job. The smoother (incremental_smoother.cc) takes the snapshot and swaps the result in.
+#pragma once
+
+#include <atomic>
+#include <exception>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/linear_factors.h"
+#include "arbor/bayestree/partial_solve.h"
+#include "arbor/core/factor.h"
+
+namespace arbor::bayestree {
+
+/// What a relinearisation job reads: a copy, so the owner goes on meanwhile.
+template <class G>
+struct RelinearizationSnapshot {
+  std::vector<G> theta;            ///< Θ with Θ_M := Θ_M ⊕ Δ_M (every pose known then)
+  std::vector<char> fixed;         ///< held fixed: the gauge poses and those not in the tree yet
+  std::vector<Factor<G>> factors;  ///< the factors in the tree, with their inlier weights
+  std::vector<int> relinearized;   ///< M, increasing
+  std::vector<G> theta_before;     ///< Θ_M before ⊕ Δ_M, parallel to `relinearized`
+  int update = 0;                  ///< the update that took it (the smoother's count)
+  int nested_dissection_min = 0;   ///< SmootherOptions, resolved for G
+};
+
+/// What it gives: the whole graph's Bayes tree at the snapshot's Θ, its linearisations and the
+/// Gauss–Newton step on it.
+template <class G>
+struct RelinearizedTree {
+  static constexpr int D = G::kDoF;
+  BayesTree<D> tree;
+  LinearizedFactors<G> factors;
+  PartialSolve<D> solve;
+  std::vector<typename G::Tangent> delta;
+  int cliques = 0, indeterminate = 0;
+  double cpu_seconds = 0;  ///< of the thread that ran it
+};
+
+/// Linearises every factor of `s` at s.theta, orders all its non-fixed poses afresh (CCOLAMD, or
+/// nested dissection from s.nested_dissection_min), eliminates them into a new tree and solves
+/// every clique. One thread; reads nothing but `s`.
+template <class G>
+RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s);
+
+/// At most one relinearisation job: started from a snapshot on a background thread (at nice
+/// +10, as the batch refinement: the update path comes first) or on the calling thread, taken
+/// when done. The destructor waits for a running job (it reads only its own copy), so a
+/// smoother destroyed mid-job neither crashes nor leaks. A copy of a handle with a job waits
+/// for it and copies its result.
+template <class G>
+class AsyncRelinearization {
+ public:
+  AsyncRelinearization() = default;
+  ~AsyncRelinearization();
+  AsyncRelinearization(const AsyncRelinearization& other);
+  AsyncRelinearization& operator=(const AsyncRelinearization& other);
+  AsyncRelinearization(AsyncRelinearization&&) noexcept = default;
+  AsyncRelinearization& operator=(AsyncRelinearization&& other) noexcept;
+
+  /// Starts a job (none may be pending); `synchronous`: runs it before returning.
+  void start(RelinearizationSnapshot<G> snapshot, bool synchronous);
+  bool pending() const { return job_ != nullptr; }         ///< started, not yet taken
+  bool done() const { return job_ && job_->done.load(); }  ///< pending and finished
+  const RelinearizationSnapshot<G>& snapshot() const { return job_->snapshot; }
+  /// Waits for the job and hands over its snapshot and result (rethrows what it threw).
+  void take(RelinearizationSnapshot<G>* snapshot, RelinearizedTree<G>* result);
+  /// Waits for a pending job and drops it.
+  void abandon();
+
+ private:
+  struct Job {
+    RelinearizationSnapshot<G> snapshot;
+    RelinearizedTree<G> result;
+    std::exception_ptr error;
+    std::atomic<bool> done{false};
+    std::thread thread;
+    void run();
+  };
+  void join() const;
+  std::unique_ptr<Job> job_;
+};
+
+extern template struct RelinearizedTree<SE2>;
+extern template struct RelinearizedTree<SE3>;
+extern template class AsyncRelinearization<SE2>;
+extern template class AsyncRelinearization<SE3>;
+
+}  // namespace arbor::bayestree

@@ -1,0 +1,259 @@
+// Tests of asynchronous relinearisation (SmootherOptions::relinearize = kAsync,
+// bayestree/async_relinearization.h): after the swap, the estimate is the one relinearising at
+// the snapshot and applying the later updates inline gives. Deterministic: the job runs on the
+// calling thread, or the swap update waits for the background thread (swap_after_updates); no
+// timing.
+
+#include <random>
+#include <vector>
+
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/tests/random_walks.h"
+
+#include <gtest/gtest.h>
+
+namespace arbor {
+namespace {
+
+using testing::randomWalk;
+
+SmootherOptions inlineOptions() {
+  SmootherOptions o;
+  o.threads = 1;
+  o.wildfire_threshold = 0;  // every clique below a change is solved: exact comparisons
+  o.batch.top_share = 1;     // the ordering differs anyway: keep the inline path plain
+  o.batch.reorder_decay = 0;
+  return o;
+}
+
+SmootherOptions asyncOptions(bool synchronous, int swap_after) {
+  SmootherOptions o = inlineOptions();
+  o.relinearize = RelinearizationMode::kAsync;
+  o.async.min_variables = 1;
+  o.async.synchronous = synchronous;
+  o.async.swap_after_updates = swap_after;
+  return o;
+}
+
+template <class G>
+double tangentDistance(const std::vector<G>& a, const std::vector<G>& b, int* worst) {
+  double d = 0;
+  for (size_t v = 0; v < a.size(); ++v) {
+    const double e = a[v].between(b[v]).Log().norm();
+    if (e > d) {
+      d = e;
+      *worst = static_cast<int>(v);
+    }
+  }
+  return d;
+}
+
+/// What happens to both smoothers during a job (the same on each), by the async one's state.
+struct DuringTheJob {
+  bool reweight = false, move = false;
+};
+
+/// Replays the walk into an inline and an async smoother side by side; after every update
+/// where the async one has swapped its job in and started none since, their estimates agree to
+/// 1e-8 in the tangent.
+template <class G>
+void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
+                            DuringTheJob during = {}) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
+  IncrementalSmoother<G> in(inlineOptions()), as(async_options);
+  in.addFixedPose(G());
+  as.addFixedPose(G());
+  std::mt19937 rng(seed);
+  int swaps = 0, starts = 0, compared = 0, reweighted = 0, moved = 0;
+  bool consistent = true;  // no job in flight since the last swap
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    const G guess = in.estimate(odo.i).compose(odo.measurement);
+    in.addPose(guess);
+    as.addPose(guess);
+    for (const auto& e : by_pose[k]) {
+      in.addFactor(e);
+      as.addFactor(e);
+    }
+    if (as.relinearizationPending()) {
+      if (during.reweight) {  // an old factor and one queued now
+        const int f = std::uniform_int_distribution<int>(0, as.numFactors() - 1)(rng);
+        const double w = std::uniform_real_distribution<double>(0.2, 0.9)(rng);
+        in.setFactorWeight(f, w);
+        as.setFactorWeight(f, w);
+        in.setFactorWeight(as.numFactors(), 0.7);
+        as.setFactorWeight(as.numFactors(), 0.7);
+        ++reweighted;
+      }
+      if (during.move && k % 3 == 0) {  // the last poses, rigidly
+        typename G::Tangent tau = G::Tangent::Constant(0.002);
+        const G T = G::Exp(tau);
+        std::vector<int> last;
+        for (int v = static_cast<int>(k) - 15; v <= static_cast<int>(k); ++v)
+          if (v > 0) last.push_back(v);
+        in.transformPoses(last, T);
+        as.transformPoses(last, T);
+        ++moved;
+      }
+    }
+    in.update();
+    const UpdateStats st = as.update();
+    ASSERT_EQ(as.numFactors(), in.numFactors()) << "update " << k;
+    swaps += st.async_swapped;
+    starts += st.async_started;
+    if (st.async_swapped) {
+      EXPECT_GT(st.variables_relinearized, 0) << "update " << k;
+      consistent = true;
+    }
+    if (st.async_started) consistent = false;
+    if (!consistent) continue;
+    int worst = -1;
+    const double d = tangentDistance(in.estimate(), as.estimate(), &worst);
+    ASSERT_LT(d, 1e-8) << "update " << k << ", pose " << worst << " (swaps so far " << swaps << ")";
+    ++compared;
+  }
+  as.checkInvariants();
+  EXPECT_GT(starts, 5);
+  EXPECT_GE(swaps, starts - 1);  // the last one may still be in flight
+  EXPECT_GT(compared, 50);
+  if (during.reweight) {
+    EXPECT_GT(reweighted, 5);
+  }
+  if (during.move) {
+    EXPECT_GT(moved, 3);
+  }
+}
+
+TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot2D) {
+  expectSwapEqualsInline<SE2>(11, asyncOptions(true, 5));
+  expectSwapEqualsInline<SE2>(12, asyncOptions(true, 3));
+}
+
+TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot3D) {
+  expectSwapEqualsInline<SE3>(21, asyncOptions(true, 5));
+  expectSwapEqualsInline<SE3>(22, asyncOptions(true, 3));
+}
+
+// Factors reweighted and poses moved while the job runs are folded in at the swap.
+TEST(AsyncRelinearization, ReweightsAndMovesDuringTheJobAreFoldedIn) {
+  expectSwapEqualsInline<SE2>(31, asyncOptions(true, 5), {true, true});
+  expectSwapEqualsInline<SE3>(32, asyncOptions(true, 5), {true, true});
+}
+
+// The job on its background thread, the swap at the 5th update after the snapshot (which waits
+// for it): the same estimates.
+TEST(AsyncRelinearization, BackgroundThreadSwapsAtTheGivenUpdate) {
+  expectSwapEqualsInline<SE2>(41, asyncOptions(false, 5));
+  expectSwapEqualsInline<SE3>(42, asyncOptions(false, 5));
+}
+
+// While the second core is taken (a batch refinement), every check relinearises inline: bit for
+// bit the inline path.
+TEST(AsyncRelinearization, SecondCoreBusyRelinearizesInline) {
+  std::vector<SE2> truth;
+  const auto by_pose = randomWalk<SE2>(200, 40, 51, &truth);
+  IncrementalSmoother2 in(inlineOptions()), as(asyncOptions(false, 0));
+  as.setSecondCoreBusy(true);
+  in.addFixedPose(SE2());
+  as.addFixedPose(SE2());
+  int relinearized = 0;
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    in.addPose(in.estimate(odo.i).compose(odo.measurement));
+    as.addPose(in.estimate(odo.i).compose(odo.measurement));
+    for (const auto& e : by_pose[k]) {
+      in.addFactor(e);
+      as.addFactor(e);
+    }
+    relinearized += in.update().variables_relinearized;
+    const UpdateStats st = as.update();
+    ASSERT_EQ(st.async_started, 0);
+    ASSERT_FALSE(as.relinearizationPending());
+    const auto a = in.estimate(), b = as.estimate();
+    for (size_t v = 0; v < a.size(); ++v) {
+      ASSERT_EQ(a[v].translation(), b[v].translation()) << "update " << k << ", pose " << v;
+      ASSERT_EQ(a[v].rotation(), b[v].rotation()) << "update " << k << ", pose " << v;
+    }
+  }
+  EXPECT_GT(relinearized, 0);
+}
+
+// A smoother copied mid-job waits for the job and swaps it in as the original does; one
+// destroyed mid-job waits for its thread (a crash or a leak shows under the sanitizers).
+TEST(AsyncRelinearization, CopiedOrDestroyedMidJob) {
+  std::vector<SE3> truth;
+  const auto by_pose = randomWalk<SE3>(400, 80, 61, &truth);
+  int destroyed_pending = 0;
+  for (int round = 0; round < 3; ++round) {
+    auto s = std::make_unique<IncrementalSmoother3>(asyncOptions(false, 4 + round));
+    s->addFixedPose(SE3());
+    std::unique_ptr<IncrementalSmoother3> copy;
+    size_t copied_at = 0;
+    for (size_t k = 1; k < by_pose.size(); ++k) {
+      const auto& odo = by_pose[k].front();
+      for (IncrementalSmoother3* t : {s.get(), copy.get()}) {
+        if (!t) continue;
+        t->addPose(s->estimate(odo.i).compose(odo.measurement));
+        for (const auto& e : by_pose[k]) t->addFactor(e);
+      }
+      const UpdateStats st = s->update();
+      if (copy) {
+        const UpdateStats cs = copy->update();
+        ASSERT_EQ(cs.async_swapped, st.async_swapped) << "update " << k;
+        const auto a = s->estimate(), b = copy->estimate();
+        for (size_t v = 0; v < a.size(); ++v)
+          ASSERT_EQ(a[v].translation(), b[v].translation()) << "update " << k << ", pose " << v;
+        if (st.async_swapped) break;  // the copy swapped the job it was copied with
+      } else if (st.async_started && k > 100 && round == 0) {
+        copy = std::make_unique<IncrementalSmoother3>(*s);
+        copied_at = k;
+        ASSERT_TRUE(copy->relinearizationPending());
+      } else if (st.async_started && k > 150) {
+        ASSERT_TRUE(s->relinearizationPending());
+        ++destroyed_pending;
+        break;  // destroyed with its job in flight
+      }
+    }
+    if (round == 0) {
+      EXPECT_GT(copied_at, 0u);
+    }
+    s.reset();
+  }
+  EXPECT_EQ(destroyed_pending, 2);
+}
+
+// Without the hooks the swap comes whenever the job is done: every update keeps the tree's
+// invariants and every edge, and the final relinearisation ends where the inline one does.
+TEST(AsyncRelinearization, FreeRunningEndsAtTheInlineOptimum) {
+  std::vector<SE2> truth;
+  const auto by_pose = randomWalk<SE2>(300, 60, 71, &truth);
+  SmootherOptions o;
+  o.relinearize = RelinearizationMode::kAsync;
+  o.async.min_variables = 1;
+  IncrementalSmoother2 in, as(o);
+  in.addFixedPose(SE2());
+  as.addFixedPose(SE2());
+  int starts = 0;
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    in.addPose(in.estimate(odo.i).compose(odo.measurement));
+    as.addPose(as.estimate(odo.i).compose(odo.measurement));
+    for (const auto& e : by_pose[k]) {
+      in.addFactor(e);
+      as.addFactor(e);
+    }
+    in.update();
+    starts += as.update().async_started;
+    ASSERT_NO_THROW(as.checkInvariants()) << "update " << k;
+  }
+  EXPECT_GT(starts, 0);
+  EXPECT_EQ(as.numFactors(), in.numFactors());
+  in.relinearizeAll();
+  as.relinearizeAll();
+  EXPECT_FALSE(as.relinearizationPending());
+  EXPECT_NEAR(as.objective(), in.objective(), 1e-5 * in.objective());
+}
+
+}  // namespace
+}  // namespace arbor
