@@ -131,6 +131,17 @@ TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
   EXPECT_EQ(o.relinearize_skip, SmootherOptions{}.relinearize_skip);
 }
 
+TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
+  const std::vector<std::string> args = {"--relinearize", "async", "--async-min-variables", "10"};
+  for (const SmootherOptions& o : {replaySmoother(args), serveSmoother(args)}) {
+    EXPECT_EQ(o.relinearize, RelinearizationMode::kAsync);
+    EXPECT_EQ(o.async.min_variables, 10);
+  }
+  EXPECT_EQ(replaySmoother({"--relinearize", "inline"}).relinearize, RelinearizationMode::kInline);
+  EXPECT_EQ(SmootherOptions{}.relinearize, RelinearizationMode::kInline);
+  EXPECT_THROW(replaySmoother({"--relinearize", "async", "--dogleg"}), UsageError);
+}
+
 TEST(SmootherFlags, OneThresholdSetsBothAndTheSpecificOneWins) {
   SmootherOptions o = replaySmoother({"--relinearize-threshold", "0.4"});
   EXPECT_EQ(o.relinearize_threshold_translation, 0.4);
@@ -157,6 +168,8 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
       {"--batch-top-share", "0"},
       {"--batch-top-share", "1.5"},
       {"--reorder-decay", "0.5"},
+      {"--relinearize", "sometimes"},
+      {"--async-min-variables", "0"},
   };
   for (const auto& [flag, value] : bad) {
     for (const bool serve : {false, true}) {
