@@ -1,6 +1,7 @@
 #include "arbor/core/gnc_solver.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -34,6 +35,9 @@ void checkOptions(const GncOptions& o, int edges) {
   if (!o.trusted.empty() && static_cast<int>(o.trusted.size()) != edges)
     throw std::invalid_argument("GncOptions.trusted has " + std::to_string(o.trusted.size()) +
                                 " marks for " + std::to_string(edges) + " edges");
+  if (!o.kernels.empty() && static_cast<int>(o.kernels.size()) != edges)
+    throw std::invalid_argument("GncOptions.kernels has " + std::to_string(o.kernels.size()) +
+                                " kernels for " + std::to_string(edges) + " edges");
 }
 
 template <class G>
@@ -102,11 +106,20 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
                                 " poses for a graph of " + std::to_string(graph.numPoses()));
   GncResult result;
   result.trusted.assign(m, 0);
+  // Each weighted edge's kernel kind: its own (GncOptions::kernels) or options.kernel.
+  std::vector<KernelKind> kind(m, options.kernel);
+  bool any_graduated = false, all_tls = true;
   for (int k = 0; k < m; ++k) {
     const auto& e = graph.edges[k];
     result.trusted[k] = (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
                         (!options.trusted.empty() && options.trusted[k]);
-    if (!result.trusted[k]) ++result.candidates;
+    if (!options.kernels.empty() && options.kernels[k] != KernelKind::kNone)
+      kind[k] = options.kernels[k];
+    if (result.trusted[k]) continue;
+    ++result.candidates;
+    const RobustKernel probe{kind[k], 1.0, 1.0};
+    any_graduated = any_graduated || probe.isGraduated();
+    all_tls = all_tls && kind[k] == KernelKind::kTruncatedLeastSquares;
   }
 
   BatchOptions inner = options.inner, outer = options.outer;
@@ -123,47 +136,55 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   result.F_least_squares = ls.F_final;
   const std::vector<G> x_ls = *poses;
   std::vector<double> s = edgeCosts(graph, *poses);
-
+  std::vector<char> inlier(m, 1);
+  const bool restart = options.inner_start == GncInnerStart::kInitial;
+  // The threshold: given, the χ² quantile, or that quantile times the variance factor σ̂²
+  // (estimate_scale), re-estimated over the inliers between rounds (header comment).
   const bool given = options.threshold > 0;
   const bool automatic = !given && options.estimate_scale;
   const double quantile = given ? 0.0 : chiSquareThreshold(options.confidence, G::kDoF);
-  std::vector<char> inlier(m, 1);
   result.scale = automatic ? varianceFactor(graph, *poses, s, inlier) : 1.0;
   result.threshold = given ? options.threshold : quantile * result.scale;
-  const bool restart = options.inner_start == GncInnerStart::kInitial;
 
-  RobustKernel kernel{options.kernel, result.threshold, 1.0};
+  std::array<RobustKernel, 5> kernels;
   for (int round = 0; !result.cancelled && round < options.max_rounds; ++round) {
     ++result.rounds;
-    kernel.threshold = result.threshold;
     if (round > 0) {  // a new threshold: GNC again from the start, at x⁰'s residuals
       *poses = x_ls;
       s = edgeCosts(graph, *poses);
     }
-    result.converged = false;
-    bool done = false;
-    if (kernel.isGraduated()) {
-      // μ⁰ (Remark 5) from the largest weighted residual at x_init (GTSAM) or x⁰.
+    // One kernel per kind in use, each with its own μ (μ⁰ from the largest residual of its edges).
+    for (int c = 0; c < 5; ++c) {
+      kernels[c] = RobustKernel{static_cast<KernelKind>(c), result.threshold, 1.0};
+      if (!kernels[c].isGraduated()) continue;
       const std::vector<double>& s0 = options.mu_start == GncMuStart::kInitial ? s_init : s;
       double s_max = 0.0;
       for (int k = 0; k < m; ++k)
-        if (!result.trusted[k]) s_max = std::max(s_max, s0[k]);
-      kernel.mu = kernel.initialMu(s_max);
+        if (!result.trusted[k] && static_cast<int>(kind[k]) == c) s_max = std::max(s_max, s0[k]);
+      kernels[c].mu = kernels[c].initialMu(s_max);
+    }
+    kernels[0].mu = 1.0;
+    RobustKernel& tls = kernels[static_cast<int>(KernelKind::kTruncatedLeastSquares)];
+    const RobustKernel& gm = kernels[static_cast<int>(KernelKind::kGemanMcClure)];
+    auto kernelOf = [&](int k) -> const RobustKernel& {
+      return kernels[static_cast<int>(kind[k])];
+    };
+
+    result.converged = false;
+    bool done = result.cancelled;
+    if (!done && all_tls) {
       // x⁰ with every weighted s_k(x⁰) ≤ c² is a local minimum of Σ min(s_k, c²) (there TLS is
       // least squares, and x⁰ minimises it): TLS's answer, whatever μ⁰ says; GTSAM stops likewise
       // when s_max ≤ c²/2 at its initial values.
       double s_max_ls = 0.0;
       for (int k = 0; k < m; ++k)
         if (!result.trusted[k]) s_max_ls = std::max(s_max_ls, s[k]);
-      if (kernel.kind == KernelKind::kTruncatedLeastSquares) {
-        if (std::isinf(kernel.mu) || s_max_ls <= kernel.threshold) {
-          std::fill(w.begin(), w.end(), 1.0);
-          result.converged = done = true;
-          result.message = "every residual within c² at the least-squares start";
-        }
-        kernel.mu = std::max(kernel.mu, options.min_initial_mu);
+      if (std::isinf(tls.mu) || s_max_ls <= result.threshold) {
+        result.converged = done = true;
+        result.message = "every residual within c² at the least-squares start";
       }
     }
+    tls.mu = std::max(tls.mu, options.min_initial_mu);
     // F_w,prev: at the first step the least-squares objective (GTSAM's prev_cost).
     double previous_cost = ls.F_final;
     std::vector<double> previous(m, -1.0);
@@ -174,22 +195,25 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
       }
       ++result.iterations;
       // The closed-form weight update at the current estimate (trusted edges stay at 1).
-      bool binary = true;
-      double change = 0.0;
+      bool binary = true;   // every TLS weight within tolerance of 0 or 1
+      double change = 0.0;  // the largest move of a reweighted (Huber, Cauchy) weight
       for (int k = 0; k < m; ++k) {
         if (result.trusted[k]) continue;
+        const RobustKernel& kernel = kernelOf(k);
         w[k] = kernel.weight(s[k]);
-        if (std::min(w[k], 1.0 - w[k]) > options.weight_tolerance) binary = false;
-        change = std::max(change, std::abs(w[k] - previous[k]));
+        if (kernel.kind == KernelKind::kTruncatedLeastSquares &&
+            std::min(w[k], 1.0 - w[k]) > options.weight_tolerance)
+          binary = false;
+        if (!kernel.isGraduated()) change = std::max(change, std::abs(w[k] - previous[k]));
       }
-      if (!kernel.isGraduated() && change <= options.weight_tolerance) {
+      if (!any_graduated && change <= options.weight_tolerance) {
         result.converged = true;
         result.message = "weights converged";
         break;
       }
       previous = w;
       const std::vector<G> finished = *poses;  // the last step's estimate, kept if cancelled
-      if (restart && kernel.isGraduated()) *poses = x_init;
+      if (restart && any_graduated) *poses = x_init;
       const BatchSummary step = solver.solve(w, poses, inner);
       result.lm_iterations += step.iterations;
       if (step.termination == Termination::kCancelled) {
@@ -203,21 +227,18 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
         int out = 0;
         for (int k = 0; k < m; ++k) out += !result.trusted[k] && w[k] <= 0.5;
         std::fprintf(stderr,
-                     "gnc round %d step %3d  c² %.4g  μ %.4g  weighted F %.10e  outliers %d  "
+                     "gnc step %3d  c² %.4g  μ tls %.4g gm %.4g  weighted F %.10e  outliers %d  "
                      "max Δw %.3g  inner %d (%s)\n",
-                     round, it, kernel.threshold, kernel.mu, cost, out, change, step.iterations,
+                     it, result.threshold, tls.mu, gm.mu, cost, out, change, step.iterations,
                      toString(step.termination).c_str());
       }
-      if (!kernel.isGraduated()) continue;
-      // GTSAM's checkConvergence, on the weights this step solved with and its cost.
-      if (kernel.kind == KernelKind::kTruncatedLeastSquares && binary) {
+      if (!any_graduated) continue;
+      // GTSAM's checkConvergence, on the weights this step solved with and its cost: every kind
+      // at its kernel (TLS binary, GM at μ = 1, the reweighted ones still), or the cost still.
+      const bool irls_still = change <= options.weight_tolerance;
+      if (binary && gm.atKernel() && irls_still) {
         result.converged = true;
-        result.message = "weights binary";
-        break;
-      }
-      if (kernel.kind == KernelKind::kGemanMcClure && kernel.atKernel()) {
-        result.converged = true;
-        result.message = "μ at the kernel";
+        result.message = all_tls ? "weights binary" : "every kernel reached";
         break;
       }
       if (std::abs(cost - previous_cost) / std::max(previous_cost, 1e-7) < options.cost_tolerance) {
@@ -226,10 +247,15 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
         break;
       }
       previous_cost = cost;
-      kernel.mu = kernel.nextMu(options.mu_factor);
+      for (RobustKernel& kernel : kernels)
+        if (kernel.isGraduated()) kernel.mu = kernel.nextMu(options.mu_factor);
     }
-    if (!result.converged) result.message = "GNC iteration limit reached";
+    if (!result.converged && !result.cancelled) result.message = "GNC iteration limit reached";
+    if (result.converged && done) std::fill(w.begin(), w.end(), 1.0);
+    if (!result.converged && !result.cancelled) result.message = "GNC iteration limit reached";
+    if (result.converged && done) std::fill(w.begin(), w.end(), 1.0);
     for (int k = 0; k < m; ++k) inlier[k] = result.trusted[k] || w[k] > 0.5;
+    result.mu = any_graduated ? (all_tls ? tls.mu : gm.mu) : 1.0;
     if (!automatic || result.cancelled) break;
     const double scale = varianceFactor(graph, *poses, s, inlier);
     const double threshold = quantile * scale;
@@ -241,7 +267,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
     result.scale = scale;
     result.threshold = threshold;
   }
-  result.mu = kernel.mu;
+  auto kernelOf = [&](int k) -> const RobustKernel& { return kernels[static_cast<int>(kind[k])]; };
 
   // The inlier problem: the edges kept, each with weight 1, from the GNC estimate.
   std::vector<double> binary(m);
@@ -263,7 +289,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   result.robust_cost = result.F_inliers;
   for (int k = 0; k < m; ++k) {
     if (!inlier[k]) ++result.rejected;
-    if (!result.trusted[k]) result.robust_cost += kernel.rho(s[k]) - (inlier[k] ? s[k] : 0.0);
+    if (!result.trusted[k]) result.robust_cost += kernelOf(k).rho(s[k]) - (inlier[k] ? s[k] : 0.0);
   }
   result.time_s = std::chrono::duration<double>(Clock::now() - start).count();
   return result;

@@ -32,6 +32,11 @@
 // Trusted edges (weight 1 throughout; GTSAM's known inliers): odometry, |i − j| = 1 in dense
 // indices, or the edges the caller marks; priors are never weighted.
 //
+// Per-edge kernels (GncOptions::kernels): each weighted edge graduates by its own kind, each
+// kind with its own μ (μ⁰ from the largest residual of its edges, its own schedule); GNC stops
+// when every kind is at its kernel at once (TLS weights binary, GM at μ = 1, Huber and Cauchy
+// weights still) or on the cost. The early stop at x⁰ is TLS's and needs every weighted edge TLS.
+//
 // The threshold c² on s. Given (GncOptions::threshold > 0) it is used as is (GTSAM's barcSq = 1
 // on its error ½‖r‖² is c² = 2). Otherwise it is the χ² quantile of the edge's dimension at
 // GncOptions::confidence, Ω taken at its word (GTSAM's default,
@@ -98,6 +103,9 @@ struct GncOptions {
   /// Per-edge marks of trusted edges (the sender's), one per edge, or empty: none beyond
   /// odometry.
   std::vector<char> trusted;
+  /// Per-edge kernel kinds, one per edge, or empty: `kernel` for every edge. KernelKind::kNone
+  /// in it: `kernel` for that edge. Ignored on trusted edges.
+  std::vector<KernelKind> kernels;
   /// The solve of each weighted problem (GTSAM: Gauss–Newton, relative tolerance 1e-5, at most
   /// 100 iterations).
   BatchOptions inner = batchOptions(BatchMethod::kGaussNewton, 100, 1e-5);

@@ -1,5 +1,7 @@
 #include "arbor/io/edge_choice_file.h"
 
+#include <cstdlib>
+
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -89,7 +91,26 @@ void checkEdgeChoices(const EdgeChoices& choices, const PoseGraph<G>& graph,
   }
 }
 
+template <class G>
+void applyEdgeChoices(const EdgeChoices& choices, const PoseGraph<G>& graph, GncOptions* gnc) {
+  const int m = graph.numEdges();
+  const bool by_rule_trusts_odometry = gnc->trust_odometry;
+  gnc->trust_odometry = false;
+  gnc->trusted.resize(m, 0);
+  gnc->kernels.assign(m, KernelKind::kNone);
+  for (int k = 0; k < m; ++k) {
+    const auto& e = graph.edges[k];
+    const EdgeChoice c = edgeChoice(choices, graph.ids[e.i], graph.ids[e.j]);
+    const bool odometry = by_rule_trusts_odometry && std::abs(e.i - e.j) == 1;
+    gnc->trusted[k] = c.trust == EdgeTrust::kTrusted ||
+                      (c.trust == EdgeTrust::kByRule && (odometry || gnc->trusted[k]));
+    gnc->kernels[k] = c.kernel;
+  }
+}
+
 template void checkEdgeChoices(const EdgeChoices&, const PoseGraph<SE2>&, const std::string&);
+template void applyEdgeChoices(const EdgeChoices&, const PoseGraph<SE2>&, GncOptions*);
+template void applyEdgeChoices(const EdgeChoices&, const PoseGraph<SE3>&, GncOptions*);
 template void checkEdgeChoices(const EdgeChoices&, const PoseGraph<SE3>&, const std::string&);
 
 }  // namespace arbor

@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "arbor/core/edge_trust.h"
+#include "arbor/core/gnc_solver.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/robust_kernel.h"
 #include "arbor/io/pose_graph_file.h"
@@ -40,5 +41,13 @@ EdgeChoice edgeChoice(const EdgeChoices& choices, Key from, Key to);
 template <class G>
 void checkEdgeChoices(const EdgeChoices& choices, const PoseGraph<G>& graph,
                       const std::string& name);
+
+/// The choices for the robust batch (`arbor batch --robust --edge-choices`): GncOptions::trusted
+/// and ::kernels, one per edge, and trust_odometry off. kByRule keeps the batch's rule (odometry,
+/// |i − j| = 1 in dense indices, trusted when gnc->trust_odometry was on; a mark already in
+/// gnc->trusted stays), kTrusted holds the edge at weight 1, kRobust judges it whatever its ids;
+/// a kernel other than kNone is that edge's own.
+template <class G>
+void applyEdgeChoices(const EdgeChoices& choices, const PoseGraph<G>& graph, GncOptions* gnc);
 
 }  // namespace arbor

@@ -2,12 +2,15 @@
 // lines named by place and value, pairs the graph does not have — and `arbor replay --robust
 // --edge-choices`: a planted false closure marked trusted keeps weight 1, a false second
 // odometry edge marked robust is judged and rejected.
+#include <cstdlib>
 #include <set>
 #include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
 
+#include "arbor/core/gnc_solver.h"
+#include "arbor/core/initialization.h"
 #include "arbor/io/edge_choice_file.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/graph_generator.h"
@@ -98,6 +101,59 @@ TEST(EdgeChoiceFile, ReplayTakesTheChoicePerEdge) {
   // Both 60 -> 61 edges are robust now: the true one created pose 61 (structural, trusted), the
   // false one is judged and rejected.
   EXPECT_EQ(statuses(chosen, 60, 61), (Set{ClosureStatus::kTrusted, ClosureStatus::kOutlier}));
+}
+
+// The robust batch (arbor batch --robust --edge-choices): the same sidecar into GNC's per-edge
+// trust and kernels; a false closure marked trusted is kept at weight 1, a false second
+// odometry edge marked robust is judged and rejected, a closure's own kernel reaches the GNC.
+TEST(EdgeChoiceFile, BatchTakesTheChoicePerEdge) {
+  sim::ManhattanOptions o;
+  o.poses = 120;
+  o.grid = 4;
+  o.seed = 5;
+  PoseGraph2 graph = sim::manhattanWorld(o).graph;
+  int closure = -1;
+  for (int k = 0; k < graph.numEdges() && closure < 0; ++k)
+    if (std::abs(graph.edges[k].i - graph.edges[k].j) > 1) closure = k;
+  ASSERT_GE(closure, 0);
+  RelativePoseEdge<SE2> wrong = graph.edges.back();
+  wrong.i = 10;
+  wrong.j = 90;
+  wrong.measurement = SE2(0.5, 0.2, 0.1);
+  graph.edges.push_back(wrong);
+  const int trusted_false = graph.numEdges() - 1;
+  wrong.i = 60;
+  wrong.j = 61;
+  wrong.measurement = SE2(3.0, -2.0, 1.0);
+  graph.edges.push_back(wrong);
+  const int robust_false = graph.numEdges() - 1;
+  const Key ci = graph.ids[graph.edges[closure].i], cj = graph.ids[graph.edges[closure].j];
+  const EdgeChoices choices = parse("10 90 trusted\n60 61 robust\n" + std::to_string(ci) + " " +
+                                    std::to_string(cj) + " default huber\n");
+  checkEdgeChoices(choices, graph, "x.choices");
+  GncOptions gnc;
+  applyEdgeChoices(choices, graph, &gnc);
+  EXPECT_FALSE(gnc.trust_odometry);
+  ASSERT_EQ(static_cast<int>(gnc.trusted.size()), graph.numEdges());
+  EXPECT_EQ(gnc.kernels[closure], KernelKind::kHuber);
+  EXPECT_FALSE(gnc.trusted[closure]);
+  EXPECT_TRUE(gnc.trusted[trusted_false]);
+  EXPECT_FALSE(gnc.trusted[robust_false]);
+  EXPECT_TRUE(gnc.trusted[0]);  // odometry by the rule
+  std::vector<SE2> poses = initialize(graph, InitMethod::kOdometry);
+  const GncResult r = solveGnc(graph, &poses, gnc);
+  EXPECT_EQ(r.weights[trusted_false], 1.0);
+  EXPECT_TRUE(r.inlier[trusted_false]);
+  EXPECT_FALSE(r.inlier[robust_false]);
+  int judged_odometry = 0;
+  for (int k = 0; k < graph.numEdges(); ++k) {
+    const auto& e = graph.edges[k];
+    if (k != robust_false && std::abs(e.i - e.j) == 1 && graph.ids[e.i] + graph.ids[e.j] == 121) {
+      EXPECT_FALSE(r.trusted[k]);  // the true 60 -> 61 is judged too
+      ++judged_odometry;
+    }
+  }
+  EXPECT_EQ(judged_odometry, 1);
 }
 
 }  // namespace

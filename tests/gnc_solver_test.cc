@@ -41,7 +41,8 @@ typename G::Tangent noiseFor(std::mt19937_64& rng,
 }
 
 template <class G>
-Planted<G> makeGraph(int n, int loops, int random_false, int group_false, std::uint64_t seed) {
+Planted<G> makeGraph(int n, int loops, int random_false, int group_false, std::uint64_t seed,
+                     double precision = 1.0) {
   std::mt19937_64 rng(seed);
   std::vector<G> truth{G::Identity()};
   for (int k = 1; k < n; ++k) {
@@ -56,7 +57,7 @@ Planted<G> makeGraph(int n, int loops, int random_false, int group_false, std::u
     g.index[k] = k;
   }
   const auto add = [&](int i, int j, const G& z, bool is_false) {
-    g.edges.push_back(RelativePoseEdge<G>::make(i, j, z, randomInformation<G>(rng)));
+    g.edges.push_back(RelativePoseEdge<G>::make(i, j, z, precision * randomInformation<G>(rng)));
     auto& e = g.edges.back();
     if (!is_false) e.measurement = z.retract(noiseFor<G>(rng, e.information));
     p.is_false.push_back(is_false);
@@ -252,6 +253,42 @@ TYPED_TEST(GncSolverTest, CleanDataKeepsTheTrueClosuresAndTheOptimum) {
     EXPECT_NEAR(r.F_all, ls.F_final, 1e-3 * ls.F_final);
     EXPECT_EQ(r.scale, 1.0);  // the χ² quantile as is (no estimate_scale)
   }
+}
+
+// Per-edge kernels: every edge given the default kernel explicitly is the run without them bit
+// for bit; one true closure given Cauchy keeps Cauchy's weight, strictly inside (0.5, 1).
+TYPED_TEST(GncSolverTest, PerEdgeKernels) {
+  using G = TypeParam;
+  const Planted<G> p = makeGraph<G>(120, 40, 8, 0, 11);
+  GncOptions o;
+  o.threshold = chiSquareThreshold(0.9999, G::kDoF);
+  std::vector<G> x0 = p.graph.poses, x1 = p.graph.poses, x2 = p.graph.poses;
+  const GncResult plain = solveGnc(p.graph, &x0, o);
+  GncOptions same = o;
+  same.kernels.assign(p.graph.edges.size(), KernelKind::kTruncatedLeastSquares);
+  const GncResult explicit_tls = solveGnc(p.graph, &x1, same);
+  EXPECT_EQ(plain.weights, explicit_tls.weights);
+  EXPECT_EQ(plain.F_all, explicit_tls.F_all);
+  int cauchy = -1;  // a true closure
+  for (size_t k = 0; k < p.is_false.size(); ++k)
+    if (!p.is_false[k] && !plain.trusted[k]) cauchy = static_cast<int>(k);
+  ASSERT_GE(cauchy, 0);
+  GncOptions mixed = o;
+  mixed.kernels.assign(p.graph.edges.size(), KernelKind::kNone);
+  mixed.kernels[cauchy] = KernelKind::kCauchy;
+  const GncResult r = solveGnc(p.graph, &x2, mixed);
+  // Cauchy's weight 1/(1 + s/c²): in (0.5, 1) for a true closure (0 < s < c²), never TLS's 0/1.
+  EXPECT_GT(r.weights[cauchy], 0.5);
+  EXPECT_LT(r.weights[cauchy], 1.0);
+  int false_kept = 0;
+  for (size_t k = 0; k < p.is_false.size(); ++k)
+    if (static_cast<int>(k) != cauchy) {
+      false_kept += p.is_false[k] && r.inlier[k];
+      EXPECT_LE(std::min(r.weights[k], 1.0 - r.weights[k]), 1e-3) << k;  // TLS: binary
+    }
+  EXPECT_EQ(false_kept, 0);
+  mixed.kernels.pop_back();
+  EXPECT_THROW(solveGnc(p.graph, &x2, mixed), std::invalid_argument);
 }
 
 }  // namespace

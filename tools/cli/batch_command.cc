@@ -10,6 +10,7 @@
 
 #include "arbor/core/gnc_solver.h"
 #include "arbor/core/initialization.h"
+#include "arbor/io/edge_choice_file.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/io/trajectory_writer.h"
 #include "arbor/tools/cli/cli_common.h"
@@ -38,6 +39,7 @@ struct BatchRun {
   bool robust = false;
   GncOptions gnc;            // --kernel, --inlier-threshold, --gnc-inner-start, --gnc-mu-start
   std::string rejected_out;  // --rejected-out
+  std::string edge_choices;  // --edge-choices FILE (io/edge_choice_file.h)
 };
 
 // -o in --format, --covariances: the marginal covariances at the final estimate.
@@ -180,6 +182,11 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   options.outer.max_iterations = run.settings.max_iterations;
   options.outer.relative_tolerance = run.settings.relative_tolerance;
   options.verbose = run.settings.verbose;
+  if (!run.edge_choices.empty()) {  // per-edge trust and kernel (io/edge_choice_file.h)
+    const EdgeChoices choices = readEdgeChoicesFile(run.edge_choices);
+    checkEdgeChoices(choices, graph, run.edge_choices);
+    applyEdgeChoices(choices, graph, &options);
+  }
   const GncResult gncFirst = solveGnc(graph, &poses, options);
 
   // rtr: the certifiable path on the inlier set (core/gnc_solver.h certifyInliers), which may
@@ -338,6 +345,9 @@ int batchCommand(const std::vector<std::string>& args) {
                  "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| "
                  "= 1) trusted; with --solver rtr, then the certifiable solver on the edges kept");
   options.add_options()(
+      "edge-choices", po::value(&run.edge_choices),
+      "with --robust: per-edge trust and kernel, \"FROM TO TRUST [KERNEL]\" a line "
+      "(docs/files.md); the default trust is the batch's rule (odometry |i-j| = 1 trusted)")(
       "gnc-inner-start", po::value(&inner_start)->default_value(inner_start),
       "with --robust: each GNC step's weighted solve starts from the initial estimate (initial, "
       "as GTSAM's GncOptimizer) or from the previous step's (previous)")(
@@ -376,7 +386,7 @@ int batchCommand(const std::vector<std::string>& args) {
       throw UsageError("--gnc-mu-start must be initial or least-squares, not '" + mu_start + "'");
     run.gnc.mu_start = mu_start == "initial" ? GncMuStart::kInitial : GncMuStart::kLeastSquares;
   } else {
-    for (const char* flag : {"gnc-inner-start", "gnc-mu-start"})
+    for (const char* flag : {"gnc-inner-start", "gnc-mu-start", "edge-choices"})
       if (given.count(flag) && !given[flag].defaulted())
         throw UsageError(std::string("--") + flag + " needs --robust");
   }
