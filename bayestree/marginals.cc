@@ -11,25 +11,6 @@
 namespace arbor::bayestree {
 
 template <int D>
-void TreeMarginals<D>::clear() {
-  for (int c : cached_) {
-    cache_[c].joint.resize(0, 0);
-    cache_[c].X.resize(0, 0);
-  }
-  cached_.clear();
-}
-
-template <int D>
-void TreeMarginals<D>::sync(const BayesTree<D>& tree, long version) {
-  if (version != version_) {
-    clear();
-    version_ = version;
-  }
-  cache_.resize(tree.cliques.size());
-  mark_.resize(tree.cliques.size(), 0);
-}
-
-template <int D>
 int TreeMarginals<D>::position(const Clique<D>& c, int v) {
   const auto f = std::find(c.frontals.begin(), c.frontals.end(), v);
   if (f != c.frontals.end()) return static_cast<int>(f - c.frontals.begin());
@@ -69,156 +50,98 @@ void TreeMarginals<D>::jointOf(const BayesTree<D>& tree, int c, const Eigen::Mat
   joint->bottomLeftCorner(Sn, F) = Sfs.transpose();
 }
 
+// (2): Y_v = R⁻ᵀE_v by forward substitution along the path from v's clique to the root. Per
+// clique c, bottom-up, with [L; B] = [Rᵀ; Sᵀ] as stored and r_c the right-hand side so far (zero
+// above row f): y_c = L⁻¹ r_c, which is zero above f too, so only L[f:, f:] is read; then
+// r_s −= B y_c for the separator's rows (frontal rows of cliques above on the path), reading
+// B[:, f:] only; Σ_vv = Σ_c y_cᵀ y_c.
 template <int D>
-const Eigen::MatrixXd& TreeMarginals<D>::cliqueJoint(const BayesTree<D>& tree, int c) {
-  // Up to the first clique with a cached joint (or past the root), then (1) top-down.
-  path_.clear();
-  for (int p = c; p >= 0 && cache_[p].joint.size() == 0; p = tree.cliques[p].parent)
-    path_.push_back(p);
-  for (auto it = path_.rbegin(); it != path_.rend(); ++it) {
-    const int parent = tree.cliques[*it].parent;
-    Entry& e = cache_[*it];
-    jointOf(tree, *it, parent >= 0 ? &cache_[parent].joint : nullptr, &e.joint, &e.X);
-    cached_.push_back(*it);
-  }
-  return cache_[c].joint;
-}
-
-// x_v from its clique c up to l's child: x_f = −X x_s + noise at each clique on the way, the
-// separator variables passed through; T maps the current variables V to x_v.
-template <int D>
-void TreeMarginals<D>::shortcut(const BayesTree<D>& tree, int v, int c, int l, std::vector<int>* V,
-                                Eigen::MatrixXd* T) {
-  if (c == l) {
-    V->assign(1, v);
-    *T = Eigen::MatrixXd::Identity(D, D);
-    return;
-  }
-  const Clique<D>& k = tree.cliques[c];
-  *V = k.separator;
-  *T = -cache_[c].X.middleRows(position(k, v) * D, D);
-  for (int p = k.parent; p != l; p = tree.cliques[p].parent) {
-    const Clique<D>& q = tree.cliques[p];
-    const int nf = static_cast<int>(q.frontals.size());
-    Eigen::MatrixXd next = Eigen::MatrixXd::Zero(D, q.Sn);
-    for (size_t j = 0; j < V->size(); ++j) {
-      const int at = position(q, (*V)[j]);
-      const auto Tj = T->middleCols(static_cast<int>(j) * D, D);
-      if (at >= nf)
-        next.middleCols((at - nf) * D, D) += Tj;
-      else
-        next.noalias() -= Tj * cache_[p].X.middleRows(at * D, D);
-    }
-    *V = q.separator;
-    T->swap(next);
-  }
-}
-
-// (2): Σ_vv = YᵀY, Y = R⁻ᵀE_v, by forward substitution along the path from v's clique to the
-// root. Per clique c, bottom-up, with [L; B] = [Rᵀ; Sᵀ] as stored: L y_c = r_c, then
-// r_s −= B y_c for the separator's rows (frontal rows of cliques above on the path).
-template <int D>
-typename TreeMarginals<D>::Block TreeMarginals<D>::pathMarginal(const BayesTree<D>& tree, int v) {
+typename TreeMarginals<D>::Block TreeMarginals<D>::solvePath(const BayesTree<D>& tree, int v,
+                                                             PathSolve* out,
+                                                             std::vector<double>* by) {
   using Rows = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, D>>;
-  // The path, each clique's rows in one buffer (offset_ per path entry), and each frontal's row
-  // in it (row_of_ per variable), so a separator variable finds its rows in O(1).
-  path_.clear();
-  offset_.clear();
+  std::vector<int>& path = out->path;
+  std::vector<int>& offset = out->offset;
+  std::vector<int>& first = out->first;
+  path.clear();
+  offset.clear();
+  first.clear();
   int rows = 0, max_sn = 0;
   for (int p = tree.clique_of[v]; p >= 0; p = tree.cliques[p].parent) {
     const Clique<D>& q = tree.cliques[p];
-    path_.push_back(p);
-    offset_.push_back(rows);
-    row_of_.resize(std::max(row_of_.size(), tree.clique_of.size()), -1);
-    for (size_t f = 0; f < q.frontals.size(); ++f)
-      row_of_[q.frontals[f]] = rows + static_cast<int>(f) * D;
+    path.push_back(p);
+    offset.push_back(rows);
+    first.push_back(q.F);  // nothing reached yet
     rows += q.F;
     max_sn = std::max(max_sn, q.Sn);
   }
-  buffer_.assign(static_cast<size_t>(rows + max_sn) * D, 0.0);
-  Rows r(buffer_.data(), rows, D);  // r_c, then y_c, per clique of the path
-  r.template middleRows<D>(row_of_[v]).setIdentity();
+  out->y.assign(static_cast<size_t>(rows) * D, 0.0);
+  by->resize(static_cast<size_t>(max_sn) * D);
+  auto rowsOf = [&](size_t k) {  // y_c of the k-th clique of the path, F×D
+    return Rows(out->y.data() + static_cast<size_t>(offset[k]) * D, tree.cliques[path[k]].F, D);
+  };
+  const int at = position(tree.cliques[path[0]], v) * D;
+  rowsOf(0).template middleRows<D>(at).setIdentity();
+  first[0] = at;
   Block sigma = Block::Zero();
-  bool off_path = false;
-  for (size_t k = 0; k < path_.size() && !off_path; ++k) {
-    const Clique<D>& q = tree.cliques[path_[k]];
-    auto y = r.middleRows(offset_[k], q.F);
-    q.LS().topRows(q.F).template triangularView<Eigen::Lower>().solveInPlace(y);
+  for (size_t k = 0; k < path.size(); ++k) {
+    const Clique<D>& q = tree.cliques[path[k]];
+    const int f = first[k], n = q.F - f;
+    if (n <= 0) continue;  // nothing reached this clique: y_c = 0
+    const auto LS = q.LS();
+    auto y = rowsOf(k).bottomRows(n);
+    LS.block(f, f, n, n).template triangularView<Eigen::Lower>().solveInPlace(y);
     sigma.noalias() += y.transpose() * y;
     if (q.Sn == 0) continue;
-    Rows By(buffer_.data() + static_cast<size_t>(rows) * D, q.Sn, D);
-    By.noalias() = q.LS().bottomRows(q.Sn) * y;
+    Rows By(by->data(), q.Sn, D);
+    By.noalias() = LS.block(q.F, f, q.Sn, n) * y;
+    size_t j = k + 1;  // the separator's cliques lie above on the path, roughly in order
     for (size_t b = 0; b < q.separator.size(); ++b) {
-      const int at = row_of_[q.separator[b]];
-      if (at < 0) {
-        off_path = true;
-        break;
+      const int s = q.separator[b], cs = tree.clique_of[s];
+      if (j >= path.size() || path[j] != cs) {
+        j = k + 1;
+        while (j < path.size() && path[j] != cs) ++j;
+        if (j == path.size())
+          throw std::logic_error("TreeMarginals: separator variable " + std::to_string(s) +
+                                 " of variable " + std::to_string(v) +
+                                 "'s path is not frontal on it");
       }
-      r.template middleRows<D>(at) -= By.template middleRows<D>(static_cast<int>(b) * D);
+      const int row = position(tree.cliques[cs], s) * D;
+      rowsOf(j).template middleRows<D>(row) -= By.template middleRows<D>(static_cast<int>(b) * D);
+      first[j] = std::min(first[j], row);
     }
   }
-  for (int c : path_)
-    for (int f : tree.cliques[c].frontals) row_of_[f] = -1;
-  if (off_path)
-    throw std::logic_error("TreeMarginals: a separator variable of variable " + std::to_string(v) +
-                           "'s path is not frontal on it");
   return sigma;
 }
 
 template <int D>
-typename TreeMarginals<D>::Block TreeMarginals<D>::marginal(const BayesTree<D>& tree, long version,
-                                                            int v) {
+typename TreeMarginals<D>::Block TreeMarginals<D>::marginal(const BayesTree<D>& tree, int v) {
   std::lock_guard<std::mutex> lock(mutex_);
-  const int c = tree.clique_of[v];
-  // A clique whose joint is cached for this version (by joint()) answers at once; else the path
-  // solve (2), which costs O(Σ (F² + F·Sn) D) on the path instead of the joints'
-  // O(Σ (F + Sn)³), and leaves the cache as it is.
-  if (version == version_ && c < static_cast<int>(cache_.size()) && cache_[c].joint.size() != 0) {
-    const int at = position(tree.cliques[c], v) * D;
-    return cache_[c].joint.template block<D, D>(at, at);
-  }
-  return pathMarginal(tree, v);
+  return solvePath(tree, v, &pa_, &by_);
 }
 
+// Σ_ab = Y_aᵀY_b over the cliques both paths hold: their common tail, from the lowest common
+// ancestor to the root (none when a and b are in different trees), each from the later of the
+// two first rows.
 template <int D>
-typename TreeMarginals<D>::JointBlock TreeMarginals<D>::joint(const BayesTree<D>& tree,
-                                                              long version, int a, int b) {
+typename TreeMarginals<D>::JointBlock TreeMarginals<D>::joint(const BayesTree<D>& tree, int a,
+                                                              int b) {
+  using Rows = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, D>>;
   std::lock_guard<std::mutex> lock(mutex_);
-  sync(tree, version);
   JointBlock out = JointBlock::Zero();
   const int ca = tree.clique_of[a], cb = tree.clique_of[b];
-  if (ca >= 0) {
-    const int at = position(tree.cliques[ca], a) * D;
-    out.template topLeftCorner<D, D>() = cliqueJoint(tree, ca).template block<D, D>(at, at);
-  }
-  if (cb >= 0) {
-    const int at = position(tree.cliques[cb], b) * D;
-    out.template bottomRightCorner<D, D>() = cliqueJoint(tree, cb).template block<D, D>(at, at);
-  }
+  if (ca >= 0) out.template topLeftCorner<D, D>() = solvePath(tree, a, &pa_, &by_);
+  if (cb >= 0) out.template bottomRightCorner<D, D>() = solvePath(tree, b, &pb_, &by_);
   if (ca < 0 || cb < 0) return out;  // a constant: no correlation
-  // The lowest common ancestor l (none: different trees, independent).
-  if (++mark_stamp_ == 0) {
-    std::fill(mark_.begin(), mark_.end(), 0);
-    mark_stamp_ = 1;
+  Block ab = Block::Zero();
+  for (int i = static_cast<int>(pa_.path.size()) - 1, j = static_cast<int>(pb_.path.size()) - 1;
+       i >= 0 && j >= 0 && pa_.path[i] == pb_.path[j]; --i, --j) {
+    const int F = tree.cliques[pa_.path[i]].F, f = std::max(pa_.first[i], pb_.first[j]);
+    if (f >= F) continue;
+    const Rows ya(pa_.y.data() + static_cast<size_t>(pa_.offset[i]) * D, F, D);
+    const Rows yb(pb_.y.data() + static_cast<size_t>(pb_.offset[j]) * D, F, D);
+    ab.noalias() += ya.bottomRows(F - f).transpose() * yb.bottomRows(F - f);
   }
-  for (int p = ca; p >= 0; p = tree.cliques[p].parent) mark_[p] = mark_stamp_;
-  int l = cb;
-  while (l >= 0 && mark_[l] != mark_stamp_) l = tree.cliques[l].parent;
-  if (l < 0) return out;
-  std::vector<int> Va, Vb;
-  Eigen::MatrixXd Ta, Tb;
-  shortcut(tree, a, ca, l, &Va, &Ta);
-  shortcut(tree, b, cb, l, &Vb, &Tb);
-  const Eigen::MatrixXd& J = cache_[l].joint;  // cached: l is on both paths
-  const Clique<D>& k = tree.cliques[l];
-  Eigen::MatrixXd Sl(Va.size() * D, Vb.size() * D);
-  for (size_t i = 0; i < Va.size(); ++i) {
-    const int pi = position(k, Va[i]) * D;
-    for (size_t j = 0; j < Vb.size(); ++j)
-      Sl.template block<D, D>(static_cast<int>(i) * D, static_cast<int>(j) * D) =
-          J.template block<D, D>(pi, position(k, Vb[j]) * D);
-  }
-  const Block ab = Ta * Sl * Tb.transpose();
   out.template topRightCorner<D, D>() = ab;
   out.template bottomLeftCorner<D, D>() = ab.transpose();
   return out;
@@ -252,12 +175,6 @@ void TreeMarginals<D>::all(const BayesTree<D>& tree, std::vector<Block>* out) {
     for (int ch : k.children) stack.push_back(ch);
     release(c);
   }
-}
-
-template <int D>
-int TreeMarginals<D>::cachedCliques() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return static_cast<int>(cached_.size());
 }
 
 // With H = RᵀR (R the tree's square-root information, block row [Lᵀ | Bᵀ] per clique, [L; B]

@@ -11,26 +11,19 @@
 //
 // and Σ_ss lies inside the joint covariance of the parent's variables (running intersection):
 // the joint of a clique's [frontals; separator] follows from its parent's, top-down from the
-// root, where Σ = (RᵀR)⁻¹. A joint query computes the joints on the path from its clique to the
-// root only, and keeps them (with X) until the tree changes: the paper's dynamic programming over
-// the entries of Σ that are needed, per clique instead of per entry, so a second query on the same
-// path, or one below a clique already computed, costs only its own cliques.
+// root, where Σ = (RᵀR)⁻¹. all() walks the whole tree so, top-down, once.
 //
-// Two variables a, b in cliques c_a ≠ c_b: with l their lowest common ancestor, a and b are
-// conditionally independent given the variables of l, and (1) read along the path from c_a up to
-// l's child gives x_a = T_a x_{V_a} + (noise of those cliques) with V_a ⊂ vars(l) (GTSAM's
-// "shortcut"); so Σ_ab = T_a Σ_l[V_a, V_b] T_bᵀ, with T_a = I and V_a = {a} when c_a = l. Cliques
-// in different trees (components) are independent: Σ_ab = 0.
+// One variable's marginal, or the joint of two, needs no clique joint: with Σ = (RᵀR)⁻¹ over the
+// whole tree's square root R (the cliques' [R S] rows, in elimination order),
 //
-// One variable's marginal alone needs no joint: with Σ = (RᵀR)⁻¹ over the whole tree's square
-// root R (the cliques' [R S] rows, in elimination order),
+//   Σ_ab = Y_aᵀ Y_b,   Y_v = R⁻ᵀ E_v   (E_v: the identity's D columns of v),              (2)
 //
-//   Σ_vv = YᵀY,   Y = R⁻ᵀ E_v   (E_v: the identity's D columns of v),                  (2)
-//
-// and Rᵀ Y = E_v is a forward substitution whose solution is zero before v and off the path
+// and Rᵀ Y_v = E_v is a forward substitution whose solution is zero before v and off the path
 // from v's clique to the root (a clique's rows couple its frontals only to themselves and,
-// through S, to its separator, which is frontal higher up the path). marginal() solves it along
-// the path unless the clique's joint is cached already.
+// through S, to its separator, which is frontal higher up the path). So Y_v lives on v's path,
+// and Σ_ab sums y_aᵀ y_b over the cliques the two paths share (from the lowest common ancestor to
+// the root; none for two components: Σ_ab = 0). Within a clique, y is zero above the first row
+// its right-hand side reaches (L lower triangular), so each clique solves only from there on.
 //
 // Each is the covariance of the linear system the tree holds: of the tangent τ at the
 // linearisation point θ (x = θ ⊞ τ), in the gauge of the fixed poses (constants, not in the
@@ -46,10 +39,9 @@
 
 namespace arbor::bayestree {
 
-/// D: the dimension of one variable. The cache of clique joints is valid for one version of the
-/// tree (a number the owner changes whenever the tree changes); every query names the version,
-/// and a new one clears the cache. Thread-safe (queries are serialised on a mutex); a copy
-/// starts with an empty cache.
+/// D: the dimension of one variable. Thread-safe (the path solves' scratch is serialised on a
+/// mutex); a copy starts with empty scratch. Nothing is cached between queries: every query
+/// reads the tree as it is.
 template <int D>
 class TreeMarginals {
  public:
@@ -58,62 +50,43 @@ class TreeMarginals {
 
   TreeMarginals() = default;
   TreeMarginals(const TreeMarginals&) {}
-  TreeMarginals& operator=(const TreeMarginals&) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    clear();
-    return *this;
-  }
+  TreeMarginals& operator=(const TreeMarginals&) { return *this; }
 
-  /// Σ_vv of variable v; v must be frontal in some clique (tree.clique_of[v] ≥ 0). From the
-  /// cached joint of its clique when there is one, else by the path solve (2) (caching nothing).
-  Block marginal(const BayesTree<D>& tree, long version, int v);
-  /// [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]]; a variable with clique_of < 0 (a constant) has zero rows.
-  JointBlock joint(const BayesTree<D>& tree, long version, int a, int b);
+  /// Σ_vv of variable v by the path solve (2); v must be frontal in some clique
+  /// (tree.clique_of[v] ≥ 0). O(Σ (F² + F·Sn) D) over the cliques on v's path.
+  Block marginal(const BayesTree<D>& tree, int v);
+  /// [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] by two path solves (2); a variable with clique_of < 0 (a
+  /// constant) has zero rows. Twice a marginal's cost, plus O(F·D²) per shared clique.
+  JointBlock joint(const BayesTree<D>& tree, int a, int b);
   /// (*out)[v] = Σ_vv for every variable frontal in the tree (others untouched), in one walk
-  /// down the tree that keeps a clique's joint only until its children have read it (the
-  /// cache is neither used nor changed). out must have an entry per variable.
+  /// down the tree (1) that keeps a clique's joint only until its children have read it. out
+  /// must have an entry per variable.
   static void all(const BayesTree<D>& tree, std::vector<Block>* out);
   /// A Σ Aᵀ for a linear map A = [A_1 … A_k] on variables vars[k] (A_k: m×D, `blocks[k]`),
   /// without forming Σ (see predicted() in marginals.cc): one forward substitution along the
   /// variables' paths to the root, O(Σ over those cliques of (F + Sn)·F·m). A variable with
-  /// clique_of < 0 (a constant) contributes nothing. The cache is neither used nor changed.
+  /// clique_of < 0 (a constant) contributes nothing.
   static Eigen::MatrixXd predicted(const BayesTree<D>& tree, const std::vector<int>& vars,
                                    const std::vector<Eigen::MatrixXd>& blocks);
-  /// Cliques whose joint is cached now.
-  int cachedCliques() const;
 
  private:
-  struct Entry {
-    Eigen::MatrixXd joint;  ///< Σ over [frontals; separator] (empty: not computed)
-    Eigen::MatrixXd X;      ///< R⁻¹S (F×Sn)
+  /// Y_v of (2) on v's path: path[k] the k-th clique up from v's, its rows of Y at
+  /// y[offset[k]·D …] (F_k × D, column-major), zero above row first[k].
+  struct PathSolve {
+    std::vector<int> path, offset, first;
+    std::vector<double> y;
   };
-  void sync(const BayesTree<D>& tree, long version);
-  void clear();
-  /// Computes (and caches) the joints on the path from clique c to the root; returns c's.
-  const Eigen::MatrixXd& cliqueJoint(const BayesTree<D>& tree, int c);
-  /// (1) for clique c, given its parent's joint (null for a root): its joint and X.
+  /// Fills *out with Y_v (tree.clique_of[v] ≥ 0) and returns Y_vᵀY_v = Σ_vv.
+  static Block solvePath(const BayesTree<D>& tree, int v, PathSolve* out, std::vector<double>* By);
+  /// (1) for clique c, given its parent's joint (null for a root): its joint.
   static void jointOf(const BayesTree<D>& tree, int c, const Eigen::MatrixXd* parent,
                       Eigen::MatrixXd* joint, Eigen::MatrixXd* X);
-  /// x_v = T x_{V} + noise, V ⊂ variables of clique l, from v's clique c (a descendant of l).
-  void shortcut(const BayesTree<D>& tree, int v, int c, int l, std::vector<int>* V,
-                Eigen::MatrixXd* T);
-  /// (2) for variable v along the path from its clique to the root.
-  Block pathMarginal(const BayesTree<D>& tree, int v);
   /// Position of v (block index) among clique c's frontals then separator.
   static int position(const Clique<D>& c, int v);
 
-  mutable std::mutex mutex_;
-  long version_ = -1;
-  std::vector<Entry> cache_;  ///< per clique id
-  std::vector<int> cached_;   ///< clique ids with an entry
-  std::vector<int> path_;
-  std::vector<int> mark_;  ///< per clique, for the lowest common ancestor
-  // pathMarginal's scratch: per path clique its first row, per variable its row (−1: not a
-  // frontal of the path), the rows r_c / y_c and B y_c.
-  std::vector<int> offset_;
-  std::vector<int> row_of_;
-  std::vector<double> buffer_;
-  int mark_stamp_ = 0;
+  std::mutex mutex_;
+  PathSolve pa_, pb_;       ///< the path solves of a query (a and b for a joint)
+  std::vector<double> by_;  ///< B y_c, per clique of a path solve
 };
 
 extern template class TreeMarginals<3>;

@@ -1,6 +1,9 @@
 #include "arbor/tools/bench/ceres_pose_graph.h"
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <set>
 #include <stdexcept>
 #include <utility>
 
@@ -235,6 +238,64 @@ std::vector<Eigen::Matrix3d> ceresCovariances(const PoseGraph<SE2>& graph,
     out[k] = J * world * J.transpose();
   }
   *time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
+}
+
+std::vector<Eigen::Matrix<double, 6, 6>> ceresJointCovariances(
+    const PoseGraph<SE2>& graph, const std::vector<SE2>& poses, const std::vector<int>& fixed,
+    const std::vector<std::pair<int, int>>& pairs) {
+  const int n = graph.numPoses();
+  std::vector<double> t(2 * n), th(n);
+  for (int k = 0; k < n; ++k) {
+    t[2 * k] = poses[k].x();
+    t[2 * k + 1] = poses[k].y();
+    th[k] = poses[k].angle();
+  }
+  ceres::Problem problem;
+  add2D(graph, fixed, &t, &th, &problem);
+  // Each pose's parameter blocks (t, θ) and their sizes; the pairs' blocks, each once (Ceres
+  // refuses duplicates, (x, y) and (y, x) alike).
+  auto params = [&](int k) {
+    return std::array<std::pair<const double*, int>, 2>{{{&t[2 * k], 2}, {&th[k], 1}}};
+  };
+  std::set<std::pair<const double*, const double*>> wanted;
+  for (const auto& [a, b] : pairs)
+    for (int u : {a, b})
+      for (int w : {a, b})
+        for (const auto& x : params(u))
+          for (const auto& y : params(w))
+            wanted.emplace(std::min(x.first, y.first), std::max(x.first, y.first));
+  const std::vector<std::pair<const double*, const double*>> blocks(wanted.begin(), wanted.end());
+  ceres::Covariance::Options options;
+  options.num_threads = 1;
+  ceres::Covariance covariance(options);
+  if (!covariance.Compute(blocks, &problem))
+    throw std::runtime_error("ceres::Covariance::Compute failed");
+  std::vector<Eigen::Matrix<double, 6, 6>> out;
+  for (const auto& [a, b] : pairs) {
+    // Of (t_a, θ_a, t_b, θ_b) in the world frame, then J = diag(R_aᵀ, 1, R_bᵀ, 1).
+    Eigen::Matrix<double, 6, 6> world;
+    const int pose[2] = {a, b};
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) {
+        int row = 3 * i;
+        for (const auto& x : params(pose[i])) {
+          int col = 3 * j;
+          for (const auto& y : params(pose[j])) {
+            Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> block(x.second,
+                                                                                         y.second);
+            covariance.GetCovarianceBlock(x.first, y.first, block.data());
+            world.block(row, col, x.second, y.second) = block;
+            col += y.second;
+          }
+          row += x.second;
+        }
+      }
+    Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+    J.block<2, 2>(0, 0) = poses[a].rotation().transpose();
+    J.block<2, 2>(3, 3) = poses[b].rotation().transpose();
+    out.push_back(J * world * J.transpose());
+  }
   return out;
 }
 

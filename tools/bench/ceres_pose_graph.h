@@ -6,6 +6,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -30,6 +31,14 @@ struct CeresResult {
 std::vector<Eigen::Matrix3d> ceresCovariances(const PoseGraph<SE2>& graph,
                                               const std::vector<SE2>& poses,
                                               const std::vector<int>& fixed, double* time_s);
+
+/// Ceres' joint covariance [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] of each pose pair (a, b) of `pairs`
+/// (dense indices of a 2D graph; a ≠ b, neither in `fixed`), as ceresCovariances (SPARSE_QR, one
+/// thread, `fixed` constant, in Arbor's tangent), computing only the blocks the pairs need.
+/// Throws std::runtime_error if Ceres cannot compute it.
+std::vector<Eigen::Matrix<double, 6, 6>> ceresJointCovariances(
+    const PoseGraph<SE2>& graph, const std::vector<SE2>& poses, const std::vector<int>& fixed,
+    const std::vector<std::pair<int, int>>& pairs);
 
 template <class G>
 CeresResult solveWithCeres(const PoseGraph<G>& graph, std::vector<G>* poses,
