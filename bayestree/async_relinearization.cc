@@ -34,10 +34,11 @@ RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s) {
     threads.addVariable();
   }
   out.delta.assign(static_cast<size_t>(n), typename G::Tangent(G::Tangent::Zero()));
-  std::vector<int> all_factors(s.factors.size());
-  for (size_t f = 0; f < s.factors.size(); ++f) {
-    out.factors.add(s.factors[f]);
-    all_factors[f] = static_cast<int>(f);
+  // Factors at weight 0 are added but stay out of the structure (LinearizedFactors::attached).
+  std::vector<int> all_factors;
+  for (const auto& e : s.factors) {
+    const int f = out.factors.add(e);
+    if (out.factors.attached[f]) all_factors.push_back(f);
   }
   std::vector<int> variables;
   for (int v = 0; v < n; ++v)

@@ -105,6 +105,7 @@ void BayesTree<D>::attachOrphan(int orphan, int parent) {
 template <int D>
 template <class Factor>
 void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
+                                   const std::vector<char>& attached,
                                    const std::vector<char>& fixed,
                                    const std::function<bool(int)>& awaiting) const {
   auto fail = [](const std::string& what) {
@@ -183,6 +184,7 @@ void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
            std::find(k.separator.begin(), k.separator.end(), v) != k.separator.end();
   };
   for (size_t f = 0; f < factors.size(); ++f) {
+    if (!attached[f]) continue;  // weight 0: not in the structure
     const Factor& e = factors[f];
     bool held = false, any = false;
     for (int k = 0; k < e.arity() && !held; ++k) {
@@ -225,10 +227,10 @@ TreeMemory BayesTree<D>::memory() const {
 template class BayesTree<3>;
 template class BayesTree<6>;
 template void BayesTree<3>::checkInvariants(const std::vector<Factor<SE2>>&,
-                                            const std::vector<char>&,
+                                            const std::vector<char>&, const std::vector<char>&,
                                             const std::function<bool(int)>&) const;
 template void BayesTree<6>::checkInvariants(const std::vector<Factor<SE3>>&,
-                                            const std::vector<char>&,
+                                            const std::vector<char>&, const std::vector<char>&,
                                             const std::function<bool(int)>&) const;
 
 }  // namespace arbor::bayestree

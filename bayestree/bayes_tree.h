@@ -89,10 +89,12 @@ class BayesTree {
   /// among the roots, a non-root a live parent that lists it, a non-empty separator inside the
   /// parent's variables (running intersection); children point back; no parent cycle; the
   /// count of cliques and their flops; every variable not fixed and not `awaiting(v)` (about to be
-  /// eliminated) frontal exactly once, fixed ones never; every factor (arity(), key(k)) held by the
-  /// clique of one of its variables.
+  /// eliminated) frontal exactly once, fixed ones never; every factor (arity(), key(k)) in the
+  /// structure (`attached[f]`, LinearizedFactors::attached) held by the clique of one of its
+  /// variables.
   template <class Factor>
-  void checkInvariants(const std::vector<Factor>& factors, const std::vector<char>& fixed,
+  void checkInvariants(const std::vector<Factor>& factors, const std::vector<char>& attached,
+                       const std::vector<char>& fixed,
                        const std::function<bool(int)>& awaiting) const;
 
   /// The cliques' share of TreeMemory (all but scratch_bytes).

@@ -90,15 +90,21 @@ double FoldIn<G>::eliminationFlops(const std::vector<int>& starts, BayesTree<D>*
 }
 
 template <class G>
-int FoldIn<G>::foldInAll(int first, const Context& ctx, BayesTree<D>* tree) {
-  const int end = ctx.factors.numFactors();
-  for (int f = first; f < end; ++f) {
+int FoldIn<G>::foldInAll(const std::vector<int>& fs, const Context& ctx, BayesTree<D>* tree) {
+  for (int f : fs) {
     const int start = startClique(f, ctx, *tree);
     if (start < 0 || !withinBudget(f, start, ctx, *tree)) return -1;
   }
   int updated = 0;
-  for (int f = first; f < end; ++f) updated += foldIn(f, ctx, tree);
+  for (int f : fs) updated += foldIn(f, ctx, tree);
   return updated;
+}
+
+template <class G>
+int FoldIn<G>::foldInAll(int first, const Context& ctx, BayesTree<D>* tree) {
+  std::vector<int> fs;
+  for (int f = first; f < ctx.factors.numFactors(); ++f) fs.push_back(f);
+  return foldInAll(fs, ctx, tree);
 }
 
 template <class G>

@@ -36,9 +36,11 @@ class FoldIn {
   /// to the root). Folding one factor in leaves this unchanged for the others.
   int startClique(int f, const Context& ctx, const BayesTree<D>& tree) const;
 
-  /// Folds factors first..factors.numFactors()−1 into the tree when every one of them can be
-  /// (within its separators' budget: checked for all before the first is folded in). Returns
-  /// the cliques updated, or −1 (nothing changed) when one cannot be.
+  /// Folds factors `fs` (in that order) into the tree when every one of them can be (within
+  /// its separators' budget: checked for all before the first is folded in). Returns the
+  /// cliques updated, or −1 (nothing changed) when one cannot be.
+  int foldInAll(const std::vector<int>& fs, const Context& ctx, BayesTree<D>* tree);
+  /// foldInAll of factors first..factors.numFactors()−1.
   int foldInAll(int first, const Context& ctx, BayesTree<D>* tree);
 
   /// Folds factor f in (startClique(f) ≥ 0); returns the cliques updated.

@@ -134,13 +134,14 @@ struct IncrementalSmoother<G>::Impl {
   bayestree::FoldIn<G> fold_in;
   bayestree::PartialSolve<D> partial_solve;  // Δ_newton
   bayestree::UpdateThreads threads;
-  // Marginal covariances, cached per clique for the tree as of `stamp` (changed by every pass).
+  // Marginal covariances: the path solves' scratch (bayestree/marginals.h).
   mutable bayestree::TreeMarginals<D> marginals;
   // Waiting for the next update.
   std::vector<Factor<G>> queued;
   std::vector<int> new_vars;
   std::vector<int> to_touch;        // variables whose cliques the next update re-eliminates
   std::vector<int> to_relinearize;  // factors the next update relinearises (transformPoses)
+  std::vector<int> readmitted;      // factors from weight 0 to > 0: enter the next update anew
   int update_count = 0;
   int stamp = 0;  // one per pass: factors.stamp lists a factor once
   double dogleg_radius = 1.0;
@@ -265,9 +266,13 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   // Extension (robust layers): a new inlier weight is a relinearisation of the factor, so its
-  // keys' cliques are re-eliminated by the next update.
+  // keys' cliques are re-eliminated by the next update. Weight 0 takes the factor out of the
+  // structure (LinearizedFactors::attached; its keys' cliques are re-eliminated without it
+  // once), and a factor that leaves weight 0 enters the next update as a new factor would:
+  // its keys are touched, it is linearised, and it may be folded in.
   // A queued factor (index numFactors() + k, k in addFactor order) takes the weight before it
-  // enters: its first linearisation is weighted, nothing is relinearised.
+  // enters: its first linearisation is weighted, nothing is relinearised (at weight 0 it never
+  // enters the structure).
   void setFactorWeight(int f, double w) {
     const int added = factors.numFactors();
     const int all = added + static_cast<int>(queued.size());
@@ -285,8 +290,16 @@ struct IncrementalSmoother<G>::Impl {
     Factor<G>& e = factors.factors[f];
     if (e.inlierWeight() == w) return;
     e.setInlierWeight(w);
-    to_relinearize.push_back(f);
     if (async.pending()) reweighted_since_snapshot.push_back(f);
+    if (w > 0 && !factors.attached[f]) {
+      readmitted.push_back(f);  // attached by the next update (addNewFactorsAndVariables)
+      return;
+    }
+    if (w > 0) {
+      to_relinearize.push_back(f);
+    } else {
+      factors.detach(f);
+    }
     for (int k = 0; k < e.arity(); ++k)
       if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
   }
@@ -366,11 +379,17 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   UpdateStats runPasses(const StepOptions& pass) {
-    if (!opt.rank_updates || opt.dogleg || new_vars.empty() || queued.size() < 2 ||
-        !to_touch.empty())
+    const auto weighted = [](const Factor<G>& e) { return e.inlierWeight() > 0; };
+    if (!opt.rank_updates || opt.dogleg || new_vars.empty() ||
+        std::count_if(queued.begin(), queued.end(), weighted) < 2 || !to_touch.empty())
       return step(pass);
     std::vector<Factor<G>> rest =
         bayestree::FoldIn<G>::splitOffIntroducing(&queued, fixed, tree, &threads.lanes[0].slot);
+    // Factors of weight 0 enter no structure (LinearizedFactors::attached): they join `factors`
+    // in the first pass and are left out of the choice to fold.
+    const auto zero = std::stable_partition(rest.begin(), rest.end(), weighted);
+    queued.insert(queued.end(), zero, rest.end());
+    rest.erase(zero, rest.end());
     if (!fold_in.worthFolding(rest, fixed, &tree)) {
       queued.insert(queued.end(), rest.begin(), rest.end());
       rest.clear();
@@ -490,9 +509,20 @@ struct IncrementalSmoother<G>::Impl {
       for (int k = 0; k < e.arity(); ++k)
         if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
     };
+    // A reweighting takes the job's factor in or out of the structure as setFactorWeight does
+    // (LinearizedFactors::attached follows the weight the snapshot had).
     for (const auto& [f, w] : weights) {
       factors.factors[f].setInlierWeight(w);
-      relinearizeFactor(f);
+      if (w > 0 && !factors.attached[f]) {
+        readmitted.push_back(f);
+      } else if (w > 0) {
+        relinearizeFactor(f);
+      } else if (factors.attached[f]) {
+        factors.detach(f);
+        const Factor<G>& e = factors.factors[f];
+        for (int k = 0; k < e.arity(); ++k)
+          if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
+      }
     }
     for (int v : moved_since_snapshot)
       if (v < n_snap)
@@ -538,13 +568,13 @@ struct IncrementalSmoother<G>::Impl {
     relinearizeVariables(pass, &st);
     // Alg. 4 step 2, "Relinearize all factors required to recreate top" (those of M), and the
     // new factors' first linearisation.
-    listFactorsToLinearize(added.first);
+    listFactorsToLinearize(added.ids);
     // Extension (fold-in, docs/design.md "Loop closures by rank updates"): only factors between
     // variables already in the tree, nothing relinearised — fold them in by rank updates along
     // their paths to the root instead of Alg. 6 step 4.
     const bool folded = !pass.relinearize_all && relin.empty() && !added.restructured &&
-                        st.new_variables == 0 && st.new_factors > 0 && opt.rank_updates &&
-                        foldInNewFactors(added.first, &st);
+                        st.new_variables == 0 && !added.ids.empty() && opt.rank_updates &&
+                        foldInNewFactors(added.ids, &st);
     // Alg. 6 step 4, "Redo top of Bayes tree with Alg. 4 with J the union of M and all
     // variables affected by new factors".
     const bool tree_changed = folded || redoTop(pass.relinearize_all, &st);
@@ -557,15 +587,20 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   struct NewFactors {
+    // The factors entering the structure in this pass: the new ones of weight > 0 in the order
+    // added, then those re-admitted from weight 0 (Extension, setFactorWeight).
+    std::vector<int> ids;
     int first = 0;              // index of the first factor added by this pass
     bool restructured = false;  // to_touch was not empty
   };
 
-  // Alg. 6 steps 1–2: the queued factors join `factors`; the new variables, the new factors'
-  // variables (and, Extension, to_touch: a released anchor's neighbours, the factors of moved
-  // poses) become `touched` (mark[v] = 1).
+  // Alg. 6 steps 1–2: the queued factors join `factors`; the new variables, the variables of
+  // the factors entering the structure (and, Extension, to_touch: a released anchor's
+  // neighbours, the factors of moved poses or reweighted) become `touched` (mark[v] = 1). A new
+  // factor of weight 0 joins `factors` only: it touches nothing.
   NewFactors addNewFactorsAndVariables(UpdateStats* st) {
     NewFactors out;
+    out.first = factors.numFactors();
     touched.clear();
     auto touch = [&](int v) {
       if (!fixed[v] && !mark[v]) {
@@ -579,13 +614,23 @@ struct IncrementalSmoother<G>::Impl {
     out.restructured = !to_touch.empty();
     for (int v : to_touch) touch(v);
     to_touch.clear();
-    out.first = factors.numFactors();
-    for (const Factor<G>& e : queued) {
-      factors.add(e);
+    auto enter = [&](int f) {
+      const Factor<G>& e = factors.factors[f];
       for (int k = 0; k < e.arity(); ++k) touch(e.key(k));
+      out.ids.push_back(f);
+    };
+    for (const Factor<G>& e : queued) {
+      const int f = factors.add(e);
+      if (factors.attached[f]) enter(f);
     }
     st->new_factors = static_cast<int>(queued.size());
     queued.clear();
+    for (int f : readmitted)
+      if (factors.factors[f].inlierWeight() > 0 && !factors.attached[f]) {
+        factors.attach(f);
+        enter(f);
+      }
+    readmitted.clear();
     return out;
   }
 
@@ -639,7 +684,7 @@ struct IncrementalSmoother<G>::Impl {
   // Alg. 4 step 2 (the factors of M; Extension: to_relinearize, from transformPoses) and the
   // new factors, each once, into `to_linearize`. With nothing relinearised they are linearised
   // at once; otherwise the top elimination linearises them beside its ordering.
-  void listFactorsToLinearize(int first_new) {
+  void listFactorsToLinearize(const std::vector<int>& entering) {
     to_linearize.clear();
     auto add = [&](int f) {
       if (factors.stamp[f] == stamp) return;
@@ -650,17 +695,17 @@ struct IncrementalSmoother<G>::Impl {
       for (int f : factors.var_factors[v]) add(f);
     for (int f : to_relinearize) add(f);
     to_relinearize.clear();
-    for (int f = first_new; f < factors.numFactors(); ++f) add(f);
+    for (int f : entering) add(f);
     if (relin.empty()) {
       factors.linearizeAll(to_linearize, theta, &threads);
       to_linearize.clear();
     }
   }
 
-  // Extension (fold-in): the factors from `first` on, folded in when every one of them can be;
-  // false (nothing changed) otherwise.
-  bool foldInNewFactors(int first, UpdateStats* st) {
-    const int updated = fold_in.foldInAll(first, foldInContext(), &tree);
+  // Extension (fold-in): the entering factors, folded in when every one of them can be; false
+  // (nothing changed) otherwise.
+  bool foldInNewFactors(const std::vector<int>& entering, UpdateStats* st) {
+    const int updated = fold_in.foldInAll(entering, foldInContext(), &tree);
     if (updated < 0) return false;
     st->cliques_updated += updated;
     return true;
@@ -747,7 +792,9 @@ struct IncrementalSmoother<G>::Impl {
       }
     const int n = static_cast<int>(vars.size());
     fresh_rows.clear();
-    for (const Factor<G>& e : factors.factors) {
+    for (int f = 0; f < factors.numFactors(); ++f) {
+      if (!factors.attached[f]) continue;  // weight 0: not in the structure
+      const Factor<G>& e = factors.factors[f];
       int keys = 0;
       for (int k = 0; k < e.arity(); ++k) keys += slot[e.key(k)] >= 0 ? 1 : 0;
       if (keys < 2) continue;
@@ -855,7 +902,7 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   void checkInvariants() const {
-    tree.checkInvariants(factors.factors, fixed, [&](int v) {
+    tree.checkInvariants(factors.factors, factors.attached, fixed, [&](int v) {
       return mark[v] || std::find(new_vars.begin(), new_vars.end(), v) != new_vars.end();
     });
   }
@@ -1014,12 +1061,12 @@ auto IncrementalSmoother<G>::jointMarginalCovariance(int a, int b) const
     Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> out =
         Eigen::Matrix<double, 2 * kDoF, 2 * kDoF>::Zero();
     if (!m.fixed[a]) {
-      const Eigen::Matrix<double, kDoF, kDoF> s = m.marginals.marginal(m.tree, m.stamp, a);
+      const Eigen::Matrix<double, kDoF, kDoF> s = m.marginals.marginal(m.tree, a);
       out << s, s, s, s;
     }
     return out;
   }
-  return m.marginals.joint(m.tree, m.stamp, a, b);
+  return m.marginals.joint(m.tree, a, b);
 }
 
 template <class G>

@@ -189,9 +189,13 @@ class IncrementalSmoother {
   /// system scaled by √w (Factor::linearizeWeighted; w = 1 changes nothing, bit for bit), so a
   /// new weight is a relinearisation of that factor: the next update() relinearises it and
   /// re-eliminates the cliques of its keys (with their ancestors), as Alg. 4 does for the
-  /// factors of a relinearised variable. w = 0 leaves the factor in the graph without effect on
-  /// the estimate. No-op when w is its weight already. Index numFactors() + k names the k-th
-  /// factor queued since the last update() (addFactor order): it enters with weight w. Throws
+  /// factors of a relinearised variable. w = 0 leaves the factor in the graph (factors(),
+  /// objective()) but takes it out of the elimination: it adds no fill and no clique holds it,
+  /// so the Bayes tree is that of the graph without it; the next update re-eliminates its keys'
+  /// cliques without it once. From w = 0 to w > 0 it enters the next update as a new factor
+  /// would (its keys touched, a fold-in when it can be). No-op when w is its weight already.
+  /// Index numFactors() + k names the k-th factor queued since the last update() (addFactor
+  /// order): it enters with weight w (at w = 0, into factors() only). Throws
   /// std::invalid_argument on a bad index or w ∉ [0, 1].
   void setFactorWeight(int index, double w);
 
@@ -242,18 +246,19 @@ class IncrementalSmoother {
   /// Marginal covariances (bayestree/marginals.h; docs/design.md, "Marginal covariances"): of the
   /// linear system the Bayes tree holds after the last update(), i.e. of the tangent τ at the
   /// linearisation point θ (x = θ ⊞ τ, linearizationPoint(); the tangent at estimate() to first
-  /// order in Δ), in the gauge of the fixed poses; a fixed pose's is zero. Computed on the path
-  /// from the pose's clique to the root and cached until the next update(), so further queries
-  /// on that path are cheap. Throws std::out_of_range for a bad index, std::logic_error for a
-  /// pose that has not been through update() yet.
+  /// order in Δ), in the gauge of the fixed poses; a fixed pose's is zero. One forward
+  /// substitution along the path from the pose's clique to the root (nothing is cached). Throws
+  /// std::out_of_range for a bad index, std::logic_error for a pose that has not been through
+  /// update() yet.
   Eigen::Matrix<double, kDoF, kDoF> marginalCovariance(int index) const;
   /// The joint covariance [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] of poses a and b (as marginalCovariance;
-  /// Σ_ab = 0 between components), e.g. for a Mahalanobis gate on a candidate edge a → b.
+  /// Σ_ab = 0 between components), e.g. for a Mahalanobis gate on a candidate edge a → b: two
+  /// forward substitutions along the poses' paths, Σ_ab summed over the cliques they share.
   Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> jointMarginalCovariance(int a, int b) const;
   /// A Σ Aᵀ for a candidate factor on poses a and b with whitened Jacobian blocks A_a, A_b
   /// (Σ their joint covariance, as jointMarginalCovariance): the covariance its whitened residual
   /// is predicted with, beside the factor's own I. One forward substitution along the two poses'
-  /// paths to the root (TreeMarginals::predicted), no clique joint; a fixed pose contributes
+  /// paths to the root (TreeMarginals::predicted); a fixed pose contributes
   /// nothing. Throws as jointMarginalCovariance.
   Eigen::Matrix<double, kDoF, kDoF> predictionCovariance(
       int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,

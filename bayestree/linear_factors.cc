@@ -10,8 +10,30 @@ int LinearizedFactors<G>::add(const Factor<G>& e) {
   factors.push_back(e);
   lin.emplace_back();
   stamp.push_back(-1);
-  for (int k = 0; k < e.arity(); ++k) var_factors[e.key(k)].push_back(f);
+  attached.push_back(0);
+  if (e.inlierWeight() > 0) attach(f);
   return f;
+}
+
+template <class G>
+void LinearizedFactors<G>::attach(int f) {
+  if (attached[f]) return;
+  attached[f] = 1;
+  const Factor<G>& e = factors[f];
+  for (int k = 0; k < e.arity(); ++k) var_factors[e.key(k)].push_back(f);
+}
+
+// attach appends: a re-admitted factor is summed last in its keys' assemblies, as a factor
+// added anew would be.
+template <class G>
+void LinearizedFactors<G>::detach(int f) {
+  if (!attached[f]) return;
+  attached[f] = 0;
+  const Factor<G>& e = factors[f];
+  for (int k = 0; k < e.arity(); ++k) {
+    std::vector<int>& list = var_factors[e.key(k)];
+    list.erase(std::find(list.begin(), list.end(), f));
+  }
 }
 
 template <class G>

@@ -35,15 +35,25 @@ class LinearizedFactors {
   };
 
   std::vector<Factor<G>> factors;             ///< in the order added
-  std::vector<std::vector<int>> var_factors;  ///< variable → its factors
-  std::vector<LinearFactor> lin;              ///< factor → its linearisation
-  std::vector<int> stamp;                     ///< factor → last update that listed it
+  std::vector<std::vector<int>> var_factors;  ///< variable → its factors in the structure
+  /// factor → 1 while it is in the structure (listed in var_factors): every factor of inlier
+  /// weight > 0. A factor at weight 0 (a rejected loop closure, an edge taken back) is left out
+  /// of the elimination altogether — no fill, no larger cliques — until it is re-admitted
+  /// (docs/design.md, "Online robust smoothing").
+  std::vector<char> attached;
+  std::vector<LinearFactor> lin;  ///< factor → its linearisation
+  std::vector<int> stamp;         ///< factor → last update that listed it
 
   int numFactors() const { return static_cast<int>(factors.size()); }
   /// A new variable (no factors yet).
   void addVariable() { var_factors.emplace_back(); }
-  /// Adds a factor (not yet linearised); returns its index.
+  /// Adds a factor (not yet linearised; attached iff its inlier weight is > 0); returns its
+  /// index.
   int add(const Factor<G>& f);
+  /// Puts factor f into the structure (its keys' var_factors) or takes it out. No-op when it is
+  /// there already / not there.
+  void attach(int f);
+  void detach(int f);
 
   /// lin[f] from factor f linearised at θ, scaled by its inlier weight (Factor::linearizeWeighted).
   void linearize(int f, const std::vector<G>& theta);

@@ -3,7 +3,9 @@
 // over IncrementalSmoother's weight seam (setFactorWeight). The online layer (OnlineSmoother)
 // owns one OnlineGnc and calls it around each smoother update; nothing here changes the Bayes
 // tree except through setFactorWeight, so every weight change is a relinearisation of that one
-// factor and only its keys' cliques (with their ancestors) are re-eliminated.
+// factor and only its keys' cliques (with their ancestors) are re-eliminated. A closure at
+// weight 0 (rejected, or entering rejected) is out of the elimination altogether: no fill, no
+// clique holds it; taken back it enters as a new factor (a fold-in of its two keys).
 //
 // Which edges are weighted. Odometry (consecutive ids, |from − to| = 1), edges the caller marks
 // trusted, an edge that creates one of its poses (its only constraint: e = 0 by construction)

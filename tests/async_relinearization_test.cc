@@ -4,6 +4,7 @@
 // calling thread, or the swap update waits for the background thread (swap_after_updates); no
 // timing.
 
+#include <cstdlib>
 #include <random>
 #include <vector>
 
@@ -51,6 +52,8 @@ double tangentDistance(const std::vector<G>& a, const std::vector<G>& b, int* wo
 /// What happens to both smoothers during a job (the same on each), by the async one's state.
 struct DuringTheJob {
   bool reweight = false, move = false;
+  bool zero =
+      false;  ///< a loop closure taken to weight 0 (out of the structure), an older one back
 };
 
 /// Replays the walk into an inline and an async smoother side by side; after every update
@@ -65,7 +68,8 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
   in.addFixedPose(G());
   as.addFixedPose(G());
   std::mt19937 rng(seed);
-  int swaps = 0, starts = 0, compared = 0, reweighted = 0, moved = 0;
+  int swaps = 0, starts = 0, compared = 0, reweighted = 0, moved = 0, zeroed = 0, readmitted = 0;
+  std::vector<int> at_zero;
   bool consistent = true;  // no job in flight since the last swap
   for (size_t k = 1; k < by_pose.size(); ++k) {
     const auto& odo = by_pose[k].front();
@@ -85,6 +89,27 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
         in.setFactorWeight(as.numFactors(), 0.7);
         as.setFactorWeight(as.numFactors(), 0.7);
         ++reweighted;
+      }
+      if (during.zero) {  // a loop closure out of the structure; the oldest one out back in
+        const auto& fs = as.factors();
+        int f = std::uniform_int_distribution<int>(0, as.numFactors() - 1)(rng);
+        for (int tries = 0; tries < as.numFactors(); ++tries, f = (f + 1) % as.numFactors())
+          if (fs[f].arity() == 2 && std::abs(fs[f].key(0) - fs[f].key(1)) > 1 &&
+              fs[f].inlierWeight() > 0)
+            break;
+        if (fs[f].arity() == 2 && std::abs(fs[f].key(0) - fs[f].key(1)) > 1 &&
+            fs[f].inlierWeight() > 0) {
+          in.setFactorWeight(f, 0);
+          as.setFactorWeight(f, 0);
+          at_zero.push_back(f);
+          ++zeroed;
+        }
+        if (at_zero.size() > 2) {
+          in.setFactorWeight(at_zero.front(), 1);
+          as.setFactorWeight(at_zero.front(), 1);
+          at_zero.erase(at_zero.begin());
+          ++readmitted;
+        }
       }
       if (during.move && k % 3 == 0) {  // the last poses, rigidly
         typename G::Tangent tau = G::Tangent::Constant(0.002);
@@ -123,6 +148,10 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
   if (during.move) {
     EXPECT_GT(moved, 3);
   }
+  if (during.zero) {
+    EXPECT_GT(zeroed, 5);
+    EXPECT_GT(readmitted, 3);
+  }
 }
 
 TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot2D) {
@@ -139,6 +168,13 @@ TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot3D) {
 TEST(AsyncRelinearization, ReweightsAndMovesDuringTheJobAreFoldedIn) {
   expectSwapEqualsInline<SE2>(31, asyncOptions(true, 5), {true, true});
   expectSwapEqualsInline<SE3>(32, asyncOptions(true, 5), {true, true});
+}
+
+// Loop closures taken to weight 0 while the job runs leave the job's structure at the swap, and
+// closures at weight 0 in the snapshot come back into it: the same estimates as inline.
+TEST(AsyncRelinearization, ClosuresOutAndBackDuringTheJobAreFoldedIn) {
+  expectSwapEqualsInline<SE2>(33, asyncOptions(true, 5), {false, false, true});
+  expectSwapEqualsInline<SE3>(34, asyncOptions(true, 3), {false, false, true});
 }
 
 // The job on its background thread, the swap at the 5th update after the snapshot (which waits

@@ -52,7 +52,8 @@ struct HandBuilt {
     k.allocate();
   }
   void check() const {
-    tree.checkInvariants(factors, fixed, [](int) { return false; });
+    tree.checkInvariants(factors, std::vector<char>(factors.size(), 1), fixed,
+                         [](int) { return false; });
   }
   // The message checkInvariants throws (empty if none).
   std::string violation() const {

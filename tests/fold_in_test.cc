@@ -47,7 +47,8 @@ TEST(FoldIn, EqualsReeliminationWithTheFactor) {
     ASSERT_GE(fold.startClique(f, ctx, p.tree), 0);
     const int updated = fold.foldInAll(f, ctx, &p.tree);
     EXPECT_GE(updated, 1);
-    p.tree.checkInvariants(p.factors.factors, p.fixed, [](int) { return false; });
+    p.tree.checkInvariants(p.factors.factors, p.factors.attached, p.fixed,
+                           [](int) { return false; });
     // The same graph, closure included, eliminated from scratch.
     q.factors.add(closure);
     q.linearizeAll();

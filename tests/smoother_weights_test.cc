@@ -253,6 +253,122 @@ TEST(SmootherWeights, QueuedFactorTakesItsWeightBeforeItEnters) {
   EXPECT_GT(with.objective(), with.weightedObjective() + 1.0);  // the closure is still held
 }
 
+/// loopGraph with `extra` more wrong closures (between poses i and n − 1 − i for i = 4, 8, …),
+/// all of them (the last 1 + extra factors) at weight `w`.
+template <class G>
+std::vector<Factor<G>> withWrongClosures(int n, unsigned seed, int extra, double w) {
+  std::vector<G> truth;
+  std::vector<Factor<G>> fs = loopGraph<G>(n, seed, &truth, 1.0);
+  const auto omega = diagonalInformation<G>(50.0, 400.0);
+  for (int k = 1; k <= extra; ++k) {
+    typename G::Tangent off = G::Tangent::Zero();
+    off(0) = 3.0;
+    fs.emplace_back(RelativePoseEdge<G>::make(4 * k, n - 1 - 4 * k, G::Exp(off), omega));
+  }
+  for (size_t f = fs.size() - 1 - extra; f < fs.size(); ++f) fs[f].setInlierWeight(w);
+  return fs;
+}
+
+// A factor at weight 0 is no part of the elimination: a graph fed with wrong closures at w = 0
+// has the Bayes tree of the graph without them — the same cliques, separators and flops — and
+// its estimate, bit for bit, at every update.
+template <class G>
+void expectZeroWeightLeavesTheStructure(unsigned seed) {
+  constexpr int n = 60;
+  const std::vector<Factor<G>> fs = withWrongClosures<G>(n, seed, 4, 0.0);
+  const std::vector<Factor<G>> clean(fs.begin(), fs.end() - 5);
+  IncrementalSmoother<G> with = smootherOf(fs, n);
+  IncrementalSmoother<G> without = smootherOf(clean, n);
+  with.checkInvariants();
+  ASSERT_EQ(with.numFactors(), without.numFactors() + 5);
+  EXPECT_EQ(with.numCliques(), without.numCliques());
+  EXPECT_EQ(with.factorizationFlops(), without.factorizationFlops());
+  const TreeMemory a = with.memory(), b = without.memory();
+  EXPECT_EQ(a.max_separator_dim, b.max_separator_dim);
+  EXPECT_EQ(a.mean_separator_dim, b.mean_separator_dim);
+  EXPECT_EQ(a.clique_bytes, b.clique_bytes);
+  EXPECT_EQ(maxDifference(with.estimate(), without.estimate()), 0.0);
+  // The same after relinearising all (the wrong closures are not relinearised either).
+  converge(&with);
+  converge(&without);
+  EXPECT_EQ(with.numCliques(), without.numCliques());
+  EXPECT_EQ(with.factorizationFlops(), without.factorizationFlops());
+  EXPECT_EQ(maxDifference(with.estimate(), without.estimate()), 0.0);
+  EXPECT_EQ(with.weightedObjective(), without.objective());
+  EXPECT_GT(with.objective(), with.weightedObjective() + 1.0);  // they are still held
+}
+
+TEST(SmootherWeights, ZeroWeightLeavesTheStructure2D) {
+  expectZeroWeightLeavesTheStructure<SE2>(8);
+}
+TEST(SmootherWeights, ZeroWeightLeavesTheStructure3D) {
+  expectZeroWeightLeavesTheStructure<SE3>(9);
+}
+
+// A factor re-admitted from weight 0 enters as a new one: w = 0 → 1 on a true closure gives the
+// update (fold-in or re-elimination, cliques, flops, estimate bit for bit) of a smoother that
+// never had it and gets it added now.
+template <class G>
+void expectReadmittedEqualsAddedFresh(unsigned seed) {
+  constexpr int n = 50;
+  std::vector<G> truth;
+  std::vector<Factor<G>> fs = loopGraph<G>(n, seed, &truth, 1.0);
+  fs.pop_back();                  // the wrong closure: every factor left is true
+  Factor<G> closure = fs.back();  // the last closure k − 9 → k
+  ASSERT_EQ(closure.key(1) - closure.key(0), 9);
+  fs.back().setInlierWeight(0.0);
+  IncrementalSmoother<G> readmitted = smootherOf(fs, n);
+  fs.pop_back();
+  IncrementalSmoother<G> fresh = smootherOf(fs, n);
+  const int f = indexOf(readmitted, closure.key(0), closure.key(1));
+  ASSERT_GE(f, 0);
+  ASSERT_EQ(readmitted.factors()[f].inlierWeight(), 0.0);
+  readmitted.setFactorWeight(f, 1.0);
+  fresh.addFactor(closure);
+  const UpdateStats a = readmitted.update(), b = fresh.update();
+  readmitted.checkInvariants();
+  EXPECT_EQ(a.cliques_updated, b.cliques_updated);
+  EXPECT_EQ(a.cliques_reeliminated, b.cliques_reeliminated);
+  EXPECT_EQ(a.cliques_solved, b.cliques_solved);
+  EXPECT_EQ(readmitted.numCliques(), fresh.numCliques());
+  EXPECT_EQ(readmitted.factorizationFlops(), fresh.factorizationFlops());
+  EXPECT_EQ(maxDifference(readmitted.estimate(), fresh.estimate()), 0.0);
+  EXPECT_EQ(readmitted.weightedObjective(), fresh.objective());
+}
+
+TEST(SmootherWeights, ReadmittedEqualsAddedFresh2D) { expectReadmittedEqualsAddedFresh<SE2>(10); }
+TEST(SmootherWeights, ReadmittedEqualsAddedFresh3D) { expectReadmittedEqualsAddedFresh<SE3>(11); }
+
+// Out of the structure and back: w > 0 → 0 re-eliminates the factor's cliques without it (it
+// leaves the tree), 0 → w' > 0 before the next update brings it back; the tree stays valid and
+// the estimate is that of the weight in force.
+TEST(SmootherWeights, OutAndBackBeforeAnUpdate) {
+  constexpr int n = 40;
+  std::vector<SE2> truth;
+  const std::vector<Factor2> fs = loopGraph<SE2>(n, 12, &truth, 1.0);
+  IncrementalSmoother2 s = smootherOf(fs, n);
+  const int bad = indexOf(s, 2, n - 3);
+  s.setFactorWeight(bad, 0.0);
+  s.setFactorWeight(bad, 0.5);
+  s.update();
+  s.checkInvariants();
+  converge(&s);
+  std::vector<Factor2> half = fs;
+  half.back().setInlierWeight(0.5);
+  IncrementalSmoother2 ref = smootherOf(half, n);
+  converge(&ref);
+  EXPECT_LT(maxDifference(s.estimate(), ref.estimate()), 1e-5);
+  // Out for good: the tree no longer holds it.
+  s.setFactorWeight(bad, 0.0);
+  s.update();
+  s.checkInvariants();
+  converge(&s);
+  std::vector<Factor2> clean(fs.begin(), fs.end() - 1);
+  IncrementalSmoother2 without = smootherOf(clean, n);
+  converge(&without);
+  EXPECT_LT(maxDifference(s.estimate(), without.estimate()), 1e-6);
+}
+
 TEST(SmootherWeights, BadWeightOrIndexIsRefusedAndChangesNothing) {
   constexpr int n = 20;
   std::vector<SE2> truth;

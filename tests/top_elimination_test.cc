@@ -32,7 +32,8 @@ TEST(TopElimination, WholeGraphGivesRtREqualToTheHessian) {
     EXPECT_EQ(out.variables, 29);
     EXPECT_EQ(out.cliques, p.tree.num_cliques);
     EXPECT_EQ(out.indeterminate, 0);
-    p.tree.checkInvariants(p.factors.factors, p.fixed, [](int) { return false; });
+    p.tree.checkInvariants(p.factors.factors, p.factors.attached, p.fixed,
+                           [](int) { return false; });
     expectFactorsHessian(p, 1e-10);
   }
 }
@@ -89,7 +90,7 @@ TEST(TopElimination, ReeliminatingATopWithItsOrphansKeepsTheFactorisation) {
                                                  p.theta,       p.fixed,     1 << 30};
   const auto out = elimination.run(in, &p.tree, &p.factors, &p.threads);
   EXPECT_EQ(out.variables, static_cast<int>(top.variables.size()));
-  p.tree.checkInvariants(p.factors.factors, p.fixed, [](int) { return false; });
+  p.tree.checkInvariants(p.factors.factors, p.factors.attached, p.fixed, [](int) { return false; });
   expectFactorsHessian(p, 1e-10);
 }
 
