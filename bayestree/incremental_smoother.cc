@@ -58,6 +58,8 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->variables_checked += s.variables_checked;
   total->async_started += s.async_started;
   total->async_swapped += s.async_swapped;
+  total->refine_iterations += s.refine_iterations;
+  total->cancelled = total->cancelled || s.cancelled;
 }
 
 int threadCount(int requested) {
@@ -858,7 +860,7 @@ struct IncrementalSmoother<G>::Impl {
 
   // Passes of Alg. 6 with every variable relinearised and the whole tree re-eliminated, until F
   // settles (Gauss–Newton steps halved while F rises).
-  UpdateStats relinearizeAll() {
+  UpdateStats relinearizeAll(const CancellationToken* cancel) {
     const auto t0 = Clock::now();
     UpdateStats total;
     if (async.pending()) {  // everything is relinearised below: the job is not needed
@@ -875,6 +877,11 @@ struct IncrementalSmoother<G>::Impl {
     StepOptions everything;
     everything.relinearize_all = true;
     for (int it = 0; it < opt.finalize_max_iterations; ++it) {
+      if (cancel != nullptr && cancel->cancelled()) {
+        total.cancelled = true;
+        break;
+      }
+      ++total.refine_iterations;
       accumulate(&total, step(everything));
       double F_new = objectiveAt(delta);
       if (!opt.dogleg && F_new > F_prev) {
@@ -957,8 +964,8 @@ UpdateStats IncrementalSmoother<G>::update() {
   return impl_->update();
 }
 template <class G>
-UpdateStats IncrementalSmoother<G>::relinearizeAll() {
-  return impl_->relinearizeAll();
+UpdateStats IncrementalSmoother<G>::relinearizeAll(const CancellationToken* cancel) {
+  return impl_->relinearizeAll(cancel);
 }
 template <class G>
 bool IncrementalSmoother<G>::relinearizationPending() const {

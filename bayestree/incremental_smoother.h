@@ -18,6 +18,7 @@
 #include <memory>
 #include <vector>
 
+#include "arbor/core/cancellation.h"
 #include "arbor/core/factor.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/relative_pose_factor.h"
@@ -136,6 +137,10 @@ struct UpdateStats {
   /// variables that snapshot relinearised in variables_relinearized)
   int async_started = 0;
   int async_swapped = 0;
+  /// relinearizeAll / OnlineSmoother::finalize: the iterations (relinearise-all passes) run, and
+  /// whether the caller's token stopped them before convergence
+  int refine_iterations = 0;
+  bool cancelled = false;
   double time_s = 0.0;
 };
 
@@ -205,8 +210,11 @@ class IncrementalSmoother {
   UpdateStats update();
   /// Relinearises every variable, re-eliminates the whole tree and back-substitutes fully,
   /// repeated until F changes by less than finalize_relative_tolerance (relative) or
-  /// finalize_max_iterations. Adds queued factors first. Returns the summed stats.
-  UpdateStats relinearizeAll();
+  /// finalize_max_iterations. Adds queued factors first. With a token, checks it before each
+  /// iteration (one cancelled() call each) and stops when it is cancelled: the estimate is then
+  /// that of the last iteration completed (UpdateStats::cancelled); an iteration is never cut
+  /// in the middle. Returns the summed stats.
+  UpdateStats relinearizeAll(const CancellationToken* cancel = nullptr);
   /// RelinearizationMode::kAsync: whether a background relinearisation has been started and not
   /// yet swapped in (it is swapped in by a later update()).
   bool relinearizationPending() const;

@@ -21,6 +21,8 @@ void addStats(UpdateStats* total, const UpdateStats& s) {
   total->indeterminate_cliques += s.indeterminate_cliques;
   total->cliques_solved += s.cliques_solved;
   total->cliques_on_helpers += s.cliques_on_helpers;
+  total->refine_iterations += s.refine_iterations;
+  total->cancelled = total->cancelled || s.cancelled;
   total->time_s += s.time_s;
 }
 
@@ -347,8 +349,13 @@ UpdateStats OnlineSmoother<G>::update() {
 }
 
 template <class G>
-void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total) {
+void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total,
+                                      const CancellationToken* cancel) {
   for (int k = 0; k < max_updates && gnc_->graduating(); ++k) {
+    if (cancel != nullptr && cancel->cancelled()) {
+      total->cancelled = true;
+      return;
+    }
     gnc_->step(smoother_);
     addStats(total, smoother_.update());
     gnc_->resolve(smoother_);
@@ -360,15 +367,16 @@ void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total) {
 // kernel (a change graduates it again) and relinearises all; another round only while the
 // re-check changed a weight.
 template <class G>
-UpdateStats OnlineSmoother<G>::finalize() {
-  if (!gnc_) return recordUpdate(smoother_.relinearizeAll());
+UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
+  if (!gnc_) return recordUpdate(smoother_.relinearizeAll(cancel));
   UpdateStats total;
   const int bound = gnc_->options().max_steps_per_closure + 1;
   for (int round = 0;; ++round) {
-    graduateFully(bound, &total);
-    addStats(&total, smoother_.relinearizeAll());
+    graduateFully(bound, &total, cancel);
+    if (total.cancelled) break;
+    addStats(&total, smoother_.relinearizeAll(cancel));
     gnc_->resolve(smoother_);
-    if (round + 1 >= gnc_->options().finalize_rounds) break;
+    if (total.cancelled || round + 1 >= gnc_->options().finalize_rounds) break;
     if (gnc_->step(smoother_, /*recheck_all=*/true) == 0 && !gnc_->graduating()) break;
   }
   return recordUpdate(total);

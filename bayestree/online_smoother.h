@@ -187,7 +187,11 @@ class OnlineSmoother {
   /// Relinearises everything and iterates to convergence (the end of a replay). With robust
   /// smoothing, first graduates every closure to the end (bounded by max_steps_per_closure
   /// updates) and re-checks every settled one, up to RobustOptions::finalize_rounds rounds.
-  UpdateStats finalize();
+  /// With a token: checked before each relinearise-all iteration and each graduation update
+  /// (one cancelled() call each, in a fixed order), and everything stops once it is cancelled;
+  /// the estimate is then that of the last step completed (UpdateStats::cancelled). The same
+  /// count of passed checks (CancellationToken::cancelAfterChecks) repeats the cut exactly.
+  UpdateStats finalize(const CancellationToken* cancel = nullptr);
   /// With robust smoothing: every loop closure's weight and status (empty without it).
   std::vector<ClosureReport> closures() const;
   /// The robust layer, or nullptr without robust smoothing (exclude/include a factor).
@@ -270,7 +274,8 @@ class OnlineSmoother {
   /// Adds m to the smoother, creating an unknown end or a new component, or joining two.
   void apply(const Measurement& m, EdgeTrust trust, KernelKind kernel);
   /// Robust smoothing: graduation steps until none graduates or `max_updates` updates.
-  void graduateFully(int max_updates, UpdateStats* total);
+  void graduateFully(int max_updates, UpdateStats* total,
+                     const CancellationToken* cancel = nullptr);
   /// The edge from → to (dense indices, in different components) joins them.
   void join(int from, int to, const G& z);
   /// Priors of component c now fix its gauge: its anchor is released.

@@ -419,6 +419,48 @@ TEST(BayesTreeFinalize, DoglegWithinOnePercentOfOptimum3D) {
   expectFinalizeReachesOptimum<SE3>(80, 20, 42, true);
 }
 
+// relinearizeAll with a token cut after k checks (one before each iteration) stops after k
+// iterations: the estimate is exactly that of finalize_max_iterations = k (k = 0: the estimate
+// before it), and the stats say it
+// was cut; a token never cancelled changes nothing.
+TEST(BayesTreeFinalize, ACancelledTokenStopsAtAnIterationBoundary) {
+  const PoseGraph<SE2> g = randomGraph<SE2>(150, 50, 24, 0.15, 0.08);
+  const auto replayed = [&](int max_iterations) {
+    SmootherOptions o;
+    o.finalize_max_iterations = max_iterations;
+    o.finalize_relative_tolerance = 0;  // every iteration runs
+    auto s = std::make_unique<IncrementalSmoother<SE2>>(o);
+    replay(g, s.get(), [](const IncrementalSmoother<SE2>&, const UpdateStats&) {});
+    return s;
+  };
+  for (const int k : {0, 1, 2}) {
+    SCOPED_TRACE(k);
+    auto limited = replayed(std::max(k, 1));  // k = 0: the estimate before relinearizeAll
+    if (k > 0) {
+      const UpdateStats by_limit = limited->relinearizeAll();
+      EXPECT_FALSE(by_limit.cancelled);
+      EXPECT_EQ(by_limit.refine_iterations, k);
+    }
+    auto cut = replayed(5);
+    const CancellationToken token;
+    token.cancelAfterChecks(k);
+    const UpdateStats by_token = cut->relinearizeAll(&token);
+    EXPECT_TRUE(by_token.cancelled);
+    EXPECT_EQ(by_token.refine_iterations, k);
+    EXPECT_EQ(token.checksPassed(), k);
+    cut->checkInvariants();
+    EXPECT_EQ(cut->objective(), limited->objective());
+    const std::vector<SE2> a = cut->estimate(), b = limited->estimate();
+    for (size_t v = 0; v < a.size(); ++v) ASSERT_EQ(a[v].Log(), b[v].Log()) << "pose " << v;
+  }
+  auto whole = replayed(3), with_token = replayed(3);
+  const CancellationToken never;
+  whole->relinearizeAll();
+  EXPECT_FALSE(with_token->relinearizeAll(&never).cancelled);
+  EXPECT_EQ(never.checksPassed(), 3);
+  EXPECT_EQ(whole->objective(), with_token->objective());
+}
+
 TEST(BayesTreeDogleg, DoesNotIncreaseFOverTheLinearizationPoint) {
   const PoseGraph<SE2> g = randomGraph<SE2>(80, 30, 43, 0.2, 0.1);
   SmootherOptions o;

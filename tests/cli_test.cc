@@ -271,6 +271,8 @@ TEST(Cli, BadSmootherOrBatchValueExitsTwoNamingTheFlagAndValue) {
       {"serve --wildfire=-0.5", "--wildfire", "'-0.5'"},
       {"replay " + file + " --batch gn", "--batch must be lm or rtr", "'gn'"},
       {"serve --batch dogleg", "--batch must be lm or rtr", "'dogleg'"},
+      {"serve --exit-refine-budget=-1", "--exit-refine-budget", "'-1'"},
+      {"serve --exit-refine-budget soon", "--exit-refine-budget", "'soon'"},
       {"batch " + file + " --solver newton", "--solver must be lm, gn, dogleg or rtr", "'newton'"},
   };
   if (std::filesystem::exists(bench)) {

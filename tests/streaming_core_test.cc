@@ -257,5 +257,77 @@ TEST(StreamingCore, TheLcmEventJournalReplaysInTheMemoryDrivenCore) {
   std::remove(path.c_str());
 }
 
+/// Streams the graph through a memory-driven core with a journal and stops it (its exit
+/// refinement as `options` say); the summary, and the journal in `entries`.
+ServeSummary runWithJournal(const StreamingOptions& options,
+                            const std::shared_ptr<std::vector<JournalEntry>>& entries) {
+  const PoseGraph2 g = graph();
+  const std::vector<int> order = replayOrder(g);
+  MemoryPublisher out;
+  StreamingCore core(out, std::make_unique<MemoryJournal>(entries), options);
+  core.start();
+  feedMemory(core, out, g, order, 0, order.size());
+  core.stop();
+  return core.summary();
+}
+
+/// A restart from `entries` without an exit refinement of its own: its first full estimate.
+Estimate restartFrom(const std::shared_ptr<std::vector<JournalEntry>>& entries,
+                     StreamingOptions options) {
+  options.refine_on_exit = false;
+  MemoryPublisher out;
+  StreamingCore core(out, std::make_unique<MemoryJournal>(entries), options);
+  core.start();
+  core.stop();
+  EXPECT_FALSE(out.full().empty());
+  return out.full().empty() ? Estimate() : out.full().front();
+}
+
+// stop()'s refinement cut after its first iteration (the token's countdown: no clock) ends
+// short of the full one, says so, and journals the cut after it ran, so that a restart repeats
+// exactly that refinement: bit for bit the cut estimate, not the converged one.
+TEST(StreamingCore, AnExitRefinementCutShortIsJournaledAndRepeatedByARestart) {
+  for (const bool robust : {false, true}) {
+    SCOPED_TRACE(robust ? "robust" : "plain");
+    StreamingOptions options;
+    if (robust) options.robust = RobustOptions{};
+    auto full_entries = std::make_shared<std::vector<JournalEntry>>();
+    const ServeSummary full = runWithJournal(options, full_entries);
+    EXPECT_FALSE(full.exit_refine_cut);
+    ASSERT_GE(full.exit_refine_iterations, 2);  // else a cut after one would change nothing
+    ASSERT_EQ(full_entries->back().type, JournalEntry::Type::kRefineMark);
+    EXPECT_EQ(full_entries->back().measurements, 0);  // to convergence
+
+    StreamingOptions cut_options = options;
+    cut_options.exit_refine_cancel = CancellationToken();
+    const int checks = 1;  // one relinearise-all iteration (no closure graduates here)
+    cut_options.exit_refine_cancel.cancelAfterChecks(checks);
+    auto cut_entries = std::make_shared<std::vector<JournalEntry>>();
+    const ServeSummary cut = runWithJournal(cut_options, cut_entries);
+    EXPECT_TRUE(cut.exit_refine_cut);
+    EXPECT_LT(cut.exit_refine_iterations, full.exit_refine_iterations);
+    ASSERT_EQ(cut_entries->back().type, JournalEntry::Type::kRefineMark);
+    EXPECT_EQ(cut_entries->back().measurements, checks + 1);
+    EXPECT_NE(cut.final_estimate.translation, full.final_estimate.translation);
+    EXPECT_GE(cut.F_final, full.F_final * (1 - 1e-12));
+
+    expectBitForBit(restartFrom(cut_entries, options), cut.final_estimate);
+    expectBitForBit(restartFrom(full_entries, options), full.final_estimate);
+  }
+}
+
+// A budget of 0 s: the watchdog cancels at once, and whether the refinement saw it before its
+// first iteration or after some is the scheduler's; either way the journal says which, and a
+// restart repeats it bit for bit.
+TEST(StreamingCore, AnExitRefinementOverItsBudgetIsRepeatedByARestart) {
+  StreamingOptions options;
+  options.exit_refine_budget_s = 0;
+  auto entries = std::make_shared<std::vector<JournalEntry>>();
+  const ServeSummary s = runWithJournal(options, entries);
+  ASSERT_EQ(entries->back().type, JournalEntry::Type::kRefineMark);
+  EXPECT_EQ(entries->back().measurements > 0, s.exit_refine_cut);
+  expectBitForBit(restartFrom(entries, StreamingOptions{}), s.final_estimate);
+}
+
 }  // namespace
 }  // namespace arbor::serve

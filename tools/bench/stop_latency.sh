@@ -4,7 +4,8 @@
 # first COUNT edges of DATASET as a burst into `arbor serve --batch SOLVER --batch-every EVERY`,
 # waits until they are all estimated, sends SIGTERM and times the exit. Runs over udpm inside a
 # private network namespace of its own (only loopback; see lcm_bench.sh), so nothing leaves the
-# machine. Prints one line per run: the stop time, and the last batch's state from serve's JSON.
+# machine. Prints one line per run: the stop time, the last batch's state and the exit
+# refinement's (iterations, time, cut by --exit-refine-budget) from serve's JSON.
 # usage: tools/bench/stop_latency.sh [BUILD_DIR] [DATASET_FILE]
 # Environment: RUNS=5 COUNT=-1 SOLVER=rtr EVERY=20 SERVE_FLAGS=... (e.g. --no-refine)
 set -euo pipefail
@@ -40,6 +41,8 @@ s = json.load(open(path))
 b = s["batches"][-1] if s["batches"] else {}
 print(f"run {run}: SIGTERM -> exit {float(end) - float(start):.3f} s; {len(s['batches'])} batches, "
       f"last cancelled={b.get('cancelled', False)} after {b.get('time_s', 0):.3f} s "
-      f"(winner {b.get('winner', '-')}); applied {s['applied']}")
+      f"(winner {b.get('winner', '-')}); exit refinement {s['exit_refine']['iterations']} "
+      f"iterations in {s['exit_refine']['time_s']:.3f} s, cut={s['exit_refine']['cut']}; "
+      f"applied {s['applied']}; F {s['F_final']:.6g}")
 PY
 done

@@ -2,10 +2,14 @@
 // smoother and publish the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
 #include "arbor/tools/cli/serve_command.h"
 
+#include <atomic>
+#include <cmath>
 #include <csignal>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <sstream>
+#include <thread>
 
 #include <pthread.h>
 #include <sys/stat.h>
@@ -71,6 +75,18 @@ int parsePublishMode(const std::string& text) {
   throw UsageError("--publish must be changed, full or N > 0, not '" + text + "'");
 }
 
+// --exit-refine-budget: seconds ≥ 0, or none (to convergence).
+double parseExitBudget(const std::string& text) {
+  if (text == "none") return std::numeric_limits<double>::infinity();
+  try {
+    size_t used = 0;
+    const double s = std::stod(text, &used);
+    if (used == text.size() && std::isfinite(s) && s >= 0) return s;
+  } catch (const std::exception&) {
+  }
+  throw UsageError("--exit-refine-budget must be seconds >= 0 or none, not '" + text + "'");
+}
+
 }  // namespace
 
 std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args) {
@@ -78,6 +94,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   serve::ServeOptions& options = line.options;
   std::string fsync = "update", publish = "changed", batch;
   bool no_refine = false;
+  std::string exit_budget = "1";
   long long max_senders = static_cast<long long>(options.max_senders);
   po::options_description desc("arbor serve [options]");
   desc.add_options()("help,h", "show this help")(
@@ -111,6 +128,9 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
                      "seconds between status messages")(
       "no-refine", po::bool_switch(&no_refine),
       "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
+      "exit-refine-budget", po::value(&exit_budget)->default_value(exit_budget),
+      "seconds the exit refinement may take: it stops at the first iteration boundary after "
+      "them (none: to convergence, however long; a second SIGINT/SIGTERM cuts it at once)")(
       "output,o", po::value(&line.output), "on exit, write the estimate as g2o")(
       "json", po::bool_switch(&line.json), "on exit, print one JSON object")(
       "batch", po::value(&batch),
@@ -175,6 +195,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
+  options.exit_refine_budget_s = parseExitBudget(exit_budget);
   if (!line.journal_dir.empty()) options.journal_path = line.journal_dir + "/journal.lcmlog";
   if (vm.count("recv-buf") && line.recv_buf_bytes <= 0) {
     throw UsageError("--recv-buf must be > 0 bytes, not '" + std::to_string(line.recv_buf_bytes) +
@@ -241,7 +262,19 @@ int serveCommand(const std::vector<std::string>& args) {
   sigwait(&signals, &signal);
   std::cerr << "arbor serve: " << (signal == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
             << std::endl;
+  // A second signal while stopping cuts the exit refinement (and a batch) at its next check.
+  std::atomic<bool> stopped{false};
+  std::thread second_signal([&] {
+    const timespec tick{0, 50 * 1000 * 1000};
+    while (!stopped) {
+      if (sigtimedwait(&signals, nullptr, &tick) < 0) continue;
+      std::cerr << "arbor serve: a second signal, cutting the exit refinement" << std::endl;
+      service.cancelExit();
+    }
+  });
   service.stop();
+  stopped = true;
+  second_signal.join();
   const serve::ServeSummary& s = service.summary();
   if (!output.empty() && !service.writeG2o(output)) {
     std::cerr << "arbor serve: no edge was applied; " << output << " not written\n";
@@ -266,6 +299,10 @@ int serveCommand(const std::vector<std::string>& args) {
         {"journal_edges", s.journal_edges},
         {"journal_updates", s.journal_updates},
         {"refinements", s.refinements},
+        {"exit_refine",
+         {{"iterations", s.exit_refine_iterations},
+          {"cut", s.exit_refine_cut},
+          {"time_s", s.exit_refine_time_s}}},
         {"batches_skipped", s.batches_skipped},
         {"reseeds", s.reseeds},
         {"journal_reseeds", s.journal_reseeds},

@@ -27,7 +27,7 @@ struct JournalEntry {
   };
   Type type = Type::kUnreadable;
   Arrival arrival;       ///< kMeasurement (`wire` null: the entry's lifetime ends with it)
-  int measurements = 0;  ///< kUpdateMark
+  int measurements = 0;  ///< kUpdateMark; kRefineMark: 0, or the cut (appendMark)
   Estimate seed;         ///< kReseed
   std::string problem;   ///< kUnreadable
 };
@@ -42,8 +42,9 @@ class JournalSink {
                       const std::function<void(const std::string&)>& note) = 0;
   /// An accepted measurement (its bytes as received when `arrival.wire` is set).
   virtual void appendMeasurement(const Arrival& arrival) = 0;
-  /// An update of `measurements` entries (kUpdateMark) or a refinement (kRefineMark, 0), after
-  /// `update` updates; may use the room kept for marks.
+  /// An update of `measurements` entries (kUpdateMark) or a refinement (kRefineMark;
+  /// `measurements` 0: it ran to convergence, k > 0: it was cut short after k − 1 passed
+  /// cancellation checks), after `update` updates; may use the room kept for marks.
   virtual void appendMark(JournalEntry::Type type, int measurements, std::int64_t update) = 0;
   /// A reseed's complete linearisation point, before it is applied.
   virtual void appendReseed(const Estimate& seed) = 0;

@@ -75,6 +75,7 @@ void LcmEventJournal::replay(const std::function<void(JournalEntry&&)>& entry,
         e.measurements = m.edges;
       } else if (m.kind == journal_mark_t::REFINE) {
         e.type = JournalEntry::Type::kRefineMark;
+        e.measurements = m.edges;  // 0: to convergence; k > 0: cut after k − 1 checks
       } else {
         continue;
       }

@@ -51,8 +51,8 @@ class EngineImpl final : public Engine {
     noteChanged(smoother_.smoother().updatedPoses());
     return st;
   }
-  UpdateStats refine() override {
-    const UpdateStats st = smoother_.finalize();
+  UpdateStats refine(const CancellationToken* cancel) override {
+    const UpdateStats st = smoother_.finalize(cancel);
     noteChanged(smoother_.smoother().updatedPoses());
     return st;
   }

@@ -31,8 +31,9 @@ class Engine {
   /// enableEdge; the next update applies it).
   virtual EdgeSwitchResult command(const StreamEdgeCommand& command) = 0;
   virtual UpdateStats update() = 0;
-  /// Relinearises everything and iterates to convergence (OnlineSmoother::finalize).
-  virtual UpdateStats refine() = 0;
+  /// Relinearises everything and iterates to convergence (OnlineSmoother::finalize), or until
+  /// `cancel` (checked between iterations) is cancelled.
+  virtual UpdateStats refine(const CancellationToken* cancel = nullptr) = 0;
   /// F over every factor not disabled (OnlineSmoother::objective).
   virtual double objective() const = 0;
   virtual OnlineStats stats() const = 0;

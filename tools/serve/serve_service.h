@@ -74,6 +74,9 @@ class LcmService final : public Publisher {
   /// receiving, then stops the core: every queued edge in one last update, refinement (option),
   /// the journal flushed, the final full estimate and status published, the threads joined.
   void stop();
+  /// Cuts the exit refinement of a stop() in progress at its next check and cancels a batch in
+  /// flight (StreamingCore::cancelExit; a second SIGINT/SIGTERM). Any thread.
+  void cancelExit() { core_->cancelExit(); }
   /// Counters and figures so far (thread-safe).
   status_t status() const;
   /// After stop(): the whole run.

@@ -81,6 +81,11 @@ void StreamingCore::start() {
 
 void StreamingCore::cancelBatches() { options_.batch.cancel.cancel(); }
 
+void StreamingCore::cancelExit() {
+  options_.exit_refine_cancel.cancel();
+  cancelBatches();
+}
+
 void StreamingCore::stop() {
   if (!running_) return;
   running_ = false;
@@ -96,7 +101,7 @@ void StreamingCore::stop() {
   smoother_thread_.join();
 
   pollBatch(true, false);  // a batch still running was cancelled: collected, not reseeded
-  if (engine_ && options_.refine_on_exit) refine(false);
+  if (engine_ && options_.refine_on_exit) refineOnExit();
   if (journal_) {
     try {
       journal_->sync();
@@ -149,6 +154,9 @@ void StreamingCore::stop() {
   summary_.pairs_disabled = s.pairs_disabled;
   summary_.journal_updates = s.journal_updates;
   summary_.refinements = s.refinements;
+  summary_.exit_refine_iterations = exit_refine_.iterations;
+  summary_.exit_refine_cut = exit_refine_.cut;
+  summary_.exit_refine_time_s = exit_refine_.seconds;
   summary_.batches = batch_runs_;
   summary_.batches_skipped = s.batches_skipped;
   summary_.reseeds = s.reseeds;
@@ -554,7 +562,7 @@ void StreamingCore::applyReseed(const Estimate& seed, bool from_journal, refine:
   }
 }
 
-void StreamingCore::refine(bool from_journal) {
+void StreamingCore::refine(bool from_journal, int cut) {
   if (!engine_) return;
   if (!from_journal) {
     try {
@@ -568,8 +576,10 @@ void StreamingCore::refine(bool from_journal) {
   }
   const auto t0 = std::chrono::steady_clock::now();
   const double before = engine_->objective();
+  CancellationToken replayed_cut;  // a journaled exit refinement cut after cut − 1 checks
+  if (cut > 0) replayed_cut.cancelAfterChecks(cut - 1);
   try {
-    engine_->refine();
+    engine_->refine(cut > 0 ? &replayed_cut : nullptr);
   } catch (const std::exception& e) {
     logLine(std::string("refinement failed: ") + e.what());
   }
@@ -581,6 +591,65 @@ void StreamingCore::refine(bool from_journal) {
   state_.refine_time_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   state_.F = after;
+}
+
+// The exit refinement runs first and is journaled after, with how it ended: to convergence
+// (mark 0), or cut by its budget or cancelExit() after k passed checks (mark k + 1), so that a
+// restart repeats exactly this refinement. A watchdog thread cancels the token at the budget.
+void StreamingCore::refineOnExit() {
+  const CancellationToken& cancel = options_.exit_refine_cancel;
+  std::mutex watch_mutex;
+  std::condition_variable watch_cv;
+  bool done = false;
+  std::thread watchdog;
+  const double budget = options_.exit_refine_budget_s;
+  if (std::isfinite(budget)) {
+    watchdog = std::thread([&] {
+      std::unique_lock<std::mutex> lock(watch_mutex);
+      const auto limit = std::chrono::duration<double>(budget);
+      if (!watch_cv.wait_for(lock, limit, [&] { return done; })) cancel.cancel();
+    });
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const double before = engine_->objective();
+  UpdateStats st;
+  try {
+    st = engine_->refine(&cancel);
+  } catch (const std::exception& e) {
+    logLine(std::string("refinement failed: ") + e.what());
+  }
+  {
+    std::lock_guard<std::mutex> lock(watch_mutex);
+    done = true;
+  }
+  watch_cv.notify_all();
+  if (watchdog.joinable()) watchdog.join();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double after = engine_->objective();
+  if (st.cancelled) {
+    std::ostringstream line;
+    line << "exit refinement cut after " << st.refine_iterations << " iteration"
+         << (st.refine_iterations == 1 ? "" : "s") << " and " << seconds << " s (F " << before
+         << " -> " << after << "; --exit-refine-budget " << budget << " s)";
+    logLine(line.str());
+  }
+  if (journal_) {
+    try {
+      journal_->appendMark(JournalEntry::Type::kRefineMark,
+                           st.cancelled ? cancel.checksPassed() + 1 : 0, state_.updates);
+    } catch (const std::exception& e) {
+      logLine(std::string("journal: the exit refinement's mark was not written (") + e.what() +
+              "); a restart starts from the estimate before it");
+    }
+  }
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  ++state_.refinements;
+  state_.refine_F_before = before;
+  state_.refine_F_after = after;
+  state_.refine_time_s = seconds;
+  state_.F = after;
+  exit_refine_ = {st.refine_iterations, st.cancelled, seconds};
 }
 
 void StreamingCore::writeSnapshot(const ControlCommand& c) {
@@ -779,7 +848,7 @@ void StreamingCore::replayJournal() {
         return;
       }
       case JournalEntry::Type::kRefineMark:
-        refine(true);
+        refine(true, e.measurements);
         return;
       case JournalEntry::Type::kReseed:
         if (!engine_) {

@@ -22,6 +22,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -104,7 +105,16 @@ struct StreamingOptions {
   int full_every = 0;  ///< estimates: 0 changed poses only; 1 always full; N full every N
   SmootherOptions smoother;
   bool refine_on_exit = true;  ///< stop(): relinearise everything and iterate to convergence
-  int dim = 0;                 ///< 2 or 3 fixes the stream's dimension; 0: the first edge's
+  /// The exit refinement's time: once it has run this long it stops at its next check (between
+  /// relinearise-all iterations and graduation updates; an iteration is never cut), so stop()
+  /// returns within the budget plus one iteration. Infinity (the library's default, so that the
+  /// final estimate does not depend on the machine's speed): to convergence, however long;
+  /// `arbor serve` defaults to 1 s (--exit-refine-budget).
+  double exit_refine_budget_s = std::numeric_limits<double>::infinity();
+  /// Cancels the exit refinement at its next check (a second SIGINT/SIGTERM: cancelExit()).
+  /// Copies share the flag; tests cut it deterministically with cancelAfterChecks.
+  CancellationToken exit_refine_cancel;
+  int dim = 0;  ///< 2 or 3 fixes the stream's dimension; 0: the first edge's
   /// Seqs remembered per sender for exact duplicate detection; older ones are refused as stale.
   std::int64_t intake_window = EdgeIntake::kDefaultWindow;
   double status_period_s = 1.0;
@@ -145,6 +155,11 @@ struct ServeSummary {
   std::int64_t smoother_rejected = 0, smoother_duplicates = 0;
   std::int64_t journal_edges = 0, journal_updates = 0;  ///< replayed from the journal at start
   int refinements = 0;
+  /// The exit refinement: iterations run, and whether its budget or cancelExit() cut it short
+  /// (its estimate is then that of the last iteration completed).
+  int exit_refine_iterations = 0;
+  bool exit_refine_cut = false;
+  double exit_refine_time_s = 0;
   int batches_skipped = 0, reseeds = 0, journal_reseeds = 0;
   std::vector<refine::BatchRun> batches;  ///< every batch run completed, in order
   double F_final = 0;
@@ -177,6 +192,9 @@ class StreamingCore {
   /// Cancels a batch in flight (its run is kept, marked cancelled, without a reseed): the first
   /// step of stopping, before the transport stops receiving.
   void cancelBatches();
+  /// Cuts the exit refinement at its next check and cancels a batch in flight (a second
+  /// SIGINT/SIGTERM while stop() runs). Any thread.
+  void cancelExit();
   /// After the transport stopped receiving: cancels a batch in flight, applies every queued
   /// measurement in one last update, refines (option), flushes the journal, publishes the final
   /// full estimate and status, joins the smoother thread and fills summary().
@@ -226,7 +244,11 @@ class StreamingCore {
   /// False when the update could not be journaled (nothing applied; the caller holds it).
   bool applyBatch(std::vector<Queued>& batch, bool from_journal);
   void applyEdgeCommand(const Queued& q, bool from_journal);
-  void refine(bool from_journal);
+  /// A refinement to convergence (command REFINE, journaled before it runs) or, replayed from
+  /// the journal, as its mark says (`cut` > 0: cut short after cut − 1 checks).
+  void refine(bool from_journal, int cut = 0);
+  /// stop()'s refinement: within exit_refine_budget_s, journaled after it ran with its cut.
+  void refineOnExit();
   /// Collects a finished batch (`wait`: the one in flight), journals and applies its reseed,
   /// publishes a status (and with `publish` the estimate if it reseeded); returns whether a run
   /// was collected.
@@ -272,6 +294,11 @@ class StreamingCore {
   mutable std::mutex state_mutex_;
   CoreStatus state_;  ///< the smoother's counters (its intake fields unused)
   std::vector<refine::BatchRun> batch_runs_;
+  struct ExitRefinement {
+    int iterations = 0;
+    bool cut = false;
+    double seconds = 0;
+  } exit_refine_;                     ///< stop()'s refinement (state_mutex_)
   std::vector<double> latencies_ms_;  ///< every applied edge and prior
   std::vector<double> transport_ms_;  ///< every applied edge and prior
   std::chrono::steady_clock::time_point last_status_;
