@@ -250,13 +250,29 @@ void benchCovariance(const std::string& name, const PoseGraph<G>& graph,
   OnlineSmoother<G> online(options);
   // One replay step's CPU time: from one update's end to the next's (the edge's insertion and
   // its update).
-  std::vector<double> steps;
+  // Live: after each of the last `samples` updates, one pose's marginal on the smoother itself
+  // (poses spread over those present), as a front-end gating a loop closure asks for it: the
+  // tree as that update left it in the cache, not a copy's.
+  std::vector<double> steps, live;
   double last = now();
+  const int updates_expected = static_cast<int>(graph.edges.size());
+  int updates_seen = 0;
+  double checksum = 0;
   cli::ReplayHooks<G> hooks;
-  hooks.after_update = [&](OnlineSmoother<G>&, cli::UpdateRow&) {
+  hooks.after_update = [&](OnlineSmoother<G>& o, cli::UpdateRow&) {
     const double t = now();
     steps.push_back(t - last);
-    last = t;
+    const int k = updates_expected - ++updates_seen;  // updates still to come
+    const int np = o.smoother().numPoses();
+    if (k >= 0 && k < samples && np > 1) {
+      const int v = static_cast<int>((static_cast<long>(k) * (np - 1)) / std::max(1, samples - 1));
+      if (!o.smoother().isFixed(v)) {
+        const double q0 = now();
+        checksum += o.smoother().marginalCovariance(v).trace();
+        live.push_back(ms(q0));
+      }
+    }
+    last = now();
   };
   const cli::ReplayResult<G> r = cli::replayInto(graph, settings, online, hooks);
   const double update_p50 = cli::summarizeLatency(steps).p50;
@@ -265,7 +281,6 @@ void benchCovariance(const std::string& name, const PoseGraph<G>& graph,
   // Cold: each sample on a copy of the smoother (a copy starts with empty scratch), poses
   // spread over the dense order; warm: the neighbouring pose next, on the same copy.
   std::vector<double> cold, warm, joint;
-  double checksum = 0;
   for (int k = 0; k < samples; ++k) {
     const int v = static_cast<int>((static_cast<long>(k) * (n - 1)) / std::max(1, samples - 1));
     if (s.isFixed(v)) continue;
@@ -286,13 +301,14 @@ void benchCovariance(const std::string& name, const PoseGraph<G>& graph,
   const auto all = s.marginalCovariances();
   const double all_ms = ms(t0);
   const auto c = cli::summarizeLatency(cold), wm = cli::summarizeLatency(warm),
-             j = cli::summarizeLatency(joint);
+             j = cli::summarizeLatency(joint), lv = cli::summarizeLatency(live);
   const TreeMemory mem = s.memory();
   std::cout << "| " << name << " | " << n << " | " << fmt("%.4f", update_p50) << " | "
             << fmt("%.4f", c.p50) << " | " << fmt("%.3f", c.max) << " | "
-            << fmt("%.2f", c.p50 / update_p50) << " | " << fmt("%.4f", wm.p50) << " | "
-            << fmt("%.3f", j.p50) << " | " << fmt("%.1f", all_ms) << " | " << mem.max_frontal_dim
-            << " | ";
+            << fmt("%.2f", c.p50 / update_p50) << " | " << fmt("%.4f", lv.p50) << " | "
+            << fmt("%.3f", lv.max) << " | " << fmt("%.2f", lv.p50 / update_p50) << " | "
+            << fmt("%.4f", wm.p50) << " | " << fmt("%.3f", j.p50) << " | " << fmt("%.1f", all_ms)
+            << " | " << mem.max_frontal_dim << " | ";
   if constexpr (std::is_same_v<G, SE2>) {
     if (ceres) {
       // θ and the fixed poses in the graph's dense order.
@@ -340,19 +356,24 @@ int covariance(const std::vector<std::string>& args, const std::string& default_
   settings.batch = false;
   const auto files =
       bench::selectDatasets(data.shared, data.only.empty() ? "M3500,intel" : data.only);
-  std::cout << "Edge-by-edge replay (" << cli::describeSmoother(settings.smoother)
-            << ", final relinearise-all pass), then marginal covariances from its Bayes tree. "
-               "Times are CPU ms of the process (CLOCK_PROCESS_CPUTIME_ID); update: one replay "
-               "step (insertion and update). cold: one pose on a fresh copy of the smoother ("
-            << samples
-            << " poses spread over the graph); warm: its neighbour next; joint: two poses half "
-               "the graph apart, cold; all: every pose in one walk. Ceres: ceres::Covariance "
-               "(SPARSE_QR) at the same linearisation point, relative Frobenius difference per "
-               "pose.\n\n"
-            << "| dataset | poses | update p50 CPU ms | marginal cold p50 CPU ms | cold max ms | "
-               "cold p50 / update p50 | warm p50 ms | joint cold p50 ms | all ms | max frontal "
-               "dim | vs Ceres median | vs Ceres max | Ceres s |\n"
-            << "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::cout
+      << "Edge-by-edge replay (" << cli::describeSmoother(settings.smoother)
+      << ", final relinearise-all pass), then marginal covariances from its Bayes tree. "
+         "Times are CPU ms of the process (CLOCK_PROCESS_CPUTIME_ID); update: one replay "
+         "step (insertion and update). cold: one pose on a fresh copy of the smoother ("
+      << samples
+      << " poses spread over the graph); live: one pose on the smoother itself after each of "
+         "the last "
+      << samples
+      << " updates (spread likewise); warm: the cold one's neighbour next; joint: two poses half "
+         "the graph apart, cold; all: every pose in one walk. Ceres: ceres::Covariance "
+         "(SPARSE_QR) at the same linearisation point, relative Frobenius difference per "
+         "pose.\n\n"
+      << "| dataset | poses | update p50 CPU ms | marginal cold p50 CPU ms | cold max ms | "
+         "cold p50 / update p50 | live p50 ms | live max ms | live p50 / update p50 | warm "
+         "p50 ms | joint cold p50 ms | all ms | max frontal dim | vs Ceres median | vs Ceres "
+         "max | Ceres s |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
     std::visit([&](const auto& g) { benchCovariance(d.name, g, settings, samples, !no_ceres); },
                d.graph);
