@@ -433,6 +433,11 @@ bool OnlineGnc<G>::judges(int factor) const {
 }
 
 template <class G>
+KernelKind OnlineGnc<G>::kernelOf(int factor) const {
+  return judges(factor) ? closures_[closureOf(factor)].kernel : KernelKind::kNone;
+}
+
+template <class G>
 double OnlineGnc<G>::rho(int factor, double s) const {
   if (!judges(factor)) return s;
   const Closure& c = closures_[closureOf(factor)];

@@ -216,6 +216,9 @@ class OnlineGnc {
   /// Whether the GNC judges factor `factor` (a loop closure graduating or settled; not trusted,
   /// excluded, odometry or a prior).
   bool judges(int factor) const;
+  /// The kernel factor `factor` is judged by (its closure's own, per edge) when the GNC judges
+  /// it, else KernelKind::kNone.
+  KernelKind kernelOf(int factor) const;
   /// ρ of factor `factor` at s = eᵀΩe: its closure's kernel at μ = 1 when the GNC judges it
   /// (TLS: min(s, c²)), else s. Σ of it over the factors is the robust cost Σρ.
   double rho(int factor, double s) const;

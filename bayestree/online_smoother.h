@@ -203,8 +203,11 @@ class OnlineSmoother {
   /// dense order, not sorted).
   PoseGraph<G> snapshot() const;
   /// As snapshot(), and per snapshot edge whether the online GNC judges it (*judged; all false
-  /// without robust smoothing): the edges a robust batch weights, the others it trusts.
-  PoseGraph<G> snapshot(std::vector<char>* judged) const;
+  /// without robust smoothing): the edges a robust batch weights, the others it trusts; with
+  /// `kernels`, per snapshot edge the kernel it is judged by (OnlineGnc::kernelOf; kNone for
+  /// the edges not judged), so that a robust batch weights each edge as the online GNC does.
+  PoseGraph<G> snapshot(std::vector<char>* judged,
+                        std::vector<KernelKind>* kernels = nullptr) const;
   /// The robust cost Σρ at the estimate over every factor not disabled: ρ of a judged closure
   /// at its kernel (TLS: min(s, c²)), s = eᵀΩe of everything else (= objective() without robust
   /// smoothing). O(m).

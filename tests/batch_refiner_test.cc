@@ -134,6 +134,70 @@ TEST(BatchRefiner, BackgroundRunsWhileUpdatesGoOn) {
   EXPECT_EQ(done->run.poses, 300);  // the snapshot, not the poses added meanwhile
 }
 
+// Robust, with each loop closure's own kernel (edge_t's kernel, --edge-choices): the snapshot
+// lists per edge the kernel the online GNC judges it by, and the batch weights every closure by
+// that kernel, so its Σρ of the incremental estimate is the online GNC's own Σρ (one kernel for
+// all, TLS, would count the Cauchy and Geman–McClure closures differently).
+TEST(BatchRefiner, RobustBatchWeightsEachClosureByItsOwnKernel) {
+  OnlineSmootherOptions<SE2> options;
+  options.robust = RobustOptions{};
+  OnlineSmoother<SE2> s(options);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0, 0.05);
+  std::vector<SE2> truth(80);
+  for (int k = 1; k < 80; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / 20));
+  auto z = [&](int a, int b) {
+    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
+  };
+  const KernelKind cycle[] = {KernelKind::kCauchy, KernelKind::kGemanMcClure,
+                              KernelKind::kTruncatedLeastSquares};
+  std::vector<KernelKind> given;  // per loop closure, in the order added
+  for (int k = 1; k < 80; ++k) {
+    s.addEdge(k - 1, k, z(k - 1, k), Eigen::Matrix3d::Identity() * 400);
+    if (k >= 20) {
+      given.push_back(cycle[k % 3]);
+      s.addEdge(k - 20, k, z(k - 20, k), Eigen::Matrix3d::Identity() * 400, EdgeTrust::kByRule,
+                given.back());
+    }
+    s.update();
+  }
+  std::vector<char> judged;
+  std::vector<KernelKind> kernels;
+  const PoseGraph<SE2> snapshot = s.snapshot(&judged, &kernels);
+  ASSERT_EQ(kernels.size(), snapshot.edges.size());
+  size_t closure = 0;
+  int judged_count = 0;
+  for (size_t e = 0; e < snapshot.edges.size(); ++e) {
+    const bool loop = std::abs(snapshot.edges[e].i - snapshot.edges[e].j) > 1;
+    if (!loop) {
+      EXPECT_EQ(kernels[e], KernelKind::kNone) << "edge " << e;
+      continue;
+    }
+    ASSERT_LT(closure, given.size());
+    if (judged[e]) {
+      EXPECT_EQ(kernels[e], given[closure]) << "closure " << closure;
+      ++judged_count;
+    }
+    ++closure;
+  }
+  EXPECT_GT(judged_count, 40);
+
+  RefinerOptions ro;
+  ro.solver = BatchSolver::kLevenbergMarquardt;
+  ro.every = 1;
+  ro.synchronous = true;
+  BatchRefiner<SE2> refiner(ro);
+  ASSERT_TRUE(refiner.start(s, 1));
+  const auto done = refiner.collect(true);
+  ASSERT_TRUE(done.has_value());
+  EXPECT_TRUE(done->run.robust);
+  EXPECT_NEAR(done->run.F_incremental, s.robustObjective(), 1e-9 * s.robustObjective());
+  // The same snapshot under one kernel for every closure counts them differently.
+  GncOptions single = gncOptionsOf(*s.gnc());
+  EXPECT_GT(std::abs(robustCost(snapshot, snapshot.poses, judged, single) - s.robustObjective()),
+            1e-6 * s.robustObjective());
+}
+
 TEST(BatchRefiner, RefusesBadOptionsAndTinySnapshots) {
   RefinerOptions o;
   o.every = -1;

@@ -120,11 +120,12 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
   result.reseed_s = refiner.reseedSeconds();
 
   std::vector<char> judged;
-  const PoseGraph<G> snapshot = smoother.snapshot(&judged);
+  std::vector<KernelKind> kernels;
+  const PoseGraph<G> snapshot = smoother.snapshot(&judged, &kernels);
   if (loop.final_run && snapshot.numPoses() > 1 && snapshot.numEdges() > 0) {
     refine::BatchOutcome<G> last =
         smoother.gnc() ? refine::solveRobustSnapshot(loop.solver, snapshot, judged,
-                                                     refine::gncOptionsOf(*smoother.gnc()))
+                                                     refine::gncOptionsOf(*smoother.gnc(), kernels))
                        : refine::solveSnapshot(loop.solver, snapshot);
     last.run.update = static_cast<std::int64_t>(r.rows.size());
     last.run.final_run = true;

@@ -133,24 +133,29 @@ BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
 }
 
 template <class G>
-GncOptions gncOptionsOf(const OnlineGnc<G>& online) {
+GncOptions gncOptionsOf(const OnlineGnc<G>& online, std::vector<KernelKind> kernels) {
   GncOptions gnc;
   gnc.kernel = online.options().kernel;
   gnc.threshold = online.threshold();
+  gnc.kernels = std::move(kernels);
   return gnc;
 }
 
 template <class G>
 double robustCost(const PoseGraph<G>& graph, const std::vector<G>& poses,
-                  const std::vector<char>& judged, KernelKind kernel, double c2) {
+                  const std::vector<char>& judged, const GncOptions& gnc) {
   // Σρ = F − Σ_judged (s − ρ(s)), F = Σ eᵀΩe over every edge and prior.
-  const RobustKernel k{kernel, c2, 1.0};
+  const double c2 = gnc.threshold;
   double cost = objective(graph, poses);
   for (size_t e = 0; e < graph.edges.size(); ++e) {
     if (!judged[e]) continue;
+    const KernelKind kernel =
+        e < gnc.kernels.size() && gnc.kernels[e] != KernelKind::kNone ? gnc.kernels[e] : gnc.kernel;
     const auto& edge = graph.edges[e];
     const double s = edge.cost(poses[edge.i], poses[edge.j]);
-    const double rho = kernel == KernelKind::kTruncatedLeastSquares ? std::min(s, c2) : k.rho(s);
+    const double rho = kernel == KernelKind::kTruncatedLeastSquares
+                           ? std::min(s, c2)
+                           : RobustKernel{kernel, c2, 1.0}.rho(s);
     cost -= s - rho;
   }
   return cost;
@@ -171,9 +176,7 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
   run.poses = snapshot.numPoses();
   run.edges = snapshot.numEdges();
   for (char j : judged) run.judged += j;
-  auto rho = [&](const std::vector<G>& x) {
-    return robustCost(snapshot, x, judged, gnc.kernel, gnc.threshold);
-  };
+  auto rho = [&](const std::vector<G>& x) { return robustCost(snapshot, x, judged, gnc); };
   run.F_incremental = rho(incremental);
 
   // GNC from the incremental estimate, trusting what the online GNC trusts.
@@ -315,12 +318,13 @@ bool BatchRefiner<G>::start(OnlineSmoother<G>& smoother, std::int64_t update) {
     return false;
   }
   std::vector<char> judged;
-  PoseGraph<G> snapshot = smoother.snapshot(&judged);
+  std::vector<KernelKind> kernels;
+  PoseGraph<G> snapshot = smoother.snapshot(&judged, &kernels);
   if (snapshot.numPoses() < 2 || snapshot.numEdges() == 0) return false;
   flight_ = std::make_unique<Flight>();
   flight_->snapshot = std::move(snapshot);
   if (const OnlineGnc<G>* online = smoother.gnc()) {  // robust: GNC as the online one judges
-    flight_->gnc = gncOptionsOf(*online);
+    flight_->gnc = gncOptionsOf(*online, std::move(kernels));
     flight_->judged = std::move(judged);
   }
   flight_->update = update;
@@ -404,12 +408,12 @@ template BatchOutcome<SE2> solveRobustSnapshot(BatchSolver, const PoseGraph<SE2>
                                                const std::vector<char>&, GncOptions);
 template BatchOutcome<SE3> solveRobustSnapshot(BatchSolver, const PoseGraph<SE3>&,
                                                const std::vector<char>&, GncOptions);
-template GncOptions gncOptionsOf(const OnlineGnc<SE2>&);
-template GncOptions gncOptionsOf(const OnlineGnc<SE3>&);
+template GncOptions gncOptionsOf(const OnlineGnc<SE2>&, std::vector<KernelKind>);
+template GncOptions gncOptionsOf(const OnlineGnc<SE3>&, std::vector<KernelKind>);
 template double robustCost(const PoseGraph<SE2>&, const std::vector<SE2>&, const std::vector<char>&,
-                           KernelKind, double);
+                           const GncOptions&);
 template double robustCost(const PoseGraph<SE3>&, const std::vector<SE3>&, const std::vector<char>&,
-                           KernelKind, double);
+                           const GncOptions&);
 template BatchOutcome<SE3> solveSnapshot(BatchSolver, const PoseGraph<SE3>&,
                                          const CancellationToken&);
 template class BatchRefiner<SE2>;

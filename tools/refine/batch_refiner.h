@@ -11,14 +11,14 @@
 // estimate becomes the smoother's linearisation point (OnlineSmoother::reseed).
 //
 // Robust (the smoother has online robust smoothing, OnlineSmootherOptions::robust): the batch is
-// GNC (core/gnc_solver.h, the smoother's kernel and c²) from the incremental estimate over the
-// snapshot, trusting exactly the edges the online GNC trusts; for rtr then SE-Sync's staircase on
-// GNC's inlier set (certifyInliers: the certificate is of the inlier problem, not of the choice
-// of inliers). Keep-best compares Σρ (the robust cost: ρ of the judged edges, TLS min(s, c²),
-// eᵀΩe of the others) instead of F, since F counts the false closures in full; the report's
-// F_* fields then hold Σρ and the winner is "incremental", "gnc" or "rtr". A reseed carries the
-// classification through the values: OnlineSmoother::reseed keeps the rebuild only if it lowers
-// Σρ and re-checks every settled closure at the new point.
+// GNC (core/gnc_solver.h, the smoother's kernel, each closure's own kernel and c²) from the
+// incremental estimate over the snapshot, trusting exactly the edges the online GNC trusts; for rtr
+// then SE-Sync's staircase on GNC's inlier set (certifyInliers: the certificate is of the inlier
+// problem, not of the choice of inliers). Keep-best compares Σρ (the robust cost: ρ of the judged
+// edges, TLS min(s, c²), eᵀΩe of the others) instead of F, since F counts the false closures in
+// full; the report's F_* fields then hold Σρ and the winner is "incremental", "gnc" or "rtr". A
+// reseed carries the classification through the values: OnlineSmoother::reseed keeps the rebuild
+// only if it lowers Σρ and re-checks every settled closure at the new point.
 //
 // Thread-safety: a BatchRefiner belongs to the thread that owns the smoother; only the solve of
 // a snapshot (a copy) runs on the background thread.
@@ -125,22 +125,26 @@ template <class G>
 BatchOutcome<G> solveSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
                               const CancellationToken& cancel = {});
 
-/// The robust batch of a snapshot (header comment): GNC with `gnc` (its kernel and threshold;
-/// `judged` per edge: weighted, else trusted), then for rtr certifyInliers; keep-best by Σρ.
+/// The robust batch of a snapshot (header comment): GNC with `gnc` (its kernel, per-edge
+/// kernels and threshold; `judged` per edge: weighted, else trusted), then for rtr
+/// certifyInliers; keep-best by Σρ.
 /// Every solve checks gnc.cancel; a cancelled run is marked and has no winner estimate.
 template <class G>
 BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
                                     const std::vector<char>& judged, GncOptions gnc);
 
-/// The GNC options of a robust batch beside `online`: its kernel and threshold c².
+/// The GNC options of a robust batch beside `online`: its kernel and threshold c², and
+/// `kernels` (per snapshot edge, OnlineSmoother::snapshot) as GncOptions::kernels, so that each
+/// closure graduates towards the kernel the online GNC judges it by.
 template <class G>
-GncOptions gncOptionsOf(const OnlineGnc<G>& online);
+GncOptions gncOptionsOf(const OnlineGnc<G>& online, std::vector<KernelKind> kernels = {});
 
-/// Σρ of `poses` on `graph`: for the edges marked in `judged` ρ(s) of `kernel` at c² (TLS:
+/// Σρ of `poses` on `graph`: for the edges marked in `judged` ρ(s) of the edge's kernel
+/// (gnc.kernels[e], or gnc.kernel where that is empty or kNone) at c² = gnc.threshold (TLS:
 /// min(s, c²)), s = eᵀΩe for every other edge and prior.
 template <class G>
 double robustCost(const PoseGraph<G>& graph, const std::vector<G>& poses,
-                  const std::vector<char>& judged, KernelKind kernel, double c2);
+                  const std::vector<char>& judged, const GncOptions& gnc);
 
 /// The values a reseed from `outcome` gives the snapshot's poses (the first best.size() in dense
 /// order): the winner's correction of the snapshot's incremental estimate applied on the left
