@@ -177,18 +177,26 @@ void add2D(const PoseGraph<SE2>& graph, const std::vector<int>& fixed, std::vect
   }
 }
 
+// Ceres' parameters of the 2D poses: t (x, y per pose) and th (θ per pose).
+void pack2D(const std::vector<SE2>& poses, std::vector<double>* t, std::vector<double>* th) {
+  const size_t n = poses.size();
+  t->resize(2 * n);
+  th->resize(n);
+  for (size_t k = 0; k < n; ++k) {
+    (*t)[2 * k] = poses[k].x();
+    (*t)[2 * k + 1] = poses[k].y();
+    (*th)[k] = poses[k].angle();
+  }
+}
+
 }  // namespace
 
 template <>
 CeresResult solveWithCeres(const PoseGraph<SE2>& graph, std::vector<SE2>* poses, int max_iterations,
                            double function_tolerance) {
   const int n = graph.numPoses();
-  std::vector<double> t(2 * n), th(n);
-  for (int k = 0; k < n; ++k) {
-    t[2 * k] = (*poses)[k].x();
-    t[2 * k + 1] = (*poses)[k].y();
-    th[k] = (*poses)[k].angle();
-  }
+  std::vector<double> t, th;
+  pack2D(*poses, &t, &th);
   ceres::Problem problem;
   add2D(graph, graph.gaugeIndices(), &t, &th, &problem);
   ceres::Solver::Summary summary;
@@ -201,12 +209,8 @@ std::vector<Eigen::Matrix3d> ceresCovariances(const PoseGraph<SE2>& graph,
                                               const std::vector<SE2>& poses,
                                               const std::vector<int>& fixed, double* time_s) {
   const int n = graph.numPoses();
-  std::vector<double> t(2 * n), th(n);
-  for (int k = 0; k < n; ++k) {
-    t[2 * k] = poses[k].x();
-    t[2 * k + 1] = poses[k].y();
-    th[k] = poses[k].angle();
-  }
+  std::vector<double> t, th;
+  pack2D(poses, &t, &th);
   ceres::Problem problem;
   add2D(graph, fixed, &t, &th, &problem);
   std::vector<char> is_fixed(n, 0);
@@ -244,13 +248,8 @@ std::vector<Eigen::Matrix3d> ceresCovariances(const PoseGraph<SE2>& graph,
 std::vector<Eigen::Matrix<double, 6, 6>> ceresJointCovariances(
     const PoseGraph<SE2>& graph, const std::vector<SE2>& poses, const std::vector<int>& fixed,
     const std::vector<std::pair<int, int>>& pairs) {
-  const int n = graph.numPoses();
-  std::vector<double> t(2 * n), th(n);
-  for (int k = 0; k < n; ++k) {
-    t[2 * k] = poses[k].x();
-    t[2 * k + 1] = poses[k].y();
-    th[k] = poses[k].angle();
-  }
+  std::vector<double> t, th;
+  pack2D(poses, &t, &th);
   ceres::Problem problem;
   add2D(graph, fixed, &t, &th, &problem);
   // Each pose's parameter blocks (t, θ) and their sizes; the pairs' blocks, each once (Ceres
