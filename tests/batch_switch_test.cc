@@ -7,7 +7,9 @@
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_smoother.h"
 #include "arbor/tests/random_walks.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 #include <gtest/gtest.h>
 
@@ -187,6 +189,48 @@ TEST(BoundedWork, RelinearizationCheckVisitsOnlySolvedVariables) {
     if (k > n / 2) max_updated_late = std::max(max_updated_late, previous_updated);
   });
   EXPECT_LT(max_updated_late, 100u) << "an odometry step touches a bounded part of the walk";
+}
+
+// The re-ordering watches the doubles the tree holds as well as its flops. A dense world (a
+// Manhattan walk that revisits each of its 15 × 15 cells ~20 times) arrives as one burst of 90%
+// of its edges (a fresh ordering), then edge by edge: the constrained re-eliminations and the
+// fold-ins give cliques of one pose under separators of hundreds of dimensions, cheap to
+// factorise but S² doubles each. The tree never holds more than decay² times the doubles of
+// the whole graph in a fresh ordering (a check when they have grown by the decay factor, the
+// re-ordering when they exceed decay × fresh); judged by flops alone it held 5.7 times.
+TEST(BatchSwitch, ReordersWhenTheTreeHoldsTooManyDoubles) {
+  sim::ManhattanOptions world;
+  world.poses = 5000;
+  world.grid = 15;
+  world.seed = 1;
+  const PoseGraph2 g = sim::manhattanWorld(world).graph;
+  OnlineSmootherOptions<SE2> o;
+  o.smoother.threads = 1;
+  const double decay = o.smoother.batch.reorder_decay;
+  ASSERT_EQ(decay, 2.0);
+  const auto add = [&](OnlineSmoother2* s, const RelativePoseEdge<SE2>& e) {
+    ASSERT_EQ(s->addEdge(g.ids[e.i], g.ids[e.j], e.measurement, e.information).status,
+              EdgeStatus::kAccepted);
+  };
+  OnlineSmoother2 s(o);
+  const size_t burst = g.edges.size() * 9 / 10;
+  for (size_t k = 0; k < burst; ++k) add(&s, g.edges[k]);
+  EXPECT_EQ(s.update().batch_reeliminations, 1);
+  double max_doubles = s.smoother().factorizationDoubles();
+  int reorderings = 0;
+  for (size_t k = burst; k < g.edges.size(); ++k) {
+    add(&s, g.edges[k]);
+    reorderings += s.update().batch_reeliminations;
+    max_doubles = std::max(max_doubles, s.smoother().factorizationDoubles());
+  }
+  s.smoother().checkInvariants();  // the doubles are the cliques' sum
+  OnlineSmoother2 fresh(o);
+  for (const auto& e : g.edges) add(&fresh, e);
+  fresh.update();
+  const double fresh_doubles = fresh.smoother().factorizationDoubles();
+  EXPECT_GT(reorderings, 2);
+  EXPECT_LE(max_doubles, decay * decay * fresh_doubles)
+      << "max " << max_doubles << " fresh " << fresh_doubles;
 }
 
 }  // namespace
