@@ -91,6 +91,8 @@ void validate(const SmootherOptions& o) {
     bad("batch.top_share", o.batch.top_share, "in (0, 1]");
   if (!(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1))
     bad("batch.reorder_decay", o.batch.reorder_decay, "0 or ≥ 1");
+  if (o.batch.constrain_last_max < 1)
+    bad("batch.constrain_last_max", o.batch.constrain_last_max, "≥ 1");
   if (o.async.min_variables < 1) bad("async.min_variables", o.async.min_variables, "≥ 1");
   if (o.async.swap_after_updates < 0)
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
@@ -757,11 +759,14 @@ struct IncrementalSmoother<G>::Impl {
       reorder_due = false;
     }
     // Alg. 4 steps 2–6: linearise (what is left of step 2), add the orphans' cached factors,
-    // re-order (constrained: the touched variables last, unless everything is re-eliminated),
-    // eliminate into new cliques and insert the orphans back.
+    // re-order (constrained: the touched variables last, unless everything is re-eliminated or
+    // they are more than BatchSwitchOptions::constrain_last_max), eliminate into new cliques and
+    // insert the orphans back.
+    const bool constrain =
+        !relinearize_all && static_cast<int>(touched.size()) <= opt.batch.constrain_last_max;
     const typename bayestree::TopElimination<G>::Input in{
-        top.variables, top.orphans,          relinearize_all ? nullptr : &mark, to_linearize, theta,
-        fixed,         nestedDissectionMin()};
+        top.variables, top.orphans, constrain ? &mark : nullptr, to_linearize,
+        theta,         fixed,       nestedDissectionMin()};
     const auto out = top_elimination.run(in, &tree, &factors, &threads);
     st->indeterminate_cliques += out.indeterminate;
     st->cliques_on_helpers += out.on_helpers;

@@ -39,6 +39,13 @@ struct BatchSwitchOptions {
   /// ordering's. The fresh ordering is computed only when the tree's flops or doubles have
   /// grown by this factor since the last comparison, so checks are amortised. 0: never.
   double reorder_decay = 2.0;
+  /// iSAM2's constrained ordering puts the variables an update touches (new, or of its new
+  /// factors) last, at the root, where the next update finds them; an update that touches more
+  /// than this many (a burst applied at once) orders its top unconstrained instead: a front
+  /// over thousands of variables forced last fills the cliques below it (measured: a
+  /// 60,000-edge Manhattan burst in a few updates needed > 14 GB constrained, 1.4 GB not;
+  /// docs/benchmarks.md). ≥ 1.
+  int constrain_last_max = 1000;
 };
 
 /// Where Alg. 5's relinearisation happens (docs/design.md, "Asynchronous relinearisation").

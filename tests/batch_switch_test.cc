@@ -3,7 +3,9 @@
 // the variables solved since the last check): deterministic counts and estimates, no timing.
 
 #include <algorithm>
+#include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
@@ -113,6 +115,15 @@ TEST(BatchSwitch, RejectsBadOptions) {
   o = {};
   o.batch.reorder_decay = 0.5;
   EXPECT_THROW(IncrementalSmoother2{o}, std::invalid_argument);
+  o = {};
+  o.batch.constrain_last_max = 0;
+  try {
+    IncrementalSmoother2 s{o};
+    ADD_FAILURE() << "constrain_last_max 0 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("batch.constrain_last_max = 0"), std::string::npos)
+        << e.what();
+  }
 }
 
 // updatedPoses lists every pose whose estimate changed: the others keep theirs bit for bit.
@@ -231,6 +242,56 @@ TEST(BatchSwitch, ReordersWhenTheTreeHoldsTooManyDoubles) {
   EXPECT_GT(reorderings, 2);
   EXPECT_LE(max_doubles, decay * decay * fresh_doubles)
       << "max " << max_doubles << " fresh " << fresh_doubles;
+}
+
+// An update touching more than constrain_last_max variables orders its top unconstrained: the
+// same linear system in another ordering, so the estimate is the constrained one's to rounding,
+// and the tree's invariants hold. Bursts of growing size onto a tree that already holds poses
+// (as `arbor serve` takes a burst); with the default (1000) the bursts of 2000 and 3000 edges
+// go unconstrained, with 1 every update with more than one touched variable does.
+TEST(BatchSwitch, LargeTouchedSetsAreOrderedUnconstrained) {
+  sim::ManhattanOptions world;
+  world.poses = 5000;
+  world.grid = 15;
+  world.seed = 1;
+  const PoseGraph2 g = sim::manhattanWorld(world).graph;
+  const std::vector<size_t> bursts = {1, 20, 200, 800, 2000, 3000};
+  const auto run = [&](int constrain_last_max, std::vector<double>* flops) {
+    OnlineSmootherOptions<SE2> o;
+    o.smoother.threads = 1;
+    o.smoother.wildfire_threshold = 0;  // every clique below a change is solved: exact
+    o.smoother.batch.top_share = 1;     // never the batch path: the constraint decides
+    o.smoother.batch.reorder_decay = 0;
+    o.smoother.batch.constrain_last_max = constrain_last_max;
+    auto s = std::make_unique<OnlineSmoother2>(o);
+    size_t k = 0;
+    for (size_t b : bursts) {
+      for (size_t q = 0; q < b && k < g.edges.size(); ++q, ++k) {
+        const auto& e = g.edges[k];
+        s->addEdge(g.ids[e.i], g.ids[e.j], e.measurement, e.information);
+      }
+      s->update();
+      s->smoother().checkInvariants();
+      flops->push_back(s->smoother().factorizationFlops());
+    }
+    return s;
+  };
+  std::vector<double> constrained_flops, default_flops, unconstrained_flops;
+  const auto constrained = run(1 << 30, &constrained_flops);
+  const auto by_default = run(1000, &default_flops);
+  const auto unconstrained = run(1, &unconstrained_flops);
+  // Another ordering, another tree: the small bursts take the same one as constrained, the
+  // large ones (and every burst with constrain_last_max 1) another.
+  for (size_t u = 0; u < 4; ++u) EXPECT_EQ(default_flops[u], constrained_flops[u]) << u;
+  EXPECT_NE(default_flops[4], constrained_flops[4]);
+  EXPECT_NE(unconstrained_flops[2], constrained_flops[2]);
+  const auto x = constrained->smoother().estimate();
+  for (const auto* s : {by_default.get(), unconstrained.get()}) {
+    const auto y = s->smoother().estimate();
+    ASSERT_EQ(x.size(), y.size());
+    for (size_t v = 0; v < x.size(); ++v)
+      ASSERT_LT(x[v].between(y[v]).Log().norm(), 1e-6) << "pose " << v;
+  }
 }
 
 }  // namespace
