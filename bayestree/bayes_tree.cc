@@ -85,6 +85,7 @@ void BayesTree<D>::removeTop(const std::vector<int>& marked, Top* top) {
     }
   for (int c : removed_) {
     flops -= cliqueFlops(cliques[c].frontals.size(), cliques[c].separator.size());
+    doubles -= cliqueDoubles(cliques[c].frontals.size(), cliques[c].separator.size());
     for (int v : cliques[c].frontals) top->variables.push_back(v);
     for (int ch : cliques[c].children)
       if (cliques[ch].removed_stamp != stamp) top->orphans.push_back(ch);
@@ -160,12 +161,18 @@ void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
       if (++steps > nc) fail(name + " lies on a parent cycle");
   }
   if (in_use != num_cliques) fail("clique count mismatch");
-  double sum_flops = 0;
+  double sum_flops = 0, sum_doubles = 0;
   for (const CliqueD& c : cliques)
-    if (c.in_use) sum_flops += cliqueFlops(c.frontals.size(), c.separator.size());
+    if (c.in_use) {
+      sum_flops += cliqueFlops(c.frontals.size(), c.separator.size());
+      sum_doubles += cliqueDoubles(c.frontals.size(), c.separator.size());
+    }
   if (std::abs(sum_flops - flops) > 1e-9 * std::max(1.0, sum_flops))
     fail("flops " + std::to_string(flops) + " is not the cliques' sum " +
          std::to_string(sum_flops));
+  if (std::abs(sum_doubles - doubles) > 1e-9 * std::max(1.0, sum_doubles))
+    fail("doubles " + std::to_string(doubles) + " is not the cliques' sum " +
+         std::to_string(sum_doubles));
   for (int r : roots)
     if (r < 0 || r >= nc || !cliques[r].in_use || cliques[r].parent != -1)
       fail("root " + std::to_string(r) + " is not a live parentless clique");

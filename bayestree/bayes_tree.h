@@ -31,9 +31,11 @@ class BayesTree {
   std::vector<int> clique_of;     ///< variable → clique where it is frontal (−1: fixed / new)
   std::vector<int> free_cliques;  ///< ids of cliques not in use, to recycle
   int num_cliques = 0;            ///< cliques in use
-  /// Flops of factorising the cliques in use (Σ cliqueFlops): removeTop takes the removed
-  /// cliques' off, addFlops (the top elimination) adds the new ones'.
+  /// Flops of factorising the cliques in use (Σ cliqueFlops) and the doubles their matrices
+  /// need (Σ cliqueDoubles): removeTop takes the removed cliques' off, addFlops (the top
+  /// elimination) adds the new ones', a fold-in the growth of the separators it extends.
   double flops = 0;
+  double doubles = 0;
 
   /// F³/3 + F²S + FS² for a clique of `frontals` and `separator` variables (F = D·frontals,
   /// S = D·separator): its dense Cholesky, the off-diagonal solve and the Schur complement.
@@ -41,7 +43,16 @@ class BayesTree {
     const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
     return F * F * F / 3 + F * F * S + F * S * S;
   }
-  void addFlops(const CliqueD& c) { flops += cliqueFlops(c.frontals.size(), c.separator.size()); }
+  /// F(F+S) + F + S² + S for such a clique: its conditional [R S], d and its cached factor on
+  /// the separator (Clique::storage without the room to grow).
+  static double cliqueDoubles(size_t frontals, size_t separator) {
+    const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
+    return F * (F + S) + F + S * S + S;
+  }
+  void addFlops(const CliqueD& c) {
+    flops += cliqueFlops(c.frontals.size(), c.separator.size());
+    doubles += cliqueDoubles(c.frontals.size(), c.separator.size());
+  }
 
   /// slots[v] = v's position (in variables) among clique c's frontals then separator, until
   /// clearSlots.

@@ -93,6 +93,8 @@ void validate(const SmootherOptions& o) {
     bad("batch.top_share", o.batch.top_share, "in (0, 1]");
   if (!(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1))
     bad("batch.reorder_decay", o.batch.reorder_decay, "0 or ≥ 1");
+  if (o.batch.constrain_last_max < 1)
+    bad("batch.constrain_last_max", o.batch.constrain_last_max, "≥ 1");
   if (o.async.min_variables < 1) bad("async.min_variables", o.async.min_variables, "≥ 1");
   if (o.async.swap_after_updates < 0)
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
@@ -102,8 +104,10 @@ void validate(const SmootherOptions& o) {
 }
 
 // The decay check (BatchSwitchOptions::reorder_decay) waits until the tree's factorisation
-// costs at least this many flops: below it a re-ordering saves less than the check costs.
+// costs at least this many flops, or its matrices hold this many doubles (8 MB): below them a
+// re-ordering saves less than the check costs.
 constexpr double kMinDecayCheckFlops = 1e6;
+constexpr double kMinDecayCheckDoubles = 1e6;
 
 /// How one pass of Alg. 6 runs.
 struct StepOptions {
@@ -164,10 +168,11 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> relin_candidates;
   std::vector<char> is_candidate;
   bool check_all = false;
-  // The batch switch (BatchSwitchOptions): the variables (not fixed), the tree's flops when its
-  // ordering was last compared with a fresh one (or made afresh), and a re-ordering found due.
+  // The batch switch (BatchSwitchOptions): the variables (not fixed), the tree's flops and
+  // doubles when its ordering was last compared with a fresh one (or made afresh), and a
+  // re-ordering found due.
   int num_variables = 0;
-  double flops_reference = 0;
+  double flops_reference = 0, doubles_reference = 0;
   bool reorder_due = false;
   bayestree::RowList fresh_rows;
   std::vector<int> fresh_vars;
@@ -551,6 +556,7 @@ struct IncrementalSmoother<G>::Impl {
     relin_candidates.clear();
     check_all = true;
     flops_reference = tree.flops;
+    doubles_reference = tree.doubles;
     reorder_due = false;
     updated_all = true;
     marginals = bayestree::TreeMarginals<D>();
@@ -580,6 +586,7 @@ struct IncrementalSmoother<G>::Impl {
     // Alg. 6 step 4, "Redo top of Bayes tree with Alg. 4 with J the union of M and all
     // variables affected by new factors".
     const bool tree_changed = folded || redoTop(pass.relinearize_all, &st);
+    if (folded) maybeCheckOrderingDecay();  // the fold-ins grew separators
     for (int v : touched) mark[v] = 0;
     // Alg. 6 step 5, "Solve for delta Δ with Alg. 7" (and Powell's dogleg on it, as GTSAM's
     // ISAM2DoglegParams). Step 6, "Current estimate given by Θ ⊕ Δ", is estimate().
@@ -754,36 +761,53 @@ struct IncrementalSmoother<G>::Impl {
       reorder_due = false;
     }
     // Alg. 4 steps 2–6: linearise (what is left of step 2), add the orphans' cached factors,
-    // re-order (constrained: the touched variables last, unless everything is re-eliminated),
-    // eliminate into new cliques and insert the orphans back.
+    // re-order (constrained: the touched variables last, unless everything is re-eliminated or
+    // they are more than BatchSwitchOptions::constrain_last_max), eliminate into new cliques and
+    // insert the orphans back.
+    const bool constrain =
+        !relinearize_all && static_cast<int>(touched.size()) <= opt.batch.constrain_last_max;
     const typename bayestree::TopElimination<G>::Input in{
-        top.variables, top.orphans,          relinearize_all ? nullptr : &mark, to_linearize, theta,
-        fixed,         nestedDissectionMin()};
+        top.variables, top.orphans, constrain ? &mark : nullptr, to_linearize,
+        theta,         fixed,       nestedDissectionMin()};
     const auto out = top_elimination.run(in, &tree, &factors, &threads);
     st->indeterminate_cliques += out.indeterminate;
     st->cliques_on_helpers += out.on_helpers;
     st->cliques_reeliminated += out.cliques;
     st->variables_reeliminated += out.variables;
-    tree.releaseFreeStorage();  // cliques not recycled hold no memory
-    if (relinearize_all || batch)
-      flops_reference = tree.flops;  // a fresh ordering
-    else if (opt.batch.reorder_decay > 0 &&
-             tree.flops > opt.batch.reorder_decay * std::max(flops_reference, kMinDecayCheckFlops))
-      checkOrderingDecay();
+    tree.releaseFreeStorage();       // cliques not recycled hold no memory
+    if (relinearize_all || batch) {  // a fresh ordering
+      flops_reference = tree.flops;
+      doubles_reference = tree.doubles;
+    } else {
+      maybeCheckOrderingDecay();
+    }
     return !top.variables.empty();
   }
 
-  // BatchSwitchOptions::reorder_decay: the tree's flops against those of the whole graph in a
-  // fresh ordering; the next re-elimination re-orders when they exceed decay × fresh. Either
-  // way the next comparison waits until the tree's flops have grown by the decay factor again.
-  void checkOrderingDecay() {
-    if (tree.flops > opt.batch.reorder_decay * freshOrderingFlops()) reorder_due = true;
+  // BatchSwitchOptions::reorder_decay: once the tree's flops or its doubles have grown by the
+  // decay factor since the last comparison, compares both with those of the whole graph in a
+  // fresh ordering; the next re-elimination re-orders when either exceeds decay × fresh. The
+  // doubles matter on their own: an incremental ordering's cliques of few frontals under a
+  // separator of thousands of dimensions cost little to factorise but hold S² doubles each (a
+  // dense world revisited, docs/benchmarks.md "Memory of a dense world").
+  void maybeCheckOrderingDecay() {
+    const double decay = opt.batch.reorder_decay;
+    if (decay <= 0) return;
+    if (tree.flops <= decay * std::max(flops_reference, kMinDecayCheckFlops) &&
+        tree.doubles <= decay * std::max(doubles_reference, kMinDecayCheckDoubles))
+      return;
+    double fresh_doubles = 0;
+    const double fresh_flops = freshOrderingCost(&fresh_doubles);
+    if (tree.flops > decay * fresh_flops || tree.doubles > decay * fresh_doubles)
+      reorder_due = true;
     flops_reference = tree.flops;
+    doubles_reference = tree.doubles;
   }
 
   // Flops of factorising every variable in the tree in a fresh ordering (the one the top
-  // elimination would choose for a top of all of them, unconstrained). O(n + m).
-  double freshOrderingFlops() {
+  // elimination would choose for a top of all of them, unconstrained), and in *doubles the
+  // doubles its cliques would hold. O(n + m).
+  double freshOrderingCost(double* doubles) {
     std::vector<int>& slot = threads.lanes[0].slot;
     std::vector<int>& vars = fresh_vars;
     vars.clear();
@@ -811,8 +835,11 @@ struct IncrementalSmoother<G>::Impl {
         n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, fresh_rows, group)
                                    : bayestree::constrainedColamd(n, fresh_rows, group));
     double flops = 0;
-    for (const bayestree::SymbolicClique& c : plan.cliques)
+    *doubles = 0;
+    for (const bayestree::SymbolicClique& c : plan.cliques) {
       flops += bayestree::BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
+      *doubles += bayestree::BayesTree<D>::cliqueDoubles(c.frontals.size(), c.separator.size());
+    }
     return flops;
   }
 
@@ -996,6 +1023,10 @@ const std::vector<int>& IncrementalSmoother<G>::updatedPoses() const {
 template <class G>
 double IncrementalSmoother<G>::factorizationFlops() const {
   return impl_->tree.flops;
+}
+template <class G>
+double IncrementalSmoother<G>::factorizationDoubles() const {
+  return impl_->tree.doubles;
 }
 template <class G>
 const std::vector<G>& IncrementalSmoother<G>::linearizationPoint() const {

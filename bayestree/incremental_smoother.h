@@ -35,10 +35,18 @@ struct BatchSwitchOptions {
   /// a share of the variables). 1: never.
   double top_share = 0.65;
   /// The tree is re-ordered (its next re-elimination is the whole graph's) when the flops of
-  /// factorising it in its incremental ordering (Σ F³/3 + F²S + FS² over its cliques) exceed this
-  /// many times a fresh ordering's. The fresh ordering is computed only when the tree's flops
-  /// have grown by this factor since the last comparison, so checks are amortised. 0: never.
+  /// factorising it in its incremental ordering (Σ F³/3 + F²S + FS² over its cliques), or the
+  /// doubles its matrices hold (Σ F(F+S) + F + S² + S), exceed this many times a fresh
+  /// ordering's. The fresh ordering is computed only when the tree's flops or doubles have
+  /// grown by this factor since the last comparison, so checks are amortised. 0: never.
   double reorder_decay = 2.0;
+  /// iSAM2's constrained ordering puts the variables an update touches (new, or of its new
+  /// factors) last, at the root, where the next update finds them; an update that touches more
+  /// than this many (a burst applied at once) orders its top unconstrained instead: a front
+  /// over thousands of variables forced last fills the cliques below it (measured: a
+  /// 60,000-edge Manhattan burst in a few updates needed > 14 GB constrained, 1.4 GB not;
+  /// docs/benchmarks.md). ≥ 1.
+  int constrain_last_max = 1000;
 };
 
 /// Where Alg. 5's relinearisation happens (docs/design.md, "Asynchronous relinearisation").
@@ -234,6 +242,9 @@ class IncrementalSmoother {
   /// Flops of factorising the Bayes tree in its current ordering (Σ F³/3 + F²S + FS² over its
   /// cliques, F and S the frontal and separator dimensions), kept up to date by every update.
   double factorizationFlops() const;
+  /// Doubles the Bayes tree's matrices need in its current ordering (Σ F(F+S) + F + S² + S over
+  /// its cliques: conditional, d, cached factor), kept up to date likewise.
+  double factorizationDoubles() const;
   const std::vector<G>& linearizationPoint() const;
   const std::vector<Tangent>& delta() const;  ///< Δ per pose (zero for fixed poses)
   double objective() const;                   ///< F = Σ eᵀΩe at estimate() (O(m))

@@ -3,11 +3,15 @@
 // the variables solved since the last check): deterministic counts and estimates, no timing.
 
 #include <algorithm>
+#include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_smoother.h"
 #include "arbor/tests/random_walks.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 #include <gtest/gtest.h>
 
@@ -111,6 +115,15 @@ TEST(BatchSwitch, RejectsBadOptions) {
   o = {};
   o.batch.reorder_decay = 0.5;
   EXPECT_THROW(IncrementalSmoother2{o}, std::invalid_argument);
+  o = {};
+  o.batch.constrain_last_max = 0;
+  try {
+    IncrementalSmoother2 s{o};
+    ADD_FAILURE() << "constrain_last_max 0 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("batch.constrain_last_max = 0"), std::string::npos)
+        << e.what();
+  }
 }
 
 // updatedPoses lists every pose whose estimate changed: the others keep theirs bit for bit.
@@ -187,6 +200,98 @@ TEST(BoundedWork, RelinearizationCheckVisitsOnlySolvedVariables) {
     if (k > n / 2) max_updated_late = std::max(max_updated_late, previous_updated);
   });
   EXPECT_LT(max_updated_late, 100u) << "an odometry step touches a bounded part of the walk";
+}
+
+// The re-ordering watches the doubles the tree holds as well as its flops. A dense world (a
+// Manhattan walk that revisits each of its 15 × 15 cells ~20 times) arrives as one burst of 90%
+// of its edges (a fresh ordering), then edge by edge: the constrained re-eliminations and the
+// fold-ins give cliques of one pose under separators of hundreds of dimensions, cheap to
+// factorise but S² doubles each. The tree never holds more than decay² times the doubles of
+// the whole graph in a fresh ordering (a check when they have grown by the decay factor, the
+// re-ordering when they exceed decay × fresh); judged by flops alone it held 5.7 times.
+TEST(BatchSwitch, ReordersWhenTheTreeHoldsTooManyDoubles) {
+  sim::ManhattanOptions world;
+  world.poses = 5000;
+  world.grid = 15;
+  world.seed = 1;
+  const PoseGraph2 g = sim::manhattanWorld(world).graph;
+  OnlineSmootherOptions<SE2> o;
+  o.smoother.threads = 1;
+  const double decay = o.smoother.batch.reorder_decay;
+  ASSERT_EQ(decay, 2.0);
+  const auto add = [&](OnlineSmoother2* s, const RelativePoseEdge<SE2>& e) {
+    ASSERT_EQ(s->addEdge(g.ids[e.i], g.ids[e.j], e.measurement, e.information).status,
+              EdgeStatus::kAccepted);
+  };
+  OnlineSmoother2 s(o);
+  const size_t burst = g.edges.size() * 9 / 10;
+  for (size_t k = 0; k < burst; ++k) add(&s, g.edges[k]);
+  EXPECT_EQ(s.update().batch_reeliminations, 1);
+  double max_doubles = s.smoother().factorizationDoubles();
+  int reorderings = 0;
+  for (size_t k = burst; k < g.edges.size(); ++k) {
+    add(&s, g.edges[k]);
+    reorderings += s.update().batch_reeliminations;
+    max_doubles = std::max(max_doubles, s.smoother().factorizationDoubles());
+  }
+  s.smoother().checkInvariants();  // the doubles are the cliques' sum
+  OnlineSmoother2 fresh(o);
+  for (const auto& e : g.edges) add(&fresh, e);
+  fresh.update();
+  const double fresh_doubles = fresh.smoother().factorizationDoubles();
+  EXPECT_GT(reorderings, 2);
+  EXPECT_LE(max_doubles, decay * decay * fresh_doubles)
+      << "max " << max_doubles << " fresh " << fresh_doubles;
+}
+
+// An update touching more than constrain_last_max variables orders its top unconstrained: the
+// same linear system in another ordering, so the estimate is the constrained one's to rounding,
+// and the tree's invariants hold. Bursts of growing size onto a tree that already holds poses
+// (as `arbor serve` takes a burst); with the default (1000) the bursts of 2000 and 3000 edges
+// go unconstrained, with 1 every update with more than one touched variable does.
+TEST(BatchSwitch, LargeTouchedSetsAreOrderedUnconstrained) {
+  sim::ManhattanOptions world;
+  world.poses = 5000;
+  world.grid = 15;
+  world.seed = 1;
+  const PoseGraph2 g = sim::manhattanWorld(world).graph;
+  const std::vector<size_t> bursts = {1, 20, 200, 800, 2000, 3000};
+  const auto run = [&](int constrain_last_max, std::vector<double>* flops) {
+    OnlineSmootherOptions<SE2> o;
+    o.smoother.threads = 1;
+    o.smoother.wildfire_threshold = 0;  // every clique below a change is solved: exact
+    o.smoother.batch.top_share = 1;     // never the batch path: the constraint decides
+    o.smoother.batch.reorder_decay = 0;
+    o.smoother.batch.constrain_last_max = constrain_last_max;
+    auto s = std::make_unique<OnlineSmoother2>(o);
+    size_t k = 0;
+    for (size_t b : bursts) {
+      for (size_t q = 0; q < b && k < g.edges.size(); ++q, ++k) {
+        const auto& e = g.edges[k];
+        s->addEdge(g.ids[e.i], g.ids[e.j], e.measurement, e.information);
+      }
+      s->update();
+      s->smoother().checkInvariants();
+      flops->push_back(s->smoother().factorizationFlops());
+    }
+    return s;
+  };
+  std::vector<double> constrained_flops, default_flops, unconstrained_flops;
+  const auto constrained = run(1 << 30, &constrained_flops);
+  const auto by_default = run(1000, &default_flops);
+  const auto unconstrained = run(1, &unconstrained_flops);
+  // Another ordering, another tree: the small bursts take the same one as constrained, the
+  // large ones (and every burst with constrain_last_max 1) another.
+  for (size_t u = 0; u < 4; ++u) EXPECT_EQ(default_flops[u], constrained_flops[u]) << u;
+  EXPECT_NE(default_flops[4], constrained_flops[4]);
+  EXPECT_NE(unconstrained_flops[2], constrained_flops[2]);
+  const auto x = constrained->smoother().estimate();
+  for (const auto* s : {by_default.get(), unconstrained.get()}) {
+    const auto y = s->smoother().estimate();
+    ASSERT_EQ(x.size(), y.size());
+    for (size_t v = 0; v < x.size(); ++v)
+      ASSERT_LT(x[v].between(y[v]).Log().norm(), 1e-6) << "pose " << v;
+  }
 }
 
 }  // namespace

@@ -3,7 +3,8 @@
 # (default 60,000) published back to back (`arbor publish --burst`), then its last edge alone as
 # a fence (so a loss at the burst's tail shows as a gap too), once per receive buffer request in
 # SIZES (serve's --recv-buf). Prints, per size, the SO_RCVBUF the kernel reported, the edges
-# accepted and the gaps (accepted + gaps = sent: every loss reported). Runs inside a private
+# accepted, the gaps (accepted + gaps = sent: every loss reported), the updates the burst took and
+# serve's peak resident memory (VmHWM before it is stopped). Runs inside a private
 # network namespace of its own (only loopback; see lcm_bench.sh): nothing leaves the machine.
 # usage: tools/bench/udpm_burst.sh [BUILD_DIR]
 # Environment: EDGES=60000 SIZES="106496 524288 1048576 4194304" RUNS=1
@@ -26,8 +27,8 @@ edges=${EDGES:-60000}
   >/dev/null
 total=$(grep -c '^EDGE' "$tmp/graph.g2o")
 [ "$total" -ge "$edges" ] || { echo "generated only $total edges" >&2; exit 1; }
-echo "| recv-buf asked | SO_RCVBUF reported | sent | accepted | gaps | accepted + gaps |"
-echo "|---|---|---|---|---|---|"
+echo "| recv-buf asked | SO_RCVBUF reported | sent | accepted | gaps | accepted + gaps | updates | serve peak RSS MiB |"
+echo "|---|---|---|---|---|---|---|---|"
 for size in ${SIZES:-106496 524288 1048576 4194304}; do
   for run in $(seq "${RUNS:-1}"); do
     "$arbor" serve --lcm-url "$url" --recv-buf "$size" --no-refine --json >"$tmp/serve.json" \
@@ -39,15 +40,16 @@ for size in ${SIZES:-106496 524288 1048576 4194304}; do
       "$arbor" publish "$tmp/graph.g2o" --lcm-url "$url" --skip $((edges - 1)) --count 1 --wait \
         --wait-ready --timeout 60 >/dev/null 2>&1 && break
     done
+    hwm_kib=$(awk '/^VmHWM/ {print $2}' "/proc/$serve_pid/status")
     kill -INT "$serve_pid"
     wait "$serve_pid" || true
     serve_pid=""
-    /usr/bin/python3 - "$size" "$edges" "$tmp/serve.json" <<'PY'
+    /usr/bin/python3 - "$size" "$edges" "$tmp/serve.json" "$hwm_kib" <<'PY'
 import json, sys
-size, edges, path = sys.argv[1:]
+size, edges, path, hwm_kib = sys.argv[1:]
 s = json.load(open(path))
 print(f"| {size} | {s['recv_buf_bytes']} | {edges} | {s['accepted']} | {s['gaps']} | "
-      f"{s['accepted'] + s['gaps']} |")
+      f"{s['accepted'] + s['gaps']} | {s['updates']} | {int(hwm_kib) // 1024} |")
 PY
   done
 done
