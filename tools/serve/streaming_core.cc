@@ -574,23 +574,29 @@ void StreamingCore::refine(bool from_journal, int cut) {
       return;
     }
   }
-  const auto t0 = std::chrono::steady_clock::now();
-  const double before = engine_->objective();
   CancellationToken replayed_cut;  // a journaled exit refinement cut after cut − 1 checks
   if (cut > 0) replayed_cut.cancelAfterChecks(cut - 1);
+  runRefinement(cut > 0 ? &replayed_cut : nullptr);
+}
+
+StreamingCore::Refinement StreamingCore::runRefinement(const CancellationToken* cancel) {
+  Refinement r;
+  const auto t0 = std::chrono::steady_clock::now();
+  r.F_before = engine_->objective();
   try {
-    engine_->refine(cut > 0 ? &replayed_cut : nullptr);
+    r.stats = engine_->refine(cancel);
   } catch (const std::exception& e) {
     logLine(std::string("refinement failed: ") + e.what());
   }
-  const double after = engine_->objective();
+  r.F_after = engine_->objective();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::lock_guard<std::mutex> lock(state_mutex_);
   ++state_.refinements;
-  state_.refine_F_before = before;
-  state_.refine_F_after = after;
-  state_.refine_time_s =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  state_.F = after;
+  state_.refine_F_before = r.F_before;
+  state_.refine_F_after = r.F_after;
+  state_.refine_time_s = r.seconds;
+  state_.F = r.F_after;
+  return r;
 }
 
 // The exit refinement runs first and is journaled after, with how it ended: to convergence
@@ -610,28 +616,19 @@ void StreamingCore::refineOnExit() {
       if (!watch_cv.wait_for(lock, limit, [&] { return done; })) cancel.cancel();
     });
   }
-  const auto t0 = std::chrono::steady_clock::now();
-  const double before = engine_->objective();
-  UpdateStats st;
-  try {
-    st = engine_->refine(&cancel);
-  } catch (const std::exception& e) {
-    logLine(std::string("refinement failed: ") + e.what());
-  }
+  const Refinement r = runRefinement(&cancel);
   {
     std::lock_guard<std::mutex> lock(watch_mutex);
     done = true;
   }
   watch_cv.notify_all();
   if (watchdog.joinable()) watchdog.join();
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const double after = engine_->objective();
+  const UpdateStats& st = r.stats;
   if (st.cancelled) {
     std::ostringstream line;
     line << "exit refinement cut after " << st.refine_iterations << " iteration"
-         << (st.refine_iterations == 1 ? "" : "s") << " and " << seconds << " s (F " << before
-         << " -> " << after << "; --exit-refine-budget " << budget << " s)";
+         << (st.refine_iterations == 1 ? "" : "s") << " and " << r.seconds << " s (F " << r.F_before
+         << " -> " << r.F_after << "; --exit-refine-budget " << budget << " s)";
     logLine(line.str());
   }
   if (journal_) {
@@ -644,12 +641,7 @@ void StreamingCore::refineOnExit() {
     }
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
-  ++state_.refinements;
-  state_.refine_F_before = before;
-  state_.refine_F_after = after;
-  state_.refine_time_s = seconds;
-  state_.F = after;
-  exit_refine_ = {st.refine_iterations, st.cancelled, seconds};
+  exit_refine_ = {st.refine_iterations, st.cancelled, r.seconds};
 }
 
 void StreamingCore::writeSnapshot(const ControlCommand& c) {

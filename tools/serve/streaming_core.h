@@ -249,6 +249,13 @@ class StreamingCore {
   void refine(bool from_journal, int cut = 0);
   /// stop()'s refinement: within exit_refine_budget_s, journaled after it ran with its cut.
   void refineOnExit();
+  struct Refinement {
+    UpdateStats stats;
+    double F_before = 0, F_after = 0, seconds = 0;
+  };
+  /// The engine's refinement (stopped by `cancel` when given), timed and recorded in the status
+  /// (refinements, refine_F_before/after, refine_time_s, F): refine's and refineOnExit's.
+  Refinement runRefinement(const CancellationToken* cancel);
   /// Collects a finished batch (`wait`: the one in flight), journals and applies its reseed,
   /// publishes a status (and with `publish` the estimate if it reseeded); returns whether a run
   /// was collected.
