@@ -29,32 +29,52 @@ double quantile(std::vector<double>* v, double q) {
 
 }  // namespace
 
-double estimateNoiseScale(std::vector<double> m, int dof, double c2, double tail_factor,
-                          double tail_quantile) {
-  const double t = tail_factor * c2;
+NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
+                                      const RobustOptions& o) {
+  const double t = o.tail_factor * c2;
   const boost::math::chi_squared_distribution<double> chi2(dof);
   const double Ft = boost::math::cdf(chi2, t);
-  const double q_median = boost::math::quantile(chi2, 0.5 * Ft);          // F⁻¹(F(t)/2)
-  const double q_tail = boost::math::quantile(chi2, tail_quantile * Ft);  // F⁻¹(q F(t))
+  const double q_median = boost::math::quantile(chi2, 0.5 * Ft);         // F⁻¹(F(t)/2)
+  const double q_tail = boost::math::quantile(chi2, o.confidence * Ft);  // F⁻¹(q F(t))
+  NoiseScaleEstimate out;
   double sigma2 = 1.0;
   std::vector<double> kept;
-  for (int round = 0; round < 50; ++round) {
+  auto keep = [&] {
     kept.clear();
     for (double x : m)
       if (x <= t * sigma2) kept.push_back(x);
-    if (kept.size() < 3) break;
-    const double next =
-        std::max(quantile(&kept, 0.5) / q_median, quantile(&kept, tail_quantile) / q_tail);
+    return kept.size() >= 3;
+  };
+  // The median's fixed point.
+  for (int round = 0; round < 50 && keep(); ++round) {
+    const double next = quantile(&kept, 0.5) / q_median;
     const bool done = std::abs(next - sigma2) <= 1e-9 * sigma2;
     sigma2 = next;
     if (done || !(sigma2 > 0)) break;
   }
-  return sigma2 > 0 ? sigma2 : 1.0;
+  if (!(sigma2 > 0) || !keep()) return out;
+  out.estimated = true;
+  // The tail's fixed point, within max_tail_scale of the median's.
+  const double median_sigma2 = sigma2;
+  for (int round = 0; round < 50 && keep(); ++round) {
+    const double next = std::max(sigma2, quantile(&kept, o.confidence) / q_tail);
+    if (next > o.max_tail_scale * median_sigma2) {
+      out.tail_cut = true;
+      sigma2 = median_sigma2;
+      break;
+    }
+    const bool done = next - sigma2 <= 1e-9 * sigma2;
+    sigma2 = next;
+    if (done) break;
+  }
+  out.sigma2 = sigma2;
+  return out;
 }
 
 const char* toString(EntryTest entry) {
   return entry == EntryTest::kInnovation ? "innovation" : "residual";
 }
+const char* toString(WarmUp warm_up) { return warm_up == WarmUp::kHold ? "hold" : "given"; }
 const char* toString(NoiseScale scale) {
   return scale == NoiseScale::kEstimated ? "estimated" : "given";
 }
@@ -83,6 +103,8 @@ std::string RobustOptions::problem() const {
   if (scale_min_samples < 1) return bad("scale_min_samples", scale_min_samples, ">= 1");
   if (!(tail_factor > 1) || !std::isfinite(tail_factor))
     return bad("tail_factor", tail_factor, "finite and > 1");
+  if (!(max_tail_scale >= 1) || !std::isfinite(max_tail_scale))
+    return bad("max_tail_scale", max_tail_scale, "finite and >= 1");
   return "";
 }
 
@@ -117,10 +139,17 @@ void OnlineGnc<G>::observe(double m) {
   innovations_.push_back(m);
   const size_t n = innovations_.size();
   if (n < static_cast<size_t>(options_.scale_min_samples) || n < next_estimate_) return;
-  scale_ = estimateNoiseScale(innovations_, G::kDoF, c2_given_, options_.tail_factor,
-                              options_.confidence);
-  c2_ = options_.tail_factor * c2_given_ * scale_;  // the estimator's own truncation
+  estimate_ = estimateNoiseScale(innovations_, G::kDoF, c2_given_, options_);
+  scale_ = estimate_.sigma2;
+  // The estimator's own truncation; Ω at its word without an estimate.
+  c2_ = estimate_.estimated ? options_.tail_factor * c2_given_ * scale_ : c2_given_;
   next_estimate_ = n < 64 ? n + 1 : n + n / 8;
+}
+
+template <class G>
+bool OnlineGnc<G>::scaleKnown() const {
+  return options_.scale != NoiseScale::kEstimated ||
+         innovations_.size() >= static_cast<size_t>(options_.scale_min_samples);
 }
 
 // (E): m = rᵀ(I + A Σ Aᵀ)⁻¹r, r the whitened residual at the estimate, A the whitened Jacobian
@@ -246,12 +275,20 @@ double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key
     const double s = edge.cost(smoother.estimate(edge.i), smoother.estimate(edge.j));
     const double m = innovation(smoother, edge, s);
     observe(m);
-    enter(&c, s, m, /*may_reject=*/true);
+    if (!scaleKnown() && options_.warm_up == WarmUp::kHold && binaryKernel(c)) {
+      c.state = State::kSettled;  // out of the tree until σ̂² exists (judgeHeld)
+      c.weight = 0.0;
+      c.judged_c2 = c2_;
+      c.held = true;
+    } else {
+      enter(&c, s, m, /*may_reject=*/true);
+    }
   }
   const int id = static_cast<int>(closures_.size());
   closures_.push_back(c);
   unresolved_.push_back(id);
   if (c.state == State::kGraduating) graduating_.push_back(id);
+  if (c.held) held_.push_back(id);
   return c.weight;
 }
 
@@ -301,9 +338,43 @@ void OnlineGnc<G>::remap(const IncrementalSmoother<G>& smoother) {
   resolved_factors_ = smoother.numFactors();
 }
 
+// Held closures are at weight 0, out of Σ: (E) is their innovation against the estimate without
+// them, as for any closure on entry. Their innovations were recorded when they arrived.
+template <class G>
+int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother) {
+  int changed = 0;
+  std::vector<int> still;
+  for (int id : held_) {
+    Closure& c = closures_[id];
+    if (!c.held || c.state == State::kExcluded) {  // excluded meanwhile
+      c.held = false;
+      continue;
+    }
+    if (c.factor < 0) {
+      still.push_back(id);
+      continue;
+    }
+    c.held = false;
+    const double s = residual(smoother, c);
+    enter(
+        &c, s,
+        innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s),
+        /*may_reject=*/true);
+    if (c.state == State::kGraduating) graduating_.push_back(id);
+    if (c.weight != 0.0) {
+      smoother.setFactorWeight(c.factor, c.weight);
+      ++changed;
+    }
+  }
+  held_.swap(still);
+  return changed;
+}
+
 template <class G>
 int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
   int changed = 0;
+  // The warm-up's closures, once σ̂² is there (in finalize() whether or not it is).
+  if (!held_.empty() && (recheck_all || scaleKnown())) changed += judgeHeld(smoother);
   // The graduating closures: one step each (those not in the smoother yet keep w₀).
   std::vector<int> still;
   for (int id : graduating_) {
@@ -329,7 +400,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
   for (size_t k = 0, looked = 0; k < budget && looked < n; ++looked) {
     const int id = static_cast<int>(cursor_++ % n);
     Closure& c = closures_[id];
-    if (c.state != State::kSettled || c.factor < 0) continue;
+    if (c.state != State::kSettled || c.factor < 0 || c.held) continue;
     ++k;
     ++totals_.rechecks;
     const double s = residual(smoother, c);
@@ -419,7 +490,7 @@ ClosureCounts OnlineGnc<G>::counts() const {
         break;
       default:
         ++(c.weight >= 0.5 ? out.inlier : out.outlier);
-        if (c.state == State::kGraduating) ++out.graduating;
+        if (c.state == State::kGraduating || c.held) ++out.graduating;
     }
   }
   return out;
@@ -455,7 +526,7 @@ std::vector<ClosureReport> OnlineGnc<G>::closures() const {
     r.to = c.to;
     r.weight = c.weight;
     r.residual = c.s;
-    r.graduating = c.state == State::kGraduating;
+    r.graduating = c.state == State::kGraduating || c.held;
     r.steps = c.steps;
     r.factor = c.factor;
     r.kernel = c.kernel;

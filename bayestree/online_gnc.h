@@ -34,16 +34,24 @@
 //                 (TLS: c²/(2s₀ − c²); GM: 2s₀/c²) and w₀ = ρ′_μ₀(s₀), as GNC starts from the
 //                 largest residual (Yang et al., RA-L 2020, Alg. 1) — here the closure's own.
 //
-// The threshold on an estimated noise scale (RobustOptions::scale). Files' Ω are often too
-// confident; with the model right, the innovations of the true closures are χ²_d (d = kDoF),
-// with Ω too confident by a factor σ², σ²χ²_d. NoiseScale::kEstimated estimates σ̂² from the
-// innovations of every judged closure so far (estimateNoiseScale: a median, truncated at
-// tail_factor·c² to leave the false closures out and corrected for that truncation, and the same
-// from the `confidence` quantile for heavy tails, the larger of the two) once scale_min_samples of
-// them are in; before that, and with NoiseScale::kGiven, σ̂² = 1 and c² is the given one. After it
-// the threshold in use is the estimator's own truncation, tail_factor · c² · σ̂²: what it counts as
-// a false closure is what is rejected (on correctly modelled data σ̂² ≈ 1; on the shared real and
-// M3500 files about 0.02, their true closures' innovations being heavy-tailed on intel).
+// The threshold on an estimated noise scale (RobustOptions::scale). Files' Ω are often wrong by
+// a constant factor; with the model right, the innovations of the true closures are χ²_d
+// (d = kDoF), with Ω too confident by a factor σ², σ²χ²_d. NoiseScale::kEstimated estimates σ̂²
+// from the innovations of every judged closure so far (estimateNoiseScale: a median, truncated
+// at tail_factor·c² to leave the false closures out and corrected for that truncation, then the
+// same from the `confidence` quantile for heavy tails, within max_tail_scale of the median's)
+// once scale_min_samples of them are in; before that, and with NoiseScale::kGiven, σ̂² = 1 and c²
+// is the given one. After it the threshold in use is the estimator's own truncation,
+// tail_factor · c² · σ̂²: what it counts as a false closure is what is rejected (on correctly
+// modelled data σ̂² ≈ 1; on the shared 2D files about 0.02, on the garage 2·10⁻⁴, Ω being too
+// weak there). With fewer than 3 innovations within the truncation there is no estimate and Ω is
+// taken at its word (the given c², not tail_factor times it).
+//   warm-up       a closure that arrives before the first estimate cannot be judged on the scale
+//                 yet: RobustOptions::warm_up kHold (default) keeps it at weight 0 (out of the
+//                 tree, its innovation recorded) and judges it by its innovation as on entry
+//                 once the estimate is there (or in finalize()); kGiven judges it at once, Ω at
+//                 its word. On the garage, whose Ω is ~10⁴ too weak, the 4th closure is false
+//                 and passes Ω's χ² test; accepted, it wrecks the Gauss–Newton smoother.
 //   graduation    before each of the following smoother updates: s at the current estimate,
 //                 μ ← μ·step (TLS) or μ/step (GM), w = ρ′_μ(s), setFactorWeight(w). At most
 //                 RobustOptions::steps_per_update steps per OnlineSmoother::update (the first
@@ -103,14 +111,12 @@ enum class NoiseScale {
 const char* toString(EntryTest entry);   ///< "innovation", "residual"
 const char* toString(NoiseScale scale);  ///< "estimated", "given"
 
-/// σ̂² from innovations m_k (RobustOptions::scale, header comment), d degrees of freedom, c² the
-/// given threshold: from σ² = 1, keep the m_k ≤ tail_factor·c²·σ², and with t = tail_factor·c²,
-/// F the χ²_d distribution, q = tail_quantile (RobustOptions::confidence),
-///   σ² ← max(median(kept) / F⁻¹(F(t)/2), q-quantile(kept) / F⁻¹(q F(t)))
-/// (the median and the q-quantile of χ²_d truncated at t: for χ² data the two agree, a heavy
-/// tail raises the second), to a fixed point (≤ 50 rounds). 1 with fewer than 3 kept.
-double estimateNoiseScale(std::vector<double> m, int dof, double c2, double tail_factor,
-                          double tail_quantile);
+/// What a loop closure that arrives before σ̂² is estimated enters with (NoiseScale::kEstimated).
+enum class WarmUp {
+  kHold,   ///< weight 0, judged by its innovation once σ̂² is estimated (or in finalize())
+  kGiven,  ///< judged at once at the given c² (Ω at its word)
+};
+const char* toString(WarmUp warm_up);  ///< "hold", "given"
 
 struct RobustOptions {
   /// The kernel the closures graduate towards: tls (default) or gm graduate (GNC); huber and
@@ -143,9 +149,13 @@ struct RobustOptions {
   NoiseScale scale = NoiseScale::kEstimated;
   /// Innovations needed before σ̂² is estimated (≥ 1); before, σ̂² = 1.
   int scale_min_samples = 20;
+  /// The closures that arrive before that (header comment, "warm-up").
+  WarmUp warm_up = WarmUp::kHold;
   /// The truncation of estimateNoiseScale: innovations beyond tail_factor·c²·σ̂² count as false
   /// closures (> 1).
   double tail_factor = 3.0;
+  /// estimateNoiseScale: the tail's σ̂² at most this many times the median's (≥ 1).
+  double max_tail_scale = 30.0;
   /// Rounds of finalize(): graduate to the end, re-check every closure, relinearise all; again
   /// while a re-check changed a weight (≥ 1).
   int finalize_rounds = 3;
@@ -153,6 +163,26 @@ struct RobustOptions {
   /// Why the options cannot be used ("" when they can): names the field and the value.
   std::string problem() const;
 };
+
+/// σ̂² from innovations m_k (RobustOptions::scale, header comment), d degrees of freedom, c² the
+/// given threshold, o the options: with t = o.tail_factor·c², F the χ²_d distribution,
+/// q = o.confidence, from σ² = 1, kept = {m_k ≤ t·σ²},
+///   σ² ← median(kept) / F⁻¹(F(t)/2)                 to a fixed point σ²_med (≤ 50 rounds), then
+///   σ² ← max(σ², q-quantile(kept) / F⁻¹(q F(t)))     to a fixed point ≤ o.max_tail_scale·σ²_med
+/// (the median and the q-quantile of χ²_d truncated at t: for χ² data the two agree, a heavy
+/// tail of true closures raises the second: intel's settle at 4.5·σ²_med, the garage's at 10.6).
+/// Past o.max_tail_scale·σ²_med the tail holds false closures just inside the truncation, which
+/// raise it by about tail_factor a round until every one is in (σ̂² ran to 10²–10³ on the
+/// shared files with 10% local or 50% random false closures when the two were iterated
+/// together): σ²_med stands (tail_cut). The median breaks down at half the kept innovations
+/// false. With fewer than 3 kept there is no estimate and Ω is taken at its word.
+struct NoiseScaleEstimate {
+  double sigma2 = 1.0;     ///< σ̂² (1 without an estimate)
+  bool estimated = false;  ///< false: Ω at its word (σ̂² = 1 and the given c²)
+  bool tail_cut = false;   ///< the tail's fixed point passed max_tail_scale·σ²_med
+};
+NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
+                                      const RobustOptions& o);
 
 enum class ClosureStatus {
   kInlier,    ///< weight ≥ 0.5
@@ -169,9 +199,10 @@ struct ClosureReport {
   double weight = 1.0;    ///< the factor's inlier weight in the smoother
   double residual = 0.0;  ///< s = eᵀΩe at its last check
   ClosureStatus status = ClosureStatus::kInlier;
-  bool graduating = false;  ///< still being graduated (status by its current weight)
-  int steps = 0;            ///< graduation steps it has taken
-  int factor = -1;          ///< its index in the smoother (−1 until the update that adds it)
+  /// still being graduated, or held in the warm-up (status by its current weight)
+  bool graduating = false;
+  int steps = 0;    ///< graduation steps it has taken
+  int factor = -1;  ///< its index in the smoother (−1 until the update that adds it)
   KernelKind kernel = KernelKind::kTruncatedLeastSquares;  ///< the kernel it is judged by
 };
 
@@ -228,8 +259,11 @@ class OnlineGnc {
   std::vector<ClosureReport> closures() const;
   /// c² in use: the given c² (warm-up, NoiseScale::kGiven), then tail_factor · c² · σ̂².
   double threshold() const { return c2_; }
-  /// σ̂² (1 until scale_min_samples innovations, and with NoiseScale::kGiven).
+  /// σ̂² (1 until scale_min_samples innovations, without an estimate, and with
+  /// NoiseScale::kGiven).
   double noiseScale() const { return scale_; }
+  /// The last estimate (estimateNoiseScale; `estimated` false before the first).
+  const NoiseScaleEstimate& noiseEstimate() const { return estimate_; }
   int noiseSamples() const { return static_cast<int>(innovations_.size()); }
   const RobustOptions& options() const { return options_; }
 
@@ -245,6 +279,7 @@ class OnlineGnc {
     double mu = 0, weight = 1, s = 0;
     double judged_c2 = 0;  ///< c² in use when it was last judged by its innovation
     int steps = 0;
+    bool held = false;  ///< at weight 0 until σ̂² is estimated (WarmUp::kHold)
   };
 
   RobustKernel kernelAt(const Closure& c, double mu) const;
@@ -261,6 +296,10 @@ class OnlineGnc {
   double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s) const;
   /// Records an innovation and re-estimates σ̂² and c² (NoiseScale::kEstimated).
   void observe(double m);
+  /// σ̂² estimated, or given (NoiseScale::kGiven): new closures are judged at once.
+  bool scaleKnown() const;
+  /// The closures held in the warm-up, judged by their innovations against the c² in use.
+  int judgeHeld(IncrementalSmoother<G>& smoother);
   /// One graduation step at s; returns the new weight.
   double graduate(Closure* c, double s);
   double residual(const IncrementalSmoother<G>& smoother, const Closure& c) const;
@@ -272,12 +311,14 @@ class OnlineGnc {
   RobustOptions options_;
   double c2_given_ = 0;  ///< RobustOptions::threshold or the χ² quantile
   double c2_ = 0;
+  NoiseScaleEstimate estimate_;
   double scale_ = 1.0;
   std::vector<double> innovations_;
   size_t next_estimate_ = 0;  ///< innovations_.size() at which σ̂² is estimated next
   std::vector<Closure> closures_;
   std::vector<int> unresolved_;  ///< closures added since the last resolve()
   std::vector<int> graduating_;  ///< closures graduating, by id
+  std::vector<int> held_;        ///< closures held in the warm-up, by id
   std::vector<int> by_factor_;   ///< factor index → closure id (−1: none)
   size_t cursor_ = 0;            ///< round robin of re-checks over closures_
   int resolved_factors_ = 0;     ///< factors seen by resolve()

@@ -603,6 +603,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.closure_threshold = gnc_->threshold();
     s.noise_scale = gnc_->noiseScale();
     s.noise_samples = gnc_->noiseSamples();
+    s.noise_scale_estimated = gnc_->noiseEstimate().estimated;
   }
   return s;
 }

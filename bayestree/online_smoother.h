@@ -138,6 +138,8 @@ struct OnlineStats {
   double closure_threshold = 0;
   double noise_scale = 1;
   int noise_samples = 0;
+  /// σ̂² is an estimate (NoiseScaleEstimate::estimated); false: Ω at its word.
+  bool noise_scale_estimated = false;
 };
 
 template <class G>

@@ -29,9 +29,12 @@ for name in "${names[@]}"; do
     "$ARBOR" replay "$SHARED/datasets/$base.g2o" --json > "$OUT/$base.clean.json"
   { grep '^VERTEX' "$OUT/$name.est.g2o"; grep -v '^VERTEX' "$SHARED/datasets/$base.g2o"; } \
     > "$OUT/$name.scored.g2o"
-  "$ARBOR" batch "$OUT/$name.scored.g2o" --init file --max-iterations 0 --json \
-    > "$OUT/$name.score.json"
-  python3 - "$name" "$base" "$OUT" "$SHARED" <<'PY'
+  if ! "$ARBOR" batch "$OUT/$name.scored.g2o" --init file --max-iterations 0 --json \
+    > "$OUT/$name.score.json" 2> "$OUT/$name.score.err"; then
+    printf '%s\tdiverged (the estimate cannot be scored: %s)\n' "$name" "$(head -c 200 "$OUT/$name.score.err")"
+    continue
+  fi
+  ${PYTHON:-python3} - "$name" "$base" "$OUT" "$SHARED" <<'PY'
 import json, sys
 name, base, out, shared = sys.argv[1:5]
 r = json.load(open(f"{out}/{name}.json")); c = json.load(open(f"{out}/{base}.clean.json"))

@@ -49,6 +49,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     robust.threshold = run.robust.threshold;
     robust.entry = run.entry;
     robust.scale = run.noise_scale;
+    robust.warm_up = run.warm_up;
     settings.robust = robust;
   }
   if (!run.edge_choices.empty()) {
@@ -115,8 +116,10 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"inlier_threshold", c2},
           {"entry", toString(run.entry)},
           {"noise_scale_mode", toString(run.noise_scale)},
+          {"warm_up", toString(run.warm_up)},
           {"threshold_in_use", online.closure_threshold},
           {"noise_scale", online.noise_scale},
+          {"noise_scale_estimated", online.noise_scale_estimated},
           {"noise_samples", online.noise_samples},
           {"F_kept", F_kept},
           {"closures_inlier", online.closures_inlier},
@@ -234,14 +237,18 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   options.add_options()("edge-choices", po::value(&run.edge_choices),
                         "with --robust: per-edge trust and kernel, 'FROM TO "
                         "default|trusted|robust [KERNEL]' a line (docs/files.md)");
-  std::string entry = "innovation", noise_scale = "estimated";
+  std::string entry = "innovation", noise_scale = "estimated", warm_up = "hold";
   options.add_options()(
       "entry", po::value(&entry)->default_value(entry),
       "with --robust, how a new loop closure is first judged: innovation (r'(I + A S A')^-1 r, "
       "S the poses' covariance in the Bayes tree) or residual (r'r)")(
       "noise-scale", po::value(&noise_scale)->default_value(noise_scale),
       "with --robust, the scale of the information matrices the threshold is put on: estimated "
-      "(from the loop closures' innovations) or given (as the file says)");
+      "(from the loop closures' innovations) or given (as the file says)")(
+      "warm-up", po::value(&warm_up)->default_value(warm_up),
+      "with --robust and --noise-scale estimated, the loop closures that arrive before the "
+      "scale is estimated: hold (at weight 0, judged once it is) or given (judged at once, Ω at "
+      "its word)");
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return std::nullopt;
@@ -274,8 +281,12 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
     throw UsageError("--noise-scale must be estimated or given, not '" + noise_scale + "'");
   run.entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
   run.noise_scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
-  if (!run.robust.robust && (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted()))
-    throw UsageError("--entry and --noise-scale need --robust");
+  if (warm_up != "hold" && warm_up != "given")
+    throw UsageError("--warm-up must be hold or given, not '" + warm_up + "'");
+  run.warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
+  if (!run.robust.robust &&
+      (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted()))
+    throw UsageError("--entry, --noise-scale and --warm-up need --robust");
   try {
     run.format = parseTrajectoryFormat(format);
   } catch (const std::invalid_argument& e) {
