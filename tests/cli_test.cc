@@ -129,12 +129,9 @@ TEST(Cli, BatchRunsEverySolverOfTheTable) {
   }
 }
 
-// arbor batch --robust on a generated 2D graph with planted false loop closures: the rejected
-// edges written by --rejected-out (file ids) are the ones the JSON counts and hold every planted
-// one, --solver rtr certifies the inlier problem, and the robust flags need --robust. (As built,
-// one true closure of 75 is rejected beside them: the quality goals are core's tests'.)
-TEST(Cli, BatchRobustWritesTheRejectedEdges) {
-  const std::string file = tempPath("robust.g2o");
+// A 300-pose generated Manhattan world with six false loop closures appended (7–12 m off);
+// their (file id) pairs in `planted`.
+void plantFalseClosures(const std::string& file, std::set<std::pair<long, long>>* planted) {
   ASSERT_EQ(run("generate manhattan --poses 300 --grid 6 --seed 5 -o " + file).status, 0);
   std::vector<long> ids;
   {
@@ -148,16 +145,26 @@ TEST(Cli, BatchRobustWritesTheRejectedEdges) {
     }
   }
   ASSERT_GE(ids.size(), 300u);
-  std::set<std::pair<long, long>> planted;
   {
     std::ofstream out(file, std::ios::app);
     for (int k = 0; k < 6; ++k) {
       const long i = ids[10 + 37 * k], j = ids[150 + 23 * k];
-      planted.emplace(i, j);
+      planted->emplace(i, j);
       out << "EDGE_SE2 " << i << " " << j << " " << 7.0 + k << " " << -5.0 + 2 * k << " "
           << 0.4 * k - 1.0 << " 100 0 0 100 0 1000\n";
     }
   }
+}
+
+// arbor batch --robust on a generated 2D graph with planted false loop closures: the rejected
+// edges written by --rejected-out (file ids) are the ones the JSON counts and hold every planted
+// one, --solver rtr certifies the inlier problem, and the robust flags need --robust. (As built,
+// one true closure of 75 is rejected beside them: the quality goals are core's tests'.)
+TEST(Cli, BatchRobustWritesTheRejectedEdges) {
+  const std::string file = tempPath("robust.g2o");
+  std::set<std::pair<long, long>> planted;
+  plantFalseClosures(file, &planted);
+  if (HasFatalFailure()) return;
   const std::string rejected = tempPath("robust.rej");
   for (const std::string solver : {"lm", "rtr"}) {
     const Result r = run("batch " + file + " --robust --json --solver " + solver +
@@ -190,35 +197,54 @@ TEST(Cli, BatchRobustWritesTheRejectedEdges) {
   }
 }
 
+// arbor batch --robust --inlier-threshold online --init online: GNC's c² is the one the robust
+// online replay ends with (the same as `arbor replay --robust` reports), it starts from that
+// replay's estimate and rejects every planted closure; online is refused where it cannot be
+// (replay, --init online without --robust).
+TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
+  const std::string file = tempPath("robust_online.g2o");
+  std::set<std::pair<long, long>> planted;
+  plantFalseClosures(file, &planted);
+  if (HasFatalFailure()) return;
+  const Result replay = run("replay " + file + " --robust --json");
+  ASSERT_EQ(replay.status, 0) << replay.out;
+  const double c2 = nlohmann::json::parse(replay.out)["robust"]["threshold_in_use"].get<double>();
+  const std::string rejected = tempPath("robust_online.rej");
+  const Result r =
+      run("batch " + file +
+          " --robust --json --inlier-threshold online --init online --rejected-out " + rejected);
+  ASSERT_EQ(r.status, 0) << r.out;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["threshold_rule"], "online");
+  EXPECT_EQ(j["init"], "online");
+  EXPECT_DOUBLE_EQ(j["inlier_threshold"].get<double>(), c2);
+  EXPECT_DOUBLE_EQ(j["online_threshold"]["c2"].get<double>(), c2);
+  EXPECT_TRUE(j["online_threshold"]["noise_scale_estimated"].get<bool>());
+  std::set<std::pair<long, long>> written;
+  std::ifstream in(rejected);
+  long i, k;
+  while (in >> i >> k) written.emplace(i, k);
+  for (const auto& edge : planted) EXPECT_EQ(written.count(edge), 1u);
+  const Result chi2 = run("batch " + file + " --robust --json");
+  ASSERT_EQ(chi2.status, 0) << chi2.out;
+  EXPECT_EQ(nlohmann::json::parse(chi2.out)["threshold_rule"], "chi2");  // the default
+  for (const std::string& args : {"batch " + file + " --init online",
+                                  "replay " + file + " --robust --inlier-threshold online"}) {
+    const Result bad = run(args);
+    EXPECT_EQ(bad.status, 2) << args << ": " << bad.out;
+    EXPECT_EQ(std::count(bad.out.begin(), bad.out.end(), '\n'), 1) << args << ": " << bad.out;
+  }
+}
+
 // arbor replay --robust on the same kind of graph: online GNC per loop closure rejects every
 // planted closure, --rejected-out writes as many edges as the JSON counts as outliers, the text
 // summary prints the closure counts, and the robust flags are refused without --robust (and
 // `auto`, batch only, and --batch with it).
 TEST(Cli, ReplayRobustWritesTheRejectedEdges) {
   const std::string file = tempPath("replay_robust.g2o");
-  ASSERT_EQ(run("generate manhattan --poses 300 --grid 6 --seed 5 -o " + file).status, 0);
-  std::vector<long> ids;
-  {
-    std::ifstream in(file);
-    std::string line;
-    while (std::getline(in, line)) {
-      std::istringstream ls(line);
-      std::string tag;
-      long id;
-      if (ls >> tag >> id && tag.rfind("VERTEX", 0) == 0) ids.push_back(id);
-    }
-  }
-  ASSERT_GE(ids.size(), 300u);
   std::set<std::pair<long, long>> planted;
-  {
-    std::ofstream out(file, std::ios::app);
-    for (int k = 0; k < 6; ++k) {
-      const long i = ids[10 + 37 * k], j = ids[150 + 23 * k];
-      planted.emplace(i, j);
-      out << "EDGE_SE2 " << i << " " << j << " " << 7.0 + k << " " << -5.0 + 2 * k << " "
-          << 0.4 * k - 1.0 << " 100 0 0 100 0 1000\n";
-    }
-  }
+  plantFalseClosures(file, &planted);
+  if (HasFatalFailure()) return;
   const std::string rejected = tempPath("replay_robust.rej");
   const Result r = run("replay " + file + " --robust --json --rejected-out " + rejected);
   ASSERT_EQ(r.status, 0) << r.out;

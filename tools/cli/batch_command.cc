@@ -16,6 +16,7 @@
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/covariance_output.h"
+#include "arbor/tools/cli/online_threshold.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/refine/batch_solvers.h"
 
@@ -37,9 +38,10 @@ struct BatchRun {
   bool json = false;
   ReadOptions read;
   bool robust = false;
-  GncOptions gnc;            // --kernel, --inlier-threshold, --gnc-inner-start, --gnc-mu-start
-  std::string rejected_out;  // --rejected-out
-  std::string edge_choices;  // --edge-choices FILE (io/edge_choice_file.h)
+  GncOptions gnc;                 // --kernel, --inlier-threshold, --gnc-inner-start, --gnc-mu-start
+  bool online_threshold = false;  // --inlier-threshold online (cli/online_threshold.h)
+  std::string rejected_out;       // --rejected-out
+  std::string edge_choices;       // --edge-choices FILE (io/edge_choice_file.h)
 };
 
 // -o in --format, --covariances: the marginal covariances at the final estimate.
@@ -175,17 +177,27 @@ int solveAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& r
 template <class G>
 int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadReport& report,
                          const Stopwatch& total) {
-  const InitMethod init = parseInitMethod(
-      run.init.empty() ? (graph.has_initial_estimate ? "file" : "odometry") : run.init);
-  std::vector<G> poses = initialize(graph, init);
+  const bool init_online = run.init == "online";
+  const std::string init_name = init_online                  ? "online"
+                                : !run.init.empty()          ? run.init
+                                : graph.has_initial_estimate ? "file"
+                                                             : "odometry";
+  std::vector<G> poses =
+      init_online ? std::vector<G>() : initialize(graph, parseInitMethod(init_name));
   GncOptions options = run.gnc;
   options.outer.max_iterations = run.settings.max_iterations;
   options.outer.relative_tolerance = run.settings.relative_tolerance;
   options.verbose = run.settings.verbose;
+  EdgeChoices choices;
   if (!run.edge_choices.empty()) {  // per-edge trust and kernel (io/edge_choice_file.h)
-    const EdgeChoices choices = readEdgeChoicesFile(run.edge_choices);
+    choices = readEdgeChoicesFile(run.edge_choices);
     checkEdgeChoices(choices, graph, run.edge_choices);
     applyEdgeChoices(choices, graph, &options);
+  }
+  std::optional<OnlineThreshold> online;
+  if (run.online_threshold || init_online) {
+    online = onlineThreshold(graph, run.gnc.kernel, choices, init_online ? &poses : nullptr);
+    if (run.online_threshold) options.threshold = online->c2;
   }
   const GncResult gncFirst = solveGnc(graph, &poses, options);
 
@@ -226,11 +238,12 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
         {"solver", refine::toString(run.solver)},
         {"robust", true},
         {"kernel", toString(run.gnc.kernel)},
-        {"init", toString(init)},
+        {"init", init_name},
         {"inlier_threshold", gnc.threshold},
         {"variance_factor", gnc.scale},
-        {"threshold_rule",
-         run.gnc.threshold > 0 ? "given" : (run.gnc.estimate_scale ? "auto" : "chi2")},
+        {"threshold_rule", online                  ? "online"
+                           : run.gnc.threshold > 0 ? "given"
+                                                   : (run.gnc.estimate_scale ? "auto" : "chi2")},
         {"F_least_squares", gnc.F_least_squares},
         {"F_final", F_all},
         {"F_inliers", F_inliers},
@@ -247,6 +260,12 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
         {"information_repaired", report.repaired},
         {"information_isotropic", report.made_isotropic},
     });
+    if (online)
+      j["online_threshold"] = {{"c2", online->c2},
+                               {"noise_scale", online->noise_scale},
+                               {"noise_scale_estimated", online->estimated},
+                               {"noise_samples", online->samples},
+                               {"replay_s", online->replay_s}};
     if (certified) {
       const RtrSummary& r = certified->rtr;
       j.update({{"termination",
@@ -269,10 +288,14 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   if (report.repaired) std::cout << "information  " << report.repaired << " repaired\n";
   if (report.made_isotropic)
     std::cout << "information  " << report.made_isotropic << " made isotropic\n";
-  std::cout << "init         " << toString(init) << "\n"
+  std::cout << "init         " << init_name << "\n"
             << "robust       GNC-" << toString(run.gnc.kernel) << " over "
             << toString(run.gnc.inner.method) << ", c² " << gnc.threshold
-            << (run.gnc.threshold > 0 ? std::string(" (given)")
+            << (online
+                    ? " (online: the robust replay's, σ̂² " + std::to_string(online->noise_scale) +
+                          (online->estimated ? "" : ", no estimate") + ", " +
+                          std::to_string(online->replay_s) + " s)"
+                : run.gnc.threshold > 0 ? std::string(" (given)")
                 : run.gnc.estimate_scale
                     ? " (χ² " + std::to_string(run.gnc.confidence) + " quantile × σ̂² " +
                           std::to_string(gnc.scale) + ")"
@@ -326,7 +349,8 @@ int batchCommand(const std::vector<std::string>& args) {
       "solver", po::value(&solver)->default_value(solver), solverHelp().c_str())(
       "init", po::value(&run.init),
       "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
-      "odometry; rtr starts from its own chordal relaxation)")(
+      "odometry; rtr starts from its own chordal relaxation); with --robust also online: the "
+      "estimate of the robust online replay (arbor replay --robust, without its final pass)")(
       "max-iterations", po::value(&run.settings.max_iterations)->default_value(100),
       "iteration limit (gn, lm, dogleg)")(
       "rel-tol", po::value(&run.settings.relative_tolerance)->default_value(1e-5, "1e-05"),
@@ -360,16 +384,19 @@ int batchCommand(const std::vector<std::string>& args) {
   const po::variables_map given = parseArguments(args, options, positional);
   try {
     run.solver = refine::parseBatchSolver(solver, "--solver");
-    if (!run.init.empty()) parseInitMethod(run.init);
+    if (!run.init.empty() && run.init != "online") parseInitMethod(run.init);
   } catch (const std::invalid_argument& e) {
     throw UsageError(e.what());
   }
   if (run.settings.max_iterations < 0) throw UsageError("--max-iterations must be >= 0");
   const RobustFlags robust = readRobustFlags(given, /*allow_auto=*/true);
+  if (run.init == "online" && !robust.robust)
+    throw UsageError("--init online needs --robust (it is the robust online replay's estimate)");
   run.robust = robust.robust;
   run.gnc.kernel = robust.kernel;
   run.gnc.threshold = robust.threshold;
   run.gnc.estimate_scale = robust.estimate_scale;
+  run.online_threshold = robust.online_threshold;
   run.rejected_out = robust.rejected_out;
   if (run.robust && run.solver != BatchSolver::kLevenbergMarquardt &&
       run.solver != BatchSolver::kRtr)

@@ -13,9 +13,11 @@ const char* const kKernelHelp = "with --robust: tls | gm (graduated) | cauchy | 
 const char* const kInlierThresholdHelp =
     "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
     "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the "
-    "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); auto "
-    "(batch only, experimental: it feeds on its own truncation): that quantile times the "
-    "variance factor estimated over the inliers";
+    "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); online "
+    "(batch only): the threshold the robust online smoother ends with after replaying the "
+    "graph, the χ² quantile on the noise scale estimated from its loop closures' innovations "
+    "(arbor replay --robust's); auto (batch only, experimental: it feeds on its own "
+    "truncation): that quantile times the variance factor estimated over the inliers";
 
 void addRobustFlags(po::options_description& options, const std::string& robust_help) {
   options.add_options()("robust", po::bool_switch(), robust_help.c_str())(
@@ -37,12 +39,11 @@ void parseKernelAndThreshold(const std::string& kernel, const std::string& thres
   }
   if (flags->kernel == KernelKind::kNone)
     throw UsageError("--kernel must be tls, gm, cauchy or huber with --robust, not none");
-  if (threshold == "auto") {
+  if (threshold == "auto" || threshold == "online") {
     if (!allow_auto)
-      throw UsageError(
-          "--inlier-threshold auto (a variance factor estimated over the inliers) is batch "
-          "only; give chi2 or a number > 0");
-    flags->estimate_scale = true;
+      throw UsageError("--inlier-threshold " + threshold +
+                       " is arbor batch only; give chi2 or a number > 0");
+    (threshold == "auto" ? flags->estimate_scale : flags->online_threshold) = true;
   } else if (threshold != "chi2") {
     std::size_t used = 0;
     double value = 0;
@@ -53,8 +54,8 @@ void parseKernelAndThreshold(const std::string& kernel, const std::string& thres
     }
     if (used != threshold.size() || !(value > 0) || !std::isfinite(value))
       throw UsageError("--inlier-threshold must be " +
-                       std::string(allow_auto ? "chi2, auto" : "chi2") + " or a number > 0, not '" +
-                       threshold + "'");
+                       std::string(allow_auto ? "chi2, online, auto" : "chi2") +
+                       " or a number > 0, not '" + threshold + "'");
     flags->threshold = value;
   }
 }
@@ -79,6 +80,8 @@ RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {
   RobustFlags flags;
   parseKernelAndThreshold(kernel, threshold, /*allow_auto=*/true, &flags);
+  if (flags.online_threshold)
+    throw UsageError("--inlier-threshold online is arbor batch only; give chi2, auto or a number");
   gnc->kernel = flags.kernel;
   gnc->threshold = flags.threshold;
   gnc->estimate_scale = flags.estimate_scale;

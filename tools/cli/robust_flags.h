@@ -19,6 +19,8 @@ struct RobustFlags {
   /// 0.99 quantile of the edge's dimension); "auto" sets estimate_scale.
   double threshold = 0.0;
   bool estimate_scale = false;
+  /// "online" (batch only): c² from a robust online replay of the graph (cli/online_threshold.h).
+  bool online_threshold = false;
   std::string rejected_out;  ///< --rejected-out FILE: the rejected edges, `i j` a line
 };
 
@@ -36,7 +38,8 @@ extern const char* const kKernelHelp;
 extern const char* const kInlierThresholdHelp;
 
 /// --kernel and --inlier-threshold given as strings (`arbor bench robust`) into gnc's kernel,
-/// threshold and estimate_scale, with readRobustFlags' checks (auto allowed).
+/// threshold and estimate_scale, with readRobustFlags' checks (auto allowed; online, which
+/// needs the graph, refused).
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc);
 
 }  // namespace arbor::cli

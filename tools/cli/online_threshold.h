@@ -1,0 +1,33 @@
+// The robust batch's threshold from the online estimator (`arbor batch --robust
+// --inlier-threshold online`): the graph's edges replayed through the robust online smoother
+// (bayestree/online_gnc.h, its defaults: innovation entry test, estimated noise scale, warm-up
+// held), and GNC's c² the threshold that smoother ends with, tail_factor·c²_χ²·σ̂² (or the χ²
+// quantile when it has no estimate). The files' Ω are often wrong by a constant factor (the
+// shared 2D files' 40–50× too weak, the garage's ~10⁴): the χ² quantile at Ω's word keeps
+// their false closures, and σ̂² is what the replay measures from its closures' innovations.
+#pragma once
+
+#include <vector>
+
+#include "arbor/core/pose_graph.h"
+#include "arbor/core/robust_kernel.h"
+#include "arbor/io/edge_choice_file.h"
+
+namespace arbor::cli {
+
+struct OnlineThreshold {
+  double c2 = 0;           ///< the online smoother's c² in use at the end of the replay
+  double noise_scale = 1;  ///< its σ̂²
+  bool estimated = false;  ///< σ̂² is an estimate (false: Ω at its word)
+  int samples = 0;         ///< innovations it was estimated from
+  double replay_s = 0;     ///< wall time of the replay
+};
+
+/// Replays `graph` (edges in order of max(i, j), one update each, no final pass) through the
+/// robust online smoother with `kernel` and `choices` and returns its threshold; `estimate`
+/// (optional): its estimate, in the graph's dense order (`arbor batch --init online`).
+template <class G>
+OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
+                                const EdgeChoices& choices, std::vector<G>* estimate = nullptr);
+
+}  // namespace arbor::cli
