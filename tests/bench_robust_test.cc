@@ -14,6 +14,7 @@
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/bench/robust_bench.h"
 #include "arbor/tools/bench/robust_metrics.h"
+#include "arbor/tools/bench/robust_replay_hooks.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
 
@@ -330,6 +331,45 @@ TEST(RobustBench, GeneratedRowsGoThroughBatchAndTheReplayHooks) {
   EXPECT_TRUE(plain[1].error.empty());
   EXPECT_FALSE(plain[1].replay.has_value());
   EXPECT_EQ(bench::robustMarkdown(plain).find("total/clean"), std::string::npos);
+  fs::remove_all(shared);
+}
+
+// The hooks `arbor bench robust` registers (robust_replay_hooks.h): the robust replay rejects
+// the planted group and no true closure (precision and recall 1, F at the clean optimum's to
+// 1e-6), its latency and update count come with it, and the clean replay of the base is timed.
+TEST(RobustBench, TheRegisteredReplayHooksRunTheRobustReplay) {
+  const fs::path shared = scratch("hooks");
+  fs::create_directories(shared / "datasets");
+  const PoseGraph2 base = smallManhattan();
+  writeG2oFile((shared / "datasets" / "tiny.g2o").string(), base, base.poses);
+  bench::GenerationPlan plan;
+  plan.bases = {"tiny"};
+  plan.fractions = {0.2};
+  plan.policies = {sim::OutlierPolicy::kGroup};
+  plan.seed = 3;
+  std::vector<std::string> missing;
+  const fs::path out = shared / "generated";
+  fs::create_directories(out);
+  const auto cases = bench::generateRobustCases(shared.string(), plan, out.string(), &missing);
+  ASSERT_EQ(cases.size(), 1u);
+  const bench::CleanReference<SE2> ref = bench::cleanReference(base, std::nan(""));
+  std::map<std::string, bench::Reference> optimum;
+  optimum["tiny"].F_star = ref.F;
+  const auto rows =
+      bench::runRobustBench(cases, optimum, {}, bench::RobustBatchSettings{},
+                            bench::robustReplayHooks(KernelKind::kTruncatedLeastSquares), nullptr);
+  ASSERT_EQ(rows.size(), 1u);
+  ASSERT_TRUE(rows[0].replay.has_value());
+  const bench::RobustFigures& r = *rows[0].replay;
+  ASSERT_TRUE(r.ok) << r.error;
+  EXPECT_DOUBLE_EQ(r.score.precision, 1.0);
+  EXPECT_DOUBLE_EQ(r.score.recall, 1.0);
+  EXPECT_NEAR(r.F_ratio, 1.0, 1e-6);
+  EXPECT_EQ(r.steps, rows[0].edges);  // one update per edge
+  ASSERT_TRUE(r.latency.has_value());
+  EXPECT_GT(r.latency->max, 0.0);
+  ASSERT_TRUE(rows[0].clean_replay.has_value());
+  EXPECT_GT(rows[0].clean_replay->total_s, 0.0);
   fs::remove_all(shared);
 }
 

@@ -45,6 +45,7 @@
 #include "arbor/tools/bench/growth.h"
 #include "arbor/tools/bench/paper_runner.h"
 #include "arbor/tools/bench/robust_bench.h"
+#include "arbor/tools/bench/robust_replay_hooks.h"
 #include "arbor/tools/bench/shared_data.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/replay_runner.h"
@@ -654,9 +655,9 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   for (const std::string& n : notes) std::cerr << "arbor bench robust: " << n << "\n";
 
   const std::string load_before = loadAverage();
-  // The replay rows' extension point: bench::RobustReplayHooks (robust_bench.h). None is
-  // registered yet, so the table has no replay columns.
-  const bench::RobustReplayHooks hooks{};
+  // The replay rows: the robust replay as `arbor replay --robust` runs it, and the clean replay
+  // of each base (tools/bench/robust_replay_hooks.h).
+  const bench::RobustReplayHooks hooks = bench::robustReplayHooks(settings.gnc.kernel);
   const auto rows = bench::runRobustBench(cases, optimum, anchors, settings, hooks, &std::cerr);
   std::cout
       << "Robust batch: GNC-" << toString(settings.gnc.kernel) << " over LM"

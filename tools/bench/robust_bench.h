@@ -18,7 +18,8 @@
 // (robust2/robust3) gets the same judgement as the batch (RobustRow::replay: F_clean, ATE,
 // precision, recall, total and its per-update latency); a clean replay of the base file
 // (clean2/clean3, once per base) gives the denominators of issue 14's cost goals (robust replay
-// total ≤ 2× the clean replay's, p99 ≤ 3×). With no hook the table has no replay columns.
+// total ≤ 2× the clean replay's, p99 ≤ 3×). With no hook the table has no replay columns;
+// `arbor bench robust` registers robust_replay_hooks.h's.
 #pragma once
 
 #include <functional>

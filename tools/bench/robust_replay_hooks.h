@@ -1,0 +1,16 @@
+// The replay rows of `arbor bench robust` (RobustReplayHooks, robust_bench.h): the robust replay
+// exactly as `arbor replay --robust` runs it (one update per edge, the online GNC's defaults:
+// innovation entry test, estimated noise scale, warm-up held; the final relinearise-all pass,
+// no batch LM), its rejected edges the closures it ends as outliers; and the clean replay of
+// the base file (`arbor replay BASE.g2o` without its batch LM), the cost goals' denominator.
+#pragma once
+
+#include "arbor/core/robust_kernel.h"
+#include "arbor/tools/bench/robust_bench.h"
+
+namespace arbor::bench {
+
+/// Hooks for both dimensions, the closures graduating towards `kernel`.
+RobustReplayHooks robustReplayHooks(KernelKind kernel);
+
+}  // namespace arbor::bench
