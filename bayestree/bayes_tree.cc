@@ -84,8 +84,7 @@ void BayesTree<D>::removeTop(const std::vector<int>& marked, Top* top) {
       c = cliques[c].parent;
     }
   for (int c : removed_) {
-    flops -= cliqueFlops(cliques[c].frontals.size(), cliques[c].separator.size());
-    doubles -= cliqueDoubles(cliques[c].frontals.size(), cliques[c].separator.size());
+    countClique(cliques[c].frontals.size(), cliques[c].separator.size(), -1.0);
     for (int v : cliques[c].frontals) top->variables.push_back(v);
     for (int ch : cliques[c].children)
       if (cliques[ch].removed_stamp != stamp) top->orphans.push_back(ch);

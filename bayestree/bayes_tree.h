@@ -32,8 +32,9 @@ class BayesTree {
   std::vector<int> free_cliques;  ///< ids of cliques not in use, to recycle
   int num_cliques = 0;            ///< cliques in use
   /// Flops of factorising the cliques in use (Σ cliqueFlops) and the doubles their matrices
-  /// need (Σ cliqueDoubles): removeTop takes the removed cliques' off, addFlops (the top
-  /// elimination) adds the new ones', a fold-in the growth of the separators it extends.
+  /// need (Σ cliqueDoubles), changed by countClique only: removeTop takes the removed cliques'
+  /// off, the top elimination adds the new ones', a fold-in the growth of the separators it
+  /// extends.
   double flops = 0;
   double doubles = 0;
 
@@ -49,10 +50,13 @@ class BayesTree {
     const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
     return F * (F + S) + F + S * S + S;
   }
-  void addFlops(const CliqueD& c) {
-    flops += cliqueFlops(c.frontals.size(), c.separator.size());
-    doubles += cliqueDoubles(c.frontals.size(), c.separator.size());
+  /// Adds (`sign` +1) or takes off (−1) a clique of that shape in `flops` and `doubles`: the
+  /// one place the two sums change, so they move together.
+  void countClique(size_t frontals, size_t separator, double sign) {
+    flops += sign * cliqueFlops(frontals, separator);
+    doubles += sign * cliqueDoubles(frontals, separator);
   }
+  void countClique(const CliqueD& c) { countClique(c.frontals.size(), c.separator.size(), 1.0); }
 
   /// slots[v] = v's position (in variables) among clique c's frontals then separator, until
   /// clearSlots.

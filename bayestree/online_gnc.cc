@@ -45,6 +45,8 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
       if (x <= t * sigma2) kept.push_back(x);
     return kept.size() >= 3;
   };
+  for (double x : m) out.share_at_word += x <= t ? 1.0 : 0.0;
+  if (!m.empty()) out.share_at_word /= static_cast<double>(m.size());
   // The median's fixed point.
   for (int round = 0; round < 50 && keep(); ++round) {
     const double next = quantile(&kept, 0.5) / q_median;
@@ -53,6 +55,12 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
     if (done || !(sigma2 > 0)) break;
   }
   if (!(sigma2 > 0) || !keep()) return out;
+  // Loosening Ω (σ̂² > 1) takes a quarter of the innovations within the truncation at Ω's word, or
+  // loosen_min_samples of them: else the median that climbed there may be of a few false
+  // closures that drew it up.
+  if (sigma2 > 1 && out.share_at_word < o.min_kept_share &&
+      m.size() < static_cast<size_t>(o.loosen_min_samples))
+    return out;
   out.estimated = true;
   // The tail's fixed point, within max_tail_scale of the median's.
   const double median_sigma2 = sigma2;
@@ -105,6 +113,9 @@ std::string RobustOptions::problem() const {
     return bad("tail_factor", tail_factor, "finite and > 1");
   if (!(max_tail_scale >= 1) || !std::isfinite(max_tail_scale))
     return bad("max_tail_scale", max_tail_scale, "finite and >= 1");
+  if (!(min_kept_share >= 0 && min_kept_share < 1))
+    return bad("min_kept_share", min_kept_share, "in [0, 1)");
+  if (loosen_min_samples < 0) return bad("loosen_min_samples", loosen_min_samples, ">= 0");
   return "";
 }
 

@@ -44,8 +44,9 @@
 // is the given one. After it the threshold in use is the estimator's own truncation,
 // tail_factor · c² · σ̂²: what it counts as a false closure is what is rejected (on correctly
 // modelled data σ̂² ≈ 1; on the shared 2D files about 0.02, on the garage 2·10⁻⁴, Ω being too
-// weak there). With fewer than 3 innovations within the truncation there is no estimate and Ω is
-// taken at its word (the given c², not tail_factor times it).
+// weak there). With fewer than 3 innovations within the truncation, or a σ̂² above 1 that fewer
+// than a quarter of them support at Ω's word while there are fewer than loosen_min_samples, there
+// is no estimate and Ω is taken at its word (the given c², not tail_factor times it).
 //   warm-up       a closure that arrives before the first estimate cannot be judged on the scale
 //                 yet: RobustOptions::warm_up kHold (default) keeps it at weight 0 (out of the
 //                 tree, its innovation recorded) and judges it by its innovation as on entry
@@ -156,6 +157,11 @@ struct RobustOptions {
   double tail_factor = 3.0;
   /// estimateNoiseScale: the tail's σ̂² at most this many times the median's (≥ 1).
   double max_tail_scale = 30.0;
+  /// estimateNoiseScale: σ̂² > 1 (Ω loosened) only when at least this share of the
+  /// innovations is within the truncation at Ω's word, σ² = 1 (in [0, 1)).
+  double min_kept_share = 0.25;
+  /// estimateNoiseScale: ... or at least this many innovations (≥ 0).
+  int loosen_min_samples = 200;
   /// Rounds of finalize(): graduate to the end, re-check every closure, relinearise all; again
   /// while a re-check changed a weight (≥ 1).
   int finalize_rounds = 3;
@@ -175,11 +181,17 @@ struct RobustOptions {
 /// raise it by about tail_factor a round until every one is in (σ̂² ran to 10²–10³ on the
 /// shared files with 10% local or 50% random false closures when the two were iterated
 /// together): σ²_med stands (tail_cut). The median breaks down at half the kept innovations
-/// false. With fewer than 3 kept there is no estimate and Ω is taken at its word.
+/// false. With fewer than 3 kept there is no estimate and Ω is taken at its word; and so when
+/// σ²_med > 1 with fewer than o.min_kept_share (a quarter) of all the m_k within t at σ² = 1 and
+/// fewer than o.loosen_min_samples of them: a median that climbed from a few, false closures
+/// drawing it up (intel's first 44 closures with 50% local false ones: 3 of them within t, σ̂² 148,
+/// c² 5042, and the replay diverged). sphere_bignoise's Ω is ~200× too confident: none of its true
+/// closures is within t at σ² = 1, and it is loosened from its 200th closure on.
 struct NoiseScaleEstimate {
-  double sigma2 = 1.0;     ///< σ̂² (1 without an estimate)
-  bool estimated = false;  ///< false: Ω at its word (σ̂² = 1 and the given c²)
-  bool tail_cut = false;   ///< the tail's fixed point passed max_tail_scale·σ²_med
+  double sigma2 = 1.0;       ///< σ̂² (1 without an estimate)
+  bool estimated = false;    ///< false: Ω at its word (σ̂² = 1 and the given c²)
+  bool tail_cut = false;     ///< the tail's fixed point passed max_tail_scale·σ²_med
+  double share_at_word = 0;  ///< of the m_k, those within the truncation at σ² = 1
 };
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
                                       const RobustOptions& o);

@@ -218,7 +218,7 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
     for (int a : sc.separator) c.separator.push_back(top[a]);
     c.parent = sc.parent < 0 ? -1 : ids[sc.parent];
     for (int v : c.frontals) tree->clique_of[v] = ids[k];
-    tree->addFlops(c);
+    tree->countClique(c);
   }
   // Recycled cliques keep their storage: hand the largest buffers to the largest new cliques
   // (saves reallocating, and re-faulting, the big ones on every update).

@@ -48,7 +48,7 @@ struct HandBuilt {
     k.parent = parent;
     if (parent >= 0) tree.cliques[parent].children.push_back(id);
     for (int v : k.frontals) tree.clique_of[v] = id;
-    tree.addFlops(k);  // as the top elimination does
+    tree.countClique(k);  // as the top elimination does
     k.allocate();
   }
   void check() const {

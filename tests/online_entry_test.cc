@@ -251,6 +251,35 @@ TEST(OnlineEntry, NoEstimateWithoutInnovationsWithinTheTruncation) {
   EXPECT_TRUE(estimateNoiseScale(m, dof, c2, RobustOptions{}).estimated);
 }
 
+// Loosening Ω on the word of a few: 44 innovations spread over three decades (false closures,
+// as intel's first ones with 50% local false closures), 3 of them within the truncation at
+// σ² = 1. The median climbs from those to σ̂² ≫ 1; with fewer than a quarter within at Ω's word
+// and fewer than loosen_min_samples innovations there is no estimate. The same share in 220
+// innovations (sphere_bignoise's case: Ω too confident, its true closures all beyond at σ² = 1)
+// is an estimate.
+TEST(OnlineEntry, LooseningNeedsSupportAtOmegasWord) {
+  const int dof = 3;
+  const double c2 = chiSquareThreshold(0.99, dof);
+  std::mt19937 rng(47);
+  std::uniform_real_distribution<double> decades(std::log(40.0), std::log(2e3));
+  auto sample = [&](int n) {
+    std::vector<double> m;
+    for (int k = 0; k < n; ++k) m.push_back(k % 15 == 7 ? 12.0 + k % 20 : std::exp(decades(rng)));
+    return m;
+  };
+  const std::vector<double> few = sample(44);
+  const NoiseScaleEstimate est = estimateNoiseScale(few, dof, c2, RobustOptions{});
+  EXPECT_LT(est.share_at_word, 0.25);
+  EXPECT_FALSE(est.estimated);
+  EXPECT_EQ(est.sigma2, 1.0);
+  RobustOptions any;
+  any.min_kept_share = 0;  // the rule off: the median climbs
+  EXPECT_GT(estimateNoiseScale(few, dof, c2, any).sigma2, 5.0);
+  const NoiseScaleEstimate many = estimateNoiseScale(sample(220), dof, c2, RobustOptions{});
+  EXPECT_TRUE(many.estimated);
+  EXPECT_GT(many.sigma2, 5.0);
+}
+
 // A replay of correctly modelled data: σ̂² ≈ 1 (the 0.99-quantile estimate of ~190 samples is
 // noisy, and the larger of two is taken: biased up); Ω nine times too
 // confident: σ̂² ≈ 9 and c² with it, and still no true closure rejected.
