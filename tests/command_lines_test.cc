@@ -221,6 +221,46 @@ TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
   }
 }
 
+// --entry, --noise-scale and --warm-up (tools/cli/robust_flags.h) reach the online robust
+// options in replay and serve alike, are refused without --robust, and a bad value is refused
+// naming it.
+TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
+  const std::vector<std::string> args = {"--robust", "--entry",   "residual", "--noise-scale",
+                                         "given",    "--warm-up", "given"};
+  std::vector<std::string> replay_args = args;
+  replay_args.insert(replay_args.begin(), "graph.g2o");
+  const auto replay = parseReplayCommandLine(replay_args);
+  ASSERT_TRUE(replay.has_value());
+  EXPECT_EQ(replay->entry, EntryTest::kResidual);
+  EXPECT_EQ(replay->noise_scale, NoiseScale::kGiven);
+  EXPECT_EQ(replay->warm_up, WarmUp::kGiven);
+  const auto serve = parseServeCommandLine(args);
+  ASSERT_TRUE(serve.has_value());
+  ASSERT_TRUE(serve->options.robust.has_value());
+  EXPECT_EQ(serve->options.robust->entry, EntryTest::kResidual);
+  EXPECT_EQ(serve->options.robust->scale, NoiseScale::kGiven);
+  EXPECT_EQ(serve->options.robust->warm_up, WarmUp::kGiven);
+  // The defaults are the robust options' own.
+  const auto plain = parseServeCommandLine({"--robust"});
+  ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
+  EXPECT_EQ(plain->options.robust->entry, RobustOptions{}.entry);
+  EXPECT_EQ(plain->options.robust->scale, RobustOptions{}.scale);
+  EXPECT_EQ(plain->options.robust->warm_up, RobustOptions{}.warm_up);
+  for (const std::string flag : {"--entry", "--noise-scale", "--warm-up"}) {
+    const std::string value = flag == "--entry" ? "residual" : "given";
+    EXPECT_THROW(parseServeCommandLine({flag, value}), UsageError) << flag;
+    EXPECT_THROW(parseReplayCommandLine({"graph.g2o", flag, value}), UsageError) << flag;
+    try {
+      parseServeCommandLine({"--robust", flag, "sometimes"});
+      ADD_FAILURE() << flag << " sometimes accepted";
+    } catch (const UsageError& e) {
+      const std::string message = e.what();
+      EXPECT_NE(message.find(flag), std::string::npos) << message;
+      EXPECT_NE(message.find("sometimes"), std::string::npos) << message;
+    }
+  }
+}
+
 TEST(ServeCommandLine, BatchFlagsAndTheJournalPathWithoutStartingTheService) {
   const auto line = parseServeCommandLine(
       {"--batch", "rtr", "--batch-every", "7", "--reseed", "--journal", "/nonexistent/j"});

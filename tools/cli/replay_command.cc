@@ -237,18 +237,7 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   options.add_options()("edge-choices", po::value(&run.edge_choices),
                         "with --robust: per-edge trust and kernel, 'FROM TO "
                         "default|trusted|robust [KERNEL]' a line (docs/files.md)");
-  std::string entry = "innovation", noise_scale = "estimated", warm_up = "hold";
-  options.add_options()(
-      "entry", po::value(&entry)->default_value(entry),
-      "with --robust, how a new loop closure is first judged: innovation (r'(I + A S A')^-1 r, "
-      "S the poses' covariance in the Bayes tree) or residual (r'r)")(
-      "noise-scale", po::value(&noise_scale)->default_value(noise_scale),
-      "with --robust, the scale of the information matrices the threshold is put on: estimated "
-      "(from the loop closures' innovations) or given (as the file says)")(
-      "warm-up", po::value(&warm_up)->default_value(warm_up),
-      "with --robust and --noise-scale estimated, the loop closures that arrive before the "
-      "scale is estimated: hold (at weight 0, judged once it is) or given (judged at once, Ω at "
-      "its word)");
+  addOnlineRobustFlags(options);
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, options)) return std::nullopt;
@@ -275,18 +264,11 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   run.robust = readRobustFlags(vm, /*allow_auto=*/false);
   if (!run.edge_choices.empty() && !run.robust.robust)
     throw UsageError("--edge-choices needs --robust");
-  if (entry != "innovation" && entry != "residual")
-    throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
-  if (noise_scale != "estimated" && noise_scale != "given")
-    throw UsageError("--noise-scale must be estimated or given, not '" + noise_scale + "'");
-  run.entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
-  run.noise_scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
-  if (warm_up != "hold" && warm_up != "given")
-    throw UsageError("--warm-up must be hold or given, not '" + warm_up + "'");
-  run.warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
-  if (!run.robust.robust &&
-      (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted()))
-    throw UsageError("--entry, --noise-scale and --warm-up need --robust");
+  RobustOptions online;
+  readOnlineRobustFlags(vm, run.robust.robust, &online);
+  run.entry = online.entry;
+  run.noise_scale = online.scale;
+  run.warm_up = online.warm_up;
   try {
     run.format = parseTrajectoryFormat(format);
   } catch (const std::invalid_argument& e) {

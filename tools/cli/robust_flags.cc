@@ -77,6 +77,38 @@ RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
   return flags;
 }
 
+void addOnlineRobustFlags(po::options_description& options) {
+  options.add_options()(
+      "entry", po::value<std::string>()->default_value("innovation"),
+      "with --robust, how a new loop closure is first judged: innovation (r'(I + A S A')^-1 r, "
+      "S the poses' covariance in the Bayes tree) or residual (r'r)")(
+      "noise-scale", po::value<std::string>()->default_value("estimated"),
+      "with --robust, the scale of the information matrices the threshold is put on: estimated "
+      "(from the loop closures' innovations) or given (as the file or sender says)")(
+      "warm-up", po::value<std::string>()->default_value("hold"),
+      "with --robust and --noise-scale estimated, the loop closures that arrive before the "
+      "scale is estimated: hold (at weight 0, judged once it is) or given (judged at once, Ω at "
+      "its word)");
+}
+
+void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
+  const std::string entry = vm["entry"].as<std::string>();
+  const std::string noise_scale = vm["noise-scale"].as<std::string>();
+  const std::string warm_up = vm["warm-up"].as<std::string>();
+  if (!robust_on &&
+      (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted()))
+    throw UsageError("--entry, --noise-scale and --warm-up need --robust");
+  if (entry != "innovation" && entry != "residual")
+    throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
+  if (noise_scale != "estimated" && noise_scale != "given")
+    throw UsageError("--noise-scale must be estimated or given, not '" + noise_scale + "'");
+  if (warm_up != "hold" && warm_up != "given")
+    throw UsageError("--warm-up must be hold or given, not '" + warm_up + "'");
+  robust->entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
+  robust->scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
+  robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
+}
+
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {
   RobustFlags flags;
   parseKernelAndThreshold(kernel, threshold, /*allow_auto=*/true, &flags);

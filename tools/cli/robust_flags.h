@@ -7,6 +7,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/gnc_solver.h"
 #include "arbor/core/robust_kernel.h"
 
@@ -32,6 +33,15 @@ void addRobustFlags(boost::program_options::options_description& options,
 /// on a bad kernel or threshold, on `auto` when `allow_auto` is false, and on --kernel,
 /// --inlier-threshold or --rejected-out given without --robust.
 RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, bool allow_auto);
+
+/// The online smoother's own robust flags (`arbor replay`, `arbor serve`): --entry
+/// innovation|residual, --noise-scale estimated|given, --warm-up hold|given
+/// (bayestree/online_gnc.h: EntryTest, NoiseScale, WarmUp).
+void addOnlineRobustFlags(boost::program_options::options_description& options);
+/// Those flags into `robust` (entry, scale, warm_up). Throws UsageError on a bad value, and when
+/// one is given without --robust (`robust_on` false).
+void readOnlineRobustFlags(const boost::program_options::variables_map& vm, bool robust_on,
+                           RobustOptions* robust);
 
 /// Help texts of --kernel and --inlier-threshold (for a command that reads them itself).
 extern const char* const kKernelHelp;

@@ -145,6 +145,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
                  "robust to false loop closures: graduated non-convexity per loop closure in the "
                  "Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; edge_t's trust and "
                  "kernel choose per edge");
+  addOnlineRobustFlags(desc);
   if (helpRequested(args, desc)) return std::nullopt;
   const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
   options.smoother = readSmootherFlags(vm);
@@ -186,8 +187,9 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   if (batch.empty() && options.batch.every > 0)
     throw UsageError("--batch-every needs --batch " + refine::batchSolverNames(true, "|"));
   line.robust = readRobustFlags(vm, /*allow_auto=*/false);
+  RobustOptions robust;
+  readOnlineRobustFlags(vm, line.robust.robust, &robust);
   if (line.robust.robust) {
-    RobustOptions robust;
     robust.kernel = line.robust.kernel;
     robust.threshold = line.robust.threshold;
     options.robust = robust;
@@ -358,6 +360,8 @@ int serveCommand(const std::vector<std::string>& args) {
       }
       j["robust"] = {
           {"kernel", toString(options.robust->kernel)},
+          {"noise_scale_mode", toString(options.robust->scale)},
+          {"warm_up", toString(options.robust->warm_up)},
           {"inlier_threshold", s.inlier_threshold},
           {"closures_inlier", counts[static_cast<int>(ClosureStatus::kInlier)]},
           {"closures_outlier", counts[static_cast<int>(ClosureStatus::kOutlier)]},
