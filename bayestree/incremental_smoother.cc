@@ -23,6 +23,7 @@
 #include <Eigen/Core>
 
 #include "arbor/bayestree/async_relinearization.h"
+#include "arbor/bayestree/background_job.h"
 #include "arbor/bayestree/bayes_tree.h"
 #include "arbor/bayestree/dogleg_step.h"
 #include "arbor/bayestree/fold_in.h"
@@ -58,6 +59,8 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->variables_checked += s.variables_checked;
   total->async_started += s.async_started;
   total->async_swapped += s.async_swapped;
+  total->async_catch_up_started += s.async_catch_up_started;
+  total->async_pending = s.async_pending;  // the state after the last update
   total->refine_iterations += s.refine_iterations;
   total->cancelled = total->cancelled || s.cancelled;
 }
@@ -181,6 +184,12 @@ struct IncrementalSmoother<G>::Impl {
   // (poses moved, factors reweighted, anchors released), and whether the second core is taken.
   bayestree::AsyncRelinearization<G> async;
   std::vector<int> moved_since_snapshot, reweighted_since_snapshot, released_since_snapshot;
+  // AsyncCatchUp::kInBackground: the catch-up in flight (a copy of this state that folds the
+  // job's tree up to the update that started it), that update's poses and factors, Θ then, and
+  // |M| of the job's snapshot.
+  bayestree::BackgroundJob<Impl> catch_up;
+  int catch_up_poses = 0, catch_up_factors = 0, catch_up_relinearized = 0;
+  std::vector<G> theta_at_catch_up;
   int pass_first_factor = 0;  // the first factor of the current pass (the snapshot's end)
   bool second_core_busy = false;
 
@@ -190,6 +199,8 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
+  // A relinearisation job or its catch-up in flight (no check runs; changes are recorded).
+  bool relinearizationPending() const { return async.pending() || catch_up.pending(); }
 
   int addPose(const G& x, bool is_fixed) {
     if (!allFinite(x)) throw std::invalid_argument("IncrementalSmoother::addPose: not finite");
@@ -237,7 +248,7 @@ struct IncrementalSmoother<G>::Impl {
     fixed[v] = 0;
     new_vars.push_back(v);
     ++num_variables;
-    if (async.pending()) released_since_snapshot.push_back(v);
+    if (relinearizationPending()) released_since_snapshot.push_back(v);
     for (int f : factors.var_factors[v]) {
       const Factor<G>& e = factors.factors[f];
       for (int k = 0; k < e.arity(); ++k)
@@ -256,7 +267,7 @@ struct IncrementalSmoother<G>::Impl {
                                     std::to_string(v) + " out of range");
     for (int v : poses) mark[v] = 1;
     moved.insert(moved.end(), poses.begin(), poses.end());
-    if (async.pending())
+    if (relinearizationPending())
       moved_since_snapshot.insert(moved_since_snapshot.end(), poses.begin(), poses.end());
     for (int v : poses) {
       theta[v] = T.compose(theta[v]);
@@ -297,7 +308,7 @@ struct IncrementalSmoother<G>::Impl {
     Factor<G>& e = factors.factors[f];
     if (e.inlierWeight() == w) return;
     e.setInlierWeight(w);
-    if (async.pending()) reweighted_since_snapshot.push_back(f);
+    if (relinearizationPending()) reweighted_since_snapshot.push_back(f);
     if (w > 0 && !factors.attached[f]) {
       readmitted.push_back(f);  // attached by the next update (addNewFactorsAndVariables)
       return;
@@ -373,16 +384,29 @@ struct IncrementalSmoother<G>::Impl {
     ++update_count;
     // RelinearizationMode::kAsync: a finished background relinearisation is swapped in first;
     // while one is in flight, no check runs (its variables wait for the swap).
-    const int swapped = async.pending() && asyncSwapDue() ? swapInRelinearized() : -1;
+    int swapped = -1;
+    bool caught_up = false;
+    if (async.pending() && asyncSwapDue()) {
+      if (opt.async.catch_up == AsyncCatchUp::kInBackground) {
+        startCatchUp();
+        caught_up = true;
+      } else {
+        swapped = swapInRelinearized();
+      }
+    } else if (catch_up.pending() && catchUpSwapDue()) {
+      swapped = swapInCaughtUp();
+    }
     StepOptions pass;
-    pass.check_relinearization = update_count % opt.relinearize_skip == 0 && !async.pending();
+    pass.check_relinearization =
+        update_count % opt.relinearize_skip == 0 && !relinearizationPending();
+    UpdateStats st = runPasses(pass);
     if (swapped >= 0) {
-      UpdateStats st = runPasses(pass);
       st.async_swapped = 1;
       st.variables_relinearized += swapped;
-      return st;
     }
-    return runPasses(pass);
+    st.async_catch_up_started = caught_up ? 1 : 0;
+    st.async_pending = relinearizationPending() ? 1 : 0;
+    return st;
   }
 
   UpdateStats runPasses(const StepOptions& pass) {
@@ -420,8 +444,8 @@ struct IncrementalSmoother<G>::Impl {
   // (those before this pass's), Θ with Θ_M := Θ_M ⊕ Δ_M, the poses held fixed (the gauge poses
   // and those not in the tree yet) — and starts the background job. O(n + m) copies.
   bool startAsyncRelinearization(UpdateStats* st) {
-    if (opt.relinearize != RelinearizationMode::kAsync || second_core_busy || async.pending() ||
-        static_cast<int>(relin.size()) < opt.async.min_variables)
+    if (opt.relinearize != RelinearizationMode::kAsync || second_core_busy ||
+        relinearizationPending() || static_cast<int>(relin.size()) < opt.async.min_variables)
       return false;
     const int n = numPoses();
     bayestree::RelinearizationSnapshot<G> s;
@@ -453,56 +477,92 @@ struct IncrementalSmoother<G>::Impl {
     return async.done();
   }
 
-  // Replaces the tree, Θ, Δ and the linearisations with the job's, and queues for this update
-  // everything that arrived since the snapshot, as one ordinary pass folds it in: the factors
-  // added since (they keep their indices), the poses new to the job's graph (added since, or not
-  // in the tree then, or released since: their neighbours' cliques are re-eliminated), the poses
-  // moved since (their Θ moved alike, their factors relinearised) and the factors reweighted
-  // since. Each factor is then linearised at the job's Θ, as relinearising at the snapshot and
-  // then applying the later updates inline would have it.
-  int swapInRelinearized() {
-    bayestree::RelinearizationSnapshot<G> snap;
-    bayestree::RelinearizedTree<G> job;
-    async.take(&snap, &job);
-    const int n = numPoses();
-    const int n_snap = static_cast<int>(snap.theta.size());
-    const int f_snap = static_cast<int>(snap.factors.size());
-    // Θ: the snapshot's, moved since as the owner's poses were (θ ← T θ for every move, i.e.
-    // θ_now θ_then⁻¹ on the left; a pose not relinearised had θ_then = the snapshot's).
-    std::vector<G> new_theta = std::move(snap.theta);
-    std::sort(moved_since_snapshot.begin(), moved_since_snapshot.end());
-    moved_since_snapshot.erase(
-        std::unique(moved_since_snapshot.begin(), moved_since_snapshot.end()),
-        moved_since_snapshot.end());
-    for (int v : moved_since_snapshot) {
-      if (v >= n_snap) continue;
-      const auto it = std::lower_bound(snap.relinearized.begin(), snap.relinearized.end(), v);
-      if (it == snap.relinearized.end() || *it != v) {
-        new_theta[v] = theta[v];
+  // A tree to swap in (the job's, or the catch-up's) and what it was built from: its first n
+  // poses and f factors at Θ = theta; `fixed`: per pose, not a variable of the tree (held fixed,
+  // or not in it); the poses whose Θ differs from the smoother's at the base's start
+  // (`relinearized`, increasing, or every pose when `all_relinearized`) with the smoother's Θ
+  // then (`theta_before`, parallel, or per pose).
+  struct SwapBase {
+    int n = 0, f = 0;
+    std::vector<char> fixed;
+    std::vector<G> theta;
+    std::vector<int> relinearized;
+    bool all_relinearized = false;
+    std::vector<G> theta_before;
+    bayestree::BayesTree<D> tree;
+    bayestree::LinearizedFactors<G> factors;
+    bayestree::PartialSolve<D> solve;
+    std::vector<Vec> delta;
+  };
+
+  static SwapBase baseOfJob(bayestree::RelinearizationSnapshot<G>&& snap,
+                            bayestree::RelinearizedTree<G>&& job) {
+    SwapBase b;
+    b.n = static_cast<int>(snap.theta.size());
+    b.f = static_cast<int>(snap.factors.size());
+    b.fixed = std::move(snap.fixed);
+    b.theta = std::move(snap.theta);
+    b.relinearized = std::move(snap.relinearized);
+    b.theta_before = std::move(snap.theta_before);
+    b.tree = std::move(job.tree);
+    b.factors = std::move(job.factors);
+    b.solve = std::move(job.solve);
+    b.delta = std::move(job.delta);
+    return b;
+  }
+
+  // Replaces the tree, Θ, Δ and the linearisations with the base's, and queues for the next
+  // pass everything `src` (this smoother, or the owner of a catch-up) has that the base lacks,
+  // as one ordinary pass folds it in: the factors added since (they keep their indices; src's
+  // queue too when `with_queued`), the poses new to the base's graph (added since, or not in it,
+  // or released since: their neighbours' cliques are re-eliminated), the poses moved since
+  // (their Θ moved alike, their factors relinearised) and the factors reweighted since. Each
+  // factor is then linearised at the base's Θ, as relinearising at the snapshot and then
+  // applying the later updates inline would have it. Reads src before it writes this.
+  void adopt(SwapBase&& base, const Impl& src, bool with_queued) {
+    const int n = src.numPoses();
+    // Θ: the base's, moved since as src's poses were (θ ← T θ for every move, i.e.
+    // θ_now θ_then⁻¹ on the left; a pose not relinearised had θ_then = the base's).
+    std::vector<G> new_theta = std::move(base.theta);
+    std::vector<int> moved_poses = src.moved_since_snapshot;
+    std::sort(moved_poses.begin(), moved_poses.end());
+    moved_poses.erase(std::unique(moved_poses.begin(), moved_poses.end()), moved_poses.end());
+    for (int v : moved_poses) {
+      if (v >= base.n) continue;
+      const G* before = nullptr;
+      if (base.all_relinearized) {
+        before = &base.theta_before[v];
+      } else {
+        const auto it = std::lower_bound(base.relinearized.begin(), base.relinearized.end(), v);
+        if (it != base.relinearized.end() && *it == v)
+          before = &base.theta_before[static_cast<size_t>(it - base.relinearized.begin())];
+      }
+      if (!before) {
+        new_theta[v] = src.theta[v];
         continue;
       }
-      const G& before = snap.theta_before[static_cast<size_t>(it - snap.relinearized.begin())];
-      new_theta[v] = theta[v].compose(before.inverse()).compose(new_theta[v]);
+      new_theta[v] = src.theta[v].compose(before->inverse()).compose(new_theta[v]);
       new_theta[v].normalize();
     }
-    for (int v = n_snap; v < n; ++v) new_theta.push_back(theta[v]);
-    // The factors added since the snapshot go first in the queue (their indices stay), with the
-    // weights they have now.
-    std::vector<Factor<G>> requeued(factors.factors.begin() + f_snap, factors.factors.end());
-    requeued.insert(requeued.end(), queued.begin(), queued.end());
+    for (int v = base.n; v < n; ++v) new_theta.push_back(src.theta[v]);
+    // The factors added since go first in the queue (their indices stay), with the weights
+    // they have now.
+    std::vector<Factor<G>> requeued(src.factors.factors.begin() + base.f,
+                                    src.factors.factors.end());
+    if (with_queued) requeued.insert(requeued.end(), src.queued.begin(), src.queued.end());
     std::vector<std::pair<int, double>> weights;
-    for (int f : reweighted_since_snapshot)
-      if (f < f_snap) weights.emplace_back(f, factors.factors[f].inlierWeight());
+    for (int f : src.reweighted_since_snapshot)
+      if (f < base.f) weights.emplace_back(f, src.factors.factors[f].inlierWeight());
     std::vector<int> pending_relinearize;
-    for (int f : to_relinearize)
-      if (f < f_snap) pending_relinearize.push_back(f);
-    // The job's state becomes the smoother's.
+    for (int f : src.to_relinearize)
+      if (f < base.f) pending_relinearize.push_back(f);
+    // The base's state becomes this smoother's.
     theta = std::move(new_theta);
-    tree = std::move(job.tree);
-    factors = std::move(job.factors);
-    partial_solve = std::move(job.solve);
-    delta = std::move(job.delta);
-    for (int v = n_snap; v < n; ++v) {
+    tree = std::move(base.tree);
+    factors = std::move(base.factors);
+    partial_solve = std::move(base.solve);
+    delta = std::move(base.delta);
+    for (int v = base.n; v < n; ++v) {
       tree.addVariable();
       factors.addVariable();
       partial_solve.addVariable();
@@ -516,8 +576,8 @@ struct IncrementalSmoother<G>::Impl {
       for (int k = 0; k < e.arity(); ++k)
         if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
     };
-    // A reweighting takes the job's factor in or out of the structure as setFactorWeight does
-    // (LinearizedFactors::attached follows the weight the snapshot had).
+    // A reweighting takes the base's factor in or out of the structure as setFactorWeight does
+    // (LinearizedFactors::attached follows the weight the base had).
     for (const auto& [f, w] : weights) {
       factors.factors[f].setInlierWeight(w);
       if (w > 0 && !factors.attached[f]) {
@@ -531,14 +591,14 @@ struct IncrementalSmoother<G>::Impl {
           if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
       }
     }
-    for (int v : moved_since_snapshot)
-      if (v < n_snap)
+    for (int v : moved_poses)
+      if (v < base.n)
         for (int f : factors.var_factors[v]) relinearizeFactor(f);
-    // The variables the job held fixed that are not (not in the tree then, or released since),
-    // and every variable added since: new to the job's tree.
+    // The variables the base held fixed that are not (not in its tree, or released since),
+    // and every variable added since: new to the base's tree.
     new_vars.clear();
-    for (int v = 0; v < n_snap; ++v) {
-      if (!snap.fixed[v] || fixed[v]) continue;
+    for (int v = 0; v < base.n; ++v) {
+      if (!base.fixed[v] || fixed[v]) continue;
       new_vars.push_back(v);
       for (int f : factors.var_factors[v]) {
         const Factor<G>& e = factors.factors[f];
@@ -546,12 +606,9 @@ struct IncrementalSmoother<G>::Impl {
           if (e.key(k) != v && !fixed[e.key(k)]) to_touch.push_back(e.key(k));
       }
     }
-    for (int v = n_snap; v < n; ++v)
+    for (int v = base.n; v < n; ++v)
       if (!fixed[v]) new_vars.push_back(v);
-    moved_since_snapshot.clear();
-    reweighted_since_snapshot.clear();
-    released_since_snapshot.clear();
-    // Every Δ is the job's: the next check scans every variable; the ordering is fresh.
+    // Every Δ is the base's: the next check scans every variable; the ordering is fresh.
     for (int v : relin_candidates) is_candidate[v] = 0;
     relin_candidates.clear();
     check_all = true;
@@ -560,7 +617,109 @@ struct IncrementalSmoother<G>::Impl {
     reorder_due = false;
     updated_all = true;
     marginals = bayestree::TreeMarginals<D>();
-    return static_cast<int>(snap.relinearized.size());
+  }
+
+  void clearSinceSnapshot() {
+    moved_since_snapshot.clear();
+    reweighted_since_snapshot.clear();
+    released_since_snapshot.clear();
+  }
+
+  // AsyncCatchUp::kOnSwap: the job's tree, with everything since its snapshot queued for this
+  // update. Returns |M| of the job's snapshot.
+  int swapInRelinearized() {
+    bayestree::RelinearizationSnapshot<G> snap;
+    bayestree::RelinearizedTree<G> job;
+    async.take(&snap, &job);
+    const int relinearized = static_cast<int>(snap.relinearized.size());
+    adopt(baseOfJob(std::move(snap), std::move(job)), *this, /*with_queued=*/true);
+    clearSinceSnapshot();
+    return relinearized;
+  }
+
+  // AsyncCatchUp::kInBackground, the update that finds the job done: a copy of the smoother's
+  // state (Θ, the fixed poses, per-pose scratch; no tree) adopts the job's tree with what came
+  // since the snapshot — this update's queue excepted, which this update folds into the old
+  // tree — and runs one ordinary pass on it in the background. What changes from here on is
+  // recorded as since the snapshot was (moved, reweighted, released), against Θ as it is now.
+  void startCatchUp() {
+    bayestree::RelinearizationSnapshot<G> snap;
+    bayestree::RelinearizedTree<G> job;
+    async.take(&snap, &job);
+    catch_up_relinearized = static_cast<int>(snap.relinearized.size());
+    SmootherOptions shadow_options = opt;
+    shadow_options.relinearize = RelinearizationMode::kInline;
+    shadow_options.threads = 1;
+    auto shadow = std::make_unique<Impl>(shadow_options);
+    const int n = numPoses();
+    shadow->theta.reserve(static_cast<size_t>(n));
+    shadow->fixed = fixed;
+    shadow->mark.assign(static_cast<size_t>(n), 0);
+    shadow->updated_stamp.assign(static_cast<size_t>(n), 0);
+    shadow->is_candidate.assign(static_cast<size_t>(n), 0);
+    for (int v = 0; v < n; ++v) shadow->threads.addVariable();
+    shadow->num_variables = num_variables;
+    shadow->stamp = stamp;
+    shadow->to_touch = to_touch;
+    shadow->adopt(baseOfJob(std::move(snap), std::move(job)), *this, /*with_queued=*/false);
+    // A pose with no factor among the shadow's (its edges wait in this update's queue) is not
+    // a variable there yet: held fixed, it is new to the tree at the swap.
+    std::vector<char> has_factor(static_cast<size_t>(n), 0);
+    for (const Factor<G>& e : shadow->queued)
+      if (e.inlierWeight() > 0)
+        for (int k = 0; k < e.arity(); ++k) has_factor[e.key(k)] = 1;
+    std::vector<int> kept;
+    for (int v : shadow->new_vars) {
+      bool attached = has_factor[v] != 0;
+      for (int f : shadow->factors.var_factors[v])
+        if (shadow->factors.attached[f] || shadow->factors.factors[f].inlierWeight() > 0)
+          attached = true;
+      if (attached) {
+        kept.push_back(v);
+      } else {
+        shadow->fixed[v] = 1;
+        --shadow->num_variables;
+      }
+    }
+    shadow->new_vars = std::move(kept);
+    clearSinceSnapshot();
+    theta_at_catch_up = theta;
+    catch_up_poses = n;
+    catch_up_factors = factors.numFactors();
+    catch_up.start(
+        std::move(shadow), [](Impl& s) { s.runPasses(StepOptions{}); }, opt.async.synchronous,
+        update_count);
+  }
+
+  // The catch-up's swap: due when it is done (or, with swap_after_updates, at the update after
+  // its start).
+  bool catchUpSwapDue() const {
+    if (opt.async.swap_after_updates > 0) return update_count >= catch_up.startedAt() + 1;
+    return catch_up.done();
+  }
+
+  // The caught-up tree, with what arrived during the catch-up queued for this update (its
+  // base: every pose's Θ the shadow's, the smoother's Θ then in theta_at_catch_up). Returns |M|
+  // of the job's snapshot.
+  int swapInCaughtUp() {
+    std::unique_ptr<Impl> shadow = catch_up.take();
+    SwapBase b;
+    b.n = catch_up_poses;
+    b.f = catch_up_factors;
+    b.fixed.resize(static_cast<size_t>(b.n));
+    for (int v = 0; v < b.n; ++v)
+      b.fixed[v] = shadow->fixed[v] || shadow->tree.clique_of[v] < 0 ? 1 : 0;
+    b.theta = std::move(shadow->theta);
+    b.all_relinearized = true;
+    b.theta_before = std::move(theta_at_catch_up);
+    b.tree = std::move(shadow->tree);
+    b.factors = std::move(shadow->factors);
+    b.solve = std::move(shadow->partial_solve);
+    b.delta = std::move(shadow->delta);
+    adopt(std::move(b), *this, /*with_queued=*/true);
+    clearSinceSnapshot();
+    theta_at_catch_up.clear();
+    return catch_up_relinearized;
   }
 
   // One pass of IJRR 2012 Alg. 6, "One step of the iSAM2 algorithm".
@@ -890,11 +1049,11 @@ struct IncrementalSmoother<G>::Impl {
   UpdateStats relinearizeAll(const CancellationToken* cancel) {
     const auto t0 = Clock::now();
     UpdateStats total;
-    if (async.pending()) {  // everything is relinearised below: the job is not needed
+    if (relinearizationPending()) {  // everything is relinearised below: the job is not needed
       async.abandon();
-      moved_since_snapshot.clear();
-      reweighted_since_snapshot.clear();
-      released_since_snapshot.clear();
+      catch_up.abandon();
+      theta_at_catch_up.clear();
+      clearSinceSnapshot();
       check_all = true;  // the snapshot's check consumed its candidates
     }
     if (!queued.empty() || !new_vars.empty()) accumulate(&total, update());
@@ -996,7 +1155,7 @@ UpdateStats IncrementalSmoother<G>::relinearizeAll(const CancellationToken* canc
 }
 template <class G>
 bool IncrementalSmoother<G>::relinearizationPending() const {
-  return impl_->async.pending();
+  return impl_->relinearizationPending();
 }
 template <class G>
 void IncrementalSmoother<G>::setSecondCoreBusy(bool busy) {

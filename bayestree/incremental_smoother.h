@@ -63,6 +63,19 @@ enum class RelinearizationMode {
   kAsync,
 };
 
+/// Where the swap folds in what arrived during the relinearisation job (docs/design.md,
+/// "Asynchronous relinearisation").
+enum class AsyncCatchUp {
+  /// The update that finds the job done folds it into the job's tree and swaps the tree in: that
+  /// update re-eliminates the fresh ordering's root (its last separator, large) on the path.
+  kOnSwap,
+  /// The update that finds the job done hands the job's tree, with what arrived since the
+  /// snapshot, to a second background job that folds it in (an ordinary pass, on a copy of the
+  /// smoother's state); the first update that finds that done swaps it in, folding in only what
+  /// arrived during the catch-up, into a tree whose top is already the incremental one's.
+  kInBackground,
+};
+
 /// The asynchronous mode's settings (RelinearizationMode::kAsync).
 struct AsyncRelinearizationOptions {
   /// A check that marks fewer variables relinearises inline (a small top costs less than the
@@ -74,6 +87,9 @@ struct AsyncRelinearizationOptions {
   /// d-th update after the snapshot's, which waits for the job if it is still running
   /// (deterministic whatever the scheduling; tests).
   int swap_after_updates = 0;
+  /// Where the swap's fold-ins run. With swap_after_updates d > 0 the catch-up starts at the
+  /// d-th update after the snapshot's and is swapped in at the next one (which waits for it).
+  AsyncCatchUp catch_up = AsyncCatchUp::kInBackground;
 };
 
 struct SmootherOptions {
@@ -145,6 +161,11 @@ struct UpdateStats {
   /// variables that snapshot relinearised in variables_relinearized)
   int async_started = 0;
   int async_swapped = 0;
+  /// AsyncCatchUp::kInBackground: 1 when this update handed the finished job's tree to the
+  /// catch-up (swapped in by a later update, async_swapped)
+  int async_catch_up_started = 0;
+  /// 1 when a relinearisation job or its catch-up was in flight after this update
+  int async_pending = 0;
   /// relinearizeAll / OnlineSmoother::finalize: the iterations (relinearise-all passes) run, and
   /// whether the caller's token stopped them before convergence
   int refine_iterations = 0;

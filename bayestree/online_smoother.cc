@@ -22,6 +22,11 @@ void addStats(UpdateStats* total, const UpdateStats& s) {
   total->cliques_solved += s.cliques_solved;
   total->cliques_on_helpers += s.cliques_on_helpers;
   total->refine_iterations += s.refine_iterations;
+  total->batch_reeliminations += s.batch_reeliminations;
+  total->async_started += s.async_started;
+  total->async_swapped += s.async_swapped;
+  total->async_catch_up_started += s.async_catch_up_started;
+  total->async_pending = s.async_pending;  // the state after the last update
   total->cancelled = total->cancelled || s.cancelled;
   total->time_s += s.time_s;
 }

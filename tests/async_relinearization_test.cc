@@ -154,20 +154,30 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
   }
 }
 
+SmootherOptions onSwap(SmootherOptions o) {
+  o.async.catch_up = AsyncCatchUp::kOnSwap;
+  return o;
+}
+
+// The default, AsyncCatchUp::kInBackground (the catch-up's own job folds in what arrived during
+// the job), and kOnSwap (the swap's update does).
 TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot2D) {
   expectSwapEqualsInline<SE2>(11, asyncOptions(true, 5));
   expectSwapEqualsInline<SE2>(12, asyncOptions(true, 3));
+  expectSwapEqualsInline<SE2>(13, onSwap(asyncOptions(true, 5)));
 }
 
 TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot3D) {
   expectSwapEqualsInline<SE3>(21, asyncOptions(true, 5));
   expectSwapEqualsInline<SE3>(22, asyncOptions(true, 3));
+  expectSwapEqualsInline<SE3>(23, onSwap(asyncOptions(true, 5)));
 }
 
 // Factors reweighted and poses moved while the job runs are folded in at the swap.
 TEST(AsyncRelinearization, ReweightsAndMovesDuringTheJobAreFoldedIn) {
   expectSwapEqualsInline<SE2>(31, asyncOptions(true, 5), {true, true});
   expectSwapEqualsInline<SE3>(32, asyncOptions(true, 5), {true, true});
+  expectSwapEqualsInline<SE2>(35, onSwap(asyncOptions(true, 5)), {true, true});
 }
 
 // Loop closures taken to weight 0 while the job runs leave the job's structure at the swap, and
@@ -182,6 +192,7 @@ TEST(AsyncRelinearization, ClosuresOutAndBackDuringTheJobAreFoldedIn) {
 TEST(AsyncRelinearization, BackgroundThreadSwapsAtTheGivenUpdate) {
   expectSwapEqualsInline<SE2>(41, asyncOptions(false, 5));
   expectSwapEqualsInline<SE3>(42, asyncOptions(false, 5));
+  expectSwapEqualsInline<SE3>(43, onSwap(asyncOptions(false, 5)));
 }
 
 // While the second core is taken (a batch refinement), every check relinearises inline: bit for

@@ -64,6 +64,8 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
                            s.cliques_reeliminated, s.variables_relinearized, s.cliques_updated,
                            s.cliques_solved});
     result.rows.back().batch_reeliminations = s.batch_reeliminations;
+    result.rows.back().async_swapped = s.async_swapped;
+    result.rows.back().async_job_running = s.async_pending && !s.async_swapped ? 1 : 0;
     result.rows.back().peak_rss_kb = peakRssKb();
     if (hooks.after_update) hooks.after_update(smoother, result.rows.back());
   }
@@ -142,12 +144,12 @@ void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows
   std::ofstream csv(path);
   if (!csv) throw std::runtime_error("cannot write " + path);
   csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated,"
-         "cliques_solved\n";
+         "cliques_solved,async_job_running,async_swapped\n";
   csv << std::setprecision(6);
   for (const auto& r : rows) {
     csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << "," << r.cliques_reeliminated
         << "," << r.variables_relinearized << "," << r.cliques_updated << "," << r.cliques_solved
-        << "\n";
+        << "," << r.async_job_running << "," << r.async_swapped << "\n";
   }
   if (!csv) throw std::runtime_error("error writing " + path);
 }

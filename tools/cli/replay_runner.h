@@ -41,7 +41,10 @@ struct UpdateRow {
   int cliques_updated = 0;       ///< cliques given a rank update instead of re-eliminated
   int cliques_solved = 0;        ///< cliques re-solved by back-substitution
   int batch_reeliminations = 0;  ///< 1: the whole graph re-eliminated (BatchSwitchOptions)
-  long peak_rss_kb = 0;          ///< the process's peak RSS after the update (cli/peak_rss.h)
+  /// --relinearize async: 1 when a relinearisation job (or its catch-up) ran during the update
+  /// (in flight before and after it, or started by it), and when the update swapped one in
+  int async_job_running = 0, async_swapped = 0;
+  long peak_rss_kb = 0;  ///< the process's peak RSS after the update (cli/peak_rss.h)
 };
 
 template <class G>
@@ -91,7 +94,7 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
                            OnlineSmoother<G>& smoother, const ReplayHooks<G>& hooks = {});
 
 /// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized,
-/// cliques_updated, cliques_solved).
+/// cliques_updated, cliques_solved, async_job_running, async_swapped).
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows);
 
 }  // namespace arbor::cli

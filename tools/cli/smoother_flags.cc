@@ -93,7 +93,13 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "inline: relinearise in the update (exact iSAM2); async: a check marking many variables "
       "relinearises the whole graph on a background thread and swaps it in at a later update")(
       "async-min-variables", po::value<int>()->default_value(d.async.min_variables),
-      "with --relinearize async: a check marking fewer variables relinearises inline");
+      "with --relinearize async: a check marking fewer variables relinearises inline")(
+      "async-catch-up",
+      po::value<std::string>()->default_value(
+          d.async.catch_up == AsyncCatchUp::kInBackground ? "background" : "swap"),
+      "with --relinearize async, where what arrived during the job is folded into its tree: "
+      "background (a second job, then the swap folds in only what came meanwhile) or swap (the "
+      "swap's update)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -147,6 +153,12 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   }
   o.async.min_variables = valueOf(vm, "async-min-variables", o.async.min_variables);
   require(o.async.min_variables >= 1, "async-min-variables", ">= 1", o.async.min_variables);
+  if (vm.count("async-catch-up")) {
+    const std::string where = vm["async-catch-up"].as<std::string>();
+    require(where == "background" || where == "swap", "async-catch-up", "background or swap",
+            where);
+    o.async.catch_up = where == "swap" ? AsyncCatchUp::kOnSwap : AsyncCatchUp::kInBackground;
+  }
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
@@ -180,6 +192,7 @@ std::string describeSmoother(const SmootherOptions& o) {
     out << ", async relinearisation";
     if (o.async.min_variables != d.async.min_variables)
       out << " from " << o.async.min_variables << " variables";
+    if (o.async.catch_up != d.async.catch_up) out << ", catch-up on the swap";
   }
   if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
       o.finalize_max_iterations != d.finalize_max_iterations) {
