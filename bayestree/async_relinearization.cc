@@ -3,12 +3,9 @@
 #include <ctime>
 #include <utility>
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include "arbor/bayestree/top_elimination.h"
 #include "arbor/bayestree/update_threads.h"
+#include "arbor/core/thread_priority.h"
 
 namespace arbor::bayestree {
 namespace {
@@ -119,9 +116,7 @@ void AsyncRelinearization<G>::start(RelinearizationSnapshot<G> snapshot, bool sy
     return;
   }
   job->thread = std::thread([job] {
-    // The update path comes first: this thread runs at a lower priority (Linux nice is per
-    // thread), as the background batch refinement does.
-    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+    lowerThisThreadsPriority();  // the update path comes first
     job->run();
   });
 }

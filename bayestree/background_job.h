@@ -14,9 +14,7 @@
 #include <thread>
 #include <utility>
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
+#include "arbor/core/thread_priority.h"
 
 namespace arbor::bayestree {
 
@@ -65,7 +63,7 @@ class BackgroundJob {
       return;
     }
     job->thread = std::thread([job] {
-      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+      lowerThisThreadsPriority();
       job->run();
     });
   }

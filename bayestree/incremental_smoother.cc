@@ -201,6 +201,12 @@ struct IncrementalSmoother<G>::Impl {
   int numPoses() const { return static_cast<int>(theta.size()); }
   // A relinearisation job or its catch-up in flight (no check runs; changes are recorded).
   bool relinearizationPending() const { return async.pending() || catch_up.pending(); }
+  // Per pose, 1 when it is not a variable of the tree: held fixed, or not in it (yet).
+  std::vector<char> notInTree() const {
+    std::vector<char> out(static_cast<size_t>(numPoses()));
+    for (int v = 0; v < numPoses(); ++v) out[v] = fixed[v] || tree.clique_of[v] < 0 ? 1 : 0;
+    return out;
+  }
 
   int addPose(const G& x, bool is_fixed) {
     if (!allFinite(x)) throw std::invalid_argument("IncrementalSmoother::addPose: not finite");
@@ -447,11 +453,9 @@ struct IncrementalSmoother<G>::Impl {
     if (opt.relinearize != RelinearizationMode::kAsync || second_core_busy ||
         relinearizationPending() || static_cast<int>(relin.size()) < opt.async.min_variables)
       return false;
-    const int n = numPoses();
     bayestree::RelinearizationSnapshot<G> s;
     s.theta = theta;
-    s.fixed.resize(static_cast<size_t>(n));
-    for (int v = 0; v < n; ++v) s.fixed[v] = fixed[v] || tree.clique_of[v] < 0 ? 1 : 0;
+    s.fixed = notInTree();
     s.factors.assign(factors.factors.begin(), factors.factors.begin() + pass_first_factor);
     s.relinearized = relin;
     std::sort(s.relinearized.begin(), s.relinearized.end());
@@ -652,7 +656,6 @@ struct IncrementalSmoother<G>::Impl {
     shadow_options.threads = 1;
     auto shadow = std::make_unique<Impl>(shadow_options);
     const int n = numPoses();
-    shadow->theta.reserve(static_cast<size_t>(n));
     shadow->fixed = fixed;
     shadow->mark.assign(static_cast<size_t>(n), 0);
     shadow->updated_stamp.assign(static_cast<size_t>(n), 0);
@@ -706,9 +709,7 @@ struct IncrementalSmoother<G>::Impl {
     SwapBase b;
     b.n = catch_up_poses;
     b.f = catch_up_factors;
-    b.fixed.resize(static_cast<size_t>(b.n));
-    for (int v = 0; v < b.n; ++v)
-      b.fixed[v] = shadow->fixed[v] || shadow->tree.clique_of[v] < 0 ? 1 : 0;
+    b.fixed = shadow->notInTree();
     b.theta = std::move(shadow->theta);
     b.all_relinearized = true;
     b.theta_before = std::move(theta_at_catch_up);

@@ -8,11 +8,8 @@
 #include <stdexcept>
 #include <thread>
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include "arbor/core/serial_openmp.h"
+#include "arbor/core/thread_priority.h"
 
 namespace arbor::refine {
 
@@ -337,9 +334,9 @@ bool BatchRefiner<G>::start(OnlineSmoother<G>& smoother, std::int64_t update) {
     f->solve(solver, cancel);
   } else {
     f->thread = std::thread([f, solver, cancel] {
-      // The smoother's latency comes first: this thread runs at a lower priority (Linux nice is
-      // per thread) and never fans out into OpenMP threads (Eigen, CHOLMOD).
-      setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+      // The smoother's latency comes first: this thread runs at a lower priority and never fans
+      // out into OpenMP threads (Eigen, CHOLMOD).
+      lowerThisThreadsPriority();
       const SerialOpenMP serial;
       f->solve(solver, cancel);
     });
