@@ -177,6 +177,9 @@ struct IncrementalSmoother<G>::Impl {
   int num_variables = 0;
   double flops_reference = 0, doubles_reference = 0;
   bool reorder_due = false;
+  // AsyncRelinearizationOptions::reorder_in_background: a decay found, its re-ordering left to
+  // a job (started at the next update's snapshot; cleared when a fresh tree comes in).
+  bool reorder_job_wanted = false;
   bayestree::RowList fresh_rows;
   std::vector<int> fresh_vars;
   // RelinearizationMode::kAsync (bayestree/async_relinearization.h): the job in flight, what
@@ -451,7 +454,8 @@ struct IncrementalSmoother<G>::Impl {
   // and those not in the tree yet) — and starts the background job. O(n + m) copies.
   bool startAsyncRelinearization(UpdateStats* st) {
     if (opt.relinearize != RelinearizationMode::kAsync || second_core_busy ||
-        relinearizationPending() || static_cast<int>(relin.size()) < opt.async.min_variables)
+        relinearizationPending() ||
+        (static_cast<int>(relin.size()) < opt.async.min_variables && !reorder_job_wanted))
       return false;
     bayestree::RelinearizationSnapshot<G> s;
     s.theta = theta;
@@ -619,6 +623,7 @@ struct IncrementalSmoother<G>::Impl {
     flops_reference = tree.flops;
     doubles_reference = tree.doubles;
     reorder_due = false;
+    reorder_job_wanted = false;
     updated_all = true;
     marginals = bayestree::TreeMarginals<D>();
   }
@@ -938,6 +943,7 @@ struct IncrementalSmoother<G>::Impl {
     if (relinearize_all || batch) {  // a fresh ordering
       flops_reference = tree.flops;
       doubles_reference = tree.doubles;
+      if (!relinearizationPending()) reorder_job_wanted = false;
     } else {
       maybeCheckOrderingDecay();
     }
@@ -958,8 +964,15 @@ struct IncrementalSmoother<G>::Impl {
       return;
     double fresh_doubles = 0;
     const double fresh_flops = freshOrderingCost(&fresh_doubles);
-    if (tree.flops > decay * fresh_flops || tree.doubles > decay * fresh_doubles)
-      reorder_due = true;
+    if (tree.flops > decay * fresh_flops || tree.doubles > decay * fresh_doubles) {
+      // With async, a job re-orders (the next update's snapshot); a second decay before its
+      // tree is swapped in, or no second core, re-orders inline.
+      if (opt.relinearize == RelinearizationMode::kAsync && opt.async.reorder_in_background &&
+          !second_core_busy && !reorder_job_wanted)
+        reorder_job_wanted = true;
+      else
+        reorder_due = true;
+    }
     flops_reference = tree.flops;
     doubles_reference = tree.doubles;
   }

@@ -90,6 +90,12 @@ struct AsyncRelinearizationOptions {
   /// Where the swap's fold-ins run. With swap_after_updates d > 0 the catch-up starts at the
   /// d-th update after the snapshot's and is swapped in at the next one (which waits for it).
   AsyncCatchUp catch_up = AsyncCatchUp::kInBackground;
+  /// A tree whose ordering has decayed (BatchSwitchOptions::reorder_decay) is re-ordered by a
+  /// job too: a snapshot at the next update, whatever its M (empty: the same linearisation
+  /// point, a fresh ordering), instead of the next re-elimination being a batch one on the
+  /// update path. A second decay found before that job is swapped in, or the second core busy,
+  /// re-orders inline as before. false: every re-ordering inline.
+  bool reorder_in_background = true;
 };
 
 struct SmootherOptions {

@@ -132,11 +132,15 @@ TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
 }
 
 TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
-  const std::vector<std::string> args = {"--relinearize", "async", "--async-min-variables", "10"};
+  const std::vector<std::string> args = {"--relinearize",  "async",        "--async-min-variables",
+                                         "10",            "--async-reorder", "inline"};
   for (const SmootherOptions& o : {replaySmoother(args), serveSmoother(args)}) {
     EXPECT_EQ(o.relinearize, RelinearizationMode::kAsync);
     EXPECT_EQ(o.async.min_variables, 10);
+    EXPECT_FALSE(o.async.reorder_in_background);
   }
+  EXPECT_TRUE(SmootherOptions{}.async.reorder_in_background);
+  EXPECT_TRUE(replaySmoother({"--relinearize", "async"}).async.reorder_in_background);
   EXPECT_EQ(replaySmoother({"--relinearize", "inline"}).relinearize, RelinearizationMode::kInline);
   EXPECT_EQ(SmootherOptions{}.relinearize, RelinearizationMode::kInline);
   EXPECT_THROW(replaySmoother({"--relinearize", "async", "--dogleg"}), UsageError);
@@ -170,6 +174,7 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
       {"--reorder-decay", "0.5"},
       {"--relinearize", "sometimes"},
       {"--async-min-variables", "0"},
+      {"--async-reorder", "later"},
   };
   for (const auto& [flag, value] : bad) {
     for (const bool serve : {false, true}) {

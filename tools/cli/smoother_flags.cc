@@ -99,7 +99,12 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
           d.async.catch_up == AsyncCatchUp::kInBackground ? "background" : "swap"),
       "with --relinearize async, where what arrived during the job is folded into its tree: "
       "background (a second job, then the swap folds in only what came meanwhile) or swap (the "
-      "swap's update)");
+      "swap's update)")(
+      "async-reorder",
+      po::value<std::string>()->default_value(d.async.reorder_in_background ? "background"
+                                                                            : "inline"),
+      "with --relinearize async, where a decayed ordering (--reorder-decay) is re-ordered: "
+      "background (a job at the next update, as a relinearisation) or inline (a batch update)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -159,6 +164,12 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
             where);
     o.async.catch_up = where == "swap" ? AsyncCatchUp::kOnSwap : AsyncCatchUp::kInBackground;
   }
+  if (vm.count("async-reorder")) {
+    const std::string where = vm["async-reorder"].as<std::string>();
+    require(where == "background" || where == "inline", "async-reorder", "background or inline",
+            where);
+    o.async.reorder_in_background = where == "background";
+  }
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
@@ -193,6 +204,8 @@ std::string describeSmoother(const SmootherOptions& o) {
     if (o.async.min_variables != d.async.min_variables)
       out << " from " << o.async.min_variables << " variables";
     if (o.async.catch_up != d.async.catch_up) out << ", catch-up on the swap";
+    if (o.async.reorder_in_background != d.async.reorder_in_background)
+      out << ", re-ordering inline";
   }
   if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
       o.finalize_max_iterations != d.finalize_max_iterations) {
