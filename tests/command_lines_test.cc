@@ -132,8 +132,8 @@ TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
 }
 
 TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
-  const std::vector<std::string> args = {"--relinearize",  "async",        "--async-min-variables",
-                                         "10",            "--async-reorder", "inline"};
+  const std::vector<std::string> args = {"--relinearize",   "async", "--async-min-variables", "10",
+                                         "--async-reorder", "inline"};
   for (const SmootherOptions& o : {replaySmoother(args), serveSmoother(args)}) {
     EXPECT_EQ(o.relinearize, RelinearizationMode::kAsync);
     EXPECT_EQ(o.async.min_variables, 10);
