@@ -38,6 +38,17 @@ void require(bool ok, const char* flag, const char* condition, T value) {
   }
 }
 
+// A flag that takes one of two words: whether it names the second (`current` when not given).
+// Throws UsageError "--FLAG must be FIRST or SECOND, not 'VALUE'" on any other word.
+bool isSecondChoice(const po::variables_map& vm, const char* flag, const char* first,
+                    const char* second, bool current) {
+  if (!vm.count(flag)) return current;
+  const std::string word = vm[flag].as<std::string>();
+  require(word == first || word == second, flag, (std::string(first) + " or " + second).c_str(),
+          word);
+  return word == second;
+}
+
 }  // namespace
 
 void addSmootherFlags(po::options_description& options, const SmootherOptions& d) {
@@ -151,25 +162,18 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   o.batch.reorder_decay = valueOf(vm, "reorder-decay", o.batch.reorder_decay);
   require(o.batch.reorder_decay == 0 || o.batch.reorder_decay >= 1, "reorder-decay", "0 or >= 1",
           o.batch.reorder_decay);
-  if (vm.count("relinearize")) {
-    const std::string mode = vm["relinearize"].as<std::string>();
-    require(mode == "inline" || mode == "async", "relinearize", "inline or async", mode);
-    o.relinearize = mode == "async" ? RelinearizationMode::kAsync : RelinearizationMode::kInline;
-  }
+  o.relinearize = isSecondChoice(vm, "relinearize", "inline", "async",
+                                 o.relinearize == RelinearizationMode::kAsync)
+                      ? RelinearizationMode::kAsync
+                      : RelinearizationMode::kInline;
   o.async.min_variables = valueOf(vm, "async-min-variables", o.async.min_variables);
   require(o.async.min_variables >= 1, "async-min-variables", ">= 1", o.async.min_variables);
-  if (vm.count("async-catch-up")) {
-    const std::string where = vm["async-catch-up"].as<std::string>();
-    require(where == "background" || where == "swap", "async-catch-up", "background or swap",
-            where);
-    o.async.catch_up = where == "swap" ? AsyncCatchUp::kOnSwap : AsyncCatchUp::kInBackground;
-  }
-  if (vm.count("async-reorder")) {
-    const std::string where = vm["async-reorder"].as<std::string>();
-    require(where == "background" || where == "inline", "async-reorder", "background or inline",
-            where);
-    o.async.reorder_in_background = where == "background";
-  }
+  o.async.catch_up = isSecondChoice(vm, "async-catch-up", "background", "swap",
+                                    o.async.catch_up == AsyncCatchUp::kOnSwap)
+                         ? AsyncCatchUp::kOnSwap
+                         : AsyncCatchUp::kInBackground;
+  o.async.reorder_in_background =
+      !isSecondChoice(vm, "async-reorder", "background", "inline", !o.async.reorder_in_background);
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
