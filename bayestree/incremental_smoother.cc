@@ -448,13 +448,18 @@ struct IncrementalSmoother<G>::Impl {
 
   // ---- Asynchronous relinearisation (RelinearizationMode::kAsync) ---------------------------
 
-  // At a check that marked M (`relin`, not yet applied): when M is large, the second core free
-  // and no job in flight, snapshots what the re-elimination reads — the factors of the tree
-  // (those before this pass's), Θ with Θ_M := Θ_M ⊕ Δ_M, the poses held fixed (the gauge poses
-  // and those not in the tree yet) — and starts the background job. O(n + m) copies.
+  // Whether background jobs may run: async mode, and the second core not taken.
+  bool backgroundJobsAllowed() const {
+    return opt.relinearize == RelinearizationMode::kAsync && !second_core_busy;
+  }
+
+  // At a check that marked M (`relin`, not yet applied): when M is large (or a re-ordering is
+  // wanted, reorder_job_wanted), the second core free and no job in flight, snapshots what the
+  // re-elimination reads — the factors of the tree (those before this pass's), Θ with
+  // Θ_M := Θ_M ⊕ Δ_M, the poses held fixed (the gauge poses and those not in the tree yet) — and
+  // starts the background job. O(n + m) copies.
   bool startAsyncRelinearization(UpdateStats* st) {
-    if (opt.relinearize != RelinearizationMode::kAsync || second_core_busy ||
-        relinearizationPending() ||
+    if (!backgroundJobsAllowed() || relinearizationPending() ||
         (static_cast<int>(relin.size()) < opt.async.min_variables && !reorder_job_wanted))
       return false;
     bayestree::RelinearizationSnapshot<G> s;
@@ -967,8 +972,7 @@ struct IncrementalSmoother<G>::Impl {
     if (tree.flops > decay * fresh_flops || tree.doubles > decay * fresh_doubles) {
       // With async, a job re-orders (the next update's snapshot); a second decay before its
       // tree is swapped in, or no second core, re-orders inline.
-      if (opt.relinearize == RelinearizationMode::kAsync && opt.async.reorder_in_background &&
-          !second_core_busy && !reorder_job_wanted)
+      if (backgroundJobsAllowed() && opt.async.reorder_in_background && !reorder_job_wanted)
         reorder_job_wanted = true;
       else
         reorder_due = true;
