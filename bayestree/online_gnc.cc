@@ -204,6 +204,11 @@ double OnlineGnc<G>::finalWeight(const Closure& c, double s) const {
   return kernelAt(c, 1.0).weight(s);
 }
 
+template <class G>
+bool OnlineGnc<G>::isInlier(const Closure& c) const {
+  return c.weight >= kernelAt(c, 1.0).inlierCut();
+}
+
 // The first check: s ≤ c² settles at weight 1 (no graduation); otherwise the convex surrogate
 // at μ₀ = initialMu(s) and w₀ = ρ′_μ₀(s) (Huber, Cauchy: w₀ = ρ′(s)).
 template <class G>
@@ -416,7 +421,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
     ++totals_.rechecks;
     const double s = residual(smoother, c);
     c.s = s;
-    const bool inlier = c.weight >= 0.5;
+    const bool inlier = isInlier(c);
     if (!inlier && c.weight == 0.0 && options_.entry == EntryTest::kInnovation && binaryKernel(c)) {
       // A closure at weight 0 is not in Σ: its innovation is (E) again, judged as on entry
       // against the c² in use now — once that has grown by a tenth since it was last judged
@@ -500,7 +505,7 @@ ClosureCounts OnlineGnc<G>::counts() const {
         ++out.excluded;
         break;
       default:
-        ++(c.weight >= 0.5 ? out.inlier : out.outlier);
+        ++(isInlier(c) ? out.inlier : out.outlier);
         if (c.state == State::kGraduating || c.held) ++out.graduating;
     }
   }
@@ -549,7 +554,7 @@ std::vector<ClosureReport> OnlineGnc<G>::closures() const {
         r.status = ClosureStatus::kExcluded;
         break;
       default:
-        r.status = c.weight >= 0.5 ? ClosureStatus::kInlier : ClosureStatus::kOutlier;
+        r.status = isInlier(c) ? ClosureStatus::kInlier : ClosureStatus::kOutlier;
     }
     out.push_back(r);
   }

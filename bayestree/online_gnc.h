@@ -62,8 +62,9 @@
 //                 and its surrogate agree) or μ ≥ RobustOptions::max_mu; GM: μ at 1; Huber,
 //                 Cauchy (no graduation, IRLS): w moved by less than weight_tolerance. Or after
 //                 max_steps_per_closure steps, with the kernel's own weight at s.
-//   status        inlier iff w ≥ 0.5 (GNC's convention, as GTSAM's GncOptimizer and the
-//                 reference figures count): for TLS at the kernel, s ≤ c².
+//   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
+//                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
+//                 GncOptimizer and the reference figures count), for GM at μ = 1 w ≥ ¼.
 //
 // Which closures are re-weighted on an update. riSAM resets μ of every graduated factor in the
 // "update-involved" top of the tree whenever new graduated factors arrive and iterates to
@@ -197,8 +198,8 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
                                       const RobustOptions& o);
 
 enum class ClosureStatus {
-  kInlier,    ///< weight ≥ 0.5
-  kOutlier,   ///< weight < 0.5: rejected
+  kInlier,    ///< weight ≥ its kernel's inlierCut (TLS ½, GM ¼)
+  kOutlier,   ///< below it: rejected
   kTrusted,   ///< never weighted (marked, or it created a pose or joined two components)
   kExcluded,  ///< taken out of the GNC by the caller (exclude()); its weight is the caller's
 };
@@ -299,6 +300,8 @@ class OnlineGnc {
   bool binaryKernel(const Closure& c) const;
   /// The closure's kernel's own weight at s (TLS: 1 or 0; GM at μ = 1; Huber, Cauchy: ρ′(s)).
   double finalWeight(const Closure& c, double s) const;
+  /// Its status: weight ≥ its kernel's RobustKernel::inlierCut (TLS ½, GM ¼, Cauchy ½, Huber 1).
+  bool isInlier(const Closure& c) const;
   /// The first check at s with innovation m (m = s: the residual test): settles at weight 1,
   /// at weight 0 (m > entry_band·c², TLS and GM, with `may_reject`) or starts graduation from
   /// μ₀(s).

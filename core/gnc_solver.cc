@@ -225,7 +225,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
       const double cost = step.F_final;
       if (options.verbose) {
         int out = 0;
-        for (int k = 0; k < m; ++k) out += !result.trusted[k] && w[k] <= 0.5;
+        for (int k = 0; k < m; ++k) out += !result.trusted[k] && w[k] < kernelOf(k).inlierCut();
         std::fprintf(stderr,
                      "gnc step %3d  c² %.4g  μ tls %.4g gm %.4g  weighted F %.10e  outliers %d  "
                      "max Δw %.3g  inner %d (%s)\n",
@@ -252,9 +252,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
     }
     if (!result.converged && !result.cancelled) result.message = "GNC iteration limit reached";
     if (result.converged && done) std::fill(w.begin(), w.end(), 1.0);
-    if (!result.converged && !result.cancelled) result.message = "GNC iteration limit reached";
-    if (result.converged && done) std::fill(w.begin(), w.end(), 1.0);
-    for (int k = 0; k < m; ++k) inlier[k] = result.trusted[k] || w[k] > 0.5;
+    for (int k = 0; k < m; ++k) inlier[k] = result.trusted[k] || w[k] >= kernelOf(k).inlierCut();
     result.mu = any_graduated ? (all_tls ? tls.mu : gm.mu) : 1.0;
     if (!automatic || result.cancelled) break;
     const double scale = varianceFactor(graph, *poses, s, inlier);

@@ -18,8 +18,9 @@
 //              objective at the new x, F_w,prev the previous step's, x⁰'s F at the first), or
 //              every w_k is within weight_tolerance of 0 or 1 (TLS), or μ = 1 (GM)
 //            μ ← μ·1.4 (TLS) or max(1, μ/1.4) (GM)
-//   then the inlier set {w_k > 0.5} is solved once more with weight 1, from the GNC estimate
-//   (the inlier problem, whose F is F_inliers; GTSAM returns the last weighted estimate).
+//   then the inlier set {w_k ≥ RobustKernel::inlierCut: ½ for TLS, the kernel's weight at
+//   s = c² for the others, ¼ for GM at μ = 1} is solved once more with weight 1, from the GNC
+//   estimate (the inlier problem, whose F is F_inliers; GTSAM returns the last weighted estimate).
 //
 // Why the restart matters: a warm start carries the basin of x⁰, which every false closure has
 // pulled (on intel with 90% false closures x⁰ is far from any good map), and with small μ the
@@ -121,7 +122,7 @@ struct GncOptions {
 
 struct GncResult {
   std::vector<double> weights;  ///< per edge, at the last GNC step (trusted: 1)
-  std::vector<char> inlier;     ///< per edge: weight > 0.5 (trusted: always)
+  std::vector<char> inlier;     ///< per edge: weight ≥ its kernel's inlierCut (trusted: always)
   std::vector<char> trusted;    ///< per edge: weight held at 1
   int rejected = 0;             ///< edges classified outliers
   int candidates = 0;           ///< edges weighted (not trusted)

@@ -94,6 +94,20 @@ double RobustKernel::weight(double s) const {
   return 1.0;
 }
 
+double RobustKernel::inlierCut() const {
+  switch (kind) {
+    case KernelKind::kHuber:
+    case KernelKind::kCauchy:
+      return weight(threshold);
+    case KernelKind::kGemanMcClure:
+      return gemanMcClure(threshold, 1.0).weight(threshold);
+    case KernelKind::kNone:
+    case KernelKind::kTruncatedLeastSquares:
+      break;
+  }
+  return 0.5;
+}
+
 double RobustKernel::derivative(double s) const {
   const double c2 = threshold;
   switch (kind) {

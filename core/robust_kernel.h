@@ -73,6 +73,11 @@ struct RobustKernel {
   double rho(double s) const;         ///< ρ(s)
   double weight(double s) const;      ///< w(s) = ρ′(s), in [0, 1]
   double derivative(double s) const;  ///< w′(s) = ρ″(s)
+  /// The least weight of an inlier: the kernel's own weight at s = c² (Huber 1, Cauchy ½,
+  /// Geman–McClure ¼ at μ = 1), so that at the kernel a factor is an inlier iff s ≤ c², the
+  /// threshold's meaning; ½ for TLS (its weights end in {0, 1}; inside the band the surrogate's
+  /// weight crosses ½ near s = c²) and for none.
+  double inlierCut() const;
 
   /// GNC's first μ for the largest residual s_max of the factors it weights (Yang et al.;
   /// for TLS, s_max ≤ c²/2 gives +∞: everything is an inlier already).

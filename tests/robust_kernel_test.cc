@@ -76,6 +76,24 @@ TEST(RobustKernel, TruncatedLeastSquaresHasBinaryWeights) {
   EXPECT_FALSE(g.atKernel());
 }
 
+// At the kernel itself a factor is an inlier iff s ≤ c²: its weight is then at least inlierCut.
+TEST(RobustKernel, InlierCutIsTheWeightAtTheThreshold) {
+  const double c2 = 7.8;
+  EXPECT_EQ(RobustKernel::gemanMcClure(c2).inlierCut(), 0.25);
+  EXPECT_EQ(RobustKernel::gemanMcClure(c2, 50.0).inlierCut(), 0.25);  // the kernel's, not μ's
+  EXPECT_EQ(RobustKernel::cauchy(c2).inlierCut(), 0.5);
+  EXPECT_EQ(RobustKernel::huber(c2).inlierCut(), 1.0);
+  EXPECT_EQ(RobustKernel::tls(c2).inlierCut(), 0.5);
+  EXPECT_EQ(RobustKernel::tls(c2, 2.0).inlierCut(), 0.5);
+  EXPECT_EQ(RobustKernel::none().inlierCut(), 0.5);
+  for (const RobustKernel& k : {RobustKernel::gemanMcClure(c2), RobustKernel::cauchy(c2),
+                                RobustKernel::huber(c2), RobustKernel::tls(c2)}) {
+    SCOPED_TRACE(toString(k.kind));
+    for (double f : {0.0, 0.2, 0.41, 0.5, 0.9, 0.999, 1.0, 1.001, 1.5, 4.0, 100.0})
+      EXPECT_EQ(k.weight(f * c2) >= k.inlierCut(), f <= 1.0) << "s = " << f << " c²";
+  }
+}
+
 TEST(RobustKernel, GraduatedSurrogatesReachTheirLimits) {
   const double c2 = 3.0;
   // TLS: μ → ∞ is min(s, c²); μ → 0 weighs every finite residual (the convex end).
