@@ -99,6 +99,7 @@ void validate(const SmootherOptions& o) {
   if (o.batch.constrain_last_max < 1)
     bad("batch.constrain_last_max", o.batch.constrain_last_max, "≥ 1");
   if (o.async.min_variables < 1) bad("async.min_variables", o.async.min_variables, "≥ 1");
+  if (!(o.async.reorder_decay >= 1)) bad("async.reorder_decay", o.async.reorder_decay, "≥ 1");
   if (o.async.swap_after_updates < 0)
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
@@ -962,21 +963,27 @@ struct IncrementalSmoother<G>::Impl {
   // separator of thousands of dimensions cost little to factorise but hold S² doubles each (a
   // dense world revisited, docs/benchmarks.md "Memory of a dense world").
   void maybeCheckOrderingDecay() {
-    const double decay = opt.batch.reorder_decay;
-    if (decay <= 0) return;
+    const double inline_decay = opt.batch.reorder_decay;
+    if (inline_decay <= 0) return;
+    // With async, a job re-orders (the next update's snapshot), from the sooner decay of
+    // AsyncRelinearizationOptions::reorder_decay; a decay past the inline one while a job is
+    // wanted already (found again before its tree is swapped in), or no second core, re-orders
+    // inline.
+    const bool in_background = backgroundJobsAllowed() && opt.async.reorder_in_background;
+    const double decay =
+        in_background ? std::min(inline_decay, opt.async.reorder_decay) : inline_decay;
     if (tree.flops <= decay * std::max(flops_reference, kMinDecayCheckFlops) &&
         tree.doubles <= decay * std::max(doubles_reference, kMinDecayCheckDoubles))
       return;
     double fresh_doubles = 0;
     const double fresh_flops = freshOrderingCost(&fresh_doubles);
-    if (tree.flops > decay * fresh_flops || tree.doubles > decay * fresh_doubles) {
-      // With async, a job re-orders (the next update's snapshot); a second decay before its
-      // tree is swapped in, or no second core, re-orders inline.
-      if (backgroundJobsAllowed() && opt.async.reorder_in_background && !reorder_job_wanted)
-        reorder_job_wanted = true;
-      else
-        reorder_due = true;
-    }
+    const auto past = [&](double d) {
+      return tree.flops > d * fresh_flops || tree.doubles > d * fresh_doubles;
+    };
+    if (in_background && !reorder_job_wanted && past(decay))
+      reorder_job_wanted = true;
+    else if (past(inline_decay))
+      reorder_due = true;
     flops_reference = tree.flops;
     doubles_reference = tree.doubles;
   }

@@ -96,6 +96,12 @@ struct AsyncRelinearizationOptions {
   /// update path. A second decay found before that job is swapped in, or the second core busy,
   /// re-orders inline as before. false: every re-ordering inline.
   bool reorder_in_background = true;
+  /// The decay (as BatchSwitchOptions::reorder_decay; ≥ 1) at which a re-ordering job is asked
+  /// for; at most the batch option's, which stays the bound past which the update path
+  /// re-orders inline. A job costs the update path little, so it re-orders sooner than inline
+  /// (docs/benchmarks.md, "Re-ordering sooner in the background": 1.5 against 2 is faster on the
+  /// Manhattan worlds and no slower on the shared sets).
+  double reorder_decay = 1.5;
 };
 
 struct SmootherOptions {

@@ -358,6 +358,41 @@ void expectBackgroundReorderEqualsInline(unsigned seed, int poses, int swap_afte
   EXPECT_GE(off_batches, 2);
 }
 
+// AsyncRelinearizationOptions::reorder_decay: re-ordering jobs are asked for at their own,
+// sooner decay, below the inline bound; the estimate is the same linear system either way.
+TEST(AsyncRelinearization, ReorderingJobsComeAtTheirOwnDecay) {
+  std::vector<SE2> truth;
+  const auto by_pose = randomWalk<SE2>(1500, 375, 85, &truth);
+  SmootherOptions late_options = inlineOptions();
+  late_options.relinearize_threshold_translation = 1e9;
+  late_options.relinearize_threshold_rotation = 1e9;
+  late_options.batch.reorder_decay = 3;
+  late_options.relinearize = RelinearizationMode::kAsync;
+  late_options.async.synchronous = true;
+  late_options.async.reorder_decay = 3;
+  SmootherOptions soon_options = late_options;
+  soon_options.async.reorder_decay = 1.2;
+  IncrementalSmoother<SE2> late(late_options), soon(soon_options);
+  for (auto* s : {&late, &soon}) s->addFixedPose(SE2());
+  int late_starts = 0, soon_starts = 0;
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    const SE2 guess = late.estimate(odo.i).compose(odo.measurement);
+    for (auto* s : {&late, &soon}) {
+      s->addPose(guess);
+      for (const auto& e : by_pose[k]) s->addFactor(e);
+    }
+    late_starts += late.update().async_started;
+    soon_starts += soon.update().async_started;
+    int worst = -1;
+    ASSERT_LT(tangentDistance(late.estimate(), soon.estimate(), &worst), 1e-8)
+        << "update " << k << ", pose " << worst;
+  }
+  EXPECT_GE(soon_starts, 2);
+  EXPECT_GT(soon_starts, late_starts)
+      << soon_starts << " jobs at decay 1.2, " << late_starts << " at 3";
+}
+
 TEST(AsyncRelinearization, DecayedOrderingIsReorderedByAJob2D) {
   expectBackgroundReorderEqualsInline<SE2>(81, 1500, 0);
   expectBackgroundReorderEqualsInline<SE2>(82, 1500, 3);

@@ -59,6 +59,7 @@ const std::vector<Field>& fields() {
       {"threads", [](const SmootherOptions& o) { return o.threads; }},
       {"batch.top_share", [](const SmootherOptions& o) { return o.batch.top_share; }},
       {"batch.reorder_decay", [](const SmootherOptions& o) { return o.batch.reorder_decay; }},
+      {"async.reorder_decay", [](const SmootherOptions& o) { return o.async.reorder_decay; }},
   };
   return all;
 }
@@ -99,7 +100,9 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
                                          "--batch-top-share",
                                          "0.5",
                                          "--reorder-decay",
-                                         "3"};
+                                         "3",
+                                         "--async-reorder-decay",
+                                         "1.25"};
   SmootherOptions expected;
   expected.relinearize_threshold_translation = 0.3;
   expected.relinearize_threshold_rotation = 0.2;
@@ -116,6 +119,7 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
   expected.threads = 2;
   expected.batch.top_share = 0.5;
   expected.batch.reorder_decay = 3;
+  expected.async.reorder_decay = 1.25;
   // Every field is set away from its default, so a flag that is dropped shows.
   for (const Field& f : fields()) EXPECT_NE(f.get(expected), f.get(SmootherOptions{})) << f.name;
   expectSame(replaySmoother(args), expected, "replay");
@@ -132,13 +136,17 @@ TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
 }
 
 TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
-  const std::vector<std::string> args = {"--relinearize",   "async", "--async-min-variables", "10",
-                                         "--async-reorder", "inline"};
+  const std::vector<std::string> args = {
+      "--relinearize",   "async",  "--async-min-variables", "10",
+      "--async-reorder", "inline", "--async-reorder-decay", "1.25"};
   for (const SmootherOptions& o : {replaySmoother(args), serveSmoother(args)}) {
     EXPECT_EQ(o.relinearize, RelinearizationMode::kAsync);
     EXPECT_EQ(o.async.min_variables, 10);
     EXPECT_FALSE(o.async.reorder_in_background);
+    EXPECT_EQ(o.async.reorder_decay, 1.25);
   }
+  EXPECT_THROW(replaySmoother({"--relinearize", "async", "--async-reorder-decay", "0.9"}),
+               UsageError);
   EXPECT_TRUE(SmootherOptions{}.async.reorder_in_background);
   EXPECT_TRUE(replaySmoother({"--relinearize", "async"}).async.reorder_in_background);
   EXPECT_EQ(replaySmoother({"--relinearize", "inline"}).relinearize, RelinearizationMode::kInline);

@@ -115,7 +115,11 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       po::value<std::string>()->default_value(d.async.reorder_in_background ? "background"
                                                                             : "inline"),
       "with --relinearize async, where a decayed ordering (--reorder-decay) is re-ordered: "
-      "background (a job at the next update, as a relinearisation) or inline (a batch update)");
+      "background (a job at the next update, as a relinearisation) or inline (a batch update)")(
+      "async-reorder-decay",
+      po::value<double>()->default_value(d.async.reorder_decay, text(d.async.reorder_decay)),
+      "with --relinearize async and --async-reorder background: ask for a re-ordering job at "
+      "this decay (>= 1; at most --reorder-decay, which stays the bound for re-ordering inline)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -174,6 +178,8 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
                          : AsyncCatchUp::kInBackground;
   o.async.reorder_in_background =
       !isSecondChoice(vm, "async-reorder", "background", "inline", !o.async.reorder_in_background);
+  o.async.reorder_decay = valueOf(vm, "async-reorder-decay", o.async.reorder_decay);
+  require(o.async.reorder_decay >= 1, "async-reorder-decay", ">= 1", o.async.reorder_decay);
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
@@ -210,6 +216,8 @@ std::string describeSmoother(const SmootherOptions& o) {
     if (o.async.catch_up != d.async.catch_up) out << ", catch-up on the swap";
     if (o.async.reorder_in_background != d.async.reorder_in_background)
       out << ", re-ordering inline";
+    else if (o.async.reorder_decay != d.async.reorder_decay)
+      out << ", re-ordering job at decay " << o.async.reorder_decay;
   }
   if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
       o.finalize_max_iterations != d.finalize_max_iterations) {
