@@ -93,8 +93,9 @@ struct AsyncRelinearizationOptions {
   /// A tree whose ordering has decayed (BatchSwitchOptions::reorder_decay) is re-ordered by a
   /// job too: a snapshot at the next update, whatever its M (empty: the same linearisation
   /// point, a fresh ordering), instead of the next re-elimination being a batch one on the
-  /// update path. A second decay found before that job is swapped in, or the second core busy,
-  /// re-orders inline as before. false: every re-ordering inline.
+  /// update path. A decay past BatchSwitchOptions::reorder_decay found while a job is wanted
+  /// already, or the second core busy, re-orders inline as before. false: every re-ordering
+  /// inline.
   bool reorder_in_background = true;
   /// The decay (as BatchSwitchOptions::reorder_decay; ≥ 1) at which a re-ordering job is asked
   /// for; at most the batch option's, which stays the bound past which the update path
