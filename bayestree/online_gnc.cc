@@ -116,6 +116,7 @@ std::string RobustOptions::problem() const {
   if (!(min_kept_share >= 0 && min_kept_share < 1))
     return bad("min_kept_share", min_kept_share, "in [0, 1)");
   if (loosen_min_samples < 0) return bad("loosen_min_samples", loosen_min_samples, ">= 0");
+  if (corroboration_window < 0) return bad("corroboration_window", corroboration_window, ">= 0");
   return "";
 }
 
@@ -142,15 +143,40 @@ OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
   c2_ = c2_given_;
 }
 
-// σ̂² from the innovations so far, once there are scale_min_samples of them; re-estimated on
-// every new one up to 64, then when their number has grown by an eighth (O(k) each).
+// σ̂² from the innovations so far (scaleSource), once scale_min_samples of them are in;
+// re-estimated on every new one up to 64, then when their number has grown by an eighth (O(k)
+// each).
 template <class G>
-void OnlineGnc<G>::observe(double m) {
+void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, double m) {
   if (options_.scale != NoiseScale::kEstimated || !std::isfinite(m)) return;
+  Closure& c = closures_[static_cast<size_t>(id)];
+  c.m = m;
+  c.judged = true;
   innovations_.push_back(m);
-  const size_t n = innovations_.size();
-  if (n < static_cast<size_t>(options_.scale_min_samples) || n < next_estimate_) return;
-  estimate_ = estimateNoiseScale(innovations_, G::kDoF, c2_given_, options_);
+  if (const Key K = options_.corroboration_window; K > 0) {
+    // (P) against the judged closures with an end near this one's low end.
+    const Key low = std::min(c.from, c.to);
+    for (auto it = by_low_end_.lower_bound(low - K); it != by_low_end_.end(); ++it) {
+      const Key other_low = it->first;
+      if (other_low > std::max(c.from, c.to) + K) break;
+      Closure& other = closures_[static_cast<size_t>(it->second)];
+      if (other.state == State::kExcluded || !agree(smoother, c, other)) continue;
+      if (!other.corroborated) {
+        other.corroborated = true;
+        corroborated_.push_back(other.m);
+      }
+      c.corroborated = true;
+    }
+    if (c.corroborated) corroborated_.push_back(m);
+    by_low_end_.emplace(low, id);
+  }
+  const std::vector<double>* source = scaleSource();
+  if (!source) return;
+  const size_t n = source->size();
+  if (source == last_source_ && n < next_estimate_) return;
+  last_source_ = source;
+  samples_used_ = static_cast<int>(n);
+  estimate_ = estimateNoiseScale(*source, G::kDoF, c2_given_, options_);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   c2_ = estimate_.estimated ? options_.tail_factor * c2_given_ * scale_ : c2_given_;
@@ -158,9 +184,46 @@ void OnlineGnc<G>::observe(double m) {
 }
 
 template <class G>
+const std::vector<double>* OnlineGnc<G>::scaleSource() const {
+  const size_t enough = static_cast<size_t>(options_.scale_min_samples);
+  if (options_.corroboration_window == 0)
+    return innovations_.size() >= enough ? &innovations_ : nullptr;
+  if (corroborated_.size() >= enough) return &corroborated_;
+  if (innovations_.size() >= std::max(enough, static_cast<size_t>(options_.loosen_min_samples)))
+    return &innovations_;
+  return nullptr;
+}
+
+// (P): closure b turned into a second measurement of a's a→b through the estimate's chains
+// between their ends, against a's own.
+template <class G>
+bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a,
+                         const Closure& b) const {
+  const Key K = options_.corroboration_window;
+  auto near = [K](Key x, Key y) { return x - y <= K && y - x <= K; };
+  G z2 = b.z;
+  int c = b.i, d = b.j;
+  if (!(near(a.from, b.from) && near(a.to, b.to))) {
+    if (!(near(a.from, b.to) && near(a.to, b.from))) return false;
+    z2 = z2.inverse();  // b reversed: d→c read as c→d (Ω₂ kept, the ends being close)
+    std::swap(c, d);
+  }
+  const G& xa = smoother.estimate(a.i);
+  const G& xb = smoother.estimate(a.j);
+  const G z_hat = xa.inverse()
+                      .compose(smoother.estimate(c))
+                      .compose(z2)
+                      .compose(smoother.estimate(d).inverse())
+                      .compose(xb);
+  const typename Edge::Vector e = relativePoseError(a.z, G::Identity(), z_hat);
+  const typename Edge::Matrix cov = a.information.inverse() + b.information.inverse();
+  const double s = e.dot(cov.ldlt().solve(e));
+  return std::isfinite(s) && s <= c2_given_;
+}
+
+template <class G>
 bool OnlineGnc<G>::scaleKnown() const {
-  return options_.scale != NoiseScale::kEstimated ||
-         innovations_.size() >= static_cast<size_t>(options_.scale_min_samples);
+  return options_.scale != NoiseScale::kEstimated || last_source_ != nullptr;
 }
 
 // (E): m = rᵀ(I + A Σ Aᵀ)⁻¹r, r the whitened residual at the estimate, A the whitened Jacobian
@@ -278,19 +341,22 @@ template <class G>
 double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key to,
                            EdgeTrust trust, bool structural, const Edge& edge, KernelKind kernel) {
   if (odometry(from, to) && trust != EdgeTrust::kRobust) return 1.0;  // odometry: not judged
-  Closure c;
+  const int id = static_cast<int>(closures_.size());
+  closures_.emplace_back();
+  Closure& c = closures_.back();
   c.kernel = kernel == KernelKind::kNone ? options_.kernel : kernel;
   c.from = from;
   c.to = to;
   c.i = edge.i;
   c.j = edge.j;
   c.z = edge.measurement;
+  c.information = edge.information;
   if (trust == EdgeTrust::kTrusted || structural) {
     c.state = State::kTrusted;
   } else {
     const double s = edge.cost(smoother.estimate(edge.i), smoother.estimate(edge.j));
     const double m = innovation(smoother, edge, s);
-    observe(m);
+    observe(smoother, id, m);
     if (!scaleKnown() && options_.warm_up == WarmUp::kHold && binaryKernel(c)) {
       c.state = State::kSettled;  // out of the tree until σ̂² exists (judgeHeld)
       c.weight = 0.0;
@@ -300,8 +366,6 @@ double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key
       enter(&c, s, m, /*may_reject=*/true);
     }
   }
-  const int id = static_cast<int>(closures_.size());
-  closures_.push_back(c);
   unresolved_.push_back(id);
   if (c.state == State::kGraduating) graduating_.push_back(id);
   if (c.held) held_.push_back(id);
@@ -357,11 +421,16 @@ void OnlineGnc<G>::remap(const IncrementalSmoother<G>& smoother) {
 // Held closures are at weight 0, out of Σ: (E) is their innovation against the estimate without
 // them, as for any closure on entry. Their innovations were recorded when they arrived.
 template <class G>
-int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother) {
+int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
   int changed = 0;
   std::vector<int> still;
+  size_t judged = 0;
   for (int id : held_) {
     Closure& c = closures_[id];
+    if (judged >= at_most) {
+      still.push_back(id);
+      continue;
+    }
     if (!c.held || c.state == State::kExcluded) {  // excluded meanwhile
       c.held = false;
       continue;
@@ -371,6 +440,7 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother) {
       continue;
     }
     c.held = false;
+    ++judged;
     const double s = residual(smoother, c);
     enter(
         &c, s,

@@ -375,6 +375,14 @@ template <class G>
 UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
   if (!gnc_) return recordUpdate(smoother_.relinearizeAll(cancel));
   UpdateStats total;
+  // Closures still held in the warm-up (σ̂² never came: too few corroborated, too few judged)
+  // are judged one at a time in arrival order, each at the estimate the ones before it made:
+  // all at once, every one would be judged on the odometry chain alone.
+  for (size_t k = gnc_->held(); k > 0; --k) {
+    if (gnc_->judgeHeld(smoother_, 1) == 0) continue;
+    addStats(&total, smoother_.update());
+    gnc_->resolve(smoother_);
+  }
   const int bound = gnc_->options().max_steps_per_closure + 1;
   for (int round = 0;; ++round) {
     graduateFully(bound, &total, cancel);

@@ -371,11 +371,64 @@ void warmUpHold() {
 TEST(OnlineEntry, WarmUpHoldsClosuresUntilTheScaleIsKnown2D) { warmUpHold<SE2>(); }
 TEST(OnlineEntry, WarmUpHoldsClosuresUntilTheScaleIsKnown3D) { warmUpHold<SE3>(); }
 
+// The first closures all false, each on its own (no two within the corroboration window of
+// each other's ends) and each within Ω's word on the odometry chain: Ω a hundred times too weak
+// (σ² = 0.01), 24 false closures in the first lap of 120 poses, then the true closures one lap
+// back. σ̂² from every innovation is estimated on the false ones alone and lets them in
+// (corroboration_window 0, the default: the control); from the corroborated ones (window 10)
+// it waits for the true closures, which agree with their neighbours, and every false closure
+// is rejected.
+template <class G>
+void falseClosuresFirst() {
+  Laps<G> laps(400, 120, 2, 0.1, 31);
+  int planted = 0;
+  for (int a = 0; a < 10 && planted < 24; ++a)
+    for (int b = 0; planted < 24; ++b) {
+      const int i = 3 + 11 * a, j = i + 22 + 11 * b;
+      if (j >= 119) break;
+      laps.addNear(i, j, (a + b) % 2 ? 1.5 : -1.5, (a % 2 ? 0.2 : -0.2));
+      ++planted;
+    }
+  ASSERT_EQ(planted, 24);
+  auto acceptedFalse = [&](const OnlineSmoother<G>& s) {
+    int n = 0;
+    for (const ClosureReport& c : s.closures())
+      n += c.to < 120 && c.status == ClosureStatus::kInlier;
+    return n;
+  };
+  OnlineSmoother<G> control(robust<G>());  // corroboration_window 0, the default
+  laps.feed(&control);
+  control.finalize();
+  ASSERT_GT(acceptedFalse(control), 0) << "σ̂² from every innovation rejects them all: not this "
+                                          "test's case";
+  OnlineSmootherOptions<G> corroborated = robust<G>();
+  corroborated.robust->corroboration_window = 10;
+  OnlineSmoother<G> s(corroborated);
+  laps.feed(&s);
+  const OnlineStats st = s.stats();
+  EXPECT_LT(st.noise_scale, 0.05);  // σ² = 0.01
+  s.finalize();
+  for (const ClosureReport& c : s.closures()) {
+    const bool is_false = c.to < 120;
+    EXPECT_FALSE(c.graduating) << c.from << " -> " << c.to;
+    EXPECT_EQ(c.status, is_false ? ClosureStatus::kOutlier : ClosureStatus::kInlier)
+        << c.from << " -> " << c.to << " weight " << c.weight << " s " << c.residual;
+  }
+  OnlineSmoother<G> clean;
+  laps.feed(&clean, /*only_true=*/true);
+  clean.finalize();
+  EXPECT_NEAR(laps.trueCost(s), laps.trueCost(clean), 1e-6 * laps.trueCost(clean));
+}
+
+TEST(OnlineEntry, FalseClosuresFirstDoNotSetTheScale2D) { falseClosuresFirst<SE2>(); }
+TEST(OnlineEntry, FalseClosuresFirstDoNotSetTheScale3D) { falseClosuresFirst<SE3>(); }
+
 TEST(OnlineEntry, BadOptionsRefused) {
   for (auto set : {+[](RobustOptions* o) { o->entry_band = 0.5; },
                    +[](RobustOptions* o) { o->scale_min_samples = 0; },
                    +[](RobustOptions* o) { o->tail_factor = 1.0; },
-                   +[](RobustOptions* o) { o->max_tail_scale = 0.5; }}) {
+                   +[](RobustOptions* o) { o->max_tail_scale = 0.5; },
+                   +[](RobustOptions* o) { o->corroboration_window = -1; }}) {
     RobustOptions o;
     set(&o);
     EXPECT_NE(o.problem(), "");

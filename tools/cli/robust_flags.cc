@@ -88,16 +88,23 @@ void addOnlineRobustFlags(po::options_description& options) {
       "warm-up", po::value<std::string>()->default_value("hold"),
       "with --robust and --noise-scale estimated, the loop closures that arrive before the "
       "scale is estimated: hold (at weight 0, judged once it is) or given (judged at once, Ω at "
-      "its word)");
+      "its word)")(
+      "corroboration-window", po::value<int>()->default_value(0),
+      "with --robust and --noise-scale estimated, K > 0: the scale is estimated from the loop "
+      "closures that another closure within K poses of both ends agrees with (docs/design.md, "
+      "\"The noise scale\"); 0: from every closure");
 }
 
 void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
   const std::string entry = vm["entry"].as<std::string>();
   const std::string noise_scale = vm["noise-scale"].as<std::string>();
   const std::string warm_up = vm["warm-up"].as<std::string>();
-  if (!robust_on &&
-      (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted()))
-    throw UsageError("--entry, --noise-scale and --warm-up need --robust");
+  const int window = vm["corroboration-window"].as<int>();
+  if (!robust_on && (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() ||
+                     !vm["warm-up"].defaulted() || !vm["corroboration-window"].defaulted()))
+    throw UsageError("--entry, --noise-scale, --warm-up and --corroboration-window need --robust");
+  if (window < 0)
+    throw UsageError("--corroboration-window must be >= 0, not " + std::to_string(window));
   if (entry != "innovation" && entry != "residual")
     throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
   if (noise_scale != "estimated" && noise_scale != "given")
@@ -107,6 +114,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
   robust->scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
   robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
+  robust->corroboration_window = window;
 }
 
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {

@@ -35,11 +35,12 @@ void addRobustFlags(boost::program_options::options_description& options,
 RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, bool allow_auto);
 
 /// The online smoother's own robust flags (`arbor replay`, `arbor serve`): --entry
-/// innovation|residual, --noise-scale estimated|given, --warm-up hold|given
-/// (bayestree/online_gnc.h: EntryTest, NoiseScale, WarmUp).
+/// innovation|residual, --noise-scale estimated|given, --warm-up hold|given,
+/// --corroboration-window K (bayestree/online_gnc.h: EntryTest, NoiseScale, WarmUp,
+/// RobustOptions::corroboration_window).
 void addOnlineRobustFlags(boost::program_options::options_description& options);
-/// Those flags into `robust` (entry, scale, warm_up). Throws UsageError on a bad value, and when
-/// one is given without --robust (`robust_on` false).
+/// Those flags into `robust` (entry, scale, warm_up, corroboration_window). Throws UsageError on a
+/// bad value, and when one is given without --robust (`robust_on` false).
 void readOnlineRobustFlags(const boost::program_options::variables_map& vm, bool robust_on,
                            RobustOptions* robust);
 
