@@ -30,7 +30,7 @@ double quantile(std::vector<double>* v, double q) {
 }  // namespace
 
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
-                                      const RobustOptions& o) {
+                                      const RobustOptions& o, bool from_median) {
   const double t = o.tail_factor * c2;
   const boost::math::chi_squared_distribution<double> chi2(dof);
   const double Ft = boost::math::cdf(chi2, t);
@@ -38,6 +38,11 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
   const double q_tail = boost::math::quantile(chi2, o.confidence * Ft);  // F⁻¹(q F(t))
   NoiseScaleEstimate out;
   double sigma2 = 1.0;
+  if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
+    std::vector<double> all = m;
+    const double start = quantile(&all, 0.5) / boost::math::quantile(chi2, 0.5);
+    if (start > 0 && std::isfinite(start)) sigma2 = start;
+  }
   std::vector<double> kept;
   auto keep = [&] {
     kept.clear();
@@ -176,7 +181,8 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   if (source == last_source_ && n < next_estimate_) return;
   last_source_ = source;
   samples_used_ = static_cast<int>(n);
-  estimate_ = estimateNoiseScale(*source, G::kDoF, c2_given_, options_);
+  estimate_ = estimateNoiseScale(*source, G::kDoF, c2_given_, options_,
+                                 /*from_median=*/source == &corroborated_);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   c2_ = estimate_.estimated ? options_.tail_factor * c2_given_ * scale_ : c2_given_;
@@ -198,7 +204,7 @@ const std::vector<double>* OnlineGnc<G>::scaleSource() const {
 // between their ends, against a's own.
 template <class G>
 bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a,
-                         const Closure& b) const {
+                         const Closure& b) {
   const Key K = options_.corroboration_window;
   auto near = [K](Key x, Key y) { return x - y <= K && y - x <= K; };
   G z2 = b.z;
@@ -218,7 +224,18 @@ bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& 
   const typename Edge::Vector e = relativePoseError(a.z, G::Identity(), z_hat);
   const typename Edge::Matrix cov = a.information.inverse() + b.information.inverse();
   const double s = e.dot(cov.ldlt().solve(e));
-  return std::isfinite(s) && s <= c2_given_;
+  if (!std::isfinite(s)) return false;
+  // On the pairs' own scale: the median of every neighbouring pair's s so far over χ²_d's
+  // (true pairs, which come in runs, are most of them), once there are 10.
+  pair_s_.push_back(s);
+  if (pair_s_.size() >= 10 && pair_s_.size() >= next_pair_estimate_) {
+    std::vector<double> copy = pair_s_;
+    const double chi2_median =
+        boost::math::quantile(boost::math::chi_squared_distribution<double>(G::kDoF), 0.5);
+    pair_scale_ = quantile(&copy, 0.5) / chi2_median;
+    next_pair_estimate_ = pair_s_.size() < 64 ? pair_s_.size() + 1 : pair_s_.size() * 9 / 8;
+  }
+  return s <= c2_given_ * pair_scale_;
 }
 
 template <class G>

@@ -53,17 +53,20 @@
 //                 corroborate each other when the estimate's short chains x_a⁻¹x_c and
 //                 x_d⁻¹x_b carry z₂ onto a second measurement of a→b that agrees with z₁:
 //                   ẑ = (x_a⁻¹ x_c) z₂ (x_d⁻¹ x_b),  e = e(z₁⁻¹ ẑ),  eᵀ(Ω₁⁻¹ + Ω₂⁻¹)⁻¹e ≤ c²    (P)
-//                 (Ω at its word, the given c²; Ω₂ taken in b's frame, the two ends being at
-//                 most K poses apart). True closures come in runs along a revisit and agree
-//                 with their neighbours; a false one agrees with nothing (random, local) or
-//                 only with its own group. Where the first closures are mostly false (intel
-//                 with 90%: the first 21 are), their innovations on the odometry chain are
+//                 (c² the given one times the pairs' own scale: the median of every
+//                 neighbouring pair's s so far over χ²_d's median, true pairs being most of
+//                 them; Ω₂ taken in b's frame, the two ends being at most K poses apart).
+//                 σ̂²'s fixed points then start from the corroborated innovations' untruncated
+//                 median, not from 1: on sphere_bignoise (Ω ~200× too confident) no true
+//                 closure is within the truncation at σ² = 1. True closures come in runs along a
+//                 revisit and agree with their neighbours; a false one agrees with nothing (random,
+//                 local) or only with its own group. Where the first closures are mostly false
+//                 (intel with 90%: the first 21 are), their innovations on the odometry chain are
 //                 1.7–2800 at Ω's word while the true ones', later, are 0.002: a median of
 //                 them took σ̂² to 66 and accepted them all. Until scale_min_samples closures are
 //                 corroborated the warm-up goes on; with loosen_min_samples judged and still
-//                 too few corroborated (isolated closures, or Ω so confident that true pairs
-//                 fail (P): sphere_bignoise) σ̂² is estimated from every innovation, as with
-//                 K = 0.
+//                 too few corroborated (isolated closures) σ̂² is estimated from every
+//                 innovation, as with K = 0.
 //   warm-up       a closure that arrives before the first estimate cannot be judged on the scale
 //                 yet: RobustOptions::warm_up kHold (default) keeps it at weight 0 (out of the
 //                 tree, its innovation recorded) and judges it by its innovation as on entry
@@ -221,8 +224,10 @@ struct NoiseScaleEstimate {
   bool tail_cut = false;     ///< the tail's fixed point passed max_tail_scale·σ²_med
   double share_at_word = 0;  ///< of the m_k, those within the truncation at σ² = 1
 };
+/// `from_median`: the fixed points start from σ² = median(m)/F⁻¹(½) (all of m) instead of 1,
+/// for samples known to hold few false closures (the corroborated ones).
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
-                                      const RobustOptions& o);
+                                      const RobustOptions& o, bool from_median = false);
 
 enum class ClosureStatus {
   kInlier,    ///< weight ≥ its kernel's inlierCut (TLS ½, GM ¼)
@@ -354,7 +359,7 @@ class OnlineGnc {
   void observe(const IncrementalSmoother<G>& smoother, int id, double m);
   /// Whether closures a and b agree through the estimate between their ends (P); false when
   /// their ends are not within corroboration_window of each other's.
-  bool agree(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b) const;
+  bool agree(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b);
   /// The innovations σ̂² is estimated from now (nullptr: none yet).
   const std::vector<double>* scaleSource() const;
   /// σ̂² estimated, or given (NoiseScale::kGiven): new closures are judged at once.
@@ -378,6 +383,9 @@ class OnlineGnc {
   size_t next_estimate_ = 0;  ///< the source's size at which σ̂² is estimated next
   int samples_used_ = 0;
   std::multimap<Key, int> by_low_end_;  ///< judged closures by min(from, to)
+  std::vector<double> pair_s_;          ///< (P)'s s of every neighbouring pair so far
+  double pair_scale_ = 1.0;             ///< their median over χ²_d's (1 before 10 of them)
+  size_t next_pair_estimate_ = 0;       ///< pair_s_.size() at which it is estimated next
   std::vector<Closure> closures_;
   std::vector<int> unresolved_;  ///< closures added since the last resolve()
   std::vector<int> graduating_;  ///< closures graduating, by id

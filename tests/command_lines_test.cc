@@ -234,31 +234,48 @@ TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
   }
 }
 
-// --entry, --noise-scale and --warm-up (tools/cli/robust_flags.h) reach the online robust
-// options in replay and serve alike, are refused without --robust, and a bad value is refused
-// naming it.
+// --entry, --noise-scale, --warm-up and --corroboration-window (tools/cli/robust_flags.h)
+// reach the online robust options in replay and serve alike, are refused without --robust,
+// and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
-  const std::vector<std::string> args = {"--robust", "--entry",   "residual", "--noise-scale",
-                                         "given",    "--warm-up", "given"};
+  const std::vector<std::string> args = {
+      "--robust", "--entry",   "residual", "--noise-scale",
+      "given",    "--warm-up", "given",    "--corroboration-window",
+      "7"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
   ASSERT_TRUE(replay.has_value());
-  EXPECT_EQ(replay->entry, EntryTest::kResidual);
-  EXPECT_EQ(replay->noise_scale, NoiseScale::kGiven);
-  EXPECT_EQ(replay->warm_up, WarmUp::kGiven);
+  EXPECT_EQ(replay->online.entry, EntryTest::kResidual);
+  EXPECT_EQ(replay->online.scale, NoiseScale::kGiven);
+  EXPECT_EQ(replay->online.warm_up, WarmUp::kGiven);
+  EXPECT_EQ(replay->online.corroboration_window, 7);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
   EXPECT_EQ(serve->options.robust->entry, EntryTest::kResidual);
   EXPECT_EQ(serve->options.robust->scale, NoiseScale::kGiven);
   EXPECT_EQ(serve->options.robust->warm_up, WarmUp::kGiven);
+  EXPECT_EQ(serve->options.robust->corroboration_window, 7);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
   EXPECT_EQ(plain->options.robust->entry, RobustOptions{}.entry);
   EXPECT_EQ(plain->options.robust->scale, RobustOptions{}.scale);
   EXPECT_EQ(plain->options.robust->warm_up, RobustOptions{}.warm_up);
+  EXPECT_EQ(plain->options.robust->corroboration_window, RobustOptions{}.corroboration_window);
+  EXPECT_EQ(parseReplayCommandLine({"graph.g2o", "--robust"})->online.corroboration_window,
+            RobustOptions{}.corroboration_window);
+  EXPECT_THROW(parseServeCommandLine({"--corroboration-window", "3"}), UsageError);
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--corroboration-window", "3"}), UsageError);
+  try {
+    parseReplayCommandLine({"graph.g2o", "--robust", "--corroboration-window", "-4"});
+    ADD_FAILURE() << "--corroboration-window -4 accepted";
+  } catch (const UsageError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("--corroboration-window"), std::string::npos) << message;
+    EXPECT_NE(message.find("-4"), std::string::npos) << message;
+  }
   for (const std::string flag : {"--entry", "--noise-scale", "--warm-up"}) {
     const std::string value = flag == "--entry" ? "residual" : "given";
     EXPECT_THROW(parseServeCommandLine({flag, value}), UsageError) << flag;

@@ -212,6 +212,23 @@ TEST(OnlineEntry, EstimateNoiseScaleOfChiSquare) {
   EXPECT_FALSE(estimateNoiseScale({}, 3, 11.3, RobustOptions{}).estimated);
 }
 
+// Clean samples with Ω 200 times too confident (sphere_bignoise's true closures; the
+// corroborated innovations): from σ² = 1 nearly none is within the truncation and there is no
+// estimate; from their untruncated median (from_median) the fixed points reach σ² = 200.
+TEST(OnlineEntry, EstimateNoiseScaleFromTheMedian) {
+  const int dof = 6;
+  const double c2 = chiSquareThreshold(0.99, dof), sigma2 = 200;
+  std::mt19937 rng(43);
+  std::chi_squared_distribution<double> chi2(dof);
+  std::vector<double> m;
+  for (int k = 0; k < 300; ++k) m.push_back(sigma2 * chi2(rng));
+  EXPECT_FALSE(estimateNoiseScale(m, dof, c2, RobustOptions{}).estimated);
+  const NoiseScaleEstimate est =
+      estimateNoiseScale(m, dof, c2, RobustOptions{}, /*from_median=*/true);
+  EXPECT_TRUE(est.estimated);
+  EXPECT_NEAR(est.sigma2, sigma2, 0.2 * sigma2);
+}
+
 // False closures spread over decades, down to just inside the truncation: the tail's estimate
 // would climb by about tail_factor a round until all of them are in; it is cut at
 // max_tail_scale·σ²_med and the median's σ̂² stands (within 15%: the false ones inside the

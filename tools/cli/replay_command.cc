@@ -44,12 +44,9 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   settings.finalize = run.finalize;
   settings.covariances = !run.covariances.empty();
   if (run.robust.robust) {
-    RobustOptions robust;
+    RobustOptions robust = run.online;
     robust.kernel = run.robust.kernel;
     robust.threshold = run.robust.threshold;
-    robust.entry = run.entry;
-    robust.scale = run.noise_scale;
-    robust.warm_up = run.warm_up;
     settings.robust = robust;
   }
   if (!run.edge_choices.empty()) {
@@ -114,9 +111,10 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
       j["robust"] = {
           {"kernel", toString(run.robust.kernel)},
           {"inlier_threshold", c2},
-          {"entry", toString(run.entry)},
-          {"noise_scale_mode", toString(run.noise_scale)},
-          {"warm_up", toString(run.warm_up)},
+          {"entry", toString(run.online.entry)},
+          {"noise_scale_mode", toString(run.online.scale)},
+          {"warm_up", toString(run.online.warm_up)},
+          {"corroboration_window", run.online.corroboration_window},
           {"threshold_in_use", online.closure_threshold},
           {"noise_scale", online.noise_scale},
           {"noise_scale_estimated", online.noise_scale_estimated},
@@ -165,8 +163,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     std::cout << std::setprecision(4) << "robust        GNC-" << toString(run.robust.kernel)
               << " per loop closure, online, c² " << c2
               << (run.robust.threshold > 0 ? " (given)" : " (χ² 0.99 quantile)") << "\n"
-              << "entry         " << toString(run.entry) << " test; noise scale "
-              << toString(run.noise_scale) << ": σ̂² " << online.noise_scale << " from "
+              << "entry         " << toString(run.online.entry) << " test; noise scale "
+              << toString(run.online.scale) << ": σ̂² " << online.noise_scale << " from "
               << online.noise_samples << " innovations, c² in use " << online.closure_threshold
               << "\n"
               << "closures      " << online.closures_inlier << " inlier, "
@@ -264,11 +262,7 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   run.robust = readRobustFlags(vm, /*allow_auto=*/false);
   if (!run.edge_choices.empty() && !run.robust.robust)
     throw UsageError("--edge-choices needs --robust");
-  RobustOptions online;
-  readOnlineRobustFlags(vm, run.robust.robust, &online);
-  run.entry = online.entry;
-  run.noise_scale = online.scale;
-  run.warm_up = online.warm_up;
+  readOnlineRobustFlags(vm, run.robust.robust, &run.online);
   try {
     run.format = parseTrajectoryFormat(format);
   } catch (const std::invalid_argument& e) {

@@ -24,11 +24,10 @@ struct ReplayCommandLine {
   SmootherOptions smoother;  ///< tools/cli/smoother_flags.h
   RobustFlags robust;        ///< tools/cli/robust_flags.h: online GNC per loop closure
   std::string edge_choices;  ///< --edge-choices FILE (io/edge_choice_file.h), with --robust
-  /// --entry innovation|residual, --noise-scale estimated|given, --warm-up hold|given (with
-  /// --robust).
-  EntryTest entry = EntryTest::kInnovation;
-  NoiseScale noise_scale = NoiseScale::kEstimated;
-  WarmUp warm_up = WarmUp::kHold;
+  /// --entry, --noise-scale, --warm-up and --corroboration-window (with --robust; read by
+  /// readOnlineRobustFlags): the online GNC's options but the kernel and threshold, which are
+  /// `robust`'s.
+  RobustOptions online;
   ReadOptions read;
 };
 
