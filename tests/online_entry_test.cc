@@ -337,6 +337,22 @@ void cleanWithinPlain() {
 TEST(OnlineEntry, CleanWithinPlain2D) { cleanWithinPlain<SE2>(); }
 TEST(OnlineEntry, CleanWithinPlain3D) { cleanWithinPlain<SE3>(); }
 
+// After finalize(): every closure settled, the planted ones (is_false) outliers and the others
+// inliers, and F over the true edges that of a smoother fed the true edges alone.
+template <class G, class IsFalse>
+void finalizedAsClean(const Laps<G>& laps, OnlineSmoother<G>* s, IsFalse is_false) {
+  s->finalize();
+  for (const ClosureReport& c : s->closures()) {
+    EXPECT_FALSE(c.graduating) << c.from << " -> " << c.to;
+    EXPECT_EQ(c.status, is_false(c) ? ClosureStatus::kOutlier : ClosureStatus::kInlier)
+        << c.from << " -> " << c.to << " weight " << c.weight << " s " << c.residual;
+  }
+  OnlineSmoother<G> clean;
+  laps.feed(&clean, /*only_true=*/true);
+  clean.finalize();
+  EXPECT_NEAR(laps.trueCost(*s), laps.trueCost(clean), 1e-6 * laps.trueCost(clean));
+}
+
 // Ω a hundred times too weak (the noise a tenth of the σ it says, as on the shared 2D files and
 // the garage) and a false closure in the warm-up that Ω at its word cannot tell from a true one.
 // WarmUp::kGiven accepts it on arrival; WarmUp::kHold keeps it at weight 0 until σ̂² is there
@@ -372,17 +388,7 @@ void warmUpHold() {
   const OnlineStats st = held.stats();
   ASSERT_GE(st.noise_samples, RobustOptions{}.scale_min_samples);
   EXPECT_LT(st.noise_scale, 0.05);  // σ² = 0.01
-  held.finalize();
-  for (const ClosureReport& c : held.closures()) {
-    const bool planted = c.from == 3 && c.to == 25;
-    EXPECT_FALSE(c.graduating) << c.from << " -> " << c.to;
-    EXPECT_EQ(c.status, planted ? ClosureStatus::kOutlier : ClosureStatus::kInlier)
-        << c.from << " -> " << c.to << " weight " << c.weight << " s " << c.residual;
-  }
-  OnlineSmoother<G> clean;
-  laps.feed(&clean, /*only_true=*/true);
-  clean.finalize();
-  EXPECT_NEAR(laps.trueCost(held), laps.trueCost(clean), 1e-6 * laps.trueCost(clean));
+  finalizedAsClean(laps, &held, [](const ClosureReport& c) { return c.from == 3 && c.to == 25; });
 }
 
 TEST(OnlineEntry, WarmUpHoldsClosuresUntilTheScaleIsKnown2D) { warmUpHold<SE2>(); }
@@ -424,17 +430,7 @@ void falseClosuresFirst() {
   laps.feed(&s);
   const OnlineStats st = s.stats();
   EXPECT_LT(st.noise_scale, 0.05);  // σ² = 0.01
-  s.finalize();
-  for (const ClosureReport& c : s.closures()) {
-    const bool is_false = c.to < 120;
-    EXPECT_FALSE(c.graduating) << c.from << " -> " << c.to;
-    EXPECT_EQ(c.status, is_false ? ClosureStatus::kOutlier : ClosureStatus::kInlier)
-        << c.from << " -> " << c.to << " weight " << c.weight << " s " << c.residual;
-  }
-  OnlineSmoother<G> clean;
-  laps.feed(&clean, /*only_true=*/true);
-  clean.finalize();
-  EXPECT_NEAR(laps.trueCost(s), laps.trueCost(clean), 1e-6 * laps.trueCost(clean));
+  finalizedAsClean(laps, &s, [](const ClosureReport& c) { return c.to < 120; });
 }
 
 TEST(OnlineEntry, FalseClosuresFirstDoNotSetTheScale2D) { falseClosuresFirst<SE2>(); }
