@@ -20,6 +20,15 @@ bool samePose(const SE3& a, const SE3& b) {
 
 bool odometry(Key from, Key to) { return from - to == 1 || to - from == 1; }
 
+// The median of χ²_d.
+double chiSquareMedian(int dof) {
+  return boost::math::quantile(boost::math::chi_squared_distribution<double>(dof), 0.5);
+}
+
+// The sample count at which an estimate re-made from n samples is made next: every new one up
+// to 64, then when their number has grown by an eighth (O(k) each, O(k) in all).
+size_t nextEstimateAt(size_t n) { return n < 64 ? n + 1 : n + n / 8; }
+
 // The q-quantile of v (0 ≤ q ≤ 1, v not empty), by selection.
 double quantile(std::vector<double>* v, double q) {
   const size_t k = std::min(v->size() - 1, static_cast<size_t>(q * static_cast<double>(v->size())));
@@ -40,7 +49,7 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
   double sigma2 = 1.0;
   if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
     std::vector<double> all = m;
-    const double start = quantile(&all, 0.5) / boost::math::quantile(chi2, 0.5);
+    const double start = quantile(&all, 0.5) / chiSquareMedian(dof);
     if (start > 0 && std::isfinite(start)) sigma2 = start;
   }
   std::vector<double> kept;
@@ -149,14 +158,12 @@ OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
 }
 
 // σ̂² from the innovations so far (scaleSource), once scale_min_samples of them are in;
-// re-estimated on every new one up to 64, then when their number has grown by an eighth (O(k)
-// each).
+// re-estimated at nextEstimateAt's counts.
 template <class G>
 void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, double m) {
   if (options_.scale != NoiseScale::kEstimated || !std::isfinite(m)) return;
   Closure& c = closures_[static_cast<size_t>(id)];
   c.m = m;
-  c.judged = true;
   innovations_.push_back(m);
   if (const Key K = options_.corroboration_window; K > 0) {
     // (P) against the judged closures with an end near this one's low end.
@@ -186,7 +193,7 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   c2_ = estimate_.estimated ? options_.tail_factor * c2_given_ * scale_ : c2_given_;
-  next_estimate_ = n < 64 ? n + 1 : n + n / 8;
+  next_estimate_ = nextEstimateAt(n);
 }
 
 template <class G>
@@ -230,10 +237,8 @@ bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& 
   pair_s_.push_back(s);
   if (pair_s_.size() >= 10 && pair_s_.size() >= next_pair_estimate_) {
     std::vector<double> copy = pair_s_;
-    const double chi2_median =
-        boost::math::quantile(boost::math::chi_squared_distribution<double>(G::kDoF), 0.5);
-    pair_scale_ = quantile(&copy, 0.5) / chi2_median;
-    next_pair_estimate_ = pair_s_.size() < 64 ? pair_s_.size() + 1 : pair_s_.size() * 9 / 8;
+    pair_scale_ = quantile(&copy, 0.5) / chiSquareMedian(G::kDoF);
+    next_pair_estimate_ = nextEstimateAt(pair_s_.size());
   }
   return s <= c2_given_ * pair_scale_;
 }

@@ -190,8 +190,8 @@ struct RobustOptions {
   /// Poses K between the ends of two closures that may corroborate each other (header comment,
   /// "corroboration"): σ̂² is estimated from corroborated closures' innovations. 0: from every
   /// closure's innovation (≥ 0; default 0: on the shared files 10 takes intel with 90% false
-  /// closures from F_clean/F* 1.7e4 to 1.25 and MIT from 5.7 to 1, but on correctly modelled
-  /// 3D laps it rejects a true closure and with Ω nine times too confident no pair passes (P)).
+  /// closures from F_clean/F* 1.7e4 to 1 and MIT from 5.7 to 1, but sphere_bignoise's replay
+  /// costs 3.5× as much, and on 3D laps with Ω nine times too confident σ̂² is 18.9 for 9).
   int corroboration_window = 0;
   /// Rounds of finalize(): graduate to the end, re-check every closure, relinearise all; again
   /// while a re-check changed a weight (≥ 1).
@@ -317,8 +317,6 @@ class OnlineGnc {
   const NoiseScaleEstimate& noiseEstimate() const { return estimate_; }
   /// The innovations the last σ̂² was estimated from (0 before the first estimate).
   int noiseSamples() const { return samples_used_; }
-  /// Closures corroborated by another (header comment, "corroboration").
-  int corroborated() const { return static_cast<int>(corroborated_.size()); }
   const RobustOptions& options() const { return options_; }
 
  private:
@@ -335,7 +333,6 @@ class OnlineGnc {
     int steps = 0;
     bool held = false;          ///< at weight 0 until σ̂² is estimated (WarmUp::kHold)
     double m = 0;               ///< its innovation on entry
-    bool judged = false;        ///< m recorded (a closure the GNC judges, not trusted)
     bool corroborated = false;  ///< another closure agrees with it (P)
     typename Edge::Matrix information = Edge::Matrix::Identity();
   };
