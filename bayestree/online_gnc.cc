@@ -166,11 +166,11 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   c.m = m;
   innovations_.push_back(m);
   if (const Key K = options_.corroboration_window; K > 0) {
-    // (P) against the judged closures with an end near this one's low end.
+    // (P) against the judged closures whose low end is within K of this one's: ends paired
+    // within K (either way round) put the low ends within K of each other.
     const Key low = std::min(c.from, c.to);
     for (auto it = by_low_end_.lower_bound(low - K); it != by_low_end_.end(); ++it) {
-      const Key other_low = it->first;
-      if (other_low > std::max(c.from, c.to) + K) break;
+      if (it->first > low + K) break;
       Closure& other = closures_[static_cast<size_t>(it->second)];
       if (other.state == State::kExcluded || !agree(smoother, c, other)) continue;
       if (!other.corroborated) {

@@ -336,12 +336,21 @@ UpdateStats OnlineSmoother<G>::update() {
   // The online GNC (bayestree/online_gnc.*) never reweights a disabled edge: the factors of a
   // pair taken back are excluded from it (disableEdge, and excludeDisabled for those that
   // enter while their pair is disabled).
+  const size_t held = gnc_->held();
   gnc_->step(smoother_, recheck_all_);  // the first graduation step rides on this update
   recheck_all_ = false;
   int first = smoother_.numFactors();
   UpdateStats total = smoother_.update();
   gnc_->resolve(smoother_);
   excludeDisabled(first);
+  // The warm-up's end: the held closures just entered together, and one Gauss–Newton step from
+  // the odometry chain leaves the estimate short of them wherever a lap's rotation drift is
+  // large. The closures judged next would be judged, and σ̂² fed, on that transient; one
+  // relinearisation of everything, once in the run, takes the estimate to them first.
+  if (gnc_->held() < held) {
+    addStats(&total, smoother_.relinearizeAll());
+    ++stats_.warm_up_relinearizations;
+  }
   for (int k = 1; k < gnc_->options().steps_per_update && gnc_->graduating(); ++k) {
     gnc_->step(smoother_);
     first = smoother_.numFactors();

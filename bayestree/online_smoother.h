@@ -133,6 +133,9 @@ struct OnlineStats {
   int closures_graduating = 0;
   int graduation_steps = 0;
   int graduation_updates = 0;
+  /// Relinearisations of everything at the warm-up's end (OnlineSmoother::update): one in a
+  /// run whose σ̂² came while closures were held, else 0.
+  int warm_up_relinearizations = 0;
   /// With robust smoothing: c² in use (OnlineGnc::threshold), σ̂² (OnlineGnc::noiseScale,
   /// 1 without robust smoothing) and the innovations it is estimated from.
   double closure_threshold = 0;

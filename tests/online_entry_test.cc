@@ -398,7 +398,7 @@ TEST(OnlineEntry, WarmUpHoldsClosuresUntilTheScaleIsKnown3D) { warmUpHold<SE3>()
 // each other's ends) and each within Ω's word on the odometry chain: Ω a hundred times too weak
 // (σ² = 0.01), 24 false closures in the first lap of 120 poses, then the true closures one lap
 // back. σ̂² from every innovation is estimated on the false ones alone and lets them in
-// (corroboration_window 0, the default: the control); from the corroborated ones (window 10)
+// (corroboration_window 0: the control); from the corroborated ones (window 10, the default)
 // it waits for the true closures, which agree with their neighbours, and every false closure
 // is rejected.
 template <class G>
@@ -419,14 +419,15 @@ void falseClosuresFirst() {
       n += c.to < 120 && c.status == ClosureStatus::kInlier;
     return n;
   };
-  OnlineSmoother<G> control(robust<G>());  // corroboration_window 0, the default
+  OnlineSmootherOptions<G> every = robust<G>();
+  every.robust->corroboration_window = 0;
+  OnlineSmoother<G> control(every);
   laps.feed(&control);
   control.finalize();
   ASSERT_GT(acceptedFalse(control), 0) << "σ̂² from every innovation rejects them all: not this "
                                           "test's case";
-  OnlineSmootherOptions<G> corroborated = robust<G>();
-  corroborated.robust->corroboration_window = 10;
-  OnlineSmoother<G> s(corroborated);
+  ASSERT_EQ(RobustOptions{}.corroboration_window, 10);
+  OnlineSmoother<G> s(robust<G>());
   laps.feed(&s);
   const OnlineStats st = s.stats();
   EXPECT_LT(st.noise_scale, 0.05);  // σ² = 0.01

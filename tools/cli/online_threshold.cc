@@ -12,7 +12,7 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
                                 const EdgeChoices& choices, std::vector<G>* estimate) {
   const auto t0 = std::chrono::steady_clock::now();
   ReplaySettings settings;
-  settings.finalize = false;
+  settings.finalize = true;  // held closures judged, as `arbor replay --robust` ends
   settings.batch = false;
   RobustOptions robust;
   robust.kernel = kernel;

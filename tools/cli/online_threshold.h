@@ -23,7 +23,7 @@ struct OnlineThreshold {
   double replay_s = 0;     ///< wall time of the replay
 };
 
-/// Replays `graph` (edges in order of max(i, j), one update each, no final pass) through the
+/// Replays `graph` (edges in order of max(i, j), one update each, then finalize()) through the
 /// robust online smoother with `kernel` and `choices` and returns its threshold; `estimate`
 /// (optional): its estimate, in the graph's dense order (`arbor batch --init online`).
 template <class G>

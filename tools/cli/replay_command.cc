@@ -126,6 +126,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"closures_graduating", online.closures_graduating},
           {"graduation_steps", online.graduation_steps},
           {"graduation_updates", online.graduation_updates},
+          {"warm_up_relinearizations", online.warm_up_relinearizations},
       };
       if (!run.robust.rejected_out.empty()) j["rejected_out"] = run.robust.rejected_out;
     }

@@ -89,7 +89,7 @@ void addOnlineRobustFlags(po::options_description& options) {
       "with --robust and --noise-scale estimated, the loop closures that arrive before the "
       "scale is estimated: hold (at weight 0, judged once it is) or given (judged at once, Ω at "
       "its word)")(
-      "corroboration-window", po::value<int>()->default_value(0),
+      "corroboration-window", po::value<int>()->default_value(RobustOptions{}.corroboration_window),
       "with --robust and --noise-scale estimated, K > 0: the scale is estimated from the loop "
       "closures that another closure within K poses of both ends agrees with (docs/design.md, "
       "\"The noise scale\"); 0: from every closure");
