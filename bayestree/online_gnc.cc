@@ -232,12 +232,15 @@ bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& 
   const typename Edge::Matrix cov = a.information.inverse() + b.information.inverse();
   const double s = e.dot(cov.ldlt().solve(e));
   if (!std::isfinite(s)) return false;
-  // On the pairs' own scale: the median of every neighbouring pair's s so far over χ²_d's
-  // (true pairs, which come in runs, are most of them), once there are 10.
+  // On the pairs' own scale: estimateNoiseScale of every neighbouring pair's s so far, from
+  // their untruncated median (true pairs, which come in runs, are most of them over a run),
+  // once there are 10. Past 1 only under the estimator's loosening rule: where the first pairs
+  // are all false (intel with 90% local false closures: the first ~150), their median would
+  // let them all agree.
   pair_s_.push_back(s);
   if (pair_s_.size() >= 10 && pair_s_.size() >= next_pair_estimate_) {
-    std::vector<double> copy = pair_s_;
-    pair_scale_ = quantile(&copy, 0.5) / chiSquareMedian(G::kDoF);
+    pair_scale_ =
+        estimateNoiseScale(pair_s_, G::kDoF, c2_given_, options_, /*from_median=*/true).sigma2;
     next_pair_estimate_ = nextEstimateAt(pair_s_.size());
   }
   return s <= c2_given_ * pair_scale_;

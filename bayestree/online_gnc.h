@@ -53,9 +53,10 @@
 //                 corroborate each other when the estimate's short chains x_a⁻¹x_c and
 //                 x_d⁻¹x_b carry z₂ onto a second measurement of a→b that agrees with z₁:
 //                   ẑ = (x_a⁻¹ x_c) z₂ (x_d⁻¹ x_b),  e = e(z₁⁻¹ ẑ),  eᵀ(Ω₁⁻¹ + Ω₂⁻¹)⁻¹e ≤ c²    (P)
-//                 (c² the given one times the pairs' own scale: the median of every
-//                 neighbouring pair's s so far over χ²_d's median, true pairs being most of
-//                 them; Ω₂ taken in b's frame, the two ends being at most K poses apart).
+//                 (c² the given one times the pairs' own scale: estimateNoiseScale of every
+//                 neighbouring pair's s so far, from their median, true pairs being most of
+//                 them over a run, and past 1 only under its loosening rule; Ω₂ taken in b's
+//                 frame, the two ends being at most K poses apart).
 //                 σ̂²'s fixed points then start from the corroborated innovations' untruncated
 //                 median, not from 1: on sphere_bignoise (Ω ~200× too confident) no true
 //                 closure is within the truncation at σ² = 1. True closures come in runs along a
@@ -384,7 +385,7 @@ class OnlineGnc {
   int samples_used_ = 0;
   std::multimap<Key, int> by_low_end_;  ///< judged closures by min(from, to)
   std::vector<double> pair_s_;          ///< (P)'s s of every neighbouring pair so far
-  double pair_scale_ = 1.0;             ///< their median over χ²_d's (1 before 10 of them)
+  double pair_scale_ = 1.0;             ///< their σ̂² (1 before 10 of them)
   size_t next_pair_estimate_ = 0;       ///< pair_s_.size() at which it is estimated next
   std::vector<Closure> closures_;
   std::vector<int> unresolved_;  ///< closures added since the last resolve()
