@@ -345,8 +345,9 @@ UpdateStats OnlineSmoother<G>::update() {
   excludeDisabled(first);
   // The warm-up's end: the held closures just entered together, and one Gauss–Newton step from
   // the odometry chain leaves the estimate short of them wherever a lap's rotation drift is
-  // large. The closures judged next would be judged, and σ̂² fed, on that transient; one
-  // relinearisation of everything, once in the run, takes the estimate to them first.
+  // large. The closures judged next would be judged, and σ̂² fed, on that transient;
+  // relinearizeAll (Gauss–Newton over every variable), once in the run, takes the estimate to
+  // them first.
   if (gnc_->held() < held) {
     addStats(&total, smoother_.relinearizeAll());
     ++stats_.warm_up_relinearizations;
