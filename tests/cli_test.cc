@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "arbor/bayestree/online_gnc.h"
 #include "arbor/io/labels_file.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/refine/batch_solvers.h"
@@ -197,8 +198,8 @@ TEST(Cli, BatchRobustWritesTheRejectedEdges) {
   }
 }
 
-// arbor batch --robust --inlier-threshold online --init online: GNC's c² is the one the robust
-// online replay ends with (the same as `arbor replay --robust` reports), it starts from that
+// arbor batch --robust --inlier-threshold online --init online: GNC's c² is recheck_margin times
+// the one the robust online replay ends with (`arbor replay --robust`'s), it starts from that
 // replay's estimate and rejects every planted closure; online is refused where it cannot be
 // (replay, --init online without --robust).
 TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
@@ -217,8 +218,10 @@ TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["threshold_rule"], "online");
   EXPECT_EQ(j["init"], "online");
-  EXPECT_DOUBLE_EQ(j["inlier_threshold"].get<double>(), c2);
-  EXPECT_DOUBLE_EQ(j["online_threshold"]["c2"].get<double>(), c2);
+  const double margin = arbor::RobustOptions{}.recheck_margin;
+  EXPECT_DOUBLE_EQ(j["inlier_threshold"].get<double>(), margin * c2);
+  EXPECT_DOUBLE_EQ(j["online_threshold"]["c2"].get<double>(), margin * c2);
+  EXPECT_DOUBLE_EQ(j["online_threshold"]["c2_in_use"].get<double>(), c2);
   EXPECT_TRUE(j["online_threshold"]["noise_scale_estimated"].get<bool>());
   std::set<std::pair<long, long>> written;
   std::ifstream in(rejected);

@@ -262,6 +262,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     });
     if (online)
       j["online_threshold"] = {{"c2", online->c2},
+                               {"c2_in_use", online->c2_in_use},
                                {"noise_scale", online->noise_scale},
                                {"noise_scale_estimated", online->estimated},
                                {"noise_samples", online->samples},

@@ -26,7 +26,8 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
   if (estimate) *estimate = std::move(replay.poses);
   const OnlineStats st = smoother.stats();
   OnlineThreshold out;
-  out.c2 = st.closure_threshold;
+  out.c2_in_use = st.closure_threshold;
+  out.c2 = robust.recheck_margin * st.closure_threshold;
   out.noise_scale = st.noise_scale;
   out.estimated = st.noise_scale_estimated;
   out.samples = st.noise_samples;

@@ -1,10 +1,14 @@
 // The robust batch's threshold from the online estimator (`arbor batch --robust
 // --inlier-threshold online`): the graph's edges replayed through the robust online smoother
 // (bayestree/online_gnc.h, its defaults: innovation entry test, estimated noise scale, warm-up
-// held), and GNC's c² the threshold that smoother ends with, tail_factor·c²_χ²·σ̂² (or the χ²
-// quantile when it has no estimate). The files' Ω are often wrong by a constant factor (the
-// shared 2D files' 40–50× too weak, the garage's ~10⁴): the χ² quantile at Ω's word keeps
-// their false closures, and σ̂² is what the replay measures from its closures' innovations.
+// held), and GNC's c² the bound up to which that smoother keeps a settled inlier at its end:
+// recheck_margin (2) times its c² in use, tail_factor·c²_χ²·σ̂² (or the χ² quantile when it has
+// no estimate). GNC-TLS has no such hysteresis: at the c² in use itself it rejected true
+// closures the online smoother keeps (intel_random_0.1: 2 of 785, F 10.7% above F*; the
+// garage: 11 of 4615, 3%; docs/benchmarks.md). The files' Ω are often wrong by a constant
+// factor (the shared 2D files' 40–50× too weak, the garage's ~10⁴): the χ² quantile at Ω's word
+// keeps their false closures, and σ̂² is what the replay measures from its closures'
+// innovations.
 #pragma once
 
 #include <vector>
@@ -16,7 +20,8 @@
 namespace arbor::cli {
 
 struct OnlineThreshold {
-  double c2 = 0;           ///< the online smoother's c² in use at the end of the replay
+  double c2 = 0;           ///< GNC's: recheck_margin · c2_in_use
+  double c2_in_use = 0;    ///< the online smoother's c² in use at the end of the replay
   double noise_scale = 1;  ///< its σ̂²
   bool estimated = false;  ///< σ̂² is an estimate (false: Ω at its word)
   int samples = 0;         ///< innovations it was estimated from

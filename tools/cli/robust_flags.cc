@@ -14,9 +14,10 @@ const char* const kInlierThresholdHelp =
     "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
     "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the "
     "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); online "
-    "(batch only): the threshold the robust online smoother ends with after replaying the "
-    "graph, the χ² quantile on the noise scale estimated from its loop closures' innovations "
-    "(arbor replay --robust's); auto (batch only, experimental: it feeds on its own "
+    "(batch only): the bound up to which the robust online smoother keeps an inlier after "
+    "replaying the graph, twice its threshold, the χ² quantile on the noise scale estimated from "
+    "its loop closures' innovations (arbor replay --robust's); auto (batch only, experimental: it "
+    "feeds on its own "
     "truncation): that quantile times the variance factor estimated over the inliers";
 
 void addRobustFlags(po::options_description& options, const std::string& robust_help) {
