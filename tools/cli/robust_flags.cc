@@ -17,8 +17,8 @@ const char* const kInlierThresholdHelp =
     "(batch only): the bound up to which the robust online smoother keeps an inlier after "
     "replaying the graph, twice its threshold, the χ² quantile on the noise scale estimated from "
     "its loop closures' innovations (arbor replay --robust's); auto (batch only, experimental: it "
-    "feeds on its own "
-    "truncation): that quantile times the variance factor estimated over the inliers";
+    "feeds on its own truncation): that quantile times the variance factor estimated over the "
+    "inliers";
 
 void addRobustFlags(po::options_description& options, const std::string& robust_help) {
   options.add_options()("robust", po::bool_switch(), robust_help.c_str())(
