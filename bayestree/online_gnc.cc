@@ -48,8 +48,7 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
   NoiseScaleEstimate out;
   double sigma2 = 1.0;
   if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
-    std::vector<double> all = m;
-    const double start = quantile(&all, 0.5) / chiSquareMedian(dof);
+    const double start = quantile(&m, 0.5) / chiSquareMedian(dof);  // m is ours: reordered
     if (start > 0 && std::isfinite(start)) sigma2 = start;
   }
   std::vector<double> kept;

@@ -359,7 +359,8 @@ class OnlineGnc {
   /// re-estimates σ̂² and c² (NoiseScale::kEstimated).
   void observe(const IncrementalSmoother<G>& smoother, int id, double m);
   /// Whether closures a and b agree through the estimate between their ends (P); false when
-  /// their ends are not within corroboration_window of each other's.
+  /// their ends are not within corroboration_window of each other's. A neighbouring pair's s
+  /// joins pair_s_ (the pairs' scale), so each pair is to be tested once.
   bool agree(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b);
   /// The innovations σ̂² is estimated from now (nullptr: none yet).
   const std::vector<double>* scaleSource() const;
