@@ -37,15 +37,8 @@
 #include "arbor/core/information.h"
 
 namespace arbor {
-namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double secondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-void accumulate(UpdateStats* total, const UpdateStats& s) {
+void addUpdateCounts(UpdateStats* total, const UpdateStats& s) {
   total->new_factors += s.new_factors;
   total->new_variables += s.new_variables;
   total->cliques_reeliminated += s.cliques_reeliminated;
@@ -60,9 +53,26 @@ void accumulate(UpdateStats* total, const UpdateStats& s) {
   total->async_started += s.async_started;
   total->async_swapped += s.async_swapped;
   total->async_catch_up_started += s.async_catch_up_started;
-  total->async_pending = s.async_pending;  // the state after the last update
   total->refine_iterations += s.refine_iterations;
   total->cancelled = total->cancelled || s.cancelled;
+  total->swap_s += s.swap_s;
+  total->prepare_s += s.prepare_s;
+  total->top_s += s.top_s;
+  total->solve_s += s.solve_s;
+  total->reelimination_flops += s.reelimination_flops;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+void accumulate(UpdateStats* total, const UpdateStats& s) {
+  addUpdateCounts(total, s);
+  total->async_pending = s.async_pending;  // the state after the last update
 }
 
 int threadCount(int requested) {
@@ -396,6 +406,7 @@ struct IncrementalSmoother<G>::Impl {
     // while one is in flight, no check runs (its variables wait for the swap).
     int swapped = -1;
     bool caught_up = false;
+    const auto t_swap = Clock::now();
     if (async.pending() && asyncSwapDue()) {
       if (opt.async.catch_up == AsyncCatchUp::kInBackground) {
         startCatchUp();
@@ -406,10 +417,13 @@ struct IncrementalSmoother<G>::Impl {
     } else if (catch_up.pending() && catchUpSwapDue()) {
       swapped = swapInCaughtUp();
     }
+    const double swap_s = swapped >= 0 || caught_up ? secondsSince(t_swap) : 0.0;
     StepOptions pass;
     pass.check_relinearization =
         update_count % opt.relinearize_skip == 0 && !relinearizationPending();
     UpdateStats st = runPasses(pass);
+    st.swap_s = swap_s;
+    st.time_s += swap_s;
     if (swapped >= 0) {
       st.async_swapped = 1;
       st.variables_relinearized += swapped;
@@ -739,6 +753,12 @@ struct IncrementalSmoother<G>::Impl {
     const auto t0 = Clock::now();
     UpdateStats st;
     ++stamp;
+    auto phase_start = t0;
+    auto endPhase = [&phase_start](double* seconds) {
+      const auto now = Clock::now();
+      *seconds += std::chrono::duration<double>(now - phase_start).count();
+      phase_start = now;
+    };
     // Alg. 6 steps 1–2, "Add any new factors F := F ∪ F′" and "Initialize any new variables Θ′
     // and add Θ := Θ ∪ Θ′" (the poses were added by addPose, the factors queued by addFactor).
     const NewFactors added = addNewFactorsAndVariables(&st);
@@ -748,6 +768,7 @@ struct IncrementalSmoother<G>::Impl {
     // Alg. 4 step 2, "Relinearize all factors required to recreate top" (those of M), and the
     // new factors' first linearisation.
     listFactorsToLinearize(added.ids);
+    endPhase(&st.prepare_s);
     // Extension (fold-in, docs/design.md "Loop closures by rank updates"): only factors between
     // variables already in the tree, nothing relinearised — fold them in by rank updates along
     // their paths to the root instead of Alg. 6 step 4.
@@ -759,9 +780,11 @@ struct IncrementalSmoother<G>::Impl {
     const bool tree_changed = folded || redoTop(pass.relinearize_all, &st);
     if (folded) maybeCheckOrderingDecay();  // the fold-ins grew separators
     for (int v : touched) mark[v] = 0;
+    endPhase(&st.top_s);
     // Alg. 6 step 5, "Solve for delta Δ with Alg. 7" (and Powell's dogleg on it, as GTSAM's
     // ISAM2DoglegParams). Step 6, "Current estimate given by Θ ⊕ Δ", is estimate().
     if (pass.solve) partialStateUpdate(pass.relinearize_all, tree_changed, &st);
+    endPhase(&st.solve_s);
     st.time_s = secondsSince(t0);
     return st;
   }
@@ -945,6 +968,7 @@ struct IncrementalSmoother<G>::Impl {
     st->cliques_on_helpers += out.on_helpers;
     st->cliques_reeliminated += out.cliques;
     st->variables_reeliminated += out.variables;
+    st->reelimination_flops += out.flops;
     tree.releaseFreeStorage();       // cliques not recycled hold no memory
     if (relinearize_all || batch) {  // a fresh ordering
       flops_reference = tree.flops;

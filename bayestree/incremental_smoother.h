@@ -184,7 +184,20 @@ struct UpdateStats {
   int refine_iterations = 0;
   bool cancelled = false;
   double time_s = 0.0;
+  /// Where time_s went, by Alg. 6's steps (seconds of the calling thread's wall clock; what
+  /// is left of time_s is the bookkeeping between them). swap_s: kAsync, a finished job's tree
+  /// taken or handed to the catch-up (else 0); prepare_s: steps 1–3 and Alg. 4 step 2 (the new
+  /// factors, Alg. 5, the list to linearise); top_s: step 4, the top re-eliminated (Alg. 4) or
+  /// the new factors folded in; solve_s: step 5, the partial state update (Alg. 7).
+  double swap_s = 0.0, prepare_s = 0.0, top_s = 0.0, solve_s = 0.0;
+  /// Σ F³/3 + F²S + FS² (BayesTree::cliqueFlops) of the cliques step 4 eliminated: the
+  /// re-elimination's dense work, which sets top_s when the top holds large cliques
+  double reelimination_flops = 0.0;
 };
+
+/// Adds s's counts, phase times and flops to `total` (time_s, the caller's to set, and
+/// async_pending, the state after s, excepted).
+void addUpdateCounts(UpdateStats* total, const UpdateStats& s);
 
 /// Memory held by the Bayes tree (bytes of double storage) and the shape of its cliques.
 struct TreeMemory {

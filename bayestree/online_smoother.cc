@@ -12,22 +12,8 @@ namespace arbor {
 namespace {
 
 void addStats(UpdateStats* total, const UpdateStats& s) {
-  total->new_factors += s.new_factors;
-  total->new_variables += s.new_variables;
-  total->cliques_reeliminated += s.cliques_reeliminated;
-  total->variables_reeliminated += s.variables_reeliminated;
-  total->cliques_updated += s.cliques_updated;
-  total->variables_relinearized += s.variables_relinearized;
-  total->indeterminate_cliques += s.indeterminate_cliques;
-  total->cliques_solved += s.cliques_solved;
-  total->cliques_on_helpers += s.cliques_on_helpers;
-  total->refine_iterations += s.refine_iterations;
-  total->batch_reeliminations += s.batch_reeliminations;
-  total->async_started += s.async_started;
-  total->async_swapped += s.async_swapped;
-  total->async_catch_up_started += s.async_catch_up_started;
+  addUpdateCounts(total, s);
   total->async_pending = s.async_pending;  // the state after the last update
-  total->cancelled = total->cancelled || s.cancelled;
   total->time_s += s.time_s;
 }
 

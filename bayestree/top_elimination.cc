@@ -219,6 +219,7 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
     c.parent = sc.parent < 0 ? -1 : ids[sc.parent];
     for (int v : c.frontals) tree->clique_of[v] = ids[k];
     tree->countClique(c);
+    out.flops += BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
   }
   // Recycled cliques keep their storage: hand the largest buffers to the largest new cliques
   // (saves reallocating, and re-faulting, the big ones on every update).

@@ -37,6 +37,7 @@ class TopElimination {
     int variables = 0;      ///< their frontal variables
     int indeterminate = 0;  ///< of them, damped
     int on_helpers = 0;     ///< of them, eliminated by helper threads
+    double flops = 0;       ///< Σ BayesTree::cliqueFlops of the new cliques
   };
 
   /// Orders and eliminates the top into new cliques of `tree` and re-attaches the orphans;

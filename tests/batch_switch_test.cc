@@ -106,6 +106,44 @@ TEST(BatchSwitch, DefaultSwitchesOnLargeTopsOnly) {
   EXPECT_GT(s.factorizationFlops(), 0);
 }
 
+// UpdateStats accounts for an update's work: reelimination_flops is the flops of the cliques
+// re-eliminated (all of the tree's after a batch re-elimination with no fold-in after it; none
+// when nothing was re-eliminated), and the phase times are within time_s.
+template <class G>
+void expectStatsAccountForTheUpdate(unsigned seed) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
+  SmootherOptions o = inlineOptions();
+  o.batch.top_share = 0.2;
+  IncrementalSmoother<G> s(o);
+  int batches = 0, reeliminations = 0, u = 0;
+  replay(by_pose, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
+    ++u;
+    if (st.cliques_reeliminated == 0) {
+      EXPECT_EQ(st.reelimination_flops, 0.0) << "update " << u;
+    } else {
+      ++reeliminations;
+      EXPECT_GT(st.reelimination_flops, 0.0) << "update " << u;
+      EXPECT_GT(st.top_s, 0.0) << "update " << u;
+    }
+    if (st.batch_reeliminations > 0 && st.cliques_updated == 0) {
+      ++batches;
+      EXPECT_NEAR(st.reelimination_flops, sm.factorizationFlops(), 1e-9 * sm.factorizationFlops())
+          << "update " << u;
+    } else {
+      EXPECT_LE(st.reelimination_flops, sm.factorizationFlops() * (1 + 1e-9)) << "update " << u;
+    }
+    EXPECT_EQ(st.swap_s, 0.0);  // inline: nothing to swap
+    for (double phase : {st.prepare_s, st.top_s, st.solve_s}) EXPECT_GE(phase, 0.0);
+    EXPECT_LE(st.swap_s + st.prepare_s + st.top_s + st.solve_s, st.time_s) << "update " << u;
+  });
+  EXPECT_GT(batches, 3);
+  EXPECT_GT(reeliminations, 100);
+}
+
+TEST(BatchSwitch, StatsAccountForTheUpdate2D) { expectStatsAccountForTheUpdate<SE2>(13); }
+TEST(BatchSwitch, StatsAccountForTheUpdate3D) { expectStatsAccountForTheUpdate<SE3>(23); }
+
 TEST(BatchSwitch, RejectsBadOptions) {
   SmootherOptions o;
   o.batch.top_share = 0;

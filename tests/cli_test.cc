@@ -99,6 +99,56 @@ TEST(Cli, GenerateThenBatchJson) {
   std::filesystem::remove(out_file);
 }
 
+// `replay --latency-csv` writes one row per update with where its time went: the phases are
+// within the update's latency, and a row re-eliminates flops exactly when it re-eliminates
+// cliques.
+TEST(Cli, ReplayLatencyCsvSplitsEachUpdateIntoItsPhases) {
+  const std::string file = tempPath("lat.g2o");
+  const std::string csv_file = tempPath("lat.csv");
+  ASSERT_EQ(run("generate manhattan --poses 300 --grid 5 --seed 4 -o " + file).status, 0);
+  const Result r = run("replay " + file + " --relinearize async --json --latency-csv " + csv_file);
+  ASSERT_EQ(r.status, 0) << r.out;
+  std::ifstream csv(csv_file);
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  std::vector<std::string> header;
+  for (std::stringstream ss(line); std::getline(ss, line, ',');) header.push_back(line);
+  const std::vector<std::string> expected = {"step",
+                                             "edges",
+                                             "latency_ms",
+                                             "cliques_reeliminated",
+                                             "variables_relinearized",
+                                             "cliques_updated",
+                                             "cliques_solved",
+                                             "async_job_running",
+                                             "async_swapped",
+                                             "swap_ms",
+                                             "prepare_ms",
+                                             "top_ms",
+                                             "solve_ms",
+                                             "reelimination_mflop"};
+  ASSERT_EQ(header, expected);
+  int rows = 0, reeliminating = 0;
+  while (std::getline(csv, line)) {
+    std::vector<double> v;
+    for (std::stringstream ss(line); std::getline(ss, line, ',');) v.push_back(std::stod(line));
+    ASSERT_EQ(v.size(), expected.size()) << "row " << rows + 1;
+    ++rows;
+    const double latency = v[2], phases = v[9] + v[10] + v[11] + v[12];
+    for (size_t k = 9; k < 13; ++k) EXPECT_GE(v[k], 0.0) << "row " << rows << " " << header[k];
+    EXPECT_LE(phases, latency * (1 + 1e-5) + 1e-6) << "row " << rows;
+    EXPECT_EQ(v[3] > 0, v[13] > 0) << "row " << rows;
+    if (v[7] == 0 && v[8] == 0) {  // no job around: nothing swapped or handed over
+      EXPECT_EQ(v[9], 0.0) << "row " << rows;
+    }
+    reeliminating += v[3] > 0 ? 1 : 0;
+  }
+  EXPECT_EQ(rows, nlohmann::json::parse(r.out)["updates"].get<int>());
+  EXPECT_GT(reeliminating, 0);
+  std::filesystem::remove(file);
+  std::filesystem::remove(csv_file);
+}
+
 // Every row of the batch-solver table runs as `arbor batch --solver NAME` on a small 3D graph
 // of data/, lowers F from its start, and reports a certificate exactly when the row certifies;
 // --help describes every row.

@@ -66,6 +66,11 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     result.rows.back().batch_reeliminations = s.batch_reeliminations;
     result.rows.back().async_swapped = s.async_swapped;
     result.rows.back().async_job_running = s.async_pending && !s.async_swapped ? 1 : 0;
+    result.rows.back().swap_ms = 1e3 * s.swap_s;
+    result.rows.back().prepare_ms = 1e3 * s.prepare_s;
+    result.rows.back().top_ms = 1e3 * s.top_s;
+    result.rows.back().solve_ms = 1e3 * s.solve_s;
+    result.rows.back().reelimination_mflop = 1e-6 * s.reelimination_flops;
     result.rows.back().peak_rss_kb = peakRssKb();
     if (hooks.after_update) hooks.after_update(smoother, result.rows.back());
   }
@@ -144,12 +149,15 @@ void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows
   std::ofstream csv(path);
   if (!csv) throw std::runtime_error("cannot write " + path);
   csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated,"
-         "cliques_solved,async_job_running,async_swapped\n";
+         "cliques_solved,async_job_running,async_swapped,swap_ms,prepare_ms,top_ms,solve_ms,"
+         "reelimination_mflop\n";
   csv << std::setprecision(6);
   for (const auto& r : rows) {
     csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << "," << r.cliques_reeliminated
         << "," << r.variables_relinearized << "," << r.cliques_updated << "," << r.cliques_solved
-        << "," << r.async_job_running << "," << r.async_swapped << "\n";
+        << "," << r.async_job_running << "," << r.async_swapped << "," << r.swap_ms << ","
+        << r.prepare_ms << "," << r.top_ms << "," << r.solve_ms << "," << r.reelimination_mflop
+        << "\n";
   }
   if (!csv) throw std::runtime_error("error writing " + path);
 }

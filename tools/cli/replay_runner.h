@@ -44,6 +44,9 @@ struct UpdateRow {
   /// --relinearize async: 1 when a relinearisation job (or its catch-up) ran during the update
   /// (in flight before and after it, or started by it), and when the update swapped one in
   int async_job_running = 0, async_swapped = 0;
+  /// Where the update's time went (UpdateStats: swap_s, prepare_s, top_s, solve_s), ms, and
+  /// the flops of the cliques it re-eliminated (UpdateStats::reelimination_flops), MFlop
+  double swap_ms = 0, prepare_ms = 0, top_ms = 0, solve_ms = 0, reelimination_mflop = 0;
   long peak_rss_kb = 0;  ///< the process's peak RSS after the update (cli/peak_rss.h)
 };
 
