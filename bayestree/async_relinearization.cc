@@ -16,13 +16,11 @@ double threadCpuSeconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
-}  // namespace
-
+// One elimination of the whole graph of `s` at Θ = theta (s.theta's place in the listing).
 template <class G>
-RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s) {
-  const double cpu0 = threadCpuSeconds();
+RelinearizedTree<G> eliminateAt(const RelinearizationSnapshot<G>& s, const std::vector<G>& theta) {
   RelinearizedTree<G> out;
-  const int n = static_cast<int>(s.theta.size());
+  const int n = static_cast<int>(theta.size());
   UpdateThreads threads(1);
   for (int v = 0; v < n; ++v) {
     out.tree.addVariable();
@@ -45,13 +43,59 @@ RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s) {
   // orphans. Then Alg. 7 over every clique.
   const std::vector<int> no_orphans;
   const typename TopElimination<G>::Input in{
-      variables, no_orphans, nullptr, all_factors, s.theta, s.fixed, s.nested_dissection_min};
+      variables, no_orphans, nullptr, all_factors, theta, s.fixed, s.nested_dissection_min};
   TopElimination<G> elimination;
   const auto eliminated = elimination.run(in, &out.tree, &out.factors, &threads);
   out.cliques = eliminated.cliques;
   out.indeterminate = eliminated.indeterminate;
   out.tree.releaseFreeStorage();
   out.solve.run(&out.tree, /*full=*/true, 0.0, &out.delta, &threads);
+  return out;
+}
+
+// F = Σ w eᵀΩe of the snapshot's factors at `theta`.
+template <class G>
+double weightedObjective(const RelinearizationSnapshot<G>& s, const std::vector<G>& theta) {
+  double f = 0;
+  for (const auto& e : s.factors) f += e.inlierWeight() * e.cost(theta);
+  return f;
+}
+
+}  // namespace
+
+template <class G>
+RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s) {
+  const double cpu0 = threadCpuSeconds();
+  RelinearizedTree<G> out = eliminateAt(s, s.theta);
+  if (s.iterations > 1) {
+    // Gauss–Newton on the snapshot (relinearizeAll's iteration, on the copy): step, and
+    // re-eliminate at the new Θ while F falls by more than the tolerance.
+    std::vector<G> theta = s.theta, next;
+    double F = weightedObjective(s, theta);
+    for (int it = 1; it < s.iterations; ++it) {
+      double scale = 1.0, F_next = F;
+      bool lower = false;
+      for (int halving = 0; halving <= 5 && !lower; ++halving, scale *= 0.5) {
+        next = theta;
+        for (size_t v = 0; v < next.size(); ++v) {
+          if (s.fixed[v]) continue;
+          next[v] = theta[v].retract(scale * out.delta[v]);
+          next[v].normalize();
+        }
+        F_next = weightedObjective(s, next);
+        lower = F_next < F;
+      }
+      if (!lower) break;  // no step lowers F: the tree at Θ stays
+      const bool settled = F - F_next <= s.relative_tolerance * F;
+      theta.swap(next);
+      F = F_next;
+      out = RelinearizedTree<G>();  // one tree at a time
+      out = eliminateAt(s, theta);
+      out.iterations = it + 1;
+      out.theta = theta;
+      if (settled) break;
+    }
+  }
   out.cpu_seconds = threadCpuSeconds() - cpu0;
   return out;
 }

@@ -30,6 +30,11 @@ struct RelinearizationSnapshot {
   std::vector<G> theta_before;     ///< Θ_M before ⊕ Δ_M, parallel to `relinearized`
   int update = 0;                  ///< the update that took it (the smoother's count)
   int nested_dissection_min = 0;   ///< SmootherOptions, resolved for G
+  /// AsyncRelinearizationOptions::job_iterations: at most this many eliminations, each after a
+  /// Gauss–Newton step from the one before; fewer once F's relative decrease is below
+  /// `relative_tolerance` or a halved step no longer lowers it.
+  int iterations = 1;
+  double relative_tolerance = 1e-6;
 };
 
 /// What it gives: the whole graph's Bayes tree at the snapshot's Θ, its linearisations and the
@@ -43,11 +48,18 @@ struct RelinearizedTree {
   std::vector<typename G::Tangent> delta;
   int cliques = 0, indeterminate = 0;
   double cpu_seconds = 0;  ///< of the thread that ran it
+  /// The eliminations run (snapshot.iterations at most). From the second on, the tree,
+  /// linearisations and Δ are at `theta` (every pose stepped), not at the snapshot's Θ.
+  int iterations = 1;
+  std::vector<G> theta;  ///< the linearisation point when iterations > 1 (else empty)
 };
 
 /// Linearises every factor of `s` at s.theta, orders all its non-fixed poses afresh (CCOLAMD, or
 /// nested dissection from s.nested_dissection_min), eliminates them into a new tree and solves
-/// every clique. One thread; reads nothing but `s`.
+/// every clique. With s.iterations k > 1, then up to k − 1 times: Θ ← Θ ⊕ Δ (Δ halved while F =
+/// Σ w eᵀΩe rises, at most five times, as relinearizeAll), and the same on the new Θ; it stops
+/// early when F's relative decrease falls below s.relative_tolerance or no halved step lowers
+/// F. One thread; reads nothing but `s`.
 template <class G>
 RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s);
 

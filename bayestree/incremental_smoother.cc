@@ -110,6 +110,7 @@ void validate(const SmootherOptions& o) {
     bad("batch.constrain_last_max", o.batch.constrain_last_max, "≥ 1");
   if (o.async.min_variables < 1) bad("async.min_variables", o.async.min_variables, "≥ 1");
   if (!(o.async.reorder_decay >= 1)) bad("async.reorder_decay", o.async.reorder_decay, "≥ 1");
+  if (o.async.job_iterations < 1) bad("async.job_iterations", o.async.job_iterations, "≥ 1");
   if (o.async.swap_after_updates < 0)
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
@@ -490,6 +491,8 @@ struct IncrementalSmoother<G>::Impl {
     }
     s.update = update_count;
     s.nested_dissection_min = nestedDissectionMin();
+    s.iterations = opt.async.job_iterations;
+    s.relative_tolerance = opt.finalize_relative_tolerance;
     moved_since_snapshot.clear();
     reweighted_since_snapshot.clear();
     released_since_snapshot.clear();
@@ -529,9 +532,19 @@ struct IncrementalSmoother<G>::Impl {
     b.n = static_cast<int>(snap.theta.size());
     b.f = static_cast<int>(snap.factors.size());
     b.fixed = std::move(snap.fixed);
-    b.theta = std::move(snap.theta);
-    b.relinearized = std::move(snap.relinearized);
-    b.theta_before = std::move(snap.theta_before);
+    if (job.iterations > 1) {
+      // Every pose stepped: Θ before is the smoother's at the snapshot (M's before Θ_M ⊕ Δ_M).
+      std::vector<G> before = std::move(snap.theta);
+      for (size_t k = 0; k < snap.relinearized.size(); ++k)
+        before[static_cast<size_t>(snap.relinearized[k])] = snap.theta_before[k];
+      b.theta = std::move(job.theta);
+      b.all_relinearized = true;
+      b.theta_before = std::move(before);
+    } else {
+      b.theta = std::move(snap.theta);
+      b.relinearized = std::move(snap.relinearized);
+      b.theta_before = std::move(snap.theta_before);
+    }
     b.tree = std::move(job.tree);
     b.factors = std::move(job.factors);
     b.solve = std::move(job.solve);

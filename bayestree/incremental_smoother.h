@@ -103,6 +103,13 @@ struct AsyncRelinearizationOptions {
   /// (docs/benchmarks.md, "Re-ordering sooner in the background": 1.5 against 2 lowers the
   /// largest update and the peak memory of a 50,000-pose world, the shared sets within noise).
   double reorder_decay = 1.5;
+  /// The job's Gauss–Newton iterations on its snapshot (relinearizeSnapshot): 1 eliminates the
+  /// graph once, at the snapshot's Θ (Θ_M ⊕ Δ_M); k > 1 steps every pose and re-eliminates up
+  /// to k − 1 more times while F falls by more than SmootherOptions::finalize_relative_tolerance
+  /// (as relinearizeAll does), and the swap takes the tree at the last Θ. Longer jobs, fewer of
+  /// them: on sphere_bignoise 5 about halves the updates above 3 ms (docs/benchmarks.md,
+  /// "Asynchronous relinearisation").
+  int job_iterations = 1;
 };
 
 struct SmootherOptions {

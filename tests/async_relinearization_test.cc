@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "arbor/bayestree/async_relinearization.h"
 #include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/tests/random_walks.h"
 
@@ -271,16 +272,19 @@ TEST(AsyncRelinearization, CopiedOrDestroyedMidJob) {
 }
 
 // Without the hooks the swap comes whenever the job is done: every update keeps the tree's
-// invariants and every edge, and the final relinearisation ends where the inline one does.
-TEST(AsyncRelinearization, FreeRunningEndsAtTheInlineOptimum) {
-  std::vector<SE2> truth;
-  const auto by_pose = randomWalk<SE2>(300, 60, 71, &truth);
+// invariants and every edge, and the final relinearisation ends where the inline one does
+// (also with jobs that iterate Gauss–Newton on their snapshot).
+template <class G>
+void expectFreeRunningEndsAtTheInlineOptimum(unsigned seed, int job_iterations) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
   SmootherOptions o;
   o.relinearize = RelinearizationMode::kAsync;
   o.async.min_variables = 1;
-  IncrementalSmoother2 in, as(o);
-  in.addFixedPose(SE2());
-  as.addFixedPose(SE2());
+  o.async.job_iterations = job_iterations;
+  IncrementalSmoother<G> in, as(o);
+  in.addFixedPose(G());
+  as.addFixedPose(G());
   int starts = 0;
   for (size_t k = 1; k < by_pose.size(); ++k) {
     const auto& odo = by_pose[k].front();
@@ -300,6 +304,103 @@ TEST(AsyncRelinearization, FreeRunningEndsAtTheInlineOptimum) {
   as.relinearizeAll();
   EXPECT_FALSE(as.relinearizationPending());
   EXPECT_NEAR(as.objective(), in.objective(), 1e-5 * in.objective());
+}
+
+TEST(AsyncRelinearization, FreeRunningEndsAtTheInlineOptimum) {
+  expectFreeRunningEndsAtTheInlineOptimum<SE2>(71, 1);
+  expectFreeRunningEndsAtTheInlineOptimum<SE2>(72, 4);
+  expectFreeRunningEndsAtTheInlineOptimum<SE3>(73, 4);
+}
+
+// AsyncRelinearizationOptions::job_iterations: the job steps every pose by Gauss–Newton and
+// re-eliminates; the tree and Δ it hands over are those of one elimination at its last Θ, whose
+// F is no higher than one full step from the snapshot's; one iteration is the plain job.
+template <class G>
+void expectJobIterationsStepTheWholeGraph(unsigned seed) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(150, 40, seed, &truth);
+  bayestree::RelinearizationSnapshot<G> s;
+  s.theta.push_back(G());
+  s.fixed.push_back(1);
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    s.theta.push_back(s.theta[odo.i].compose(odo.measurement));  // odometry: far from optimal
+    s.fixed.push_back(0);
+    for (const auto& e : by_pose[k]) s.factors.push_back(e);
+  }
+  s.nested_dissection_min = 1 << 30;
+  const auto F = [&](const std::vector<G>& theta) {
+    double f = 0;
+    for (const auto& e : s.factors) f += e.cost(theta);
+    return f;
+  };
+  const auto stepped = [&](const std::vector<G>& theta, const std::vector<typename G::Tangent>& d) {
+    std::vector<G> out = theta;
+    for (size_t v = 1; v < out.size(); ++v) out[v] = theta[v].retract(d[v]);
+    return out;
+  };
+  const auto once = bayestree::relinearizeSnapshot(s);
+  EXPECT_EQ(once.iterations, 1);
+  EXPECT_TRUE(once.theta.empty());
+  s.iterations = 4;
+  const auto iterated = bayestree::relinearizeSnapshot(s);
+  ASSERT_GE(iterated.iterations, 2);
+  EXPECT_LE(iterated.iterations, 4);
+  ASSERT_EQ(iterated.theta.size(), s.theta.size());
+  EXPECT_LE(F(iterated.theta), F(stepped(s.theta, once.delta)) * (1 + 1e-12));
+  EXPECT_LT(F(stepped(iterated.theta, iterated.delta)), F(s.theta));
+  // Its Δ is one elimination's at its Θ.
+  bayestree::RelinearizationSnapshot<G> at_theta = s;
+  at_theta.theta = iterated.theta;
+  at_theta.iterations = 1;
+  const auto again = bayestree::relinearizeSnapshot(at_theta);
+  for (size_t v = 0; v < s.theta.size(); ++v)
+    ASSERT_LT((again.delta[v] - iterated.delta[v]).template lpNorm<Eigen::Infinity>(), 1e-9)
+        << "pose " << v;
+  EXPECT_EQ(iterated.cliques, again.cliques);
+}
+
+// After a swap of an iterated job's tree, the smoother's Δ is the Gauss–Newton step of its
+// factors at its linearisation point (the tree was linearised at the job's last Θ, which the
+// smoother took), as after every update of the inline path.
+template <class G>
+void expectIteratedSwapIsTheStepAtItsPoint(unsigned seed) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
+  SmootherOptions o = asyncOptions(true, 0);
+  o.async.job_iterations = 4;
+  o.async.catch_up = AsyncCatchUp::kOnSwap;
+  IncrementalSmoother<G> as(o);
+  as.addFixedPose(G());
+  int checked = 0;
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    as.addPose(as.estimate(odo.i).compose(odo.measurement));
+    for (const auto& e : by_pose[k]) as.addFactor(e);
+    const UpdateStats st = as.update();
+    if (!st.async_swapped || as.relinearizationPending()) continue;
+    bayestree::RelinearizationSnapshot<G> here;
+    here.theta = as.linearizationPoint();
+    for (int v = 0; v < as.numPoses(); ++v) here.fixed.push_back(as.isFixed(v) ? 1 : 0);
+    here.factors = as.factors();
+    here.nested_dissection_min = 1 << 30;
+    const auto step = bayestree::relinearizeSnapshot(here);
+    for (int v = 0; v < as.numPoses(); ++v)
+      ASSERT_LT((step.delta[v] - as.delta()[v]).template lpNorm<Eigen::Infinity>(), 1e-8)
+          << "update " << k << ", pose " << v;
+    ++checked;
+  }
+  EXPECT_GT(checked, 3);
+}
+
+TEST(AsyncRelinearization, IteratedSwapIsTheStepAtItsPoint) {
+  expectIteratedSwapIsTheStepAtItsPoint<SE2>(83);
+  expectIteratedSwapIsTheStepAtItsPoint<SE3>(84);
+}
+
+TEST(AsyncRelinearization, JobIterationsStepTheWholeGraph) {
+  expectJobIterationsStepTheWholeGraph<SE2>(81);
+  expectJobIterationsStepTheWholeGraph<SE3>(82);
 }
 
 // AsyncRelinearizationOptions::reorder_in_background: a decayed ordering is re-ordered by a job

@@ -119,7 +119,10 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "async-reorder-decay",
       po::value<double>()->default_value(d.async.reorder_decay, text(d.async.reorder_decay)),
       "with --relinearize async and --async-reorder background: ask for a re-ordering job at "
-      "this decay (>= 1; at most --reorder-decay, which stays the bound for re-ordering inline)");
+      "this decay (>= 1; at most --reorder-decay, which stays the bound for re-ordering inline)")(
+      "async-job-iterations", po::value<int>()->default_value(d.async.job_iterations),
+      "with --relinearize async: Gauss-Newton iterations of each background job on its snapshot "
+      "(1: one elimination at the relinearised point; more: fewer, longer jobs)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -180,6 +183,8 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
       !isSecondChoice(vm, "async-reorder", "background", "inline", !o.async.reorder_in_background);
   o.async.reorder_decay = valueOf(vm, "async-reorder-decay", o.async.reorder_decay);
   require(o.async.reorder_decay >= 1, "async-reorder-decay", ">= 1", o.async.reorder_decay);
+  o.async.job_iterations = valueOf(vm, "async-job-iterations", o.async.job_iterations);
+  require(o.async.job_iterations >= 1, "async-job-iterations", ">= 1", o.async.job_iterations);
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
@@ -218,6 +223,8 @@ std::string describeSmoother(const SmootherOptions& o) {
       out << ", re-ordering inline";
     else if (o.async.reorder_decay != d.async.reorder_decay)
       out << ", re-ordering job at decay " << o.async.reorder_decay;
+    if (o.async.job_iterations != d.async.job_iterations)
+      out << ", " << o.async.job_iterations << " Gauss-Newton iterations a job";
   }
   if (o.finalize_relative_tolerance != d.finalize_relative_tolerance ||
       o.finalize_max_iterations != d.finalize_max_iterations) {
