@@ -137,13 +137,14 @@ TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
 
 TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
   const std::vector<std::string> args = {
-      "--relinearize",   "async",  "--async-min-variables", "10",
-      "--async-reorder", "inline", "--async-reorder-decay", "1.25"};
+      "--relinearize",         "async", "--async-min-variables",  "10", "--async-reorder", "inline",
+      "--async-reorder-decay", "1.25",  "--async-job-iterations", "5"};
   for (const SmootherOptions& o : {replaySmoother(args), serveSmoother(args)}) {
     EXPECT_EQ(o.relinearize, RelinearizationMode::kAsync);
     EXPECT_EQ(o.async.min_variables, 10);
     EXPECT_FALSE(o.async.reorder_in_background);
     EXPECT_EQ(o.async.reorder_decay, 1.25);
+    EXPECT_EQ(o.async.job_iterations, 5);
   }
   EXPECT_THROW(replaySmoother({"--relinearize", "async", "--async-reorder-decay", "0.9"}),
                UsageError);
@@ -183,6 +184,7 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
       {"--relinearize", "sometimes"},
       {"--async-min-variables", "0"},
       {"--async-reorder", "later"},
+      {"--async-job-iterations", "0"},
   };
   for (const auto& [flag, value] : bad) {
     for (const bool serve : {false, true}) {
