@@ -56,6 +56,11 @@ OnlineSmoother<G>::OnlineSmoother(OnlineSmootherOptions<G> options)
     : options_(options), smoother_(options.smoother) {
   if (!allFinite(options_.gauge))
     throw std::invalid_argument("OnlineSmoother: gauge pose not finite");
+  // The robust layer judges each closure against the estimate; with async relinearisation that
+  // lags the background job and the robust replays end wrecked (docs/design.md).
+  if (options_.robust && options_.smoother.relinearize == RelinearizationMode::kAsync)
+    throw std::invalid_argument(
+        "OnlineSmoother: robust smoothing needs inline relinearisation (not async)");
   if (options_.robust) gnc_.emplace(*options_.robust);  // throws on bad options
 }
 

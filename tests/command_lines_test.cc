@@ -135,6 +135,27 @@ TEST(SmootherFlags, ServeTakesTheFlagsItUsedToLack) {
   EXPECT_EQ(o.relinearize_skip, SmootherOptions{}.relinearize_skip);
 }
 
+// The robust layer judges closures against the estimate, which with async lags the job: the
+// combination is refused naming both flags, in replay and serve alike.
+TEST(SmootherFlags, RobustWithAsyncRelinearizationIsRefused) {
+  for (const bool serve : {false, true}) {
+    try {
+      if (serve) {
+        parseServeCommandLine({"--robust", "--relinearize", "async"});
+      } else {
+        parseReplayCommandLine({"graph.g2o", "--robust", "--relinearize", "async"});
+      }
+      ADD_FAILURE() << (serve ? "serve" : "replay") << " accepted --robust with async";
+    } catch (const UsageError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("--robust"), std::string::npos) << what;
+      EXPECT_NE(what.find("--relinearize inline"), std::string::npos) << what;
+    }
+  }
+  EXPECT_NO_THROW(parseReplayCommandLine({"graph.g2o", "--robust"}));
+  EXPECT_NO_THROW(parseReplayCommandLine({"graph.g2o", "--relinearize", "async"}));
+}
+
 TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
   const std::vector<std::string> args = {
       "--relinearize",         "async", "--async-min-variables",  "10", "--async-reorder", "inline",

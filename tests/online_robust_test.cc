@@ -223,6 +223,16 @@ void cleanEqualsPlain() {
   EXPECT_EQ(robust.smoother().objective(), plain.smoother().objective());
 }
 
+// Robust smoothing with async relinearisation is refused at construction (the closures would
+// be judged against an estimate that lags the background job).
+TEST(OnlineRobust, AsyncRelinearizationRefused) {
+  OnlineSmootherOptions<SE2> options = robustOptions<SE2>();
+  options.smoother.relinearize = RelinearizationMode::kAsync;
+  EXPECT_THROW(OnlineSmoother<SE2>{options}, std::invalid_argument);
+  options.robust.reset();
+  EXPECT_NO_THROW(OnlineSmoother<SE2>{options});
+}
+
 TEST(OnlineRobust, CleanEqualsPlain2D) { cleanEqualsPlain<SE2>(); }
 TEST(OnlineRobust, CleanEqualsPlain3D) { cleanEqualsPlain<SE3>(); }
 

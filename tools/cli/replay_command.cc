@@ -264,6 +264,7 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   if (!run.edge_choices.empty() && !run.robust.robust)
     throw UsageError("--edge-choices needs --robust");
   readOnlineRobustFlags(vm, run.robust.robust, &run.online);
+  requireInlineWithRobust(run.robust.robust, run.smoother);
   try {
     run.format = parseTrajectoryFormat(format);
   } catch (const std::invalid_argument& e) {

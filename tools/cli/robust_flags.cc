@@ -128,4 +128,11 @@ void readRobustFlags(const std::string& kernel, const std::string& threshold, Gn
   gnc->estimate_scale = flags.estimate_scale;
 }
 
+void requireInlineWithRobust(bool robust_on, const SmootherOptions& smoother) {
+  if (robust_on && smoother.relinearize == RelinearizationMode::kAsync)
+    throw UsageError(
+        "--robust needs --relinearize inline: with async the loop closures are judged against an "
+        "estimate that lags the background job (docs/design.md, \"Online robust smoothing\")");
+}
+
 }  // namespace arbor::cli

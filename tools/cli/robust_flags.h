@@ -7,6 +7,7 @@
 
 #include <boost/program_options.hpp>
 
+#include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/gnc_solver.h"
 #include "arbor/core/robust_kernel.h"
@@ -52,5 +53,10 @@ extern const char* const kInlierThresholdHelp;
 /// threshold and estimate_scale, with readRobustFlags' checks (auto allowed; online, which
 /// needs the graph, refused).
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc);
+
+/// --robust with --relinearize async is refused (UsageError): the online robust layer judges each
+/// loop closure against an estimate that, with async, lags the background job, and its replays
+/// end wrecked (docs/design.md, "Online robust smoothing").
+void requireInlineWithRobust(bool robust_on, const SmootherOptions& smoother);
 
 }  // namespace arbor::cli

@@ -189,6 +189,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   line.robust = readRobustFlags(vm, /*allow_auto=*/false);
   RobustOptions robust;
   readOnlineRobustFlags(vm, line.robust.robust, &robust);
+  requireInlineWithRobust(line.robust.robust, options.smoother);
   if (line.robust.robust) {
     robust.kernel = line.robust.kernel;
     robust.threshold = line.robust.threshold;
