@@ -5,6 +5,7 @@
 #pragma once
 
 #include <array>
+#include <deque>
 #include <functional>
 #include <vector>
 
@@ -41,8 +42,10 @@ class LinearizedFactors {
   /// of the elimination altogether — no fill, no larger cliques — until it is re-admitted
   /// (docs/design.md, "Online robust smoothing").
   std::vector<char> attached;
-  std::vector<LinearFactor> lin;  ///< factor → its linearisation
-  std::vector<int> stamp;         ///< factor → last update that listed it
+  /// factor → its linearisation; a deque, so adding a factor never moves the others (a vector
+  /// doubling would copy every linearisation in one update: 7 ms at 8192 SE(3) factors)
+  std::deque<LinearFactor> lin;
+  std::vector<int> stamp;  ///< factor → last update that listed it
 
   int numFactors() const { return static_cast<int>(factors.size()); }
   /// A new variable (no factors yet).
