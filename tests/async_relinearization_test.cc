@@ -362,22 +362,37 @@ void expectJobIterationsStepTheWholeGraph(unsigned seed) {
 
 // After a swap of an iterated job's tree, the smoother's Δ is the Gauss–Newton step of its
 // factors at its linearisation point (the tree was linearised at the job's last Θ, which the
-// smoother took), as after every update of the inline path.
+// smoother took), as after every update of the inline path; also with factors reweighted and
+// poses moved while the job and its catch-up are in flight.
 template <class G>
-void expectIteratedSwapIsTheStepAtItsPoint(unsigned seed) {
+void expectIteratedSwapIsTheStepAtItsPoint(unsigned seed, AsyncCatchUp catch_up, bool changes) {
   std::vector<G> truth;
   const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
-  SmootherOptions o = asyncOptions(true, 0);
+  SmootherOptions o = asyncOptions(true, changes ? 4 : 0);
   o.async.job_iterations = 4;
-  o.async.catch_up = AsyncCatchUp::kOnSwap;
+  o.async.catch_up = catch_up;
   IncrementalSmoother<G> as(o);
   as.addFixedPose(G());
-  int checked = 0;
+  std::mt19937 rng(seed);
+  int checked = 0, reweighted = 0, moved = 0;
   for (size_t k = 1; k < by_pose.size(); ++k) {
     const auto& odo = by_pose[k].front();
     as.addPose(as.estimate(odo.i).compose(odo.measurement));
     for (const auto& e : by_pose[k]) as.addFactor(e);
+    if (changes && as.relinearizationPending()) {
+      const int f = std::uniform_int_distribution<int>(0, as.numFactors() - 1)(rng);
+      as.setFactorWeight(f, std::uniform_real_distribution<double>(0.2, 0.9)(rng));
+      ++reweighted;
+      if (k % 3 == 0) {  // the last poses, rigidly
+        std::vector<int> last;
+        for (int v = static_cast<int>(k) - 15; v <= static_cast<int>(k); ++v)
+          if (v > 0) last.push_back(v);
+        as.transformPoses(last, G::Exp(G::Tangent::Constant(0.002)));
+        ++moved;
+      }
+    }
     const UpdateStats st = as.update();
+    ASSERT_NO_THROW(as.checkInvariants()) << "update " << k;
     if (!st.async_swapped || as.relinearizationPending()) continue;
     bayestree::RelinearizationSnapshot<G> here;
     here.theta = as.linearizationPoint();
@@ -391,11 +406,18 @@ void expectIteratedSwapIsTheStepAtItsPoint(unsigned seed) {
     ++checked;
   }
   EXPECT_GT(checked, 3);
+  if (changes) {
+    EXPECT_GT(reweighted, 5);
+    EXPECT_GT(moved, 2);
+  }
 }
 
 TEST(AsyncRelinearization, IteratedSwapIsTheStepAtItsPoint) {
-  expectIteratedSwapIsTheStepAtItsPoint<SE2>(83);
-  expectIteratedSwapIsTheStepAtItsPoint<SE3>(84);
+  expectIteratedSwapIsTheStepAtItsPoint<SE2>(83, AsyncCatchUp::kOnSwap, false);
+  expectIteratedSwapIsTheStepAtItsPoint<SE3>(84, AsyncCatchUp::kOnSwap, false);
+  expectIteratedSwapIsTheStepAtItsPoint<SE2>(85, AsyncCatchUp::kInBackground, true);
+  expectIteratedSwapIsTheStepAtItsPoint<SE3>(86, AsyncCatchUp::kInBackground, true);
+  expectIteratedSwapIsTheStepAtItsPoint<SE3>(87, AsyncCatchUp::kOnSwap, true);
 }
 
 TEST(AsyncRelinearization, JobIterationsStepTheWholeGraph) {
