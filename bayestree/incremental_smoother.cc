@@ -111,6 +111,10 @@ void validate(const SmootherOptions& o) {
   if (o.async.min_variables < 1) bad("async.min_variables", o.async.min_variables, "≥ 1");
   if (!(o.async.reorder_decay >= 1)) bad("async.reorder_decay", o.async.reorder_decay, "≥ 1");
   if (o.async.job_iterations < 1) bad("async.job_iterations", o.async.job_iterations, "≥ 1");
+  if (o.async.catch_up_max_factors < 0)
+    bad("async.catch_up_max_factors", o.async.catch_up_max_factors, "≥ 0");
+  if (o.async.catch_up_max_rounds < 1)
+    bad("async.catch_up_max_rounds", o.async.catch_up_max_rounds, "≥ 1");
   if (o.async.swap_after_updates < 0)
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
@@ -203,7 +207,7 @@ struct IncrementalSmoother<G>::Impl {
   // job's tree up to the update that started it), that update's poses and factors, Θ then, and
   // |M| of the job's snapshot.
   bayestree::BackgroundJob<Impl> catch_up;
-  int catch_up_poses = 0, catch_up_factors = 0, catch_up_relinearized = 0;
+  int catch_up_poses = 0, catch_up_factors = 0, catch_up_relinearized = 0, catch_up_rounds = 0;
   std::vector<G> theta_at_catch_up;
   int pass_first_factor = 0;  // the first factor of the current pass (the snapshot's end)
   bool second_core_busy = false;
@@ -416,7 +420,12 @@ struct IncrementalSmoother<G>::Impl {
         swapped = swapInRelinearized();
       }
     } else if (catch_up.pending() && catchUpSwapDue()) {
-      swapped = swapInCaughtUp();
+      if (catchUpAgain()) {
+        restartCatchUp();
+        caught_up = true;
+      } else {
+        swapped = swapInCaughtUp();
+      }
     }
     const double swap_s = swapped >= 0 || caught_up ? secondsSince(t_swap) : 0.0;
     StepOptions pass;
@@ -689,6 +698,27 @@ struct IncrementalSmoother<G>::Impl {
     bayestree::RelinearizedTree<G> job;
     async.take(&snap, &job);
     catch_up_relinearized = static_cast<int>(snap.relinearized.size());
+    catch_up_rounds = 1;
+    launchCatchUp(baseOfJob(std::move(snap), std::move(job)));
+  }
+
+  // AsyncRelinearizationOptions::catch_up_max_factors: a finished catch-up whose swap would
+  // fold in more than that many factors hands its tree to another catch-up instead, which folds
+  // them in the background too (at most catch_up_max_rounds catch-ups a job).
+  bool catchUpAgain() const {
+    const int arrived = factors.numFactors() + static_cast<int>(queued.size()) - catch_up_factors;
+    return opt.async.catch_up_max_factors > 0 && arrived > opt.async.catch_up_max_factors &&
+           catch_up_rounds < opt.async.catch_up_max_rounds && backgroundJobsAllowed();
+  }
+  void restartCatchUp() {
+    ++catch_up_rounds;
+    launchCatchUp(baseOfCatchUp());
+  }
+
+  // The catch-up on `base` (a job's tree, or a finished catch-up's): a copy of the smoother's
+  // state adopts it with what came since the base's start — this update's queue excepted — and
+  // one ordinary pass folds that in on the background thread.
+  void launchCatchUp(SwapBase&& base) {
     SmootherOptions shadow_options = opt;
     shadow_options.relinearize = RelinearizationMode::kInline;
     shadow_options.threads = 1;
@@ -702,7 +732,7 @@ struct IncrementalSmoother<G>::Impl {
     shadow->num_variables = num_variables;
     shadow->stamp = stamp;
     shadow->to_touch = to_touch;
-    shadow->adopt(baseOfJob(std::move(snap), std::move(job)), *this, /*with_queued=*/false);
+    shadow->adopt(std::move(base), *this, /*with_queued=*/false);
     // A pose with no factor among the shadow's (its edges wait in this update's queue) is not
     // a variable there yet: held fixed, it is new to the tree at the swap.
     std::vector<char> has_factor(static_cast<size_t>(n), 0);
@@ -743,6 +773,15 @@ struct IncrementalSmoother<G>::Impl {
   // base: every pose's Θ the shadow's, the smoother's Θ then in theta_at_catch_up). Returns |M|
   // of the job's snapshot.
   int swapInCaughtUp() {
+    adopt(baseOfCatchUp(), *this, /*with_queued=*/true);
+    clearSinceSnapshot();
+    theta_at_catch_up.clear();
+    return catch_up_relinearized;
+  }
+
+  // The finished catch-up's tree as a base (its Θ for every pose; the smoother's Θ when it
+  // started in theta_at_catch_up, moved out).
+  SwapBase baseOfCatchUp() {
     std::unique_ptr<Impl> shadow = catch_up.take();
     SwapBase b;
     b.n = catch_up_poses;
@@ -755,10 +794,7 @@ struct IncrementalSmoother<G>::Impl {
     b.factors = std::move(shadow->factors);
     b.solve = std::move(shadow->partial_solve);
     b.delta = std::move(shadow->delta);
-    adopt(std::move(b), *this, /*with_queued=*/true);
-    clearSinceSnapshot();
-    theta_at_catch_up.clear();
-    return catch_up_relinearized;
+    return b;
   }
 
   // One pass of IJRR 2012 Alg. 6, "One step of the iSAM2 algorithm".

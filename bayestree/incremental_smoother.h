@@ -110,6 +110,11 @@ struct AsyncRelinearizationOptions {
   /// them: on sphere_bignoise 5 about halves the updates above 3 ms (docs/benchmarks.md,
   /// "Asynchronous relinearisation").
   int job_iterations = 1;
+  /// AsyncCatchUp::kInBackground: 0, off; m > 0: a finished catch-up whose swap would fold in
+  /// more than m factors (those that arrived while it ran) hands its tree to another catch-up,
+  /// up to catch_up_max_rounds catch-ups a job, so the swap's update folds in less.
+  int catch_up_max_factors = 0;
+  int catch_up_max_rounds = 3;
 };
 
 struct SmootherOptions {

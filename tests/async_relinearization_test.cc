@@ -70,6 +70,7 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
   as.addFixedPose(G());
   std::mt19937 rng(seed);
   int swaps = 0, starts = 0, compared = 0, reweighted = 0, moved = 0, zeroed = 0, readmitted = 0;
+  int catch_ups = 0;
   std::vector<int> at_zero;
   bool consistent = true;  // no job in flight since the last swap
   for (size_t k = 1; k < by_pose.size(); ++k) {
@@ -128,6 +129,7 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
     ASSERT_EQ(as.numFactors(), in.numFactors()) << "update " << k;
     swaps += st.async_swapped;
     starts += st.async_started;
+    catch_ups += st.async_catch_up_started;
     if (st.async_swapped) {
       EXPECT_GT(st.variables_relinearized, 0) << "update " << k;
       consistent = true;
@@ -143,6 +145,13 @@ void expectSwapEqualsInline(unsigned seed, const SmootherOptions& async_options,
   EXPECT_GT(starts, 5);
   EXPECT_GE(swaps, starts - 1);  // the last one may still be in flight
   EXPECT_GT(compared, 50);
+  if (async_options.async.catch_up == AsyncCatchUp::kInBackground) {
+    // Every job has its catch-up; chained ones add more.
+    EXPECT_GE(catch_ups, swaps);
+    if (async_options.async.catch_up_max_factors > 0) {
+      EXPECT_GT(catch_ups, swaps + swaps / 2);
+    }
+  }
   if (during.reweight) {
     EXPECT_GT(reweighted, 5);
   }
@@ -172,6 +181,23 @@ TEST(AsyncRelinearization, SwapEqualsRelinearizingAtTheSnapshot3D) {
   expectSwapEqualsInline<SE3>(21, asyncOptions(true, 5));
   expectSwapEqualsInline<SE3>(22, asyncOptions(true, 3));
   expectSwapEqualsInline<SE3>(23, onSwap(asyncOptions(true, 5)));
+}
+
+// AsyncRelinearizationOptions::catch_up_max_factors: a catch-up whose swap would fold in more
+// than that hands its tree to another one (up to catch_up_max_rounds); the estimates after the
+// swap are the same.
+SmootherOptions chainedCatchUps(SmootherOptions o) {
+  o.async.catch_up_max_factors = 1;
+  o.async.catch_up_max_rounds = 3;
+  return o;
+}
+
+TEST(AsyncRelinearization, ChainedCatchUpsEqualRelinearizingAtTheSnapshot) {
+  expectSwapEqualsInline<SE2>(14, chainedCatchUps(asyncOptions(true, 5)));
+  expectSwapEqualsInline<SE3>(24, chainedCatchUps(asyncOptions(true, 3)));
+  expectSwapEqualsInline<SE2>(36, chainedCatchUps(asyncOptions(true, 5)), {true, true});
+  expectSwapEqualsInline<SE3>(37, chainedCatchUps(asyncOptions(true, 5)), {false, false, true});
+  expectSwapEqualsInline<SE3>(44, chainedCatchUps(asyncOptions(false, 5)));
 }
 
 // Factors reweighted and poses moved while the job runs are folded in at the swap.

@@ -122,7 +122,11 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "this decay (>= 1; at most --reorder-decay, which stays the bound for re-ordering inline)")(
       "async-job-iterations", po::value<int>()->default_value(d.async.job_iterations),
       "with --relinearize async: Gauss-Newton iterations of each background job on its snapshot "
-      "(1: one elimination at the relinearised point; more: fewer, longer jobs)");
+      "(1: one elimination at the relinearised point; more: fewer, longer jobs)")(
+      "async-catch-up-max-factors", po::value<int>()->default_value(d.async.catch_up_max_factors),
+      "with --relinearize async and --async-catch-up background: a catch-up whose swap would "
+      "fold in more than this many factors hands its tree to another catch-up (at most 3 a job; "
+      "0: never)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -185,6 +189,10 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   require(o.async.reorder_decay >= 1, "async-reorder-decay", ">= 1", o.async.reorder_decay);
   o.async.job_iterations = valueOf(vm, "async-job-iterations", o.async.job_iterations);
   require(o.async.job_iterations >= 1, "async-job-iterations", ">= 1", o.async.job_iterations);
+  o.async.catch_up_max_factors =
+      valueOf(vm, "async-catch-up-max-factors", o.async.catch_up_max_factors);
+  require(o.async.catch_up_max_factors >= 0, "async-catch-up-max-factors", ">= 0",
+          o.async.catch_up_max_factors);
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
