@@ -57,9 +57,9 @@ struct RelinearizedTree {
 /// Linearises every factor of `s` at s.theta, orders all its non-fixed poses afresh (CCOLAMD, or
 /// nested dissection from s.nested_dissection_min), eliminates them into a new tree and solves
 /// every clique. With s.iterations k > 1, then up to k − 1 times: Θ ← Θ ⊕ Δ (Δ halved while F =
-/// Σ w eᵀΩe rises, at most five times, as relinearizeAll), and the same on the new Θ; it stops
-/// early when F's relative decrease falls below s.relative_tolerance or no halved step lowers
-/// F. One thread; reads nothing but `s`.
+/// Σ w eᵀΩe does not fall, at most five times; relinearizeAll allows ten and then a zero step),
+/// and the same on the new Θ; it stops early when F's relative decrease falls below
+/// s.relative_tolerance or no halved step lowers F. One thread; reads nothing but `s`.
 template <class G>
 RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s);
 
