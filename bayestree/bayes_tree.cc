@@ -34,6 +34,7 @@ void BayesTree<D>::freeClique(int id) {
   c.parent = -1;
   c.dirty = false;
   c.damped = false;
+  c.cached = true;
   c.in_use = false;
   c.pending.resize(0, 0);
   c.pending_cols = 0;
@@ -83,11 +84,19 @@ void BayesTree<D>::removeTop(const std::vector<int>& marked, Top* top) {
       removed_.push_back(c);
       c = cliques[c].parent;
     }
-  for (int c : removed_) {
-    countClique(cliques[c].frontals.size(), cliques[c].separator.size(), -1.0);
-    for (int v : cliques[c].frontals) top->variables.push_back(v);
-    for (int ch : cliques[c].children)
-      if (cliques[ch].removed_stamp != stamp) top->orphans.push_back(ch);
+  for (size_t k = 0; k < removed_.size(); ++k) {  // grows by the children without a cached factor
+    const CliqueD& c = cliques[removed_[k]];
+    countClique(c.frontals.size(), c.separator.size(), -1.0, c.cached);
+    for (int v : c.frontals) top->variables.push_back(v);
+    for (int ch : c.children) {
+      if (cliques[ch].removed_stamp == stamp) continue;
+      if (cliques[ch].cached) {
+        top->orphans.push_back(ch);
+      } else {
+        cliques[ch].removed_stamp = stamp;
+        removed_.push_back(ch);
+      }
+    }
   }
   if (removed_.empty()) return;
   roots.erase(std::remove_if(roots.begin(), roots.end(),
@@ -122,9 +131,11 @@ void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
     const std::string name = "clique " + std::to_string(id);
     if (c.frontals.empty()) fail(name + " has no frontal variable");
     const int nf = static_cast<int>(c.frontals.size()), ns = static_cast<int>(c.separator.size());
-    if (c.F != nf * D || c.Sn != ns * D || c.ld < c.F + c.Sn || c.ldh < c.Sn ||
+    if (c.F != nf * D || c.Sn != ns * D || c.ld < c.F + c.Sn ||
+        (c.cached ? c.ldh < c.Sn : c.ldh != 0) ||
         c.storage.size() != CliqueD::sizeFor(c.F, c.ld, c.ldh))
       fail(name + " has matrices of the wrong size");
+    if (!c.cached && c.pending_cols != 0) fail(name + " has pending updates but no cached factor");
     for (int v : c.frontals) {
       if (v < 0 || v >= n || fixed[v]) fail(name + " has a bad frontal " + std::to_string(v));
       if (++frontal_count[v] > 1)
@@ -164,7 +175,7 @@ void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
   for (const CliqueD& c : cliques)
     if (c.in_use) {
       sum_flops += cliqueFlops(c.frontals.size(), c.separator.size());
-      sum_doubles += cliqueDoubles(c.frontals.size(), c.separator.size());
+      sum_doubles += cliqueDoubles(c.frontals.size(), c.separator.size(), c.cached);
     }
   if (std::abs(sum_flops - flops) > 1e-9 * std::max(1.0, sum_flops))
     fail("flops " + std::to_string(flops) + " is not the cliques' sum " +

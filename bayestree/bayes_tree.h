@@ -37,6 +37,8 @@ class BayesTree {
   /// extends.
   double flops = 0;
   double doubles = 0;
+  /// CachedFactorOptions::max_ratio (0: every clique keeps its cached factor).
+  double cached_factor_max_ratio = 0;
 
   /// F³/3 + F²S + FS² for a clique of `frontals` and `separator` variables (F = D·frontals,
   /// S = D·separator): its dense Cholesky, the off-diagonal solve and the Schur complement.
@@ -45,18 +47,29 @@ class BayesTree {
     return F * F * F / 3 + F * F * S + F * S * S;
   }
   /// F(F+S) + F + S² + S for such a clique: its conditional [R S], d and its cached factor on
-  /// the separator (Clique::storage without the room to grow).
-  static double cliqueDoubles(size_t frontals, size_t separator) {
+  /// the separator (Clique::storage without the room to grow); F(F+S) + F without the cached
+  /// factor.
+  static double cliqueDoubles(size_t frontals, size_t separator, bool cached = true) {
     const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
-    return F * (F + S) + F + S * S + S;
+    return F * (F + S) + F + (cached ? S * S + S : 0.0);
+  }
+  /// Whether a clique of that shape keeps its cached factor (CachedFactorOptions): always at
+  /// max_ratio 0, else when S² ≤ max_ratio·F(F+S), the cached factor no larger than max_ratio
+  /// times the conditional.
+  bool keepsCachedFactor(size_t frontals, size_t separator) const {
+    if (cached_factor_max_ratio <= 0) return true;
+    const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
+    return S * S <= cached_factor_max_ratio * F * (F + S);
   }
   /// Adds (`sign` +1) or takes off (−1) a clique of that shape in `flops` and `doubles`: the
   /// one place the two sums change, so they move together.
-  void countClique(size_t frontals, size_t separator, double sign) {
+  void countClique(size_t frontals, size_t separator, double sign, bool cached) {
     flops += sign * cliqueFlops(frontals, separator);
-    doubles += sign * cliqueDoubles(frontals, separator);
+    doubles += sign * cliqueDoubles(frontals, separator, cached);
   }
-  void countClique(const CliqueD& c) { countClique(c.frontals.size(), c.separator.size(), 1.0); }
+  void countClique(const CliqueD& c) {
+    countClique(c.frontals.size(), c.separator.size(), 1.0, c.cached);
+  }
 
   /// slots[v] = v's position (in variables) among clique c's frontals then separator, until
   /// clearSlots.
@@ -92,7 +105,9 @@ class BayesTree {
   /// remove the corresponding clique and all parents up to the root. (b) Store orphaned
   /// sub-trees T_O of removed cliques." Removes `marked` and all their ancestors (each once),
   /// appends their frontals to top->variables and their children not removed to top->orphans
-  /// (both in removal order), takes them off the roots and frees them.
+  /// (both in removal order), takes them off the roots and frees them. A child without a cached
+  /// factor (Clique::cached) is removed too, not orphaned: nothing would stand for it in the
+  /// re-eliminated top.
   void removeTop(const std::vector<int>& marked, Top* top);
 
   /// Hangs subtree `orphan` below clique `parent` (IJRR 2012 Alg. 4 step 6).

@@ -3,7 +3,8 @@
 // passes to its parent (the Schur complement on the separator, "cached factor"), in one block of
 // storage; and the changes a fold-in makes to them in place (docs/design.md, "Loop closures by
 // rank updates"): a separator that grows, a rank-D update of the factor, the cached factor's
-// pending updates.
+// pending updates; and a clique that keeps no cached factor (docs/design.md, "Cliques without a
+// cached factor").
 #pragma once
 
 #include <algorithm>
@@ -49,6 +50,11 @@ struct Clique {
   bool dirty = false;     ///< changed since the last back-substitution
   bool damped = false;    ///< the factor is of a damped (indeterminate) Hessian
   bool in_use = false;
+  /// Keeps its cached factor (BayesTree::keepsCachedFactor when eliminated). Without one
+  /// (ldh = 0 once its parent has read it) the clique cannot be an orphan: BayesTree::removeTop
+  /// removes it with its parent, and the top elimination re-eliminates it from its factors and
+  /// its children's cached factors.
+  bool cached = true;
   int removed_stamp = -1;
   /// Entries of [L; Sᵀ] in the subtree it roots (itself included) when last eliminated: what
   /// back-substituting the subtree reads.
@@ -97,6 +103,8 @@ struct Clique {
   }
   Eigen::MatrixXd S() const { return LS().bottomRows(Sn).transpose(); }
   ConstVecMap d() const { return ConstVecMap(dPtr(), F); }
+  /// Valid while the storage holds it: a cached clique, or one without a cached factor until its
+  /// parent's elimination has read it (dropCachedFactor).
   ConstMap cachedH() const { return ConstMap(hPtr(), Sn, Sn, Eigen::OuterStride<>(ldh)); }
   ConstVecMap cachedG() const { return ConstVecMap(gPtr(), Sn); }
 
@@ -111,9 +119,9 @@ struct Clique {
   /// when it must move.
   void extendSeparator(int v, DoubleBuffer* scratch) {
     const int N = F + Sn;
-    if (ld < N + D || ldh < Sn + D) {
+    if (ld < N + D || (cached && ldh < Sn + D)) {
       const int room = D * std::max(2, Sn / (4 * D));
-      const int new_ld = N + D + room, new_ldh = Sn + D + room;
+      const int new_ld = N + D + room, new_ldh = cached ? Sn + D + room : 0;
       scratch->fit(sizeFor(F, new_ld, new_ldh));
       double* ls = scratch->data();
       for (int k = 0; k < F; ++k)
@@ -122,10 +130,13 @@ struct Clique {
       double* d = ls + static_cast<size_t>(new_ld) * F;
       std::copy(dPtr(), dPtr() + F, d);
       double* h = d + F;
-      for (int q = 0; q < Sn; ++q)
-        std::copy(hPtr() + static_cast<size_t>(q) * ldh, hPtr() + static_cast<size_t>(q) * ldh + Sn,
-                  h + static_cast<size_t>(q) * new_ldh);
-      std::copy(gPtr(), gPtr() + Sn, h + static_cast<size_t>(new_ldh) * new_ldh);
+      if (cached) {
+        for (int q = 0; q < Sn; ++q)
+          std::copy(hPtr() + static_cast<size_t>(q) * ldh,
+                    hPtr() + static_cast<size_t>(q) * ldh + Sn,
+                    h + static_cast<size_t>(q) * new_ldh);
+        std::copy(gPtr(), gPtr() + Sn, h + static_cast<size_t>(new_ldh) * new_ldh);
+      }
       storage.swap(*scratch);
       ld = new_ld;
       ldh = new_ldh;
@@ -133,6 +144,11 @@ struct Clique {
     for (int k = 0; k < F; ++k) {
       double* col = lsPtr() + static_cast<size_t>(k) * ld;
       std::fill(col + N, col + N + D, 0.0);
+    }
+    if (!cached) {
+      separator.push_back(v);
+      Sn += D;
+      return;
     }
     for (int q = 0; q < Sn + D; ++q) {
       double* col = hPtr() + static_cast<size_t>(q) * ldh;
@@ -157,7 +173,7 @@ struct Clique {
   void rankUpdate(double* W, int ldw) {
     partialCholeskyUpdate(lsPtr(), ld, F + Sn, F, dPtr(), W, ldw, D);
     dirty = true;
-    if (Sn == 0) return;  // a root: what is left is the constant term
+    if (Sn == 0 || !cached) return;  // a root: what is left is the constant term
     const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> V(W + F, Sn + 1, D,
                                                                        Eigen::OuterStride<>(ldw));
     const int K = pending_cols;
@@ -173,6 +189,20 @@ struct Clique {
     pending.middleCols(K, D) = V;
     pending_cols = K + D;
     if (4 * pending_cols > Sn) applyPending();
+  }
+
+  /// Frees the cached factor of a clique that keeps none, once its parent's elimination has read
+  /// it: the storage shrinks to [LS | d] (copied), ldh = 0.
+  void dropCachedFactor() {
+    if (cached || ldh == 0) return;
+    const size_t keep = sizeFor(F, ld, 0);
+    DoubleBuffer kept;
+    kept.fit(keep);
+    std::copy(storage.data(), storage.data() + keep, kept.data());
+    storage.swap(kept);
+    ldh = 0;
+    pending.resize(0, 0);
+    pending_cols = 0;
   }
 
   /// Applies the pending rank updates to the cached factor.

@@ -117,8 +117,8 @@ int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
   separatorsToExtend(f, start, ctx, *tree, &later, &path_);
   for (int c : path_) {  // each separator grows by one variable: its flops and doubles with it
     const size_t nf = cliques[c].frontals.size(), ns = cliques[c].separator.size();
-    tree->countClique(nf, ns, -1.0);
-    tree->countClique(nf, ns + 1, 1.0);
+    tree->countClique(nf, ns, -1.0, cliques[c].cached);
+    tree->countClique(nf, ns + 1, 1.0, cliques[c].cached);
     cliques[c].extendSeparator(later, &extend_buf_);
   }
   // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].

@@ -117,6 +117,8 @@ void validate(const SmootherOptions& o) {
     bad("async.catch_up_max_rounds", o.async.catch_up_max_rounds, "≥ 1");
   if (o.async.swap_after_updates < 0)
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
+  if (!(o.cached_factors.max_ratio >= 0 && std::isfinite(o.cached_factors.max_ratio)))
+    bad("cached_factors.max_ratio", o.cached_factors.max_ratio, "finite and ≥ 0");
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw std::invalid_argument(
         "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
@@ -215,6 +217,7 @@ struct IncrementalSmoother<G>::Impl {
   explicit Impl(const SmootherOptions& o)
       : opt(o), threads(threadCount(o.threads)), dogleg_radius(o.dogleg_initial_radius) {
     validate(o);
+    tree.cached_factor_max_ratio = o.cached_factors.max_ratio;
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
@@ -500,6 +503,7 @@ struct IncrementalSmoother<G>::Impl {
     }
     s.update = update_count;
     s.nested_dissection_min = nestedDissectionMin();
+    s.cached_factor_max_ratio = opt.cached_factors.max_ratio;
     s.iterations = opt.async.job_iterations;
     s.relative_tolerance = opt.finalize_relative_tolerance;
     moved_since_snapshot.clear();
@@ -1095,7 +1099,9 @@ struct IncrementalSmoother<G>::Impl {
     *doubles = 0;
     for (const bayestree::SymbolicClique& c : plan.cliques) {
       flops += bayestree::BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
-      *doubles += bayestree::BayesTree<D>::cliqueDoubles(c.frontals.size(), c.separator.size());
+      *doubles += bayestree::BayesTree<D>::cliqueDoubles(
+          c.frontals.size(), c.separator.size(),
+          tree.keepsCachedFactor(c.frontals.size(), c.separator.size()));
     }
     return flops;
   }

@@ -49,6 +49,22 @@ struct BatchSwitchOptions {
   int constrain_last_max = 1000;
 };
 
+/// Which cliques keep their cached factor, the Schur complement on the separator that a clique
+/// passes to its parent (Kaess et al., IJRR 2012, §3: "we cache the conditional densities and
+/// the corresponding marginal factors"; docs/design.md, "Cliques without a cached factor"). It
+/// is what lets an update re-eliminate only the top: an orphan's cached factor stands for its
+/// whole subtree. It is also most of the tree's memory: S² doubles on a separator of dimension
+/// S, against F(F+S) for the conditional of F frontal dimensions (on a fresh ordering of a
+/// 1,000,000-pose Manhattan world, 9.5 of 11.8 GB; docs/benchmarks.md). A clique that keeps
+/// none is removed with its parent whenever the parent is (never an orphan) and re-eliminated
+/// from its factors and its children's cached factors: the same linear system, so the same
+/// estimate, for more work in those updates.
+struct CachedFactorOptions {
+  /// 0: every clique keeps its cached factor (iSAM2). r > 0: a clique keeps it only when it is
+  /// at most r times its conditional, S² ≤ r·F(F+S), decided when the clique is eliminated.
+  double max_ratio = 0;
+};
+
 /// Where Alg. 5's relinearisation happens (docs/design.md, "Asynchronous relinearisation").
 enum class RelinearizationMode {
   /// On the update path: a check's marked variables are relinearised and their cliques
@@ -160,6 +176,7 @@ struct SmootherOptions {
   /// of the tree). Async needs Gauss–Newton (not dogleg).
   RelinearizationMode relinearize = RelinearizationMode::kInline;
   AsyncRelinearizationOptions async;
+  CachedFactorOptions cached_factors;  ///< which cliques keep their cached factor
 };
 
 struct UpdateStats {
@@ -302,7 +319,8 @@ class IncrementalSmoother {
   /// cliques, F and S the frontal and separator dimensions), kept up to date by every update.
   double factorizationFlops() const;
   /// Doubles the Bayes tree's matrices need in its current ordering (Σ F(F+S) + F + S² + S over
-  /// its cliques: conditional, d, cached factor), kept up to date likewise.
+  /// its cliques: conditional, d, cached factor; S² + S only for those that keep their cached
+  /// factor, CachedFactorOptions), kept up to date likewise.
   double factorizationDoubles() const;
   const std::vector<G>& linearizationPoint() const;
   const std::vector<Tangent>& delta() const;  ///< Δ per pose (zero for fixed poses)

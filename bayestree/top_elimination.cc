@@ -116,6 +116,7 @@ bool TopElimination<G>::eliminateClique(int id, int lane, const std::vector<char
       for (int k = 0; k < F; ++k) c.lsPtr()[static_cast<size_t>(k) * c.ld + k] = std::sqrt(floor);
       c.dirty = true;
       c.damped = true;
+      dropChildrenCachedFactors(c, tree);
       return true;
     }
   }
@@ -141,7 +142,13 @@ bool TopElimination<G>::eliminateClique(int id, int lane, const std::vector<char
         cH[static_cast<size_t>(q) * c.ldh + p] = cH[static_cast<size_t>(p) * c.ldh + q];
   c.dirty = true;
   c.damped = damped;
+  dropChildrenCachedFactors(c, tree);
   return damped;
+}
+
+template <class G>
+void TopElimination<G>::dropChildrenCachedFactors(const Clique<D>& c, BayesTree<D>* tree) {
+  for (int ch : c.children) tree->cliques[ch].dropCachedFactor();
 }
 
 template <class G>
@@ -218,6 +225,7 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
     for (int a : sc.separator) c.separator.push_back(top[a]);
     c.parent = sc.parent < 0 ? -1 : ids[sc.parent];
     for (int v : c.frontals) tree->clique_of[v] = ids[k];
+    c.cached = tree->keepsCachedFactor(c.frontals.size(), c.separator.size());
     tree->countClique(c);
     out.flops += BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
   }

@@ -63,6 +63,10 @@ class TopElimination {
   size_t scratchBytes() const;
 
  private:
+  /// Once clique c is eliminated, its children without a cached factor (Clique::cached) free
+  /// the one their elimination computed for c's assembly.
+  static void dropChildrenCachedFactors(const Clique<D>& c, BayesTree<D>* tree);
+
   RowList rows_;
   std::vector<int> group_, ids_, by_need_, by_capacity_;
   std::vector<double> chain_flops_;

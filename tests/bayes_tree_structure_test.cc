@@ -101,6 +101,52 @@ TEST(BayesTreeStructure, RemoveTopOfTwoBranchesRemovesEachCliqueOnce) {
   EXPECT_EQ(t.tree.num_cliques, 1);
 }
 
+// A clique without a cached factor cannot be an orphan: it leaves with its parent, and its own
+// children (which keep theirs) are the orphans.
+TEST(BayesTreeStructure, RemoveTopTakesAChildWithoutACachedFactorAlong) {
+  HandBuilt t;
+  auto& c1 = t.tree.cliques[t.c[1]];
+  t.tree.countClique(c1.frontals.size(), c1.separator.size(), -1.0, true);
+  c1.cached = false;
+  t.tree.countClique(c1.frontals.size(), c1.separator.size(), 1.0, false);
+  c1.dropCachedFactor();
+  EXPECT_EQ(c1.ldh, 0);
+  EXPECT_EQ(c1.storage.size(), Tree::CliqueD::sizeFor(c1.F, c1.ld, 0));
+  EXPECT_EQ(t.violation(), "");
+  const double doubles_before = t.tree.doubles;
+  Tree::Top top;
+  t.tree.removeTop({t.c[3]}, &top);  // c3 and c0; c1 (no cached factor) along; c2 the orphan
+  EXPECT_EQ(top.variables, (std::vector<int>{0, 4, 5, 2, 3}));
+  EXPECT_EQ(top.orphans, (std::vector<int>{t.c[2]}));
+  EXPECT_EQ(t.tree.num_cliques, 1);
+  // Only c2 is left, so the doubles are its own: the removed ones were taken off as counted.
+  EXPECT_NEAR(t.tree.doubles, Tree::cliqueDoubles(1, 1), 1e-9);
+  EXPECT_LT(t.tree.doubles, doubles_before);
+}
+
+TEST(BayesTreeStructure, CheckInvariantsNamesACliqueWithoutCachedFactorThatHoldsOne) {
+  HandBuilt t;
+  auto& c1 = t.tree.cliques[t.c[1]];
+  t.tree.countClique(c1.frontals.size(), c1.separator.size(), -1.0, true);
+  c1.cached = false;
+  t.tree.countClique(c1.frontals.size(), c1.separator.size(), 1.0, false);
+  // Not dropped: its storage still holds the cached factor.
+  EXPECT_NE(t.violation().find("clique 1 has matrices of the wrong size"), std::string::npos)
+      << t.violation();
+}
+
+TEST(BayesTreeStructure, KeepsCachedFactorByItsRatioToTheConditional) {
+  Tree tree;
+  EXPECT_TRUE(tree.keepsCachedFactor(1, 100));  // ratio 0: every clique keeps it
+  tree.cached_factor_max_ratio = 2;
+  // F = 3, S = 6: S² = 36 ≤ 2·3·9 = 54; S = 9: 81 > 2·3·12 = 72.
+  EXPECT_TRUE(tree.keepsCachedFactor(1, 2));
+  EXPECT_FALSE(tree.keepsCachedFactor(1, 3));
+  EXPECT_TRUE(tree.keepsCachedFactor(1, 0));  // a root
+  EXPECT_DOUBLE_EQ(Tree::cliqueDoubles(1, 3, false), 3.0 * 12 + 3);
+  EXPECT_DOUBLE_EQ(Tree::cliqueDoubles(1, 3, true), 3.0 * 12 + 3 + 81 + 9);
+}
+
 TEST(BayesTreeStructure, AttachOrphanLinksBothWays) {
   HandBuilt t;
   Tree::Top top;

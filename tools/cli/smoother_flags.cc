@@ -1,5 +1,6 @@
 #include "arbor/tools/cli/smoother_flags.h"
 
+#include <cmath>
 #include <sstream>
 
 #include "arbor/tools/cli/cli_common.h"
@@ -126,7 +127,13 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "async-catch-up-max-factors", po::value<int>()->default_value(d.async.catch_up_max_factors),
       "with --relinearize async and --async-catch-up background: a catch-up whose swap would "
       "fold in more than this many factors hands its tree to another catch-up (at most 3 a job; "
-      "0: never)");
+      "0: never)")(
+      "cached-factor-max-ratio",
+      po::value<double>()->default_value(d.cached_factors.max_ratio,
+                                         text(d.cached_factors.max_ratio)),
+      "a clique keeps its cached factor (the Schur complement on its separator) only when it is "
+      "at most this many times its conditional, S^2 <= X*F(F+S); one without is re-eliminated "
+      "with its parent (less memory, more work; 0: every clique keeps it, as iSAM2)");
 }
 
 SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOptions& defaults) {
@@ -193,6 +200,9 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
       valueOf(vm, "async-catch-up-max-factors", o.async.catch_up_max_factors);
   require(o.async.catch_up_max_factors >= 0, "async-catch-up-max-factors", ">= 0",
           o.async.catch_up_max_factors);
+  o.cached_factors.max_ratio = valueOf(vm, "cached-factor-max-ratio", o.cached_factors.max_ratio);
+  require(o.cached_factors.max_ratio >= 0 && std::isfinite(o.cached_factors.max_ratio),
+          "cached-factor-max-ratio", "finite and >= 0", o.cached_factors.max_ratio);
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
   return o;
@@ -222,6 +232,8 @@ std::string describeSmoother(const SmootherOptions& o) {
     out << ", batch past a top share of " << o.batch.top_share;
   if (o.batch.reorder_decay != d.batch.reorder_decay)
     out << ", re-order at decay " << o.batch.reorder_decay;
+  if (o.cached_factors.max_ratio != d.cached_factors.max_ratio)
+    out << ", cached factors up to " << o.cached_factors.max_ratio << "x the conditional";
   if (o.relinearize == RelinearizationMode::kAsync) {
     out << ", async relinearisation";
     if (o.async.min_variables != d.async.min_variables)

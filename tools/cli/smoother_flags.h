@@ -17,7 +17,9 @@ namespace arbor::cli {
 ///   --full-backsubstitution, --no-rank-updates, --dogleg, --dogleg-radius R,
 ///   --dogleg-min-radius R, --finalize-rel-tol X, --finalize-max-iterations N,
 ///   --nested-dissection-min N, --threads N, --batch-top-share S, --reorder-decay X,
-///   --relinearize inline|async, --async-min-variables N.
+///   --relinearize inline|async, --async-min-variables N, --async-catch-up, --async-reorder,
+///   --async-reorder-decay, --async-job-iterations, --async-catch-up-max-factors,
+///   --cached-factor-max-ratio X.
 void addSmootherFlags(boost::program_options::options_description& options,
                       const SmootherOptions& defaults = {});
 

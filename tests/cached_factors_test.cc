@@ -1,0 +1,162 @@
+// Cliques without a cached factor (SmootherOptions::cached_factors, docs/design.md "Cliques
+// without a cached factor"): a smoother that drops them eliminates the same linear systems, so
+// every estimate equals the one that keeps them all, through fold-ins, relinearisations, batch
+// re-eliminations and background jobs, while its tree holds fewer doubles. Deterministic
+// counts and estimates, no timing.
+
+#include <limits>
+#include <stdexcept>
+#include <vector>
+
+#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/tests/random_walks.h"
+
+#include <gtest/gtest.h>
+
+namespace arbor {
+namespace {
+
+using testing::randomWalk;
+
+template <class G, class Check>
+void replay(const std::vector<std::vector<RelativePoseEdge<G>>>& by_pose, IncrementalSmoother<G>* s,
+            Check check) {
+  s->addFixedPose(G());
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    s->addPose(s->estimate(odo.i).compose(odo.measurement));
+    for (const auto& e : by_pose[k]) s->addFactor(e);
+    check(*s, s->update());
+  }
+}
+
+SmootherOptions exactOptions() {
+  SmootherOptions o;
+  o.threads = 1;
+  o.wildfire_threshold = 0;  // every clique below a change is solved: exact comparisons
+  return o;
+}
+
+struct DropRun {
+  std::vector<double> doubles;  // factorizationDoubles() after each update
+  int folded = 0, batches = 0, relinearized = 0;
+};
+
+// Replays the walk with `dropping` (some max_ratio) and with every cached factor kept (the same
+// options otherwise): the estimates agree after every update, the dropping tree's invariants
+// hold after every update, and its tree holds fewer doubles.
+template <class G>
+DropRun expectDroppingEqualsKeeping(unsigned seed, SmootherOptions dropping) {
+  std::vector<G> truth;
+  const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
+  SmootherOptions keeping = dropping;
+  keeping.cached_factors.max_ratio = 0;
+  IncrementalSmoother<G> kept(keeping);
+  std::vector<std::vector<G>> estimates;
+  DropRun keep_run;
+  replay(by_pose, &kept, [&](const IncrementalSmoother<G>& s, const UpdateStats&) {
+    estimates.push_back(s.estimate());
+    keep_run.doubles.push_back(s.factorizationDoubles());
+  });
+  IncrementalSmoother<G> dropped(dropping);
+  DropRun run;
+  size_t u = 0;
+  replay(by_pose, &dropped, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
+    ASSERT_NO_THROW(s.checkInvariants()) << "update " << u + 1;
+    run.folded += st.cliques_updated > 0 ? 1 : 0;
+    run.batches += st.batch_reeliminations;
+    run.relinearized += st.variables_relinearized;
+    run.doubles.push_back(s.factorizationDoubles());
+    const std::vector<G> x = s.estimate();
+    for (size_t v = 0; v < x.size(); ++v)
+      ASSERT_LT(estimates[u][v].between(x[v]).Log().norm(), 1e-8)
+          << "update " << u + 1 << ", pose " << v;
+    ++u;
+  });
+  EXPECT_LT(run.doubles.back(), keep_run.doubles.back());
+  EXPECT_LT(dropped.memory().clique_bytes, kept.memory().clique_bytes);
+  EXPECT_NEAR(dropped.objective(), kept.objective(), 1e-9 * kept.objective());
+  return run;
+}
+
+// Ratio 0.5: every clique whose cached factor outweighs half its conditional keeps none, most
+// of the tree on these walks. Fold-ins and relinearisations both happen.
+TEST(CachedFactors, DroppingEqualsKeepingAfterEveryUpdate2D) {
+  SmootherOptions o = exactOptions();
+  o.cached_factors.max_ratio = 0.5;
+  for (unsigned seed : {31u, 32u}) {
+    const DropRun r = expectDroppingEqualsKeeping<SE2>(seed, o);
+    EXPECT_GT(r.folded, 0);
+    EXPECT_GT(r.relinearized, 0);
+  }
+}
+TEST(CachedFactors, DroppingEqualsKeepingAfterEveryUpdate3D) {
+  SmootherOptions o = exactOptions();
+  o.cached_factors.max_ratio = 0.5;
+  for (unsigned seed : {41u, 42u}) {
+    const DropRun r = expectDroppingEqualsKeeping<SE3>(seed, o);
+    EXPECT_GT(r.folded, 0);
+    EXPECT_GT(r.relinearized, 0);
+  }
+}
+
+// With the batch switch firing often (whole-graph re-eliminations in fresh orderings) and
+// without rank updates (every loop closure re-eliminates its path).
+TEST(CachedFactors, DroppingEqualsKeepingWithBatchesAndWithoutRankUpdates) {
+  SmootherOptions o = exactOptions();
+  o.cached_factors.max_ratio = 1;
+  o.batch.top_share = 0.2;
+  o.batch.reorder_decay = 1.0;
+  EXPECT_GT(expectDroppingEqualsKeeping<SE2>(51, o).batches, 5);
+  o.rank_updates = false;
+  EXPECT_EQ(expectDroppingEqualsKeeping<SE3>(52, o).folded, 0);
+}
+
+// Background relinearisation jobs build their trees with the same rule (the snapshot carries
+// it), and the swap folds what came meanwhile into them: still equal, update by update.
+TEST(CachedFactors, DroppingEqualsKeepingWithAsyncRelinearization) {
+  SmootherOptions o = exactOptions();
+  o.batch.top_share = 1;
+  o.batch.reorder_decay = 0;
+  o.relinearize = RelinearizationMode::kAsync;
+  o.async.min_variables = 1;
+  o.async.synchronous = true;
+  o.async.swap_after_updates = 3;
+  o.cached_factors.max_ratio = 0.5;
+  expectDroppingEqualsKeeping<SE2>(61, o);
+  o.async.catch_up = AsyncCatchUp::kOnSwap;
+  expectDroppingEqualsKeeping<SE3>(62, o);
+}
+
+// The tree's doubles follow the rule: the fewer cliques keep their cached factor, the fewer
+// doubles, and the sum is what checkInvariants recounts (asserted above after every update).
+TEST(CachedFactors, LowerRatiosHoldFewerDoubles) {
+  std::vector<SE2> truth;
+  const auto by_pose = randomWalk<SE2>(300, 60, 71, &truth);
+  double previous = 0;
+  for (double ratio : {0.0, 8.0, 1.0, 0.25}) {
+    SmootherOptions o = exactOptions();
+    o.batch.reorder_decay = 0;
+    o.cached_factors.max_ratio = ratio;
+    IncrementalSmoother2 s(o);
+    replay(by_pose, &s, [](const IncrementalSmoother2&, const UpdateStats&) {});
+    // A last full re-elimination, so each tree is its ratio's fresh one.
+    s.relinearizeAll();
+    const double d = s.factorizationDoubles();
+    if (previous > 0) {
+      EXPECT_LT(d, previous) << "ratio " << ratio;
+    }
+    previous = d;
+  }
+}
+
+TEST(CachedFactors, NegativeOrInfiniteRatioIsRefused) {
+  SmootherOptions o;
+  o.cached_factors.max_ratio = -1;
+  EXPECT_THROW(IncrementalSmoother2 s(o), std::invalid_argument);
+  o.cached_factors.max_ratio = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(IncrementalSmoother2 s(o), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace arbor
