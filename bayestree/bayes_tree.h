@@ -57,9 +57,12 @@ class BayesTree {
   /// max_ratio 0, else when S² ≤ max_ratio·F(F+S), the cached factor no larger than max_ratio
   /// times the conditional.
   bool keepsCachedFactor(size_t frontals, size_t separator) const {
-    if (cached_factor_max_ratio <= 0) return true;
+    return keepsCachedFactor(frontals, separator, cached_factor_max_ratio);
+  }
+  static bool keepsCachedFactor(size_t frontals, size_t separator, double max_ratio) {
+    if (max_ratio <= 0) return true;
     const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;
-    return S * S <= cached_factor_max_ratio * F * (F + S);
+    return S * S <= max_ratio * F * (F + S);
   }
   /// Adds (`sign` +1) or takes off (−1) a clique of that shape in `flops` and `doubles`: the
   /// one place the two sums change, so they move together.

@@ -31,6 +31,7 @@
 #include "arbor/bayestree/marginals.h"
 #include "arbor/bayestree/partial_solve.h"
 #include "arbor/bayestree/top_elimination.h"
+#include "arbor/bayestree/tree_shape.h"
 #include "arbor/bayestree/update_threads.h"
 #include "arbor/core/blas_threads.h"
 #include "arbor/core/finite_pose.h"
@@ -1095,15 +1096,9 @@ struct IncrementalSmoother<G>::Impl {
         n, fresh_rows,
         n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, fresh_rows, group)
                                    : bayestree::constrainedColamd(n, fresh_rows, group));
-    double flops = 0;
-    *doubles = 0;
-    for (const bayestree::SymbolicClique& c : plan.cliques) {
-      flops += bayestree::BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
-      *doubles += bayestree::BayesTree<D>::cliqueDoubles(
-          c.frontals.size(), c.separator.size(),
-          tree.keepsCachedFactor(c.frontals.size(), c.separator.size()));
-    }
-    return flops;
+    const bayestree::TreeShape shape = bayestree::treeShape<D>(plan, tree.cached_factor_max_ratio);
+    *doubles = shape.doubles();
+    return shape.flops;
   }
 
   // Tops of at least this many variables are ordered by nested dissection

@@ -60,6 +60,8 @@ const std::vector<Field>& fields() {
       {"batch.top_share", [](const SmootherOptions& o) { return o.batch.top_share; }},
       {"batch.reorder_decay", [](const SmootherOptions& o) { return o.batch.reorder_decay; }},
       {"async.reorder_decay", [](const SmootherOptions& o) { return o.async.reorder_decay; }},
+      {"cached_factors.max_ratio",
+       [](const SmootherOptions& o) { return o.cached_factors.max_ratio; }},
   };
   return all;
 }
@@ -102,7 +104,9 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
                                          "--reorder-decay",
                                          "3",
                                          "--async-reorder-decay",
-                                         "1.25"};
+                                         "1.25",
+                                         "--cached-factor-max-ratio",
+                                         "8"};
   SmootherOptions expected;
   expected.relinearize_threshold_translation = 0.3;
   expected.relinearize_threshold_rotation = 0.2;
@@ -120,6 +124,7 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
   expected.batch.top_share = 0.5;
   expected.batch.reorder_decay = 3;
   expected.async.reorder_decay = 1.25;
+  expected.cached_factors.max_ratio = 8;
   // Every field is set away from its default, so a flag that is dropped shows.
   for (const Field& f : fields()) EXPECT_NE(f.get(expected), f.get(SmootherOptions{})) << f.name;
   expectSame(replaySmoother(args), expected, "replay");
@@ -198,6 +203,8 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
       {"--finalize-rel-tol", "-1"},
       {"--finalize-max-iterations", "0"},
       {"--nested-dissection-min", "-2"},
+      {"--cached-factor-max-ratio", "-1"},
+      {"--cached-factor-max-ratio", "inf"},
       {"--threads", "-1"},
       {"--batch-top-share", "0"},
       {"--batch-top-share", "1.5"},

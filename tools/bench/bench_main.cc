@@ -17,6 +17,9 @@
 //                      [--inlier-threshold X] [--solver lm|rtr] [--keep-generated DIR]
 //     the robust batch (GNC over LM, as `arbor batch --robust`) on the shared files with false
 //     loop closures and on its own, generated from shared clean sets (tools/bench/robust_bench.h).
+//   arbor-bench tree [--shared DIR] [--only NAME,...] [--ratios R,...]
+//     the Bayes tree's cliques, flops and memory on each whole graph in a fresh ordering,
+//     symbolic only, for cached-factor ratios (tools/bench/tree_size.h).
 //   arbor-bench micro [--sizes=N,...] [--benchmark_* flags]
 //     the Google Benchmark microbenchmarks: runs `arbor-microbench` built beside this program.
 #include <unistd.h>
@@ -47,6 +50,7 @@
 #include "arbor/tools/bench/robust_bench.h"
 #include "arbor/tools/bench/robust_replay_hooks.h"
 #include "arbor/tools/bench/shared_data.h"
+#include "arbor/tools/bench/tree_size.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/cli/robust_flags.h"
@@ -427,6 +431,43 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
   return 0;
 }
 
+// `arbor bench tree`: what the smoother's Bayes tree holds on each whole graph in a fresh
+// ordering, with every cached factor and at each ratio (tools/bench/tree_size.h).
+int tree(const std::vector<std::string>& args, const std::string& default_shared) {
+  DatasetOptions data;
+  std::string ratios_text;
+  po::options_description options =
+      datasetOptions("arbor bench tree [options]", &data, default_shared);
+  options.add_options()("ratios", po::value(&ratios_text)->default_value("0,16,4,1"),
+                        "comma-separated CachedFactorOptions::max_ratio values (0: every clique "
+                        "keeps its cached factor)");
+  if (!parseOptions(args, options)) return 0;
+  std::vector<double> ratios;
+  std::stringstream list(ratios_text);
+  for (std::string item; std::getline(list, item, ',');) {
+    char* end = nullptr;
+    const double r = std::strtod(item.c_str(), &end);
+    if (item.empty() || *end != '\0' || !(r >= 0) || !std::isfinite(r))
+      throw cli::UsageError("--ratios: '" + item + "' is not a finite number >= 0");
+    ratios.push_back(r);
+  }
+  std::cout << "The smoother's Bayes tree on each whole graph in a fresh, unconstrained ordering "
+               "(what a batch re-elimination makes; symbolic only). Per clique of F frontal and S "
+               "separator dimensions: the conditional F(F+S) + F doubles, the cached factor S^2 "
+               "+ S unless the ratio drops it (S^2 > ratio * F(F+S)).\n";
+  bench::forEachDataset(data.shared, data.only, [&](const bench::LoadedDataset& d) {
+    std::visit(
+        [&](const auto& g) {
+          std::cout << "\n### " << d.name << d.note << " (" << g.numPoses() << " poses, "
+                    << g.numEdges() << " edges)\n\n";
+          bench::printTreeSizeTable(std::cout, bench::treeSizes(g, ratios), g.numPoses());
+          std::cout.flush();
+        },
+        d.graph);
+  });
+  return 0;
+}
+
 // Ceres as an external solver of the paper runner, with the same iteration cap and tolerance.
 bench::ExternalSolver ceresSolver(const bench::PaperSettings& settings) {
   auto solve = [settings](const auto& graph, auto* poses) {
@@ -716,6 +757,7 @@ int main(int argc, char** argv) {
            "       arbor bench robust [--shared DIR] [--only NAMES] [--no-generated] "
            "[--generate-from NAMES] [--fractions F,...] [--policies P,...] [--seed S] [--kernel K] "
            "[--inlier-threshold X] [--solver lm|rtr] [--keep-generated DIR]\n"
+           "       arbor bench tree [--shared DIR] [--only NAMES] [--ratios R,...]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;
   }
@@ -726,6 +768,7 @@ int main(int argc, char** argv) {
     if (args[0] == "paper") return paper(rest, ARBOR_SHARED_DIR);
     if (args[0] == "growth") return growth(rest, ARBOR_SHARED_DIR);
     if (args[0] == "covariance") return covariance(rest, ARBOR_SHARED_DIR);
+    if (args[0] == "tree") return tree(rest, ARBOR_SHARED_DIR);
     if (args[0] == "robust") return robust(rest, ARBOR_SHARED_DIR);
     if (args[0] == "micro") return micro(rest);
     std::cerr << "arbor bench: unknown benchmark '" << args[0] << "'\n";

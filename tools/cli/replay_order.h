@@ -34,6 +34,21 @@ std::vector<std::vector<int>> replayGroups(const PoseGraph<G>& graph, bool per_p
   return groups;
 }
 
+/// Merges the first groups into one that holds at least `edges` edges (all of them when there
+/// are fewer): a map of that many edges loaded in one update before the rest streams in.
+/// edges ≤ 0: unchanged.
+inline void mergeFirstGroups(std::vector<std::vector<int>>* groups, int edges) {
+  if (edges <= 0 || groups->empty()) return;
+  size_t k = 1;
+  std::vector<int> first = std::move((*groups)[0]);
+  while (static_cast<int>(first.size()) < edges && k < groups->size()) {
+    first.insert(first.end(), (*groups)[k].begin(), (*groups)[k].end());
+    ++k;
+  }
+  groups->erase(groups->begin() + 1, groups->begin() + static_cast<std::ptrdiff_t>(k));
+  (*groups)[0] = std::move(first);
+}
+
 /// One prior of a graph: a pose prior (position = false) or a position prior, by index.
 struct PriorRef {
   bool position = false;

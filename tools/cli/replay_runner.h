@@ -20,8 +20,12 @@ namespace arbor::cli {
 struct ReplaySettings {
   SmootherOptions smoother;
   bool per_pose = false;  ///< one update per new pose (all its edges) instead of per edge
-  bool finalize = true;   ///< relinearise everything at the end
-  bool batch = true;      ///< run batch LM from the incremental estimate
+  /// > 0: the first update takes the first this many edges (whole groups, mergeFirstGroups), a
+  /// map loaded before the rest streams in; the latency summary is then of the updates after
+  /// it, and first_update_s its time.
+  int first_update_edges = 0;
+  bool finalize = true;  ///< relinearise everything at the end
+  bool batch = true;     ///< run batch LM from the incremental estimate
   /// Online robust smoothing (bayestree/online_gnc.h); the batch LM then runs over the edges
   /// it kept.
   std::optional<RobustOptions> robust;
@@ -54,10 +58,11 @@ template <class G>
 struct ReplayResult {
   std::vector<UpdateRow> rows;
   LatencySummary latency;
-  double total_s = 0;        ///< updates + final relinearisation
-  double update_s = 0;       ///< sum of update latencies
-  double finalize_s = 0;     ///< the final relinearise-all pass
-  double F_incremental = 0;  ///< before the final pass
+  double total_s = 0;         ///< updates + final relinearisation
+  double update_s = 0;        ///< sum of update latencies
+  double first_update_s = 0;  ///< with ReplaySettings::first_update_edges: that update's time
+  double finalize_s = 0;      ///< the final relinearise-all pass
+  double F_incremental = 0;   ///< before the final pass
   double F_final = 0;
   BatchSummary batch;  ///< LM from the final estimate (if settings.batch)
   int relinearized = 0, indeterminate = 0, duplicates = 0, rejected = 0, pending = 0;

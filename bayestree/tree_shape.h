@@ -1,0 +1,48 @@
+// The shape of the Bayes tree a symbolic elimination makes (bayestree/elimination_plan.h): its
+// cliques, the flops of factorising it and the doubles its matrices hold, with and without the
+// cached factors a CachedFactorOptions ratio drops (docs/design.md, "Memory"). Symbolic only:
+// what the smoother's tree would hold after re-eliminating that plan, without building it.
+#pragma once
+
+#include <algorithm>
+
+#include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/elimination_plan.h"
+
+namespace arbor::bayestree {
+
+struct TreeShape {
+  int cliques = 0;
+  double flops = 0;                ///< Σ BayesTree::cliqueFlops
+  double conditional_doubles = 0;  ///< Σ F(F+S) + F: the conditionals and their d
+  double cached_doubles = 0;       ///< Σ S² + S over the cliques that keep their cached factor
+  double dropped_doubles = 0;      ///< Σ S² + S over those that keep none
+  int cliques_without_cached = 0;
+  int max_frontal_dim = 0, max_separator_dim = 0;
+
+  /// BayesTree::doubles of such a tree.
+  double doubles() const { return conditional_doubles + cached_doubles; }
+};
+
+/// The shape of the cliques of `plan` over variables of dimension D, keeping the cached factors
+/// BayesTree::keepsCachedFactor keeps at `cached_factor_max_ratio`. O(cliques).
+template <int D>
+TreeShape treeShape(const EliminationPlan& plan, double cached_factor_max_ratio) {
+  TreeShape s;
+  for (const SymbolicClique& c : plan.cliques) {
+    const size_t nf = c.frontals.size(), ns = c.separator.size();
+    const bool cached = BayesTree<D>::keepsCachedFactor(nf, ns, cached_factor_max_ratio);
+    const double all = BayesTree<D>::cliqueDoubles(nf, ns, true);
+    const double conditional = BayesTree<D>::cliqueDoubles(nf, ns, false);
+    ++s.cliques;
+    s.flops += BayesTree<D>::cliqueFlops(nf, ns);
+    s.conditional_doubles += conditional;
+    (cached ? s.cached_doubles : s.dropped_doubles) += all - conditional;
+    s.cliques_without_cached += cached ? 0 : 1;
+    s.max_frontal_dim = std::max(s.max_frontal_dim, static_cast<int>(nf) * D);
+    s.max_separator_dim = std::max(s.max_separator_dim, static_cast<int>(ns) * D);
+  }
+  return s;
+}
+
+}  // namespace arbor::bayestree
