@@ -22,7 +22,7 @@ RelinearizedTree<G> eliminateAt(const RelinearizationSnapshot<G>& s, const std::
   RelinearizedTree<G> out;
   const int n = static_cast<int>(theta.size());
   UpdateThreads threads(1);
-  out.tree.cached_factor_max_ratio = s.cached_factor_max_ratio;
+  out.tree.cached_factors = s.cached_factors;
   for (int v = 0; v < n; ++v) {
     out.tree.addVariable();
     out.factors.addVariable();

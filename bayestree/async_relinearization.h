@@ -30,7 +30,7 @@ struct RelinearizationSnapshot {
   std::vector<G> theta_before;     ///< Θ_M before ⊕ Δ_M, parallel to `relinearized`
   int update = 0;                  ///< the update that took it (the smoother's count)
   int nested_dissection_min = 0;   ///< SmootherOptions, resolved for G
-  double cached_factor_max_ratio = 0;  ///< SmootherOptions::cached_factors
+  CachedFactorOptions cached_factors;  ///< SmootherOptions::cached_factors
   /// AsyncRelinearizationOptions::job_iterations: at most this many eliminations, each after a
   /// Gauss–Newton step from the one before; fewer once F's relative decrease is below
   /// `relative_tolerance` or a halved step no longer lowers it.

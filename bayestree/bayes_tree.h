@@ -37,8 +37,9 @@ class BayesTree {
   /// extends.
   double flops = 0;
   double doubles = 0;
-  /// CachedFactorOptions::max_ratio (0: every clique keeps its cached factor).
-  double cached_factor_max_ratio = 0;
+  /// Which cliques keep their cached factor (the top elimination applies it); by default every
+  /// one (a bare tree; the smoother sets its options).
+  CachedFactorOptions cached_factors{0, 0};
 
   /// F³/3 + F²S + FS² for a clique of `frontals` and `separator` variables (F = D·frontals,
   /// S = D·separator): its dense Cholesky, the off-diagonal solve and the Schur complement.
@@ -57,7 +58,7 @@ class BayesTree {
   /// max_ratio 0, else when S² ≤ max_ratio·F(F+S), the cached factor no larger than max_ratio
   /// times the conditional.
   bool keepsCachedFactor(size_t frontals, size_t separator) const {
-    return keepsCachedFactor(frontals, separator, cached_factor_max_ratio);
+    return keepsCachedFactor(frontals, separator, cached_factors.max_ratio);
   }
   static bool keepsCachedFactor(size_t frontals, size_t separator, double max_ratio) {
     if (max_ratio <= 0) return true;

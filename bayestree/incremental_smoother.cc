@@ -120,6 +120,8 @@ void validate(const SmootherOptions& o) {
     bad("async.swap_after_updates", o.async.swap_after_updates, "≥ 0");
   if (!(o.cached_factors.max_ratio >= 0 && std::isfinite(o.cached_factors.max_ratio)))
     bad("cached_factors.max_ratio", o.cached_factors.max_ratio, "finite and ≥ 0");
+  if (!(o.cached_factors.min_tree_doubles >= 0))
+    bad("cached_factors.min_tree_doubles", o.cached_factors.min_tree_doubles, "≥ 0");
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw std::invalid_argument(
         "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
@@ -218,7 +220,7 @@ struct IncrementalSmoother<G>::Impl {
   explicit Impl(const SmootherOptions& o)
       : opt(o), threads(threadCount(o.threads)), dogleg_radius(o.dogleg_initial_radius) {
     validate(o);
-    tree.cached_factor_max_ratio = o.cached_factors.max_ratio;
+    tree.cached_factors = o.cached_factors;
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
@@ -504,7 +506,7 @@ struct IncrementalSmoother<G>::Impl {
     }
     s.update = update_count;
     s.nested_dissection_min = nestedDissectionMin();
-    s.cached_factor_max_ratio = opt.cached_factors.max_ratio;
+    s.cached_factors = opt.cached_factors;
     s.iterations = opt.async.job_iterations;
     s.relative_tolerance = opt.finalize_relative_tolerance;
     moved_since_snapshot.clear();
@@ -1096,8 +1098,11 @@ struct IncrementalSmoother<G>::Impl {
         n, fresh_rows,
         n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, fresh_rows, group)
                                    : bayestree::constrainedColamd(n, fresh_rows, group));
-    const bayestree::TreeShape shape = bayestree::treeShape<D>(plan, tree.cached_factor_max_ratio);
-    *doubles = shape.doubles();
+    const bayestree::TreeShape shape = bayestree::treeShape<D>(plan, tree.cached_factors.max_ratio);
+    // The whole graph's tree is the one the rule's size applies to.
+    *doubles = shape.allKeptDoubles() < tree.cached_factors.min_tree_doubles
+                   ? shape.allKeptDoubles()
+                   : shape.doubles();
     return shape.flops;
   }
 

@@ -64,9 +64,15 @@ struct CachedFactorOptions {
   /// at most r times its conditional, S² ≤ r·F(F+S), decided when the clique is eliminated.
   /// 4 (measured against 0, 1 and 16, docs/benchmarks.md "Cached factors kept and dropped"):
   /// on the 50,000-pose world 3.7 times less memory and a 30% shorter replay; on the shared
-  /// sets totals the same or lower and 16–53% less memory; 1 drops nearly every cached factor
-  /// and re-eliminates whole subtrees (2.7 times the replay).
+  /// sets totals the same or lower and 15–53% less memory (p99 0.2–0.4 ms higher on the small
+  /// 2D sets); 1 drops nearly every cached factor and re-eliminates whole subtrees (1.9 times
+  /// the replay of ratio 0).
   double max_ratio = 4;
+  /// A top elimination drops cached factors only when the tree it makes (what is left of the
+  /// tree, plus the new cliques with every cached factor) holds at least this many doubles
+  /// (10⁶: 8 MB): in a small tree they cost little memory and dropping them costs
+  /// re-eliminations (measured on smallGrid3D: a 12% longer replay with none kept).
+  double min_tree_doubles = 1e6;
 };
 
 /// Where Alg. 5's relinearisation happens (docs/design.md, "Asynchronous relinearisation").

@@ -215,6 +215,12 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
   std::vector<int>& ids = ids_;
   ids.resize(m);
   for (int k = 0; k < m; ++k) ids[k] = tree->allocClique();
+  // CachedFactorOptions::min_tree_doubles: the tree this elimination makes, every cached factor
+  // kept, decides whether any is dropped.
+  double all_kept = tree->doubles;
+  for (const SymbolicClique& sc : plan.cliques)
+    all_kept += BayesTree<D>::cliqueDoubles(sc.frontals.size(), sc.separator.size(), true);
+  const bool dropping = all_kept >= tree->cached_factors.min_tree_doubles;
   for (int k = 0; k < m; ++k) {
     const SymbolicClique& sc = plan.cliques[k];
     Clique<D>& c = cliques[ids[k]];
@@ -225,7 +231,7 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
     for (int a : sc.separator) c.separator.push_back(top[a]);
     c.parent = sc.parent < 0 ? -1 : ids[sc.parent];
     for (int v : c.frontals) tree->clique_of[v] = ids[k];
-    c.cached = tree->keepsCachedFactor(c.frontals.size(), c.separator.size());
+    c.cached = !dropping || tree->keepsCachedFactor(c.frontals.size(), c.separator.size());
     tree->countClique(c);
     out.flops += BayesTree<D>::cliqueFlops(c.frontals.size(), c.separator.size());
   }

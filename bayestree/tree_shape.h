@@ -20,8 +20,9 @@ struct TreeShape {
   int cliques_without_cached = 0;
   int max_frontal_dim = 0, max_separator_dim = 0;
 
-  /// BayesTree::doubles of such a tree.
+  /// BayesTree::doubles of such a tree, and of the one that keeps every cached factor.
   double doubles() const { return conditional_doubles + cached_doubles; }
+  double allKeptDoubles() const { return doubles() + dropped_doubles; }
 };
 
 /// The shape of the cliques of `plan` over variables of dimension D, keeping the cached factors

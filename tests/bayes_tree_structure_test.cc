@@ -138,7 +138,7 @@ TEST(BayesTreeStructure, CheckInvariantsNamesACliqueWithoutCachedFactorThatHolds
 TEST(BayesTreeStructure, KeepsCachedFactorByItsRatioToTheConditional) {
   Tree tree;
   EXPECT_TRUE(tree.keepsCachedFactor(1, 100));  // ratio 0: every clique keeps it
-  tree.cached_factor_max_ratio = 2;
+  tree.cached_factors.max_ratio = 2;
   // F = 3, S = 6: S² = 36 ≤ 2·3·9 = 54; S = 9: 81 > 2·3·12 = 72.
   EXPECT_TRUE(tree.keepsCachedFactor(1, 2));
   EXPECT_FALSE(tree.keepsCachedFactor(1, 3));

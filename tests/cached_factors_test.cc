@@ -34,6 +34,7 @@ SmootherOptions exactOptions() {
   SmootherOptions o;
   o.threads = 1;
   o.wildfire_threshold = 0;  // every clique below a change is solved: exact comparisons
+  o.cached_factors.min_tree_doubles = 0;  // these trees are small: drop at any size
   return o;
 }
 
@@ -150,11 +151,41 @@ TEST(CachedFactors, LowerRatiosHoldFewerDoubles) {
   }
 }
 
+// By default a small tree keeps every cached factor (CachedFactorOptions::min_tree_doubles):
+// the same doubles as at ratio 0 after every update; at min 0 the same walk drops some.
+TEST(CachedFactors, SmallTreesKeepEveryCachedFactorByDefault) {
+  std::vector<SE3> truth;
+  const auto by_pose = randomWalk<SE3>(300, 60, 81, &truth);
+  SmootherOptions keep_all;
+  keep_all.threads = 1;
+  keep_all.cached_factors.max_ratio = 0;
+  SmootherOptions defaults;
+  defaults.threads = 1;
+  SmootherOptions any_size = defaults;
+  any_size.cached_factors.min_tree_doubles = 0;
+  IncrementalSmoother<SE3> a(keep_all), b(defaults), c(any_size);
+  std::vector<double> kept;
+  replay(by_pose, &a, [&](const IncrementalSmoother<SE3>& s, const UpdateStats&) {
+    kept.push_back(s.factorizationDoubles());
+  });
+  ASSERT_LT(kept.back(), defaults.cached_factors.min_tree_doubles) << "a small tree";
+  size_t u = 0;
+  replay(by_pose, &b, [&](const IncrementalSmoother<SE3>& s, const UpdateStats&) {
+    EXPECT_EQ(s.factorizationDoubles(), kept[u]) << "update " << u + 1;
+    ++u;
+  });
+  replay(by_pose, &c, [](const IncrementalSmoother<SE3>&, const UpdateStats&) {});
+  EXPECT_LT(c.factorizationDoubles(), kept.back());
+}
+
 TEST(CachedFactors, NegativeOrInfiniteRatioIsRefused) {
   SmootherOptions o;
   o.cached_factors.max_ratio = -1;
   EXPECT_THROW(IncrementalSmoother2 s(o), std::invalid_argument);
   o.cached_factors.max_ratio = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(IncrementalSmoother2 s(o), std::invalid_argument);
+  o.cached_factors.max_ratio = 4;
+  o.cached_factors.min_tree_doubles = -1;
   EXPECT_THROW(IncrementalSmoother2 s(o), std::invalid_argument);
 }
 

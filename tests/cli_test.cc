@@ -168,6 +168,9 @@ TEST(Cli, ReplayLoadsAMapInTheFirstUpdateThenStreams) {
   EXPECT_GT(l["first_update_s"].get<double>(), 0.0);
   EXPECT_LE(l["first_update_s"].get<double>(), l["update_s"].get<double>());
   EXPECT_EQ(p["first_update_s"].get<double>(), 0.0);
+  // The peak after the updates is apart from the whole run's (final pass and batch included).
+  EXPECT_GT(l["peak_rss_mb_updates"].get<double>(), 0.0);
+  EXPECT_LE(l["peak_rss_mb_updates"].get<double>(), l["peak_rss_mb"].get<double>());
   const double F = p["F_batch"].get<double>();
   EXPECT_NEAR(l["F_batch"].get<double>(), F, 1e-6 * F);
   const Result text = run("replay " + file + " --first-update-edges 300");

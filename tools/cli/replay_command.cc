@@ -108,6 +108,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"rejected", r.rejected},
         {"pending", r.pending},
         {"peak_rss_mb", peakRssMb()},
+        {"peak_rss_mb_updates", r.rows.empty() ? 0.0 : r.rows.back().peak_rss_kb / 1024.0},
         {"wall_s", total_clock.seconds()},
     });
     if (run.robust.robust) {
@@ -199,7 +200,9 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   if (!run.output.empty())
     std::cout << "output        " << run.output << " (" << toString(run.format) << ")\n";
   if (!run.covariances.empty()) std::cout << "covariances   " << run.covariances << "\n";
-  std::cout << "peak RSS      " << peakRssMb() << " MiB\n";
+  std::cout << "peak RSS      " << peakRssMb() << " MiB ("
+            << (r.rows.empty() ? 0.0 : r.rows.back().peak_rss_kb / 1024.0)
+            << " MiB after the last update, before the final pass and the batch)\n";
   return 0;
 }
 
