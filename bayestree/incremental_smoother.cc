@@ -131,6 +131,8 @@ void validate(const SmootherOptions& o) {
 // costs at least this many flops, or its matrices hold this many doubles (8 MB): below them a
 // re-ordering saves less than the check costs.
 constexpr double kMinDecayCheckFlops = 1e6;
+// The queue of factors keeps its storage between updates up to this many factors.
+constexpr size_t kKeptQueueCapacity = 4096;
 constexpr double kMinDecayCheckDoubles = 1e6;
 
 /// How one pass of Alg. 6 runs.
@@ -878,12 +880,16 @@ struct IncrementalSmoother<G>::Impl {
       for (int k = 0; k < e.arity(); ++k) touch(e.key(k));
       out.ids.push_back(f);
     };
+    factors.reserveFor(queued.size());
     for (const Factor<G>& e : queued) {
       const int f = factors.add(e);
       if (factors.attached[f]) enter(f);
     }
     st->new_factors = static_cast<int>(queued.size());
     queued.clear();
+    // A burst's queue (a map loaded in one update) is not kept at its size for the elimination
+    // that follows: 0.6 GB for 1.24 million SE(2) factors.
+    if (queued.capacity() > kKeptQueueCapacity) std::vector<Factor<G>>().swap(queued);
     for (int f : readmitted)
       if (factors.factors[f].inlierWeight() > 0 && !factors.attached[f]) {
         factors.attach(f);

@@ -48,6 +48,17 @@ class LinearizedFactors {
   std::vector<int> stamp;  ///< factor → last update that listed it
 
   int numFactors() const { return static_cast<int>(factors.size()); }
+  /// Before adding `more` factors: when they would more than double the factor array, it grows
+  /// to exactly what they need (a map loaded in one update: 1.24 million SE(2) factors take
+  /// 358 MB instead of doubling's 604, with no copy of the array on the way); otherwise the
+  /// array's own doubling.
+  void reserveFor(size_t more) {
+    const size_t need = factors.size() + more;
+    if (need <= 2 * factors.capacity()) return;
+    factors.reserve(need);
+    stamp.reserve(need);
+    attached.reserve(need);
+  }
   /// A new variable (no factors yet).
   void addVariable() { var_factors.emplace_back(); }
   /// Adds a factor (not yet linearised; attached iff its inlier weight is > 0); returns its

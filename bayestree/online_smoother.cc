@@ -408,6 +408,7 @@ std::vector<ClosureReport> OnlineSmoother<G>::closures() const {
 template <class G>
 UpdateStats OnlineSmoother<G>::recordUpdate(const UpdateStats& s) {
   queued_.clear();
+  if (queued_.capacity() > 4096) std::vector<Factor<G>>().swap(queued_);  // a burst's queue
   poses_at_update_ = static_cast<int>(ids_.size());
   ++stats_.updates;
   stats_.total_update_time_s += s.time_s;
