@@ -173,7 +173,8 @@ struct Clique {
   void rankUpdate(double* W, int ldw) {
     partialCholeskyUpdate(lsPtr(), ld, F + Sn, F, dPtr(), W, ldw, D);
     dirty = true;
-    if (Sn == 0 || !cached) return;  // a root: what is left is the constant term
+    // A root (what is left is the constant term), or no cached factor to update.
+    if (Sn == 0 || !cached) return;
     const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> V(W + F, Sn + 1, D,
                                                                        Eigen::OuterStride<>(ldw));
     const int K = pending_cols;
