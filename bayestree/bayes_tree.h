@@ -60,6 +60,12 @@ class BayesTree {
   bool keepsCachedFactor(size_t frontals, size_t separator) const {
     return keepsCachedFactor(frontals, separator, cached_factors.max_ratio);
   }
+  /// Whether a tree that would hold `all_kept_doubles` with every cached factor drops any
+  /// (CachedFactorOptions::min_tree_doubles): asked by the top elimination of the tree it makes,
+  /// and by the decay watch of the whole graph's fresh tree.
+  bool dropsCachedFactors(double all_kept_doubles) const {
+    return all_kept_doubles >= cached_factors.min_tree_doubles;
+  }
   static bool keepsCachedFactor(size_t frontals, size_t separator, double max_ratio) {
     if (max_ratio <= 0) return true;
     const double F = static_cast<double>(frontals) * D, S = static_cast<double>(separator) * D;

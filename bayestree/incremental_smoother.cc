@@ -1105,10 +1105,8 @@ struct IncrementalSmoother<G>::Impl {
         n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, fresh_rows, group)
                                    : bayestree::constrainedColamd(n, fresh_rows, group));
     const bayestree::TreeShape shape = bayestree::treeShape<D>(plan, tree.cached_factors.max_ratio);
-    // The whole graph's tree is the one the rule's size applies to.
-    *doubles = shape.allKeptDoubles() < tree.cached_factors.min_tree_doubles
-                   ? shape.allKeptDoubles()
-                   : shape.doubles();
+    *doubles =
+        tree.dropsCachedFactors(shape.allKeptDoubles()) ? shape.doubles() : shape.allKeptDoubles();
     return shape.flops;
   }
 

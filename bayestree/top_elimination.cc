@@ -5,6 +5,8 @@
 #include <cmath>
 #include <memory>
 
+#include "arbor/bayestree/tree_shape.h"
+
 namespace arbor::bayestree {
 namespace {
 
@@ -215,12 +217,9 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
   std::vector<int>& ids = ids_;
   ids.resize(m);
   for (int k = 0; k < m; ++k) ids[k] = tree->allocClique();
-  // CachedFactorOptions::min_tree_doubles: the tree this elimination makes, every cached factor
-  // kept, decides whether any is dropped.
-  double all_kept = tree->doubles;
-  for (const SymbolicClique& sc : plan.cliques)
-    all_kept += BayesTree<D>::cliqueDoubles(sc.frontals.size(), sc.separator.size(), true);
-  const bool dropping = all_kept >= tree->cached_factors.min_tree_doubles;
+  // The tree this elimination makes, every cached factor kept, decides whether any is dropped.
+  const bool dropping =
+      tree->dropsCachedFactors(tree->doubles + treeShape<D>(plan, 0).allKeptDoubles());
   for (int k = 0; k < m; ++k) {
     const SymbolicClique& sc = plan.cliques[k];
     Clique<D>& c = cliques[ids[k]];
