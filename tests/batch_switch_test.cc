@@ -20,19 +20,7 @@ namespace {
 
 using testing::diagonalInformation;
 using testing::randomWalk;
-
-/// Feeds pose k and its edges, then update(), for every k; `check(smoother, stats)` after each.
-template <class G, class Check>
-void replay(const std::vector<std::vector<RelativePoseEdge<G>>>& by_pose, IncrementalSmoother<G>* s,
-            Check check) {
-  s->addFixedPose(G());
-  for (size_t k = 1; k < by_pose.size(); ++k) {
-    const auto& odo = by_pose[k].front();
-    s->addPose(s->estimate(odo.i).compose(odo.measurement));
-    for (const auto& e : by_pose[k]) s->addFactor(e);
-    check(*s, s->update());
-  }
-}
+using testing::replayWalk;
 
 SmootherOptions inlineOptions() {
   SmootherOptions o;
@@ -51,17 +39,18 @@ void expectBatchEqualsInline(unsigned seed) {
   const auto by_pose = randomWalk<G>(300, 60, seed, &truth);
   IncrementalSmoother<G> inline_smoother(inlineOptions());
   std::vector<std::vector<G>> inline_estimates;
-  replay(by_pose, &inline_smoother, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
-    EXPECT_EQ(st.batch_reeliminations, 0);
-    inline_estimates.push_back(s.estimate());
-  });
+  replayWalk(by_pose, &inline_smoother,
+             [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
+               EXPECT_EQ(st.batch_reeliminations, 0);
+               inline_estimates.push_back(s.estimate());
+             });
   SmootherOptions o = inlineOptions();
   o.batch.top_share = 0.2;
   o.batch.reorder_decay = 1.0;
   IncrementalSmoother<G> batch_smoother(o);
   int batches = 0;
   size_t u = 0;
-  replay(by_pose, &batch_smoother, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
+  replayWalk(by_pose, &batch_smoother, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
     batches += st.batch_reeliminations;
     const std::vector<G> x = s.estimate();
     for (size_t v = 0; v < x.size(); ++v)
@@ -93,7 +82,7 @@ TEST(BatchSwitch, DefaultSwitchesOnLargeTopsOnly) {
   o.threads = 1;
   IncrementalSmoother2 s(o);
   int n = 0;
-  replay(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
+  replayWalk(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
     ++n;
     ASSERT_NO_THROW(sm.checkInvariants()) << "update " << n << " batch " << st.batch_reeliminations
                                           << " folded " << st.cliques_updated;
@@ -117,7 +106,7 @@ void expectStatsAccountForTheUpdate(unsigned seed) {
   o.batch.top_share = 0.2;
   IncrementalSmoother<G> s(o);
   int batches = 0, reeliminations = 0, u = 0;
-  replay(by_pose, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
+  replayWalk(by_pose, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats& st) {
     ++u;
     if (st.cliques_reeliminated == 0) {
       EXPECT_EQ(st.reelimination_flops, 0.0) << "update " << u;
@@ -174,7 +163,7 @@ void expectUnlistedPosesUnchanged(unsigned seed) {
   IncrementalSmoother<G> s(o);
   std::vector<G> before;
   size_t listed = 0, updates = 0;
-  replay(by_pose, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats&) {
+  replayWalk(by_pose, &s, [&](const IncrementalSmoother<G>& sm, const UpdateStats&) {
     const std::vector<int>& updated = sm.updatedPoses();
     ASSERT_TRUE(std::is_sorted(updated.begin(), updated.end()));
     ASSERT_TRUE(std::adjacent_find(updated.begin(), updated.end()) == updated.end());
@@ -231,7 +220,7 @@ TEST(BoundedWork, RelinearizationCheckVisitsOnlySolvedVariables) {
   size_t previous_updated = 0;
   int k = 0;
   size_t max_updated_late = 0;
-  replay(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
+  replayWalk(by_pose, &s, [&](const IncrementalSmoother2& sm, const UpdateStats& st) {
     ++k;
     EXPECT_EQ(static_cast<size_t>(st.variables_checked), previous_updated) << "update " << k;
     previous_updated = sm.updatedPoses().size();

@@ -51,6 +51,14 @@ struct HandBuilt {
     tree.countClique(k);  // as the top elimination does
     k.allocate();
   }
+  // Makes clique `id` one without a cached factor, its doubles recounted (as the top elimination
+  // counts such a clique); its storage still holds the cached factor until dropCachedFactor.
+  void keepNoCachedFactor(int id) {
+    auto& k = tree.cliques[id];
+    tree.countClique(k.frontals.size(), k.separator.size(), -1.0, true);
+    k.cached = false;
+    tree.countClique(k.frontals.size(), k.separator.size(), 1.0, false);
+  }
   void check() const {
     tree.checkInvariants(factors, std::vector<char>(factors.size(), 1), fixed,
                          [](int) { return false; });
@@ -105,10 +113,8 @@ TEST(BayesTreeStructure, RemoveTopOfTwoBranchesRemovesEachCliqueOnce) {
 // children (which keep theirs) are the orphans.
 TEST(BayesTreeStructure, RemoveTopTakesAChildWithoutACachedFactorAlong) {
   HandBuilt t;
+  t.keepNoCachedFactor(t.c[1]);
   auto& c1 = t.tree.cliques[t.c[1]];
-  t.tree.countClique(c1.frontals.size(), c1.separator.size(), -1.0, true);
-  c1.cached = false;
-  t.tree.countClique(c1.frontals.size(), c1.separator.size(), 1.0, false);
   c1.dropCachedFactor();
   EXPECT_EQ(c1.ldh, 0);
   EXPECT_EQ(c1.storage.size(), Tree::CliqueD::sizeFor(c1.F, c1.ld, 0));
@@ -126,10 +132,7 @@ TEST(BayesTreeStructure, RemoveTopTakesAChildWithoutACachedFactorAlong) {
 
 TEST(BayesTreeStructure, CheckInvariantsNamesACliqueWithoutCachedFactorThatHoldsOne) {
   HandBuilt t;
-  auto& c1 = t.tree.cliques[t.c[1]];
-  t.tree.countClique(c1.frontals.size(), c1.separator.size(), -1.0, true);
-  c1.cached = false;
-  t.tree.countClique(c1.frontals.size(), c1.separator.size(), 1.0, false);
+  t.keepNoCachedFactor(t.c[1]);
   // Not dropped: its storage still holds the cached factor.
   EXPECT_NE(t.violation().find("clique 1 has matrices of the wrong size"), std::string::npos)
       << t.violation();

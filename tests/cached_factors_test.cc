@@ -17,18 +17,7 @@ namespace arbor {
 namespace {
 
 using testing::randomWalk;
-
-template <class G, class Check>
-void replay(const std::vector<std::vector<RelativePoseEdge<G>>>& by_pose, IncrementalSmoother<G>* s,
-            Check check) {
-  s->addFixedPose(G());
-  for (size_t k = 1; k < by_pose.size(); ++k) {
-    const auto& odo = by_pose[k].front();
-    s->addPose(s->estimate(odo.i).compose(odo.measurement));
-    for (const auto& e : by_pose[k]) s->addFactor(e);
-    check(*s, s->update());
-  }
-}
+using testing::replayWalk;
 
 SmootherOptions exactOptions() {
   SmootherOptions o;
@@ -55,14 +44,14 @@ DropRun expectDroppingEqualsKeeping(unsigned seed, SmootherOptions dropping) {
   IncrementalSmoother<G> kept(keeping);
   std::vector<std::vector<G>> estimates;
   DropRun keep_run;
-  replay(by_pose, &kept, [&](const IncrementalSmoother<G>& s, const UpdateStats&) {
+  replayWalk(by_pose, &kept, [&](const IncrementalSmoother<G>& s, const UpdateStats&) {
     estimates.push_back(s.estimate());
     keep_run.doubles.push_back(s.factorizationDoubles());
   });
   IncrementalSmoother<G> dropped(dropping);
   DropRun run;
   size_t u = 0;
-  replay(by_pose, &dropped, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
+  replayWalk(by_pose, &dropped, [&](const IncrementalSmoother<G>& s, const UpdateStats& st) {
     ASSERT_NO_THROW(s.checkInvariants()) << "update " << u + 1;
     run.folded += st.cliques_updated > 0 ? 1 : 0;
     run.batches += st.batch_reeliminations;
@@ -140,7 +129,7 @@ TEST(CachedFactors, LowerRatiosHoldFewerDoubles) {
     o.batch.reorder_decay = 0;
     o.cached_factors.max_ratio = ratio;
     IncrementalSmoother2 s(o);
-    replay(by_pose, &s, [](const IncrementalSmoother2&, const UpdateStats&) {});
+    replayWalk(by_pose, &s, [](const IncrementalSmoother2&, const UpdateStats&) {});
     // A last full re-elimination, so each tree is its ratio's fresh one.
     s.relinearizeAll();
     const double d = s.factorizationDoubles();
@@ -165,16 +154,16 @@ TEST(CachedFactors, SmallTreesKeepEveryCachedFactorByDefault) {
   any_size.cached_factors.min_tree_doubles = 0;
   IncrementalSmoother<SE3> a(keep_all), b(defaults), c(any_size);
   std::vector<double> kept;
-  replay(by_pose, &a, [&](const IncrementalSmoother<SE3>& s, const UpdateStats&) {
+  replayWalk(by_pose, &a, [&](const IncrementalSmoother<SE3>& s, const UpdateStats&) {
     kept.push_back(s.factorizationDoubles());
   });
   ASSERT_LT(kept.back(), defaults.cached_factors.min_tree_doubles) << "a small tree";
   size_t u = 0;
-  replay(by_pose, &b, [&](const IncrementalSmoother<SE3>& s, const UpdateStats&) {
+  replayWalk(by_pose, &b, [&](const IncrementalSmoother<SE3>& s, const UpdateStats&) {
     EXPECT_EQ(s.factorizationDoubles(), kept[u]) << "update " << u + 1;
     ++u;
   });
-  replay(by_pose, &c, [](const IncrementalSmoother<SE3>&, const UpdateStats&) {});
+  replayWalk(by_pose, &c, [](const IncrementalSmoother<SE3>&, const UpdateStats&) {});
   EXPECT_LT(c.factorizationDoubles(), kept.back());
 }
 

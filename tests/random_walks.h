@@ -1,10 +1,11 @@
 // A random walk with loop closures, for the tests that replay one into the smoother update by
-// update (the batch switch, asynchronous relinearisation).
+// update (the batch switch, asynchronous relinearisation, cached factors), and that replay.
 #pragma once
 
 #include <random>
 #include <vector>
 
+#include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/tests/random_graphs.h"
 
@@ -37,6 +38,20 @@ std::vector<std::vector<RelativePoseEdge<G>>> randomWalk(int n, int loops, unsig
     by_pose[j].push_back(RelativePoseEdge<G>::make(i, j, measured(i, j), omega));
   }
   return by_pose;
+}
+
+/// Feeds a walk's pose k (dead-reckoned from its odometry) and its edges, then update(), for
+/// every k after the fixed first pose; `check(smoother, stats)` after each update.
+template <class G, class Check>
+void replayWalk(const std::vector<std::vector<RelativePoseEdge<G>>>& by_pose,
+                IncrementalSmoother<G>* s, Check check) {
+  s->addFixedPose(G());
+  for (size_t k = 1; k < by_pose.size(); ++k) {
+    const auto& odo = by_pose[k].front();
+    s->addPose(s->estimate(odo.i).compose(odo.measurement));
+    for (const auto& e : by_pose[k]) s->addFactor(e);
+    check(*s, s->update());
+  }
 }
 
 }  // namespace arbor::testing
