@@ -143,6 +143,17 @@ po::options_description datasetOptions(const std::string& caption, DatasetOption
   return options;
 }
 
+// One item of a comma-separated list of numbers: the whole item a finite number >= 0, else
+// cli::UsageError "FLAG: 'ITEM' is not a WHAT >= 0" (an empty item included).
+double finiteNonNegative(const std::string& item, const std::string& flag,
+                         const std::string& what) {
+  char* end = nullptr;
+  const double value = std::strtod(item.c_str(), &end);
+  if (end == item.c_str() || *end != '\0' || !(value >= 0) || !std::isfinite(value))
+    throw cli::UsageError(flag + ": '" + item + "' is not a " + what + " >= 0");
+  return value;
+}
+
 // Parses `args` into the variables bound to `options` (and into *vm when given); false (after
 // printing the help) on --help. Throws cli::UsageError (exit 2) on a bad command line.
 bool parseOptions(const std::vector<std::string>& args, const po::options_description& options,
@@ -444,13 +455,8 @@ int tree(const std::vector<std::string>& args, const std::string& default_shared
   if (!parseOptions(args, options)) return 0;
   std::vector<double> ratios;
   std::stringstream list(ratios_text);
-  for (std::string item; std::getline(list, item, ',');) {
-    char* end = nullptr;
-    const double r = std::strtod(item.c_str(), &end);
-    if (item.empty() || *end != '\0' || !(r >= 0) || !std::isfinite(r))
-      throw cli::UsageError("--ratios: '" + item + "' is not a finite number >= 0");
-    ratios.push_back(r);
-  }
+  for (std::string item; std::getline(list, item, ',');)
+    ratios.push_back(finiteNonNegative(item, "--ratios", "finite number"));
   std::cout << "The smoother's Bayes tree on each whole graph in a fresh, unconstrained ordering "
                "(what a batch re-elimination makes; symbolic only). Per clique of F frontal and S "
                "separator dimensions: the conditional F(F+S) + F doubles, the cached factor S^2 "
@@ -637,13 +643,8 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   settings.certify = solver == "rtr";
   plan.bases = splitList(generate_from);
   plan.fractions.clear();
-  for (const std::string& f : splitList(fractions)) {
-    char* end = nullptr;
-    const double value = std::strtod(f.c_str(), &end);
-    if (end == f.c_str() || *end != '\0' || !(value >= 0) || !std::isfinite(value))
-      throw cli::UsageError("--fractions: '" + f + "' is not a finite fraction >= 0");
-    plan.fractions.push_back(value);
-  }
+  for (const std::string& f : splitList(fractions))
+    plan.fractions.push_back(finiteNonNegative(f, "--fractions", "finite fraction"));
   plan.policies.clear();
   for (const std::string& p : splitList(policies)) {
     const auto policy = sim::parseOutlierPolicy(p);
