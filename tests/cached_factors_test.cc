@@ -4,11 +4,14 @@
 // re-eliminations and background jobs, while its tree holds fewer doubles. Deterministic
 // counts and estimates, no timing.
 
+#include <algorithm>
 #include <limits>
 #include <stdexcept>
 #include <vector>
 
+#include "arbor/bayestree/elimination_plan.h"
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/tree_shape.h"
 #include "arbor/tests/random_walks.h"
 
 #include <gtest/gtest.h>
@@ -165,6 +168,42 @@ TEST(CachedFactors, SmallTreesKeepEveryCachedFactorByDefault) {
   });
   replayWalk(by_pose, &c, [](const IncrementalSmoother<SE3>&, const UpdateStats&) {});
   EXPECT_LT(c.factorizationDoubles(), kept.back());
+}
+
+// treeShape (what `arbor bench tree` prints): a ratio only moves doubles from the kept cached
+// factors to the dropped ones (at ratios up to 1 some), and the conditionals, flops and cliques
+// stay.
+TEST(CachedFactors, TreeShapeSplitsTheCachedFactorsByRatio) {
+  std::vector<SE2> truth;
+  const auto by_pose = randomWalk<SE2>(300, 60, 91, &truth);
+  bayestree::RowList rows;
+  int n = 0;
+  for (size_t k = 1; k < by_pose.size(); ++k)
+    for (const auto& e : by_pose[k]) {
+      n = std::max(n, e.j);
+      if (e.i == 0) continue;  // pose 0 fixed
+      rows.add(e.i - 1);
+      rows.add(e.j - 1);
+      rows.endRow();
+    }
+  const std::vector<int> group(static_cast<size_t>(n), 0);
+  const bayestree::EliminationPlan plan =
+      bayestree::planElimination(n, rows, bayestree::constrainedColamd(n, rows, group));
+  const bayestree::TreeShape all = bayestree::treeShape<3>(plan, 0);
+  EXPECT_EQ(all.dropped_doubles, 0.0);
+  EXPECT_EQ(all.cliques_without_cached, 0);
+  EXPECT_GT(all.cached_doubles, 0.0);
+  for (double ratio : {8.0, 1.0, 0.25}) {
+    const bayestree::TreeShape s = bayestree::treeShape<3>(plan, ratio);
+    EXPECT_EQ(s.cliques, all.cliques);
+    EXPECT_EQ(s.flops, all.flops);
+    EXPECT_EQ(s.conditional_doubles, all.conditional_doubles);
+    EXPECT_NEAR(s.allKeptDoubles(), all.doubles(), 1e-9 * all.doubles()) << ratio;
+    if (ratio <= 1) {
+      EXPECT_GT(s.cliques_without_cached, 0) << ratio;
+      EXPECT_LT(s.doubles(), all.doubles()) << ratio;
+    }
+  }
 }
 
 TEST(CachedFactors, NegativeOrInfiniteRatioIsRefused) {
