@@ -4,9 +4,12 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <stdexcept>
 
 #include <boost/math/distributions/chi_squared.hpp>
+
+#include "arbor/bayestree/closure_innovation.h"
 
 namespace arbor {
 namespace {
@@ -177,6 +180,8 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
         corroborated_.push_back(other.m);
       }
       c.corroborated = true;
+      c.partners.push_back(it->second);
+      other.partners.push_back(id);
     }
     if (c.corroborated) corroborated_.push_back(m);
     by_low_end_.emplace(low, id);
@@ -256,23 +261,49 @@ template <class G>
 double OnlineGnc<G>::innovation(const IncrementalSmoother<G>& smoother, const Edge& edge,
                                 double s) const {
   if (options_.entry == EntryTest::kResidual) return s;
-  using Matrix = typename Edge::Matrix;
-  using Vector = typename Edge::Vector;
-  const auto& theta = smoother.linearizationPoint();
-  Matrix A_i, A_j;
-  Vector r_theta;
-  edge.linearize(theta[static_cast<size_t>(edge.i)], theta[static_cast<size_t>(edge.j)], &A_i, &A_j,
-                 &r_theta);
-  Matrix P;
-  try {
-    P = smoother.predictionCovariance(edge.i, A_i, edge.j, A_j);
-  } catch (const std::logic_error&) {
-    return s;  // a pose not through an update yet: no Σ
+  const std::optional<double> m = closureInnovation(smoother, edge);
+  return m ? std::min(*m, s) : s;  // no Σ (a pose not through an update yet): s
+}
+
+template <class G>
+bool OnlineGnc<G>::confirms() const {
+  // Only on an estimated σ̂²: at Ω's word (no estimate, NoiseScale::kGiven) c² is as wrong as
+  // Ω, and (L), which sees a closure's whole cost, drops true ones that graduation keeps (MIT:
+  // four, and the estimate is lost).
+  return options_.confirm && options_.entry == EntryTest::kInnovation && estimate_.estimated;
+}
+
+template <class G>
+bool OnlineGnc<G>::backed(const Closure& c) const {
+  for (int id : c.partners) {
+    const Closure& p = closures_[static_cast<size_t>(id)];
+    if (p.state == State::kSettled && !p.held && isInlier(p)) return true;
   }
-  const Vector r =
-      edge.sqrt_information_t * edge.error(smoother.estimate(edge.i), smoother.estimate(edge.j));
-  const double m = r.dot((Matrix::Identity() + P).ldlt().solve(r));
-  return std::isfinite(m) ? std::min(m, s) : s;
+  return false;
+}
+
+template <class G>
+bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
+  if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
+      c->factor >= smoother.numFactors() || c->set_at_step == steps_ ||
+      c->kernel != KernelKind::kTruncatedLeastSquares || backed(*c))
+    return false;
+  c->judged_c2 = c2_;
+  const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
+  // In the tree at weight 1 (checked above): (L); without Σ it is kept.
+  const std::optional<double> m = leaveOneOutInnovation(smoother, edge);
+  if (!m || *m <= c2_) return false;
+  setWeight(smoother, c, 0.0);
+  ++totals_.unconfirmed;
+  return true;
+}
+
+template <class G>
+int OnlineGnc<G>::confirm(IncrementalSmoother<G>& smoother) {
+  int changed = 0;
+  for (int id : confirming_) changed += unconfirmed(smoother, &closures_[id]) ? 1 : 0;
+  confirming_.clear();
+  return changed;
 }
 
 template <class G>
@@ -301,6 +332,7 @@ bool OnlineGnc<G>::isInlier(const Closure& c) const {
 template <class G>
 void OnlineGnc<G>::enter(Closure* c, double s, double m, bool may_reject) {
   c->s = s;
+  c->set_at_step = steps_;
   c->judged_c2 = c2_;
   c->steps = 0;
   if (m <= c2_) {
@@ -358,6 +390,7 @@ double OnlineGnc<G>::residual(const IncrementalSmoother<G>& smoother, const Clos
 template <class G>
 void OnlineGnc<G>::setWeight(IncrementalSmoother<G>& smoother, Closure* c, double w) {
   c->weight = w;
+  c->set_at_step = steps_;
   smoother.setFactorWeight(c->factor, w);
 }
 
@@ -483,8 +516,11 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
 template <class G>
 int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
   int changed = 0;
+  ++steps_;
   // The warm-up's closures, once σ̂² is there (in finalize() whether or not it is).
   if (!held_.empty() && (recheck_all || scaleKnown())) changed += judgeHeld(smoother);
+  // The closures the last step's graduation settled at weight 1, now eliminated so: (L).
+  if (confirms()) changed += confirm(smoother);
   // The graduating closures: one step each (those not in the smoother yet keep w₀).
   std::vector<int> still;
   for (int id : graduating_) {
@@ -500,7 +536,11 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
       ++changed;
       ++totals_.graduation_steps;
     }
-    if (c.state == State::kGraduating) still.push_back(id);
+    if (c.state == State::kGraduating) {
+      still.push_back(id);
+    } else if (confirms() && c.weight == 1.0) {
+      confirming_.push_back(id);  // (L) at the next step, once the tree holds it at 1
+    }
   }
   graduating_.swap(still);
   // The settled closures, at the kernel: an outlier the estimate now agrees with comes back, an
@@ -526,9 +566,8 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
           smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s);
       if (m > c2_) continue;
       c.state = State::kSettled;
-      c.weight = 1.0;
+      setWeight(smoother, &c, 1.0);
       ++totals_.regraduated;
-      smoother.setFactorWeight(c.factor, 1.0);
       ++changed;
       continue;
     }
@@ -546,7 +585,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
     if (c.state == State::kGraduating) graduating_.push_back(id);
     ++totals_.regraduated;
     if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() != c.weight) {
-      smoother.setFactorWeight(c.factor, c.weight);
+      setWeight(smoother, &c, c.weight);
       ++changed;
     }
   }

@@ -615,6 +615,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.closures_excluded = c.excluded;
     s.closures_graduating = c.graduating;
     s.graduation_steps = c.graduation_steps;
+    s.closures_unconfirmed = c.unconfirmed;
     s.closure_threshold = gnc_->threshold();
     s.noise_scale = gnc_->noiseScale();
     s.noise_samples = gnc_->noiseSamples();

@@ -133,6 +133,8 @@ struct OnlineStats {
   int closures_graduating = 0;
   int graduation_steps = 0;
   int graduation_updates = 0;
+  /// Inliers dropped by their leave-one-out innovation (ClosureCounts::unconfirmed).
+  int closures_unconfirmed = 0;
   /// Relinearisations of everything at the warm-up's end (OnlineSmoother::update): one in a
   /// run whose σ̂² came while closures were held, else 0.
   int warm_up_relinearizations = 0;

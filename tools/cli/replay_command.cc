@@ -130,6 +130,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"closures_graduating", online.closures_graduating},
           {"graduation_steps", online.graduation_steps},
           {"graduation_updates", online.graduation_updates},
+          {"closures_unconfirmed", online.closures_unconfirmed},
           {"warm_up_relinearizations", online.warm_up_relinearizations},
       };
       if (!run.robust.rejected_out.empty()) j["rejected_out"] = run.robust.rejected_out;
@@ -179,7 +180,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
               << online.closures_outlier << " outlier (rejected), " << online.closures_trusted
               << " trusted, " << online.closures_graduating << " still graduating; "
               << online.graduation_steps << " graduation steps, " << online.graduation_updates
-              << " extra updates\n"
+              << " extra updates, " << online.closures_unconfirmed
+              << " inliers dropped by their leave-one-out innovation\n"
               << std::setprecision(10) << "F kept        " << F_kept
               << " (the final estimate without the rejected edges)\n";
     if (!run.robust.rejected_out.empty())
