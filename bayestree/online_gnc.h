@@ -87,27 +87,26 @@
 //                 and its surrogate agree) or μ ≥ RobustOptions::max_mu; GM: μ at 1; Huber,
 //                 Cauchy (no graduation, IRLS): w moved by less than weight_tolerance. Or after
 //                 max_steps_per_closure steps, with the kernel's own weight at s.
-//   confirmed     TLS with EntryTest::kInnovation: graduation compares s, the residual at an
-//                 estimate the closure itself pulls towards, with c². Where little else sees its
-//                 poses a false closure can pull them to within c² and settle at weight 1
-//                 (smallGrid3D with 90% local false closures, seed 1: (1, 27) at s 61.6 against
-//                 c² 192.8). So a closure graduation settles at 1 is judged once more, at the
+//   confirmed     (RobustOptions::confirm, off by default) TLS with EntryTest::kInnovation and
+//                 an estimated σ̂²: graduation compares s, the residual at an estimate the
+//                 closure itself pulls towards, with c². Where little else sees its poses a
+//                 false closure can pull them to within c² and settle at weight 1 (smallGrid3D
+//                 with 90% local false closures, seed 1: (1, 27) at s 61.6 against c² 192.8).
+//                 With `confirm`, a closure graduation settles at 1 is judged once more, at the
 //                 step after the update that eliminated it so, by what keeping it costs the
 //                 whole linearised objective against the c² that dropping it costs (TLS's own
 //                 choice for one closure, the others held): its leave-one-out innovation, from
 //                 its whitened residual r at the estimate with it and Σ with it,
 //                   m₋ = rᵀ (I − A Σ Aᵀ)⁻¹ r      (L, bayestree/closure_innovation.h)
 //                 ((E) of the graph without it; (1, 27): 423). m₋ > c²: weight 0, settled
-//                 outlier — unless a settled inlier agrees with it (P): true closures come in
-//                 runs, and on the garage (Ω ~10⁴ too weak) and intel true closures in runs sit
-//                 up to 1.6 times c² by (L). Measured and not adopted (docs/benchmarks.md, "Robust
-//                 replay"): (L) for every inlier in finalize() drops intel's two isolated true
-//                 closures (99, 1371) and (346, 1375) at 1.13 and 1.16 times c² (F_clean
-//                 1.107 × F*), while the isolated false (58, 100) of smallGrid3D with 10% random
-//                 false closures, whose pose 100 has only its odometry besides, ends at 1.41
-//                 times: no bound on (L) keeps the one and drops the other. (L) for inliers
-//                 accepted under a c² wider by a tenth: one generated 3D file with 90% grouped
-//                 false closures then diverges.
+//                 outlier — unless a settled inlier agrees with it (P). Why it is off: the
+//                 first true closures of sphere_bignoise with 10% random false closures,
+//                 (0, 50) and (2, 51), reach m₋ 6.1·10⁴ and 2.6·10⁴ against c² 3831 (Ω ~200×
+//                 too confident, a ring of odometry between them) before any inlier can agree
+//                 with them; dropped, the replay loses the ring and diverges. On the garage and
+//                 intel true closures sit up to 1.6 times c² by (L), and intel's isolated
+//                 (99, 1371) and (346, 1375) at 1.13 and 1.16 times where smallGrid3D's false
+//                 (58, 100) is at 1.41: no bound on (L) keeps the true and drops the false.
 //   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
 //                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
 //                 GncOptimizer and the reference figures count), for GM at μ = 1 w ≥ ¼.
@@ -192,10 +191,11 @@ struct RobustOptions {
   double recheck_margin = 2.0;
   /// The first check of a new closure (header comment): the innovation (default) or s₀.
   EntryTest entry = EntryTest::kInnovation;
-  /// With EntryTest::kInnovation and TLS: a closure graduation settles at weight 1 is judged
-  /// again by its leave-one-out innovation (L) and dropped when that exceeds c², unless an
-  /// inlier agrees with it (header comment, "confirmed").
-  bool confirm = true;
+  /// With EntryTest::kInnovation, TLS and an estimated σ̂²: a closure graduation settles at
+  /// weight 1 is judged again by its leave-one-out innovation (L) and dropped when that exceeds
+  /// c², unless an inlier agrees with it (header comment, "confirmed"). Off by default: it
+  /// drops sphere_bignoise's first true closures and the replay diverges.
+  bool confirm = false;
   /// TLS, GM: a closure whose first check exceeds entry_band·c² enters at weight 0; between c²
   /// and that it graduates (≥ 1).
   double entry_band = 2.0;

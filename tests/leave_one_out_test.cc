@@ -1,8 +1,9 @@
 // The leave-one-out innovation (bayestree/closure_innovation.h) and what the online GNC does
 // with it (bayestree/online_gnc.h, "confirmed"): (L) on the graph with a closure equals (E) on
 // the graph without it, where (E) read on the tree that holds the closure is far lower; a pose
-// without Σ has no (L); and on smallGrid3D with 90% local false closures (shared data) (L)
-// drops a false closure graduation keeps, and no true one.
+// without Σ has no (L); and on smallGrid3D with 90% local false closures (shared data)
+// RobustOptions::confirm (off by default) drops a false closure graduation keeps, and no true
+// one.
 #include <algorithm>
 #include <cmath>
 #include <iostream>
