@@ -43,8 +43,14 @@ RelinearizedTree<G> eliminateAt(const RelinearizationSnapshot<G>& s, const std::
   // factor at Θ, steps 4–5 order the whole graph afresh (unconstrained) and eliminate it; no
   // orphans. Then Alg. 7 over every clique.
   const std::vector<int> no_orphans;
-  const typename TopElimination<G>::Input in{
-      variables, no_orphans, nullptr, all_factors, theta, s.fixed, s.nested_dissection_min};
+  const typename TopElimination<G>::Input in{variables,
+                                             no_orphans,
+                                             nullptr,
+                                             all_factors,
+                                             theta,
+                                             s.fixed,
+                                             s.nested_dissection_min,
+                                             s.nested_dissection_try_flops};
   TopElimination<G> elimination;
   const auto eliminated = elimination.run(in, &out.tree, &out.factors, &threads);
   out.cliques = eliminated.cliques;

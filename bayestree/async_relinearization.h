@@ -30,7 +30,8 @@ struct RelinearizationSnapshot {
   std::vector<G> theta_before;     ///< Θ_M before ⊕ Δ_M, parallel to `relinearized`
   int update = 0;                  ///< the update that took it (the smoother's count)
   int nested_dissection_min = 0;   ///< SmootherOptions, resolved for G
-  CachedFactorOptions cached_factors;  ///< SmootherOptions::cached_factors
+  double nested_dissection_try_flops = 0;  ///< SmootherOptions, resolved for G (planTop)
+  CachedFactorOptions cached_factors;      ///< SmootherOptions::cached_factors
   /// AsyncRelinearizationOptions::job_iterations: at most this many eliminations, each after a
   /// Gauss–Newton step from the one before; fewer once F's relative decrease is below
   /// `relative_tolerance` or a halved step no longer lowers it.

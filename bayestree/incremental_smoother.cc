@@ -127,6 +127,13 @@ void validate(const SmootherOptions& o) {
         "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
 }
 
+// 2D tops (SmootherOptions::nested_dissection_min automatic) whose CCOLAMD plan costs more than
+// this many flops per variable are ordered by nested dissection too, the cheaper plan kept. The
+// shared 2D sets stay below it (M3500 and manhattan whole: 2·10³ a variable, where nested
+// dissection costs 14–30% more in total), the generated 50,000-pose world's tops pass it (its
+// whole graph: 1.1·10⁵ a variable under CCOLAMD, 3.4·10⁴ under nested dissection;
+// docs/benchmarks.md, "Nested dissection for heavy 2D tops").
+constexpr double kNestedDissectionTryFlops = 2e4;
 // The decay check (BatchSwitchOptions::reorder_decay) waits until the tree's factorisation
 // costs at least this many flops, or its matrices hold this many doubles (8 MB): below them a
 // re-ordering saves less than the check costs.
@@ -508,6 +515,7 @@ struct IncrementalSmoother<G>::Impl {
     }
     s.update = update_count;
     s.nested_dissection_min = nestedDissectionMin();
+    s.nested_dissection_try_flops = nestedDissectionTryFlops();
     s.cached_factors = opt.cached_factors;
     s.iterations = opt.async.job_iterations;
     s.relative_tolerance = opt.finalize_relative_tolerance;
@@ -1024,7 +1032,7 @@ struct IncrementalSmoother<G>::Impl {
         !relinearize_all && static_cast<int>(touched.size()) <= opt.batch.constrain_last_max;
     const typename bayestree::TopElimination<G>::Input in{
         top.variables, top.orphans, constrain ? &mark : nullptr, to_linearize,
-        theta,         fixed,       nestedDissectionMin()};
+        theta,         fixed,       nestedDissectionMin(),       nestedDissectionTryFlops()};
     const auto out = top_elimination.run(in, &tree, &factors, &threads);
     st->indeterminate_cliques += out.indeterminate;
     st->cliques_on_helpers += out.on_helpers;
@@ -1100,10 +1108,8 @@ struct IncrementalSmoother<G>::Impl {
     }
     for (int v : vars) slot[v] = -1;
     const std::vector<int> group(static_cast<size_t>(n), 0);
-    const bayestree::EliminationPlan plan = bayestree::planElimination(
-        n, fresh_rows,
-        n >= nestedDissectionMin() ? bayestree::constrainedNestedDissection(n, fresh_rows, group)
-                                   : bayestree::constrainedColamd(n, fresh_rows, group));
+    const bayestree::EliminationPlan plan = bayestree::planTop<D>(
+        n, fresh_rows, group, nestedDissectionMin(), nestedDissectionTryFlops());
     const bayestree::TreeShape shape = bayestree::treeShape<D>(plan, tree.cached_factors.max_ratio);
     *doubles =
         tree.dropsCachedFactors(shape.allKeptDoubles()) ? shape.doubles() : shape.allKeptDoubles();
@@ -1111,10 +1117,15 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   // Tops of at least this many variables are ordered by nested dissection
-  // (SmootherOptions::nested_dissection_min; automatic: 100 poses in 3D, never in 2D).
+  // (SmootherOptions::nested_dissection_min; automatic: 100 poses in 3D, never in 2D by size).
   int nestedDissectionMin() const {
     if (opt.nested_dissection_min >= 0) return opt.nested_dissection_min;
     return D == 6 ? 100 : std::numeric_limits<int>::max();
+  }
+  // Smaller tops whose CCOLAMD plan costs more than this many flops per variable are also
+  // ordered by nested dissection, the cheaper plan kept (automatic in 2D only; planTop).
+  double nestedDissectionTryFlops() const {
+    return opt.nested_dissection_min < 0 && D == 3 ? kNestedDissectionTryFlops : 0.0;
   }
 
   // Alg. 7, "Partial state update" (full: every clique, for relinearizeAll or

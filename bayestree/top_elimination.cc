@@ -205,10 +205,7 @@ typename TopElimination<G>::Output TopElimination<G>::run(const Input& in, Bayes
     for (int a = 0; a < n; ++a) group[a] = (*in.last_group)[top[a]] ? 1 : 0;
   EliminationPlan plan;
   factors->linearizeAll(in.to_linearize, in.theta, threads, [&] {
-    plan =
-        planElimination(n, rows,
-                        n >= in.nested_dissection_min ? constrainedNestedDissection(n, rows, group)
-                                                      : constrainedColamd(n, rows, group));
+    plan = planTop<D>(n, rows, group, in.nested_dissection_min, in.nested_dissection_try_flops);
   });
 
   // Alg. 4 step 5, "Eliminate the factor graph (Alg. 1) and create a new Bayes tree (Alg. 2)":

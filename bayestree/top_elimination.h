@@ -30,6 +30,9 @@ class TopElimination {
     const std::vector<G>& theta;           ///< the linearisation point (for to_linearize)
     const std::vector<char>& fixed;        ///< per pose: a gauge pose (a constant)
     int nested_dissection_min;  ///< tops of at least this many variables: nested dissection
+    /// > 0: a smaller top whose CCOLAMD plan costs more than this many flops per variable is
+    /// also ordered by nested dissection, the cheaper plan kept (planTop, tree_shape.h)
+    double nested_dissection_try_flops = 0;
   };
   /// What it did.
   struct Output {

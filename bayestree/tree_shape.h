@@ -5,6 +5,7 @@
 #pragma once
 
 #include <algorithm>
+#include <vector>
 
 #include "arbor/bayestree/bayes_tree.h"
 #include "arbor/bayestree/elimination_plan.h"
@@ -44,6 +45,24 @@ TreeShape treeShape(const EliminationPlan& plan, double cached_factor_max_ratio)
     s.max_separator_dim = std::max(s.max_separator_dim, static_cast<int>(ns) * D);
   }
   return s;
+}
+
+/// The plan of a top of n variables (`rows`, the variables of a larger `group` last, as
+/// constrainedColamd): nested dissection when n ≥ nested_dissection_min; otherwise CCOLAMD and,
+/// when try_flops > 0, n ≥ 100 and that plan's factorisation costs more than try_flops flops per
+/// variable, nested dissection as well, the plan of fewer flops kept. (An ordering costs
+/// microseconds per variable; a top that heavy costs far more to factorise.)
+template <int D>
+EliminationPlan planTop(int n, const RowList& rows, const std::vector<int>& group,
+                        int nested_dissection_min, double try_flops) {
+  if (n >= nested_dissection_min)
+    return planElimination(n, rows, constrainedNestedDissection(n, rows, group));
+  EliminationPlan plan = planElimination(n, rows, constrainedColamd(n, rows, group));
+  if (!(try_flops > 0) || n < 100) return plan;
+  const double flops = treeShape<D>(plan, 0).flops;
+  if (flops <= try_flops * n) return plan;
+  EliminationPlan nd = planElimination(n, rows, constrainedNestedDissection(n, rows, group));
+  return treeShape<D>(nd, 0).flops < flops ? nd : plan;
 }
 
 }  // namespace arbor::bayestree

@@ -236,7 +236,7 @@ TEST(BoundedWork, RelinearizationCheckVisitsOnlySolvedVariables) {
 // factorise but S² doubles each. The tree never holds more than decay² times the doubles of
 // the whole graph in a fresh ordering (a check when they have grown by the decay factor, the
 // re-ordering when they exceed decay × fresh); judged by flops alone it held 5.7 times. With
-// every cached factor kept (ratio 0) the watch re-orders several times; with the default ratio
+// every cached factor kept (ratio 0) the watch re-orders more than once; with the default ratio
 // (CachedFactorOptions) the one-pose cliques under long separators keep none, so the tree holds
 // fewer doubles at its largest and the same bound holds.
 double replayDenseWorld(double ratio, int* reorderings) {
@@ -278,7 +278,9 @@ double replayDenseWorld(double ratio, int* reorderings) {
 TEST(BatchSwitch, ReordersWhenTheTreeHoldsTooManyDoubles) {
   int kept_reorderings = 0, default_reorderings = 0;
   const double kept = replayDenseWorld(0, &kept_reorderings);
-  EXPECT_GT(kept_reorderings, 2);
+  // Twice here: the heavy tops are ordered by nested dissection (planTop), which keeps the tree
+  // nearer a fresh ordering between re-orderings (more often when every top took CCOLAMD).
+  EXPECT_GE(kept_reorderings, 2);
   const double dropped =
       replayDenseWorld(SmootherOptions{}.cached_factors.max_ratio, &default_reorderings);
   EXPECT_LT(dropped, kept);

@@ -2,10 +2,12 @@
 // and the symbolic elimination they feed.
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 #include <vector>
 
 #include "arbor/bayestree/elimination_plan.h"
+#include "arbor/bayestree/tree_shape.h"
 
 #include <gtest/gtest.h>
 
@@ -93,6 +95,49 @@ TEST(EliminationPlan, RejectsAGroupOfTheWrongSize) {
   const RowList rows = gridRows(10);
   EXPECT_THROW(constrainedNestedDissection(100, rows, std::vector<int>(99, 0)),
                std::invalid_argument);
+}
+
+// planTop (bayestree/tree_shape.h): nested dissection from nested_dissection_min on; below it
+// CCOLAMD, and for a heavy plan (more than try_flops flops per variable) whichever of the two
+// costs fewer flops. A 100 × 100 lattice is such a plan: nested dissection beats minimum degree
+// on it (not yet at 60 × 60), and the constrained variables stay last either way.
+TEST(PlanTop, TriesNestedDissectionOnHeavyPlansAndKeepsTheCheaper) {
+  constexpr int side = 100, n = side * side;
+  RowList rows;
+  for (int r = 0; r < side; ++r)
+    for (int c = 0; c < side; ++c) {
+      const int v = r * side + c;
+      if (c + 1 < side) {
+        rows.add(v);
+        rows.add(v + 1);
+        rows.endRow();
+      }
+      if (r + 1 < side) {
+        rows.add(v);
+        rows.add(v + side);
+        rows.endRow();
+      }
+    }
+  std::vector<int> group(n, 0);
+  constexpr int last = 4;  // the variables of the new factors, ordered last
+  for (int c = 0; c < last; ++c) group[(side - 1) * side + c] = 1;
+  const auto colamd = planElimination(n, rows, constrainedColamd(n, rows, group));
+  const auto nd = planElimination(n, rows, constrainedNestedDissection(n, rows, group));
+  const double colamd_flops = treeShape<3>(colamd, 0).flops;
+  const double nd_flops = treeShape<3>(nd, 0).flops;
+  ASSERT_LT(nd_flops, colamd_flops) << "a lattice where nested dissection wins: this test's case";
+  const int never = std::numeric_limits<int>::max();
+  // Light enough, or no try: CCOLAMD's plan.
+  EXPECT_EQ(planTop<3>(n, rows, group, never, 0).order, colamd.order);
+  EXPECT_EQ(planTop<3>(n, rows, group, never, 2 * colamd_flops / n).order, colamd.order);
+  // Heavier than the bound: the cheaper, nested dissection's.
+  const auto tried = planTop<3>(n, rows, group, never, 0.5 * colamd_flops / n);
+  EXPECT_EQ(tried.order, nd.order);
+  // At nested_dissection_min: nested dissection without a try.
+  EXPECT_EQ(planTop<3>(n, rows, group, n, 0).order, nd.order);
+  for (const auto* plan : {&colamd, &tried}) {
+    for (int k = n - last; k < n; ++k) EXPECT_EQ(group[plan->order[k]], 1) << k;
+  }
 }
 
 }  // namespace
