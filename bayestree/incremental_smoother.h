@@ -171,8 +171,10 @@ struct SmootherOptions {
   /// A re-eliminated top of at least this many variables is ordered by nested dissection
   /// (CHOLMOD/METIS, bayestree/elimination_plan.h) instead of CCOLAMD; the variables of the new
   /// factors still go last. −1: automatic, 100 for SE(3) (measured: replay total on the shared
-  /// 3D sets 15–45% lower, docs/benchmarks.md) and never for SE(2) (23–28% higher on M3500,
-  /// manhattan: the cheaper 3×3 eliminations do not pay for the ordering); 0: always.
+  /// 3D sets 15–45% lower, docs/benchmarks.md) and never by size for SE(2) (23–28% higher on
+  /// M3500, manhattan: the cheaper 3×3 eliminations do not pay for the ordering), but a 2D top
+  /// whose CCOLAMD plan costs more than 2·10⁴ flops a variable is ordered both ways and the
+  /// cheaper plan kept (bayestree::planTop); 0: always.
   int nested_dissection_min = -1;
   /// Threads that work on one update: the caller's and threads − 1 helpers (owned by the
   /// smoother, idle between updates), which eliminate and back-substitute independent subtrees

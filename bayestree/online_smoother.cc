@@ -73,7 +73,19 @@ bool OnlineSmoother<G>::sameMeasurement(const Measurement& a, const Measurement&
 }
 
 template <class G>
-int OnlineSmoother<G>::createPose(Key id, const G& value, int creator, bool anchor) {
+bool OnlineSmoother<G>::setInitialGuess(Key id, const G& value) {
+  if (!allFinite(value) || index_.count(id)) return false;
+  guesses_.insert_or_assign(id, value);
+  return true;
+}
+
+template <class G>
+int OnlineSmoother<G>::createPose(Key id, const G& computed, int creator, bool anchor) {
+  G value = computed;
+  if (auto guess = guesses_.find(id); guess != guesses_.end()) {
+    value = guess->second;
+    guesses_.erase(guess);
+  }
   const int index =
       creator < 0 && anchor ? smoother_.addFixedPose(value) : smoother_.addPose(value);
   index_.emplace(id, index);

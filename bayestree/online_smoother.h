@@ -170,6 +170,15 @@ class OnlineSmoother {
   /// unknown id starts a component there (at p, identity rotation).
   EdgeResult addPositionPrior(Key id, const typename G::Translation& p,
                               const PositionMatrix& omega);
+  /// The value pose `id` starts at when an edge creates it, instead of the estimate of the pose
+  /// the edge comes from composed with the measurement (iSAM2's new Θ of ISAM2::update): a map
+  /// saved at its optimum, or a front end's own odometry, starts near its optimum, and the first
+  /// relinearisation checks then mark few variables. In the frame of the estimate (that of the
+  /// component's first pose, where a new component also starts at its guess); a component
+  /// moved onto another by a join keeps its relative placement, not its guesses'. Used once, by
+  /// the edge that creates the pose (a pose created already ignores it). Returns false, and
+  /// keeps nothing, when the value is not finite or the pose exists.
+  bool setInitialGuess(Key id, const G& value);
   /// Takes back every accepted edge between `from` and `to` (either direction): smoother weight
   /// 0 from the next update() on, until enableEdge; an edge between them accepted meanwhile
   /// enters disabled. Refused, changing nothing, for an unknown id, no edge between them, a pair
@@ -320,6 +329,7 @@ class OnlineSmoother {
   OnlineSmootherOptions<G> options_;
   IncrementalSmoother<G> smoother_;
   std::unordered_map<Key, int> index_;
+  std::unordered_map<Key, G> guesses_;  ///< setInitialGuess, for poses not created yet
   std::vector<Key> ids_;
   std::vector<int> creator_;  ///< per dense index: the known end it was created from (−1: none)
   // Components, a union–find over dense indices (path halving; the root's entries are the

@@ -30,6 +30,30 @@ TEST(OnlineSmoother, FirstPoseIsTheFixedGauge) {
   EXPECT_THROW(s.estimate(7), std::out_of_range);
 }
 
+// setInitialGuess (iSAM2's new Θ): a pose an edge creates starts at its guess, not at the pose
+// the edge comes from composed with the measurement; a new component's first pose too; a guess
+// for a pose that exists, or not finite, is refused; a guess is used once.
+TEST(OnlineSmoother, InitialGuessIsWhereACreatedPoseStarts) {
+  OnlineSmoother<SE2> s;
+  EXPECT_TRUE(s.setInitialGuess(10, SE2(3, 4, 0.5)));
+  EXPECT_TRUE(s.setInitialGuess(11, SE2(4, 4, 0.5)));
+  EXPECT_EQ(s.addEdge(10, 11, SE2(1.5, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  // Before the update the estimate is the start: the guesses, not 10 ∘ z.
+  EXPECT_NEAR(s.estimate(10).localCoordinates(SE2(3, 4, 0.5)).norm(), 0, 1e-12);
+  EXPECT_NEAR(s.estimate(11).localCoordinates(SE2(4, 4, 0.5)).norm(), 0, 1e-12);
+  EXPECT_FALSE(s.setInitialGuess(11, SE2(9, 9, 0)));  // exists
+  EXPECT_FALSE(s.setInitialGuess(12, SE2(std::nan(""), 0, 0)));
+  s.update();
+  // 10 is the fixed gauge pose; 11 moves onto the measurement from its guess.
+  EXPECT_NEAR(s.estimate(10).localCoordinates(SE2(3, 4, 0.5)).norm(), 0, 1e-12);
+  EXPECT_NEAR(s.estimate(11).localCoordinates(SE2(3, 4, 0.5).compose(SE2(1.5, 0, 0))).norm(), 0,
+              1e-6);
+  // Without a guess: odometry.
+  EXPECT_EQ(s.addEdge(11, 13, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);
+  EXPECT_NEAR(s.estimate(13).localCoordinates(s.estimate(11).compose(SE2(1, 0, 0))).norm(), 0,
+              1e-12);
+}
+
 TEST(OnlineSmoother, DuplicatesAreReportedNotAdded) {
   OnlineSmoother<SE2> s;
   EXPECT_EQ(s.addEdge(1, 2, SE2(1, 0, 0), kI3).status, EdgeStatus::kAccepted);

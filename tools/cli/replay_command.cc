@@ -42,6 +42,12 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   settings.smoother = run.smoother;
   settings.per_pose = run.step == "pose";
   settings.first_update_edges = run.first_update_edges;
+  settings.initial_from_file = run.initial == "file";
+  if (settings.initial_from_file && !graph.has_initial_estimate) {
+    std::cerr << "arbor replay: --initial file needs the file's VERTEX lines; " << run.file
+              << " has none\n";
+    return 2;
+  }
   settings.finalize = run.finalize;
   settings.covariances = !run.covariances.empty();
   if (run.robust.robust) {
@@ -93,6 +99,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"total_s", r.total_s},
         {"update_s", r.update_s},
         {"first_update_edges", run.first_update_edges},
+        {"initial", run.initial},
         {"first_update_s", r.first_update_s},
         {"finalize_s", r.finalize_s},
         {"latency_ms", {{"p50", lat.p50}, {"p90", lat.p90}, {"p99", lat.p99}, {"max", lat.max}}},
@@ -221,7 +228,10 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       "edge: update after every edge; pose: once per new pose with all its edges")(
       "first-update-edges", po::value(&run.first_update_edges)->default_value(0),
       "the first N edges (whole --step groups) in one update, a map loaded before the rest "
-      "streams in; the latency figures are then of the updates after it (0: off)");
+      "streams in; the latency figures are then of the updates after it (0: off)")(
+      "initial", po::value(&run.initial)->default_value("odometry"),
+      "where a new pose starts: odometry (the pose its first edge comes from, composed with "
+      "it) | file (its VERTEX line: a saved map starts at its estimate)");
   addSmootherFlags(options);
   options.add_options()(
       "no-finalize", po::bool_switch(&no_finalize),
@@ -267,6 +277,8 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       throw UsageError(e.what());
     }
   }
+  if (run.initial != "odometry" && run.initial != "file")
+    throw UsageError("--initial must be odometry or file, not '" + run.initial + "'");
   if (run.first_update_edges < 0) {
     throw UsageError("--first-update-edges must be >= 0, not '" +
                      std::to_string(run.first_update_edges) + "'");

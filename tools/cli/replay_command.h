@@ -22,9 +22,10 @@ struct ReplayCommandLine {
   std::optional<refine::BatchSolver> batch;  ///< --batch: a row that refines; none: no loop
   int batch_every = 0;
   int first_update_edges = 0;  ///< --first-update-edges: a map of that many edges loaded at once
-  SmootherOptions smoother;    ///< tools/cli/smoother_flags.h
-  RobustFlags robust;          ///< tools/cli/robust_flags.h: online GNC per loop closure
-  std::string edge_choices;    ///< --edge-choices FILE (io/edge_choice_file.h), with --robust
+  std::string initial = "odometry";  ///< --initial odometry|file: where new poses start
+  SmootherOptions smoother;          ///< tools/cli/smoother_flags.h
+  RobustFlags robust;                ///< tools/cli/robust_flags.h: online GNC per loop closure
+  std::string edge_choices;          ///< --edge-choices FILE (io/edge_choice_file.h), with --robust
   /// --entry, --noise-scale, --warm-up and --corroboration-window (with --robust; read by
   /// readOnlineRobustFlags): the online GNC's options but the kernel and threshold, which are
   /// `robust`'s.

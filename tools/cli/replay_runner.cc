@@ -42,6 +42,10 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
       const auto& edge = graph.edges[e];
       const Key from = graph.ids[edge.i], to = graph.ids[edge.j];
       const EdgeChoice choice = edgeChoice(settings.choices, from, to);
+      if (settings.initial_from_file) {  // kept only for a pose not created yet
+        smoother.setInitialGuess(from, graph.poses[edge.i]);
+        smoother.setInitialGuess(to, graph.poses[edge.j]);
+      }
       const EdgeResult r = smoother.addEdge(from, to, edge.measurement, edge.information,
                                             choice.trust, choice.kernel);
       if (r.status == EdgeStatus::kDuplicate) ++result.duplicates;

@@ -24,6 +24,9 @@ struct ReplaySettings {
   /// map loaded before the rest streams in; the latency summary is then of the updates after
   /// it, and first_update_s its time.
   int first_update_edges = 0;
+  /// New poses start at the graph's poses (its VERTEX values: a saved map) instead of the pose
+  /// their first edge comes from composed with it (OnlineSmoother::setInitialGuess).
+  bool initial_from_file = false;
   bool finalize = true;  ///< relinearise everything at the end
   bool batch = true;     ///< run batch LM from the incremental estimate
   /// Online robust smoothing (bayestree/online_gnc.h); the batch LM then runs over the edges
