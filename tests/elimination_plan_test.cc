@@ -103,21 +103,7 @@ TEST(EliminationPlan, RejectsAGroupOfTheWrongSize) {
 // on it (not yet at 60 × 60), and the constrained variables stay last either way.
 TEST(PlanTop, TriesNestedDissectionOnHeavyPlansAndKeepsTheCheaper) {
   constexpr int side = 100, n = side * side;
-  RowList rows;
-  for (int r = 0; r < side; ++r)
-    for (int c = 0; c < side; ++c) {
-      const int v = r * side + c;
-      if (c + 1 < side) {
-        rows.add(v);
-        rows.add(v + 1);
-        rows.endRow();
-      }
-      if (r + 1 < side) {
-        rows.add(v);
-        rows.add(v + side);
-        rows.endRow();
-      }
-    }
+  const RowList rows = gridRows(side);
   std::vector<int> group(n, 0);
   constexpr int last = 4;  // the variables of the new factors, ordered last
   for (int c = 0; c < last; ++c) group[(side - 1) * side + c] = 1;
