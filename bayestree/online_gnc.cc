@@ -180,8 +180,10 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
         corroborated_.push_back(other.m);
       }
       c.corroborated = true;
-      c.partners.push_back(it->second);
-      other.partners.push_back(id);
+      if (options_.confirm) {  // read only by (L)'s backed()
+        c.partners.push_back(it->second);
+        other.partners.push_back(id);
+      }
     }
     if (c.corroborated) corroborated_.push_back(m);
     by_low_end_.emplace(low, id);
@@ -285,8 +287,8 @@ bool OnlineGnc<G>::backed(const Closure& c) const {
 template <class G>
 bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
   if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
-      c->factor >= smoother.numFactors() || c->set_at_step == steps_ ||
-      c->kernel != KernelKind::kTruncatedLeastSquares || backed(*c))
+      c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
+      backed(*c))
     return false;
   c->judged_c2 = c2_;
   const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
@@ -332,7 +334,6 @@ bool OnlineGnc<G>::isInlier(const Closure& c) const {
 template <class G>
 void OnlineGnc<G>::enter(Closure* c, double s, double m, bool may_reject) {
   c->s = s;
-  c->set_at_step = steps_;
   c->judged_c2 = c2_;
   c->steps = 0;
   if (m <= c2_) {
@@ -390,7 +391,6 @@ double OnlineGnc<G>::residual(const IncrementalSmoother<G>& smoother, const Clos
 template <class G>
 void OnlineGnc<G>::setWeight(IncrementalSmoother<G>& smoother, Closure* c, double w) {
   c->weight = w;
-  c->set_at_step = steps_;
   smoother.setFactorWeight(c->factor, w);
 }
 
@@ -516,7 +516,6 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
 template <class G>
 int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
   int changed = 0;
-  ++steps_;
   // The warm-up's closures, once σ̂² is there (in finalize() whether or not it is).
   if (!held_.empty() && (recheck_all || scaleKnown())) changed += judgeHeld(smoother);
   // The closures the last step's graduation settled at weight 1, now eliminated so: (L).

@@ -364,8 +364,7 @@ class OnlineGnc {
     bool held = false;          ///< at weight 0 until σ̂² is estimated (WarmUp::kHold)
     double m = 0;               ///< its innovation on entry
     bool corroborated = false;  ///< another closure agrees with it (P)
-    std::vector<int> partners;  ///< the closures that agree with it (P), by id
-    int set_at_step = -1;       ///< the step() that last set its weight (not in Σ then)
+    std::vector<int> partners;  ///< the closures that agree with it (P), by id (with confirm)
     typename Edge::Matrix information = Edge::Matrix::Identity();
   };
 
@@ -385,8 +384,8 @@ class OnlineGnc {
   double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s) const;
   /// Whether a closure that agrees with c (P) is a settled inlier now.
   bool backed(const Closure& c) const;
-  /// (L) for a settled TLS closure the tree holds at weight 1 (not set by this step) and no
-  /// inlier agrees with: sets weight 0 and returns true when it exceeds c².
+  /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with: sets
+  /// weight 0 and returns true when it exceeds c².
   bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c);
   /// (L) for the closures graduation settled at weight 1 in the last step. Returns the
   /// weights changed.
@@ -431,7 +430,6 @@ class OnlineGnc {
   std::vector<int> graduating_;  ///< closures graduating, by id
   std::vector<int> held_;        ///< closures held in the warm-up, by id
   std::vector<int> confirming_;  ///< settled at weight 1 by the last step's graduation, by id
-  int steps_ = 0;                ///< step() calls so far
   std::vector<int> by_factor_;   ///< factor index → closure id (−1: none)
   size_t cursor_ = 0;            ///< round robin of re-checks over closures_
   int resolved_factors_ = 0;     ///< factors seen by resolve()
