@@ -5,6 +5,7 @@
 #pragma once
 
 #include <algorithm>
+#include <utility>
 #include <vector>
 
 #include "arbor/bayestree/bayes_tree.h"
@@ -45,6 +46,67 @@ TreeShape treeShape(const EliminationPlan& plan, double cached_factor_max_ratio)
     s.max_separator_dim = std::max(s.max_separator_dim, static_cast<int>(ns) * D);
   }
   return s;
+}
+
+/// What a new factor on variables a and b costs an exact smoother in the tree of `plan`, read
+/// off the cliques it reaches: the cliques holding a or b as frontals and every ancestor of
+/// them (Kaess et al. 2012, Alg. 4: the top iSAM2 re-eliminates).
+///   re-elimination:  Σ BayesTree::cliqueFlops over that top (its cliques re-eliminated as they
+///     are; a fresh ordering of the top changes the shapes, not the order of magnitude);
+///   rewritten:       the doubles of the conditionals [R S] an update of the square-root factor
+///     by the factor's rows must rewrite: a row of R that the factor's rows are rotated with
+///     changes in all of its entries, and they fill to every column after. Row r of a clique of
+///     Fₙ frontal variables holds D(Fₙ − r) + S entries; the rows enter the cliques holding a or
+///     b at that variable's row, and each parent at the row of the child's first separator
+///     variable (the child's separator fills), and every row after it changes;
+///   rank update:     2·D·rewritten, the flops of a Householder update of those rows by D rows.
+struct PathCost {
+  int cliques = 0;
+  double reelimination_flops = 0;
+  double rewritten_doubles = 0;
+  double rank_update_flops = 0;
+};
+
+/// PathCost of a factor on local variables a and b (a == b: a unary factor). `seen` is scratch
+/// of plan.cliques.size() ints, all different from `stamp` on entry (a caller keeps one and
+/// passes a new stamp each call). O(the top's cliques' frontal variables).
+template <int D>
+PathCost pathCost(const EliminationPlan& plan, int a, int b, std::vector<int>* seen, int stamp) {
+  // The cliques reached, each with the first of its frontal rows the factor's rows reach.
+  std::vector<std::pair<int, size_t>> reached;
+  auto rowOf = [&](int c, int v) {
+    const std::vector<int>& f = plan.cliques[static_cast<size_t>(c)].frontals;
+    return static_cast<size_t>(std::find(f.begin(), f.end(), v) - f.begin());
+  };
+  for (const int v : {a, b}) {
+    int c = plan.clique_of_variable[static_cast<size_t>(v)];
+    size_t row = rowOf(c, v);
+    while (c >= 0) {
+      int& mark = (*seen)[static_cast<size_t>(c)];
+      if (mark == stamp) {  // the rest of the path is counted already, from this row or before
+        for (auto& [clique, first] : reached)
+          if (clique == c) first = std::min(first, row);
+        break;
+      }
+      mark = stamp;
+      reached.emplace_back(c, row);
+      const SymbolicClique& clique = plan.cliques[static_cast<size_t>(c)];
+      if (clique.parent >= 0) row = rowOf(clique.parent, clique.separator.front());
+      c = clique.parent;
+    }
+  }
+  PathCost cost;
+  for (const auto& [c, first] : reached) {
+    const SymbolicClique& clique = plan.cliques[static_cast<size_t>(c)];
+    const size_t nf = clique.frontals.size();
+    const double S = static_cast<double>(clique.separator.size()) * D;
+    ++cost.cliques;
+    cost.reelimination_flops += BayesTree<D>::cliqueFlops(nf, clique.separator.size());
+    for (size_t r = first; r < nf; ++r)
+      cost.rewritten_doubles += D * (D * static_cast<double>(nf - r) + S);
+  }
+  cost.rank_update_flops = 2.0 * D * cost.rewritten_doubles;
+  return cost;
 }
 
 /// The plan of a top of n variables (`rows`, the variables of a larger `group` last, as

@@ -126,5 +126,57 @@ TEST(PlanTop, TriesNestedDissectionOnHeavyPlansAndKeepsTheCheaper) {
   }
 }
 
+TEST(PathCost, CountsTheRowsFromTheFactorsVariableUpAndEveryRowAbove) {
+  // Two variables in one clique (0 then 1, no separator), D = 3: the blocks of [R] are
+  // R₀₀ R₀₁ / R₁₁, 9 doubles each.
+  RowList rows;
+  rows.add(0);
+  rows.add(1);
+  rows.endRow();
+  const EliminationPlan plan = planElimination(2, rows, {0, 1});
+  ASSERT_EQ(plan.cliques.size(), 1u);
+  std::vector<int> seen(1, -1);
+  const PathCost from0 = pathCost<3>(plan, 0, 0, &seen, 0);
+  EXPECT_EQ(from0.cliques, 1);
+  EXPECT_DOUBLE_EQ(from0.rewritten_doubles, 27);  // both block rows
+  EXPECT_DOUBLE_EQ(from0.rank_update_flops, 2 * 3 * 27);
+  EXPECT_DOUBLE_EQ(from0.reelimination_flops, 6.0 * 6 * 6 / 3);
+  const PathCost from1 = pathCost<3>(plan, 1, 1, &seen, 1);
+  EXPECT_DOUBLE_EQ(from1.rewritten_doubles, 9);  // the last block row only
+}
+
+TEST(PathCost, ReachesTheUnionOfTheTwoPathsToTheRoot) {
+  constexpr int side = 30, n = side * side;
+  const RowList rows = gridRows(side);
+  const std::vector<int> group(n, 0);
+  const auto plan = planElimination(n, rows, constrainedNestedDissection(n, rows, group));
+  std::vector<int> seen(plan.cliques.size(), -1);
+  int stamp = 0;
+  auto path = [&](int v) {  // the cliques from v's to the root, walked by hand
+    std::vector<int> p;
+    for (int c = plan.clique_of_variable[v]; c >= 0; c = plan.cliques[c].parent) p.push_back(c);
+    return p;
+  };
+  const int a = 0, b = n - 1, c = n / 2 + side / 2;
+  for (const auto& [u, v] : {std::pair{a, b}, std::pair{a, c}, std::pair{b, c}}) {
+    std::vector<int> both = path(u), pv = path(v);
+    both.insert(both.end(), pv.begin(), pv.end());
+    std::sort(both.begin(), both.end());
+    both.erase(std::unique(both.begin(), both.end()), both.end());
+    double flops = 0;
+    for (int k : both)
+      flops += BayesTree<3>::cliqueFlops(plan.cliques[k].frontals.size(),
+                                         plan.cliques[k].separator.size());
+    const PathCost cost = pathCost<3>(plan, u, v, &seen, stamp++);
+    EXPECT_EQ(cost.cliques, static_cast<int>(both.size())) << u << " " << v;
+    EXPECT_NEAR(cost.reelimination_flops, flops, 1e-9 * flops);
+    // Two paths cost at least the dearer one and at most both.
+    const PathCost pu = pathCost<3>(plan, u, u, &seen, stamp++);
+    const PathCost pv2 = pathCost<3>(plan, v, v, &seen, stamp++);
+    EXPECT_GE(cost.rewritten_doubles, std::max(pu.rewritten_doubles, pv2.rewritten_doubles));
+    EXPECT_LE(cost.rewritten_doubles, pu.rewritten_doubles + pv2.rewritten_doubles);
+  }
+}
+
 }  // namespace
 }  // namespace arbor::bayestree

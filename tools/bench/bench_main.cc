@@ -19,7 +19,8 @@
 //     loop closures and on its own, generated from shared clean sets (tools/bench/robust_bench.h).
 //   arbor-bench tree [--shared DIR] [--only NAME,...] [--ratios R,...]
 //     the Bayes tree's cliques, flops and memory on each whole graph in a fresh ordering,
-//     symbolic only, for cached-factor ratios (tools/bench/tree_size.h).
+//     symbolic only, for cached-factor ratios, and what the last tenth's loop closures cost in
+//     it (tools/bench/tree_size.h).
 //   arbor-bench micro [--sizes=N,...] [--benchmark_* flags]
 //     the Google Benchmark microbenchmarks: runs `arbor-microbench` built beside this program.
 #include <unistd.h>
@@ -467,6 +468,11 @@ int tree(const std::vector<std::string>& args, const std::string& default_shared
           std::cout << "\n### " << d.name << d.note << " (" << g.numPoses() << " poses, "
                     << g.numEdges() << " edges)\n\n";
           bench::printTreeSizeTable(std::cout, bench::treeSizes(g, ratios), g.numPoses());
+          std::cout << "\nThe last tenth of the edges (file order) in that tree: the cliques a "
+                       "loop closure reaches and what re-eliminating them or a rank update "
+                       "through them costs (odometry counted free; a floor on those updates, "
+                       "not a measurement).\n\n";
+          bench::printPathCostTable(std::cout, bench::lastTenthPathCosts(g));
           std::cout.flush();
         },
         d.graph);

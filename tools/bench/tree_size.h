@@ -30,4 +30,32 @@ std::vector<TreeSizeRow> treeSizes(const PoseGraph<G>& graph, const std::vector<
 /// The rows as a markdown table; `poses` for the per-pose column.
 void printTreeSizeTable(std::ostream& out, const std::vector<TreeSizeRow>& rows, int poses);
 
+/// What the last tenth of `graph`'s edges (file order, the updates of an edge-by-edge replay's
+/// last tenth) cost an exact smoother at least, in the tree of the whole graph under one
+/// ordering (bayestree::pathCost): a floor on their latency, not a measurement of it. Odometry
+/// edges (|i − j| = 1 in dense indices) count as free: an incremental ordering keeps the newest
+/// poses at the root (the constrained ordering of iSAM2), where the edge touches one clique.
+/// A loop closure's cost is its path's in the fresh tree, whose separators an incremental tree
+/// only matches right after a re-ordering.
+struct PathCostRow {
+  std::string ordering;  ///< as TreeSizeRow
+  int updates = 0;       ///< edges in the last tenth
+  int closures = 0;      ///< of them loop closures
+  /// Over the loop closures: percentiles (nearest rank) of the cliques reached and of each
+  /// estimate, MFlop.
+  double cliques_p50 = 0, cliques_max = 0;
+  double reelimination_p50 = 0, reelimination_p99 = 0, reelimination_max = 0;
+  double rank_update_p50 = 0, rank_update_p99 = 0, rank_update_max = 0;
+  double rewritten_mb_p50 = 0, rewritten_mb_p99 = 0, rewritten_mb_max = 0;  ///< 8-byte doubles
+  /// Over every update of the last tenth (odometry free): the p99 of each estimate, MFlop and
+  /// MB, the floor the updates' p99 latency stands on.
+  double updates_reelimination_p99 = 0, updates_rank_update_p99 = 0, updates_rewritten_mb_p99 = 0;
+};
+
+template <class G>
+std::vector<PathCostRow> lastTenthPathCosts(const PoseGraph<G>& graph);
+
+/// The rows as a markdown table.
+void printPathCostTable(std::ostream& out, const std::vector<PathCostRow>& rows);
+
 }  // namespace arbor::bench

@@ -63,10 +63,12 @@ void BM_CliqueRankUpdate(benchmark::State& state) {
   shapeCounters(state, F, S);
 }
 
-// (F, S): a leaf-like clique, mid-tree cliques, torus3D's largest (about 570 frontal).
+// (F, S): a leaf-like clique, mid-tree cliques, torus3D's largest (about 570 frontal), the top
+// of a 200,000-pose Manhattan world under nested dissection (`arbor bench tree`: F up to 561, S
+// up to 915).
 void cliqueShapes(benchmark::internal::Benchmark* b) {
-  for (const auto& [F, S] :
-       std::vector<std::pair<int, int>>{{6, 36}, {36, 120}, {120, 240}, {240, 480}, {570, 6}})
+  for (const auto& [F, S] : std::vector<std::pair<int, int>>{
+           {6, 36}, {36, 120}, {120, 240}, {240, 480}, {570, 6}, {600, 900}})
     b->Args({F, S});
 }
 
