@@ -49,6 +49,16 @@ py::dict statsDict(const OnlineStats& s) {
   d["closures_trusted"] = s.closures_trusted;
   d["closures_excluded"] = s.closures_excluded;
   d["closures_graduating"] = s.closures_graduating;
+  d["closures_unconfirmed"] = s.closures_unconfirmed;
+  d["graduation_steps"] = s.graduation_steps;
+  d["graduation_updates"] = s.graduation_updates;
+  d["warm_up_relinearizations"] = s.warm_up_relinearizations;
+  d["closure_threshold"] = s.closure_threshold;
+  d["noise_scale"] = s.noise_scale;
+  d["noise_samples"] = s.noise_samples;
+  d["noise_scale_estimated"] = s.noise_scale_estimated;
+  d["reseeds"] = s.reseeds;
+  d["total_reseed_time_s"] = s.total_reseed_time_s;
   d["last_update"] = statsDict(s.last_update);
   return d;
 }

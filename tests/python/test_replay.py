@@ -44,6 +44,21 @@ def test_robust_replay_rejects_false_closures(data_dir):
     assert smoother.stats()["closures_outlier"] == sum(c["status"] == "outlier" for c in closures)
 
 
+def test_robust_stats_match_the_cli(data_dir, arbor_cli):
+    """The robust counters of stats() are those `arbor replay --robust --json` reports."""
+    path = os.path.join(data_dir, "manhattan_2d_group_0.1.g2o")
+    smoother, _ = replay(arbor.read(path), robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    expected = arbor_cli("replay", path, "--robust", "--inlier-threshold", "2")["robust"]
+    stats = smoother.stats()
+    for key in ["closures_inlier", "closures_outlier", "closures_unconfirmed", "graduation_steps",
+                "graduation_updates", "warm_up_relinearizations", "noise_samples",
+                "noise_scale_estimated"]:
+        assert stats[key] == expected[key], key
+    assert stats["graduation_steps"] > 0
+    assert stats["noise_scale"] == pytest.approx(expected["noise_scale"], rel=1e-12)
+    assert stats["closure_threshold"] == pytest.approx(expected["threshold_in_use"], rel=1e-12)
+
+
 @pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
 def test_replay_covariances_and_tum_output(name, data_dir, arbor_cli, tmp_path):
     """`arbor replay --covariances OUT -o OUT --format tum` writes what the module computes."""
