@@ -59,12 +59,16 @@ TreeShape treeShape(const EliminationPlan& plan, double cached_factor_max_ratio)
 ///     Fₙ frontal variables holds D(Fₙ − r) + S entries; the rows enter the cliques holding a or
 ///     b at that variable's row, and each parent at the row of the child's first separator
 ///     variable (the child's separator fills), and every row after it changes;
-///   rank update:     2·D·rewritten, the flops of a Householder update of those rows by D rows.
+///   rank update:     2·D·rewritten, the flops of a Householder update of those rows by D rows
+///     (PathCost::rankUpdateFlops).
 struct PathCost {
   int cliques = 0;
   double reelimination_flops = 0;
   double rewritten_doubles = 0;
-  double rank_update_flops = 0;
+  template <int D>
+  double rankUpdateFlops() const {
+    return 2.0 * D * rewritten_doubles;
+  }
 };
 
 /// PathCost of a factor on local variables a and b (a == b: a unary factor). `seen` is scratch
@@ -105,7 +109,6 @@ PathCost pathCost(const EliminationPlan& plan, int a, int b, std::vector<int>* s
     for (size_t r = first; r < nf; ++r)
       cost.rewritten_doubles += D * (D * static_cast<double>(nf - r) + S);
   }
-  cost.rank_update_flops = 2.0 * D * cost.rewritten_doubles;
   return cost;
 }
 

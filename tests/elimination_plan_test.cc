@@ -139,7 +139,7 @@ TEST(PathCost, CountsTheRowsFromTheFactorsVariableUpAndEveryRowAbove) {
   const PathCost from0 = pathCost<3>(plan, 0, 0, &seen, 0);
   EXPECT_EQ(from0.cliques, 1);
   EXPECT_DOUBLE_EQ(from0.rewritten_doubles, 27);  // both block rows
-  EXPECT_DOUBLE_EQ(from0.rank_update_flops, 2 * 3 * 27);
+  EXPECT_DOUBLE_EQ(from0.rankUpdateFlops<3>(), 2 * 3 * 27);
   EXPECT_DOUBLE_EQ(from0.reelimination_flops, 6.0 * 6 * 6 / 3);
   const PathCost from1 = pathCost<3>(plan, 1, 1, &seen, 1);
   EXPECT_DOUBLE_EQ(from1.rewritten_doubles, 9);  // the last block row only

@@ -467,12 +467,13 @@ int tree(const std::vector<std::string>& args, const std::string& default_shared
         [&](const auto& g) {
           std::cout << "\n### " << d.name << d.note << " (" << g.numPoses() << " poses, "
                     << g.numEdges() << " edges)\n\n";
-          bench::printTreeSizeTable(std::cout, bench::treeSizes(g, ratios), g.numPoses());
+          const bench::TreeReport report = bench::treeReport(g, ratios);
+          bench::printTreeSizeTable(std::cout, report.sizes, g.numPoses());
           std::cout << "\nThe last tenth of the edges (file order) in that tree: the cliques a "
                        "loop closure reaches and what re-eliminating them or a rank update "
                        "through them costs (odometry counted free; a floor on those updates, "
                        "not a measurement).\n\n";
-          bench::printPathCostTable(std::cout, bench::lastTenthPathCosts(g));
+          bench::printPathCostTable(std::cout, report.paths);
           std::cout.flush();
         },
         d.graph);

@@ -1,9 +1,8 @@
 #include "arbor/tools/bench/tree_size.h"
 
-#include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <cstdlib>
+#include <utility>
 
 #include "arbor/bayestree/elimination_plan.h"
 #include "arbor/core/se2.h"
@@ -47,35 +46,75 @@ bayestree::EliminationPlan plan(const WholeGraph& w, bool nested) {
                                         : bayestree::constrainedColamd(w.n, w.rows, group));
 }
 
-// Nearest-rank percentile of a sorted sample.
-double percentile(const std::vector<double>& sorted, double p) {
-  if (sorted.empty()) return 0;
-  const size_t rank = static_cast<size_t>(std::ceil(p / 100.0 * sorted.size()));
-  return sorted[std::min(sorted.size() - 1, rank == 0 ? 0 : rank - 1)];
+}  // namespace
+
+namespace {
+
+// The last tenth's path costs in the tree of plan p.
+template <class G>
+PathCostRow pathCosts(const PoseGraph<G>& graph, const WholeGraph& w,
+                      const bayestree::EliminationPlan& p) {
+  constexpr int D = G::kDoF;
+  const int m = graph.numEdges();
+  PathCostRow row;
+  std::vector<int> seen(p.cliques.size(), -1);
+  std::vector<double> cliques, reelimination, rank_update, rewritten, all_reelimination,
+      all_rank_update, all_rewritten;
+  for (int k = m - m / 10; k < m; ++k) {
+    const auto& e = graph.edges[static_cast<size_t>(k)];
+    ++row.updates;
+    const int a = w.slot[static_cast<size_t>(e.i)], b = w.slot[static_cast<size_t>(e.j)];
+    if (std::abs(e.i - e.j) == 1 || (a < 0 && b < 0)) {
+      all_reelimination.push_back(0);
+      all_rank_update.push_back(0);
+      all_rewritten.push_back(0);
+      continue;
+    }
+    ++row.closures;
+    const bayestree::PathCost c = bayestree::pathCost<D>(p, a < 0 ? b : a, b < 0 ? a : b, &seen, k);
+    cliques.push_back(c.cliques);
+    reelimination.push_back(c.reelimination_flops / 1e6);
+    rank_update.push_back(c.rankUpdateFlops<D>() / 1e6);
+    rewritten.push_back(c.rewritten_doubles * 8 / 1e6);
+    all_reelimination.push_back(reelimination.back());
+    all_rank_update.push_back(rank_update.back());
+    all_rewritten.push_back(rewritten.back());
+  }
+  row.cliques = cli::summarizeLatency(std::move(cliques));
+  row.reelimination_mflop = cli::summarizeLatency(std::move(reelimination));
+  row.rank_update_mflop = cli::summarizeLatency(std::move(rank_update));
+  row.rewritten_mb = cli::summarizeLatency(std::move(rewritten));
+  row.updates_reelimination_mflop = cli::summarizeLatency(std::move(all_reelimination));
+  row.updates_rank_update_mflop = cli::summarizeLatency(std::move(all_rank_update));
+  row.updates_rewritten_mb = cli::summarizeLatency(std::move(all_rewritten));
+  return row;
 }
 
 }  // namespace
 
 template <class G>
-std::vector<TreeSizeRow> treeSizes(const PoseGraph<G>& graph, const std::vector<double>& ratios) {
+TreeReport treeReport(const PoseGraph<G>& graph, const std::vector<double>& ratios) {
   constexpr int D = G::kDoF;
   const WholeGraph w = wholeGraph(graph);
-  std::vector<TreeSizeRow> out;
+  TreeReport report;
   for (const bool nested : {false, true}) {
+    const char* ordering = nested ? "nested dissection" : "colamd";
     const auto t0 = std::chrono::steady_clock::now();
     const bayestree::EliminationPlan p = plan(w, nested);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     for (double r : ratios) {
       TreeSizeRow row;
-      row.ordering = nested ? "nested dissection" : "colamd";
+      row.ordering = ordering;
       row.ordering_s = seconds;
       row.max_ratio = r;
       row.shape = bayestree::treeShape<D>(p, r);
-      out.push_back(row);
+      report.sizes.push_back(row);
     }
+    report.paths.push_back(pathCosts(graph, w, p));
+    report.paths.back().ordering = ordering;
   }
-  return out;
+  return report;
 }
 
 void printTreeSizeTable(std::ostream& out, const std::vector<TreeSizeRow>& rows, int poses) {
@@ -96,63 +135,10 @@ void printTreeSizeTable(std::ostream& out, const std::vector<TreeSizeRow>& rows,
   }
 }
 
-template <class G>
-std::vector<PathCostRow> lastTenthPathCosts(const PoseGraph<G>& graph) {
-  constexpr int D = G::kDoF;
-  const WholeGraph w = wholeGraph(graph);
-  const int m = graph.numEdges();
-  std::vector<PathCostRow> out;
-  for (const bool nested : {false, true}) {
-    const bayestree::EliminationPlan p = plan(w, nested);
-    PathCostRow row;
-    row.ordering = nested ? "nested dissection" : "colamd";
-    std::vector<int> seen(p.cliques.size(), -1);
-    std::vector<double> cliques, reelimination, rank_update, rewritten, all_reelimination,
-        all_rank_update, all_rewritten;
-    for (int k = m - m / 10; k < m; ++k) {
-      const auto& e = graph.edges[static_cast<size_t>(k)];
-      ++row.updates;
-      const int a = w.slot[static_cast<size_t>(e.i)], b = w.slot[static_cast<size_t>(e.j)];
-      if (std::abs(e.i - e.j) == 1 || (a < 0 && b < 0)) {
-        all_reelimination.push_back(0);
-        all_rank_update.push_back(0);
-        all_rewritten.push_back(0);
-        continue;
-      }
-      ++row.closures;
-      const bayestree::PathCost c =
-          bayestree::pathCost<D>(p, a < 0 ? b : a, b < 0 ? a : b, &seen, k);
-      cliques.push_back(c.cliques);
-      reelimination.push_back(c.reelimination_flops / 1e6);
-      rank_update.push_back(c.rank_update_flops / 1e6);
-      all_reelimination.push_back(c.reelimination_flops / 1e6);
-      all_rank_update.push_back(c.rank_update_flops / 1e6);
-      rewritten.push_back(c.rewritten_doubles * 8 / 1e6);
-      all_rewritten.push_back(c.rewritten_doubles * 8 / 1e6);
-    }
-    for (auto* v : {&cliques, &reelimination, &rank_update, &rewritten, &all_reelimination,
-                    &all_rank_update, &all_rewritten})
-      std::sort(v->begin(), v->end());
-    row.cliques_p50 = percentile(cliques, 50);
-    row.cliques_max = percentile(cliques, 100);
-    row.reelimination_p50 = percentile(reelimination, 50);
-    row.reelimination_p99 = percentile(reelimination, 99);
-    row.reelimination_max = percentile(reelimination, 100);
-    row.rank_update_p50 = percentile(rank_update, 50);
-    row.rank_update_p99 = percentile(rank_update, 99);
-    row.rank_update_max = percentile(rank_update, 100);
-    row.rewritten_mb_p50 = percentile(rewritten, 50);
-    row.rewritten_mb_p99 = percentile(rewritten, 99);
-    row.rewritten_mb_max = percentile(rewritten, 100);
-    row.updates_reelimination_p99 = percentile(all_reelimination, 99);
-    row.updates_rewritten_mb_p99 = percentile(all_rewritten, 99);
-    row.updates_rank_update_p99 = percentile(all_rank_update, 99);
-    out.push_back(row);
-  }
-  return out;
-}
-
 void printPathCostTable(std::ostream& out, const std::vector<PathCostRow>& rows) {
+  auto threePercentiles = [](const cli::LatencySummary& l) {
+    return fmt("%.2f", l.p50) + " / " + fmt("%.2f", l.p99) + " / " + fmt("%.2f", l.max);
+  };
   out << "| ordering | updates | loop closures | cliques reached p50 / max | re-elimination MFlop "
          "p50 / p99 / max | rank update MFlop p50 / p99 / max | conditionals rewritten MB p50 / "
          "p99 "
@@ -161,19 +147,15 @@ void printPathCostTable(std::ostream& out, const std::vector<PathCostRow>& rows)
          "|---|---|---|---|---|---|---|---|\n";
   for (const PathCostRow& r : rows)
     out << "| " << r.ordering << " | " << r.updates << " | " << r.closures << " | "
-        << fmt("%.0f", r.cliques_p50) << " / " << fmt("%.0f", r.cliques_max) << " | "
-        << fmt("%.2f", r.reelimination_p50) << " / " << fmt("%.2f", r.reelimination_p99) << " / "
-        << fmt("%.2f", r.reelimination_max) << " | " << fmt("%.2f", r.rank_update_p50) << " / "
-        << fmt("%.2f", r.rank_update_p99) << " / " << fmt("%.2f", r.rank_update_max) << " | "
-        << fmt("%.2f", r.rewritten_mb_p50) << " / " << fmt("%.2f", r.rewritten_mb_p99) << " / "
-        << fmt("%.2f", r.rewritten_mb_max) << " | " << fmt("%.2f", r.updates_reelimination_p99)
-        << " / " << fmt("%.2f", r.updates_rank_update_p99) << " / "
-        << fmt("%.2f", r.updates_rewritten_mb_p99) << " |\n";
+        << fmt("%.0f", r.cliques.p50) << " / " << fmt("%.0f", r.cliques.max) << " | "
+        << threePercentiles(r.reelimination_mflop) << " | " << threePercentiles(r.rank_update_mflop)
+        << " | " << threePercentiles(r.rewritten_mb) << " | "
+        << fmt("%.2f", r.updates_reelimination_mflop.p99) << " / "
+        << fmt("%.2f", r.updates_rank_update_mflop.p99) << " / "
+        << fmt("%.2f", r.updates_rewritten_mb.p99) << " |\n";
 }
 
-template std::vector<TreeSizeRow> treeSizes(const PoseGraph<SE2>&, const std::vector<double>&);
-template std::vector<TreeSizeRow> treeSizes(const PoseGraph<SE3>&, const std::vector<double>&);
-template std::vector<PathCostRow> lastTenthPathCosts(const PoseGraph<SE2>&);
-template std::vector<PathCostRow> lastTenthPathCosts(const PoseGraph<SE3>&);
+template TreeReport treeReport(const PoseGraph<SE2>&, const std::vector<double>&);
+template TreeReport treeReport(const PoseGraph<SE3>&, const std::vector<double>&);
 
 }  // namespace arbor::bench

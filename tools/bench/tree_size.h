@@ -11,6 +11,7 @@
 
 #include "arbor/bayestree/tree_shape.h"
 #include "arbor/core/pose_graph.h"
+#include "arbor/tools/cli/latency.h"
 
 namespace arbor::bench {
 
@@ -20,12 +21,6 @@ struct TreeSizeRow {
   double max_ratio = 0;   ///< CachedFactorOptions::max_ratio
   bayestree::TreeShape shape;
 };
-
-/// For each ordering (CCOLAMD, as the smoother orders 2D tops; CHOLMOD's nested dissection, as
-/// it orders 3D tops of 100 poses or more) and each ratio: the shape of the tree of every
-/// variable of `graph` (its gauge poses fixed), unconstrained.
-template <class G>
-std::vector<TreeSizeRow> treeSizes(const PoseGraph<G>& graph, const std::vector<double>& ratios);
 
 /// The rows as a markdown table; `poses` for the per-pose column.
 void printTreeSizeTable(std::ostream& out, const std::vector<TreeSizeRow>& rows, int poses);
@@ -41,19 +36,25 @@ struct PathCostRow {
   std::string ordering;  ///< as TreeSizeRow
   int updates = 0;       ///< edges in the last tenth
   int closures = 0;      ///< of them loop closures
-  /// Over the loop closures: percentiles (nearest rank) of the cliques reached and of each
-  /// estimate, MFlop.
-  double cliques_p50 = 0, cliques_max = 0;
-  double reelimination_p50 = 0, reelimination_p99 = 0, reelimination_max = 0;
-  double rank_update_p50 = 0, rank_update_p99 = 0, rank_update_max = 0;
-  double rewritten_mb_p50 = 0, rewritten_mb_p99 = 0, rewritten_mb_max = 0;  ///< 8-byte doubles
-  /// Over every update of the last tenth (odometry free): the p99 of each estimate, MFlop and
-  /// MB, the floor the updates' p99 latency stands on.
-  double updates_reelimination_p99 = 0, updates_rank_update_p99 = 0, updates_rewritten_mb_p99 = 0;
+  /// Over the loop closures: percentiles (nearest rank, cli::summarizeLatency, here of counts,
+  /// MFlop and MB of 8-byte doubles) of the cliques reached and of each estimate.
+  cli::LatencySummary cliques, reelimination_mflop, rank_update_mflop, rewritten_mb;
+  /// Over every update of the last tenth (odometry free): the same estimates, whose p99 is the
+  /// floor the updates' p99 latency stands on.
+  cli::LatencySummary updates_reelimination_mflop, updates_rank_update_mflop, updates_rewritten_mb;
 };
 
+/// Both tables of one graph, each ordering computed once.
+struct TreeReport {
+  std::vector<TreeSizeRow> sizes;
+  std::vector<PathCostRow> paths;
+};
+
+/// For each ordering (CCOLAMD, as the smoother orders 2D tops; CHOLMOD's nested dissection, as
+/// it orders 3D tops of 100 poses or more): the shape of the tree of every variable of `graph`
+/// (its gauge poses fixed), unconstrained, at each ratio, and the last tenth's path costs in it.
 template <class G>
-std::vector<PathCostRow> lastTenthPathCosts(const PoseGraph<G>& graph);
+TreeReport treeReport(const PoseGraph<G>& graph, const std::vector<double>& ratios);
 
 /// The rows as a markdown table.
 void printPathCostTable(std::ostream& out, const std::vector<PathCostRow>& rows);
