@@ -122,6 +122,9 @@ std::string RobustOptions::problem() const {
   if (!(recheck_margin >= 1) || !std::isfinite(recheck_margin))
     return bad("recheck_margin", recheck_margin, "finite and >= 1");
   if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
+  if (!(final_confirm_margin == 0 || final_confirm_margin >= 1) ||
+      !std::isfinite(final_confirm_margin))
+    return bad("final_confirm_margin", final_confirm_margin, "0 (off) or finite and >= 1");
   if (!(entry_band >= 1) || !std::isfinite(entry_band))
     return bad("entry_band", entry_band, "finite and >= 1");
   if (scale_min_samples < 1) return bad("scale_min_samples", scale_min_samples, ">= 1");
@@ -180,7 +183,7 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
         corroborated_.push_back(other.m);
       }
       c.corroborated = true;
-      if (options_.confirm) {  // read only by (L)'s backed()
+      if (recordsPartners()) {  // read only by (L)'s backed()
         c.partners.push_back(it->second);
         other.partners.push_back(id);
       }
@@ -276,6 +279,17 @@ bool OnlineGnc<G>::confirms() const {
 }
 
 template <class G>
+bool OnlineGnc<G>::confirmsAtTheEnd() const {
+  return options_.final_confirm_margin > 0 && options_.entry == EntryTest::kInnovation &&
+         estimate_.estimated;
+}
+
+template <class G>
+bool OnlineGnc<G>::recordsPartners() const {
+  return options_.confirm || options_.final_confirm_margin > 0;
+}
+
+template <class G>
 bool OnlineGnc<G>::backed(const Closure& c) const {
   for (int id : c.partners) {
     const Closure& p = closures_[static_cast<size_t>(id)];
@@ -285,7 +299,7 @@ bool OnlineGnc<G>::backed(const Closure& c) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
+bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin) {
   if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
       c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
       backed(*c))
@@ -294,7 +308,7 @@ bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
   const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
   // In the tree at weight 1 (checked above): (L); without Σ it is kept.
   const std::optional<double> m = leaveOneOutInnovation(smoother, edge);
-  if (!m || *m <= c2_) return false;
+  if (!m || *m <= margin * c2_) return false;
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
   return true;
@@ -303,8 +317,20 @@ bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
 template <class G>
 int OnlineGnc<G>::confirm(IncrementalSmoother<G>& smoother) {
   int changed = 0;
-  for (int id : confirming_) changed += unconfirmed(smoother, &closures_[id]) ? 1 : 0;
+  for (int id : confirming_) changed += unconfirmed(smoother, &closures_[id], 1.0) ? 1 : 0;
   confirming_.clear();
+  return changed;
+}
+
+template <class G>
+int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped) {
+  int changed = 0;
+  dropped->assign(closures_.size(), 0);
+  for (size_t id = 0; id < closures_.size(); ++id) {
+    if (!unconfirmed(smoother, &closures_[id], options_.final_confirm_margin)) continue;
+    (*dropped)[id] = 1;
+    ++changed;
+  }
   return changed;
 }
 
@@ -514,12 +540,17 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
 }
 
 template <class G>
-int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
+int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
+  const bool recheck_all = scope != StepScope::kRoundRobin;
   int changed = 0;
   // The warm-up's closures, once σ̂² is there (in finalize() whether or not it is).
   if (!held_.empty() && (recheck_all || scaleKnown())) changed += judgeHeld(smoother);
   // The closures the last step's graduation settled at weight 1, now eliminated so: (L).
   if (confirms()) changed += confirm(smoother);
+  // In finalize(): every inlier no inlier agrees with, (L) at final_confirm_margin·c².
+  std::vector<char> dropped;
+  if (scope == StepScope::kFinalize && confirmsAtTheEnd())
+    changed += confirmAll(smoother, &dropped);
   // The graduating closures: one step each (those not in the smoother yet keep w₀).
   std::vector<int> still;
   for (int id : graduating_) {
@@ -550,6 +581,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, bool recheck_all) {
     const int id = static_cast<int>(cursor_++ % n);
     Closure& c = closures_[id];
     if (c.state != State::kSettled || c.factor < 0 || c.held) continue;
+    if (static_cast<size_t>(id) < dropped.size() && dropped[static_cast<size_t>(id)]) continue;
     ++k;
     ++totals_.rechecks;
     const double s = residual(smoother, c);

@@ -340,7 +340,8 @@ UpdateStats OnlineSmoother<G>::update() {
   // pair taken back are excluded from it (disableEdge, and excludeDisabled for those that
   // enter while their pair is disabled).
   const size_t held = gnc_->held();
-  gnc_->step(smoother_, recheck_all_);  // the first graduation step rides on this update
+  // The first graduation step rides on this update.
+  gnc_->step(smoother_, recheck_all_ ? StepScope::kAll : StepScope::kRoundRobin);
   recheck_all_ = false;
   int first = smoother_.numFactors();
   UpdateStats total = smoother_.update();
@@ -403,7 +404,7 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
     addStats(&total, smoother_.relinearizeAll(cancel));
     gnc_->resolve(smoother_);
     if (total.cancelled || round + 1 >= gnc_->options().finalize_rounds) break;
-    if (gnc_->step(smoother_, /*recheck_all=*/true) == 0 && !gnc_->graduating()) break;
+    if (gnc_->step(smoother_, StepScope::kFinalize) == 0 && !gnc_->graduating()) break;
   }
   return recordUpdate(total);
 }

@@ -264,14 +264,17 @@ TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
   }
 }
 
-// --entry, --noise-scale, --warm-up and --corroboration-window (tools/cli/robust_flags.h)
+// --entry, --noise-scale, --warm-up, --corroboration-window and --final-confirm-margin
+// (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
-  const std::vector<std::string> args = {
-      "--robust", "--entry",   "residual", "--noise-scale",
-      "given",    "--warm-up", "given",    "--corroboration-window",
-      "7"};
+  const std::vector<std::string> args = {"--robust", "--entry",
+                                         "residual", "--noise-scale",
+                                         "given",    "--warm-up",
+                                         "given",    "--corroboration-window",
+                                         "7",        "--final-confirm-margin",
+                                         "1.5"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -280,6 +283,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.scale, NoiseScale::kGiven);
   EXPECT_EQ(replay->online.warm_up, WarmUp::kGiven);
   EXPECT_EQ(replay->online.corroboration_window, 7);
+  EXPECT_EQ(replay->online.final_confirm_margin, 1.5);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -287,6 +291,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->scale, NoiseScale::kGiven);
   EXPECT_EQ(serve->options.robust->warm_up, WarmUp::kGiven);
   EXPECT_EQ(serve->options.robust->corroboration_window, 7);
+  EXPECT_EQ(serve->options.robust->final_confirm_margin, 1.5);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -294,6 +299,17 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->scale, RobustOptions{}.scale);
   EXPECT_EQ(plain->options.robust->warm_up, RobustOptions{}.warm_up);
   EXPECT_EQ(plain->options.robust->corroboration_window, RobustOptions{}.corroboration_window);
+  EXPECT_EQ(plain->options.robust->final_confirm_margin, RobustOptions{}.final_confirm_margin);
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
+  for (const std::string bad : {"0.5", "nan", "-1"}) {
+    try {
+      parseReplayCommandLine({"graph.g2o", "--robust", "--final-confirm-margin", bad});
+      ADD_FAILURE() << "--final-confirm-margin " << bad << " accepted";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find("--final-confirm-margin"), std::string::npos)
+          << e.what();
+    }
+  }
   EXPECT_EQ(parseReplayCommandLine({"graph.g2o", "--robust"})->online.corroboration_window,
             RobustOptions{}.corroboration_window);
   EXPECT_THROW(parseServeCommandLine({"--corroboration-window", "3"}), UsageError);

@@ -3,7 +3,8 @@
 // the graph without it, where (E) read on the tree that holds the closure is far lower; a pose
 // without Σ has no (L); and on smallGrid3D with 90% local false closures (shared data)
 // RobustOptions::confirm (off by default) drops a false closure graduation keeps, and no true
-// one.
+// one; finalize()'s (L) at RobustOptions::final_confirm_margin drops smallGrid3D's isolated
+// false closure and keeps intel's isolated true ones.
 #include <algorithm>
 #include <cmath>
 #include <iostream>
@@ -89,13 +90,13 @@ struct Outcome {
   double F_clean = 0;
 };
 
-Outcome replayPlanted(const PoseGraph3& clean, const sim::FalseClosures<SE3>& planted,
-                      bool confirm) {
+template <class G>
+Outcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
+                     const RobustOptions& robust) {
   cli::ReplaySettings settings;
-  settings.robust = RobustOptions{};
-  settings.robust->confirm = confirm;
+  settings.robust = robust;
   settings.batch = false;
-  const cli::ReplayResult<SE3> r = cli::runReplay(planted.graph, settings);
+  const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
   Outcome out;
   for (const ClosureReport& c : r.closures)
     if (c.status == ClosureStatus::kOutlier)
@@ -119,8 +120,12 @@ TEST(LeaveOneOut, DropsLocalFalseClosuresGraduationKeeps) {
   for (const auto& [i, j] : planted.pairs)
     is_false.insert(
         {planted.graph.ids[static_cast<size_t>(i)], planted.graph.ids[static_cast<size_t>(j)]});
-  const Outcome off = replayPlanted(clean, planted, /*confirm=*/false);
-  const Outcome on = replayPlanted(clean, planted, /*confirm=*/true);
+  RobustOptions off_options;
+  off_options.final_confirm_margin = 0;  // (L) online only
+  RobustOptions on_options = off_options;
+  on_options.confirm = true;
+  const Outcome off = replayRobust(clean, planted.graph, off_options);
+  const Outcome on = replayRobust(clean, planted.graph, on_options);
   std::cout << "rejected " << off.rejected.size() << " -> " << on.rejected.size() << " of "
             << is_false.size() << " false, F_clean " << off.F_clean << " -> " << on.F_clean << "\n";
   EXPECT_EQ(off.unconfirmed, 0);
@@ -132,6 +137,57 @@ TEST(LeaveOneOut, DropsLocalFalseClosuresGraduationKeeps) {
     EXPECT_TRUE(is_false.count(pair)) << "a true closure " << pair.first << " " << pair.second;
   EXPECT_GE(on.rejected.size(), off.rejected.size());
   EXPECT_LT(on.F_clean, 0.9 * off.F_clean);
+}
+
+// Graduation keeps smallGrid3D's isolated false (58, 100) (10% random false closures, seed 1:
+// pose 100 has only its odometry besides) at F_clean 1.03 F*; in finalize() its (L) is 1.41·c²,
+// past the margin, and it is dropped.
+TEST(LeaveOneOut, FinalizeDropsAnIsolatedFalseClosure) {
+  if (!testing::datasetPresent("smallGrid3D"))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
+  const PoseGraph3 clean =
+      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D")));
+  sim::OutlierOptions o;
+  o.fraction = 0.1;
+  o.policy = sim::OutlierPolicy::kRandom;
+  o.seed = 1;
+  const sim::FalseClosures<SE3> planted = sim::addFalseClosures(clean, o);
+  std::set<std::pair<Key, Key>> is_false;
+  for (const auto& [i, j] : planted.pairs) {
+    const Key a = planted.graph.ids[static_cast<size_t>(i)];
+    const Key b = planted.graph.ids[static_cast<size_t>(j)];
+    is_false.insert({std::min(a, b), std::max(a, b)});
+  }
+  RobustOptions off_options;
+  off_options.final_confirm_margin = 0;
+  const Outcome off = replayRobust(clean, planted.graph, off_options);
+  const Outcome on = replayRobust(clean, planted.graph, RobustOptions{});
+  std::cout << "rejected " << off.rejected.size() << " -> " << on.rejected.size() << " of "
+            << is_false.size() << " false, F_clean " << off.F_clean << " -> " << on.F_clean << "\n";
+  EXPECT_EQ(off.unconfirmed, 0);
+  EXPECT_LT(off.rejected.size(), is_false.size());  // graduation keeps one
+  EXPECT_GT(on.unconfirmed, 0);
+  EXPECT_EQ(on.rejected, is_false);  // every false closure, and no true one
+  EXPECT_LT(on.F_clean, off.F_clean / 1.02);
+}
+
+// Intel's isolated true closures (99, 1371) and (346, 1375) sit at 1.12 and 1.16·c² by (L) at
+// the end of the clean replay: (L) at c² itself (margin 1) drops them, the default margin keeps
+// every closure, and the estimate is the plain replay's.
+TEST(LeaveOneOut, FinalizeKeepsIsolatedTrueClosures) {
+  if (!testing::datasetPresent("intel"))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("intel");
+  const PoseGraph2 clean = std::get<PoseGraph2>(readPoseGraphFile(testing::datasetPath("intel")));
+  RobustOptions at_c2;
+  at_c2.final_confirm_margin = 1.0;
+  const Outcome tight = replayRobust(clean, clean, at_c2);
+  const Outcome kept = replayRobust(clean, clean, RobustOptions{});
+  std::cout << "margin 1: " << tight.rejected.size() << " rejected, F " << tight.F_clean
+            << "; default: " << kept.rejected.size() << ", F " << kept.F_clean << "\n";
+  EXPECT_GT(tight.unconfirmed, 0);
+  EXPECT_GT(tight.F_clean, 1.05 * kept.F_clean);
+  EXPECT_EQ(kept.unconfirmed, 0);
+  EXPECT_TRUE(kept.rejected.empty());
 }
 
 }  // namespace

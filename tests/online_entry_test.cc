@@ -468,7 +468,9 @@ TEST(OnlineEntry, BadOptionsRefused) {
                    +[](RobustOptions* o) { o->scale_min_samples = 0; },
                    +[](RobustOptions* o) { o->tail_factor = 1.0; },
                    +[](RobustOptions* o) { o->max_tail_scale = 0.5; },
-                   +[](RobustOptions* o) { o->corroboration_window = -1; }}) {
+                   +[](RobustOptions* o) { o->corroboration_window = -1; },
+                   +[](RobustOptions* o) { o->final_confirm_margin = 0.5; },
+                   +[](RobustOptions* o) { o->final_confirm_margin = std::nan(""); }}) {
     RobustOptions o;
     set(&o);
     EXPECT_NE(o.problem(), "");

@@ -126,6 +126,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"noise_scale_mode", toString(run.online.scale)},
           {"warm_up", toString(run.online.warm_up)},
           {"corroboration_window", run.online.corroboration_window},
+          {"final_confirm_margin", run.online.final_confirm_margin},
           {"threshold_in_use", online.closure_threshold},
           {"noise_scale", online.noise_scale},
           {"noise_scale_estimated", online.noise_scale_estimated},

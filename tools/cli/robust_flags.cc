@@ -93,7 +93,12 @@ void addOnlineRobustFlags(po::options_description& options) {
       "corroboration-window", po::value<int>()->default_value(RobustOptions{}.corroboration_window),
       "with --robust and --noise-scale estimated, K > 0: the scale is estimated from the loop "
       "closures that another closure within K poses of both ends agrees with (docs/design.md, "
-      "\"The noise scale\"); 0: from every closure");
+      "\"The noise scale\"); 0: from every closure")(
+      "final-confirm-margin",
+      po::value<double>()->default_value(RobustOptions{}.final_confirm_margin),
+      "with --robust, the final pass drops an inlier no other inlier agrees with when keeping it "
+      "costs the objective more than this many times the threshold (its leave-one-out "
+      "innovation; docs/design.md, \"Confirmed at the end\"); 0: off");
 }
 
 void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
@@ -101,11 +106,18 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const std::string noise_scale = vm["noise-scale"].as<std::string>();
   const std::string warm_up = vm["warm-up"].as<std::string>();
   const int window = vm["corroboration-window"].as<int>();
-  if (!robust_on && (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() ||
-                     !vm["warm-up"].defaulted() || !vm["corroboration-window"].defaulted()))
-    throw UsageError("--entry, --noise-scale, --warm-up and --corroboration-window need --robust");
+  const double margin = vm["final-confirm-margin"].as<double>();
+  if (!robust_on &&
+      (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
+       !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted()))
+    throw UsageError(
+        "--entry, --noise-scale, --warm-up, --corroboration-window and --final-confirm-margin "
+        "need --robust");
   if (window < 0)
     throw UsageError("--corroboration-window must be >= 0, not " + std::to_string(window));
+  if (!(margin == 0 || margin >= 1) || !std::isfinite(margin))
+    throw UsageError("--final-confirm-margin must be 0 (off) or >= 1, not " +
+                     std::to_string(margin));
   if (entry != "innovation" && entry != "residual")
     throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
   if (noise_scale != "estimated" && noise_scale != "given")
@@ -116,6 +128,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
   robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
   robust->corroboration_window = window;
+  robust->final_confirm_margin = margin;
 }
 
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {

@@ -37,10 +37,11 @@ RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, boo
 
 /// The online smoother's own robust flags (`arbor replay`, `arbor serve`): --entry
 /// innovation|residual, --noise-scale estimated|given, --warm-up hold|given,
-/// --corroboration-window K (bayestree/online_gnc.h: EntryTest, NoiseScale, WarmUp,
-/// RobustOptions::corroboration_window).
+/// --corroboration-window K, --final-confirm-margin X (bayestree/online_gnc.h: EntryTest,
+/// NoiseScale, WarmUp, RobustOptions::corroboration_window and final_confirm_margin).
 void addOnlineRobustFlags(boost::program_options::options_description& options);
-/// Those flags into `robust` (entry, scale, warm_up, corroboration_window). Throws UsageError on a
+/// Those flags into `robust` (entry, scale, warm_up, corroboration_window, final_confirm_margin).
+/// Throws UsageError on a
 /// bad value, and when one is given without --robust (`robust_on` false).
 void readOnlineRobustFlags(const boost::program_options::variables_map& vm, bool robust_on,
                            RobustOptions* robust);
