@@ -106,7 +106,8 @@
 //                 with them; dropped, the replay loses the ring and diverges. On the garage and
 //                 intel true closures sit up to 1.6 times c² by (L), and intel's isolated
 //                 (99, 1371) and (346, 1375) at 1.13 and 1.16 times where smallGrid3D's false
-//                 (58, 100) is at 1.41: no bound on (L) keeps the true and drops the false.
+//                 (58, 100) is at 1.41: no bound on (L) alone keeps the true and drops the
+//                 false; with the agreeing runs exempt, the end's margin does (below).
 //   confirmed at the end (RobustOptions::final_confirm_margin, 1.25 by default; 0: off) the
 //                 same judgement in finalize(), for every settled TLS inlier no inlier agrees
 //                 with, each round, at the estimate of the whole replay: m₋ > margin·c² drops it.
@@ -116,8 +117,9 @@
 //                 (intel's (346, 1375), 1.16–1.17·c²; smallGrid3D's (7, 2) 1.13) and the false
 //                 ones graduation keeps (smallGrid3D's (58, 100) 1.28–1.80, (1, 27) 4.2; torus3D's
 //                 (163, 188) 4.3), chosen on the seed-1 files and checked on seeds 2 and 3.
-//                 A false closure an inlier agrees with (a group's member a true run's estimate
-//                 bends to) is not reached: true closures in runs sit up to 2.7·c² by (L).
+//                 A false closure an inlier agrees with is not reached (a true neighbour read
+//                 through an estimate already bent to it agrees), and agreement cannot be
+//                 ignored: true closures in runs sit up to 2.7·c² by (L).
 //   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
 //                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
 //                 GncOptimizer and the reference figures count), for GM at μ = 1 w ≥ ¼.
