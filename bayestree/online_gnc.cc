@@ -183,7 +183,11 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
         corroborated_.push_back(other.m);
       }
       c.corroborated = true;
-      if (recordsPartners()) {  // read only by (L)'s backed()
+      // Partners (read only by (L)'s backed()) span more than 2K poses each: the ends of a
+      // shorter closure's neighbour can lie on the chain between its own ends, and (P) then
+      // reads it against the estimate's chain (bent to it once it is in), not against the
+      // neighbour's measurement (header comment, "confirmed at the end").
+      if (recordsPartners() && spansLoop(c) && spansLoop(other)) {
         c.partners.push_back(it->second);
         other.partners.push_back(id);
       }
@@ -287,6 +291,12 @@ bool OnlineGnc<G>::confirmsAtTheEnd() const {
 template <class G>
 bool OnlineGnc<G>::recordsPartners() const {
   return options_.confirm || options_.final_confirm_margin > 0;
+}
+
+template <class G>
+bool OnlineGnc<G>::spansLoop(const Closure& c) const {
+  const Key span = c.from > c.to ? c.from - c.to : c.to - c.from;
+  return span > 2 * options_.corroboration_window;
 }
 
 template <class G>

@@ -117,9 +117,13 @@
 //                 (intel's (346, 1375), 1.16–1.17·c²; smallGrid3D's (7, 2) 1.13) and the false
 //                 ones graduation keeps (smallGrid3D's (58, 100) 1.28–1.80, (1, 27) 4.2; torus3D's
 //                 (163, 188) 4.3), chosen on the seed-1 files and checked on seeds 2 and 3.
-//                 A false closure an inlier agrees with is not reached (a true neighbour read
-//                 through an estimate already bent to it agrees), and agreement cannot be
-//                 ignored: true closures in runs sit up to 2.7·c² by (L).
+//                 Agreement (P) backs a closure only between closures whose ends are more
+//                 than 2K poses apart: a shorter closure's neighbour can lie on the chain
+//                 between its own ends, and (P) then reads it against the estimate, which the
+//                 group it belongs to has bent (smallGrid3D's false (29, 35), 6 poses long,
+//                 "agreed" with the true (20, 29)). A false closure a long true run agrees with
+//                 is not reached, and agreement cannot be ignored: true closures in runs sit up
+//                 to 2.7·c² by (L).
 //   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
 //                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
 //                 GncOptimizer and the reference figures count), for GM at μ = 1 w ≥ ¼.
@@ -388,7 +392,7 @@ class OnlineGnc {
     bool held = false;          ///< at weight 0 until σ̂² is estimated (WarmUp::kHold)
     double m = 0;               ///< its innovation on entry
     bool corroborated = false;  ///< another closure agrees with it (P)
-    std::vector<int> partners;  ///< the closures that agree with it (P), by id (recordsPartners)
+    std::vector<int> partners;  ///< agreeing closures (P) by id, both spansLoop (recordsPartners)
     typename Edge::Matrix information = Edge::Matrix::Identity();
   };
 
@@ -408,6 +412,8 @@ class OnlineGnc {
   double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s) const;
   /// Whether a closure that agrees with c (P) is a settled inlier now.
   bool backed(const Closure& c) const;
+  /// Whether c's ends are more than 2·corroboration_window poses apart (a partner's must be).
+  bool spansLoop(const Closure& c) const;
   /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with: sets
   /// weight 0 and returns true when it exceeds margin·c².
   bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin);
