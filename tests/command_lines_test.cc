@@ -264,6 +264,14 @@ TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
   }
 }
 
+// --bounded-heap (core/heap_policy.h) is off unless given, in replay and serve alike.
+TEST(HeapFlag, ReachesReplayAndServe) {
+  EXPECT_FALSE(parseReplayCommandLine({"graph.g2o"})->bounded_heap);
+  EXPECT_TRUE(parseReplayCommandLine({"graph.g2o", "--bounded-heap"})->bounded_heap);
+  EXPECT_FALSE(parseServeCommandLine({})->bounded_heap);
+  EXPECT_TRUE(parseServeCommandLine({"--bounded-heap"})->bounded_heap);
+}
+
 // --entry, --noise-scale, --warm-up, --corroboration-window and --final-confirm-margin
 // (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,

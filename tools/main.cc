@@ -6,7 +6,6 @@
 #include <vector>
 
 #include "arbor/core/blas_threads.h"
-#include "arbor/core/heap_policy.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 
@@ -49,7 +48,6 @@ void printUsage(std::ostream& out) {
 
 int main(int argc, char** argv) {
   arbor::useOneBlasThread();  // first thing: stops OpenBLAS's idle workers early
-  arbor::useBoundedHeap();    // freed clique storage goes back to the system (core/heap_policy.h)
   if (argc >= 2 && std::string(argv[1]) == "--version") {
     std::cout << "arbor " << ARBOR_VERSION << "\n";
     return 0;

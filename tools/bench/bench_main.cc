@@ -42,7 +42,6 @@
 #include <boost/program_options.hpp>
 
 #include "arbor/core/blas_threads.h"
-#include "arbor/core/heap_policy.h"
 #include "arbor/core/initialization.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/bench/ceres_pose_graph.h"
@@ -749,7 +748,6 @@ int micro(const std::vector<std::string>& args) {
 
 int main(int argc, char** argv) {
   arbor::useOneBlasThread();  // first thing: stops OpenBLAS's idle workers early
-  arbor::useBoundedHeap();    // as arbor itself (core/heap_policy.h): the figures are its
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "arbor/core/gnc_solver.h"
+#include "arbor/core/heap_policy.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/cli/batch_refinement.h"
 #include "arbor/tools/cli/cli_common.h"
@@ -115,6 +116,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"rejected", r.rejected},
         {"pending", r.pending},
         {"peak_rss_mb", peakRssMb()},
+        {"bounded_heap", run.bounded_heap},
         {"peak_rss_mb_updates", r.rows.empty() ? 0.0 : r.rows.back().peak_rss_kb / 1024.0},
         {"wall_s", total_clock.seconds()},
     });
@@ -253,7 +255,11 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       "batch-every", po::value(&run.batch_every)->default_value(0),
       "a background batch run every N updates (needs --batch)")(
       "reseed", po::bool_switch(&run.reseed),
-      "rebuild the smoother from a batch estimate with lower F");
+      "rebuild the smoother from a batch estimate with lower F")(
+      "bounded-heap", po::bool_switch(&run.bounded_heap),
+      "return freed clique storage to the system: glibc's mmap threshold fixed at 1 MiB "
+      "(core/heap_policy.h). Lowers the peak of very large graphs; costs page faults where "
+      "large tops are re-eliminated every update (docs/design.md, \"Memory\")");
   addRobustFlags(options,
                  "robust to false loop closures: graduated non-convexity per loop closure in "
                  "the Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; the final batch "
@@ -311,6 +317,7 @@ int replayCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   const std::optional<ReplayCommandLine> run = parseReplayCommandLine(args);
   if (!run) return 0;
+  if (run->bounded_heap) useBoundedHeap();
   AnyPoseGraph any = readGraphFile(run->file, run->read);
   return std::visit([&](auto& graph) { return replay(*run, graph, total); }, any);
 }

@@ -19,6 +19,7 @@ struct ReplayCommandLine {
   TrajectoryFormat format = TrajectoryFormat::kG2o;  ///< --format of --output
   std::string covariances;  ///< --covariances FILE: every pose's marginal at the end
   bool json = false, finalize = true, reseed = false;
+  bool bounded_heap = false;  ///< --bounded-heap: arbor::useBoundedHeap before reading the file
   std::optional<refine::BatchSolver> batch;  ///< --batch: a row that refines; none: no loop
   int batch_every = 0;
   int first_update_edges = 0;  ///< --first-update-edges: a map of that many edges loaded at once

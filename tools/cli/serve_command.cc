@@ -17,6 +17,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
+#include "arbor/core/heap_policy.h"
 #include "arbor/tools/cli/batch_refinement.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
@@ -133,6 +134,10 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "them (none: to convergence, however long; a second SIGINT/SIGTERM cuts it at once)")(
       "output,o", po::value(&line.output), "on exit, write the estimate as g2o")(
       "json", po::bool_switch(&line.json), "on exit, print one JSON object")(
+      "bounded-heap", po::bool_switch(&line.bounded_heap),
+      "return freed clique storage to the system: glibc's mmap threshold fixed at 1 MiB "
+      "(core/heap_policy.h). Lowers the peak of very large graphs; costs page faults where "
+      "large tops are re-eliminated every update (docs/design.md, \"Memory\")")(
       "batch", po::value(&batch),
       (refine::batchSolverNames(true) +
        ": batch refinement in the background (every --batch-every updates and on command BATCH; "
@@ -219,6 +224,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
 int serveCommand(const std::vector<std::string>& args) {
   std::optional<ServeCommandLine> line = parseServeCommandLine(args);
   if (!line) return 0;
+  if (line->bounded_heap) useBoundedHeap();
   serve::ServeOptions& options = line->options;
   const std::string& url = line->url;
   const std::string& output = line->output;

@@ -17,7 +17,8 @@ struct ServeCommandLine {
   std::string journal_dir;  ///< --journal; options.journal_path is the file inside it
   std::string output;       ///< --output
   bool json = false;
-  RobustFlags robust;  ///< --robust ... (options.robust is set from it)
+  bool bounded_heap = false;  ///< --bounded-heap: arbor::useBoundedHeap before serving
+  RobustFlags robust;         ///< --robust ... (options.robust is set from it)
   /// --recv-buf: udpm's receive buffer request in bytes; url then carries it as recv_buf_size
   /// (replacing the URL's own). 0: kDefaultRecvBufBytes, unless the URL names its own.
   std::int64_t recv_buf_bytes = 0;
