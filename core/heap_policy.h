@@ -8,8 +8,11 @@
 // world in the smoother"). A fixed threshold keeps every buffer of 1 MiB or more in its own
 // mapping, returned when freed, and stops the dynamic rise.
 //
-// Process-wide, so the libraries never call it on their own (a host process may have its own
-// reasons); `arbor` calls it first thing, and a program that holds large graphs can too.
+// The price: every large buffer then comes from fresh pages, so where every update
+// re-eliminates a large top the page faults cost (sphere_bignoise with false closures: 40% more
+// time). Process-wide, so the libraries never call it on their own (a host process may have its
+// own reasons); `arbor replay|serve --bounded-heap` call it, and a program that holds a very
+// large graph can too.
 #pragma once
 
 #include <cstddef>
