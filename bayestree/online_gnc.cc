@@ -284,8 +284,10 @@ bool OnlineGnc<G>::confirms() const {
 
 template <class G>
 bool OnlineGnc<G>::confirmsAtTheEnd() const {
-  return options_.final_confirm_margin > 0 && options_.entry == EntryTest::kInnovation &&
-         estimate_.estimated;
+  // Without corroboration (K = 0) no closure is backed, and true closures in runs sit up to
+  // 2.7·c² by (L): the garage lost three more at K = 0 (F_clean 1.0092 → 1.0184).
+  return options_.final_confirm_margin > 0 && options_.corroboration_window > 0 &&
+         options_.entry == EntryTest::kInnovation && estimate_.estimated;
 }
 
 template <class G>

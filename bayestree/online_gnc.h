@@ -213,7 +213,8 @@ struct RobustOptions {
   /// c², unless an inlier agrees with it (header comment, "confirmed"). Off by default: it
   /// drops sphere_bignoise's first true closures and the replay diverges.
   bool confirm = false;
-  /// finalize(), with EntryTest::kInnovation, TLS and an estimated σ̂²: in each round every
+  /// finalize(), with EntryTest::kInnovation, TLS, an estimated σ̂² and corroboration on
+  /// (corroboration_window > 0: agreement exempts true runs): in each round every
   /// settled inlier no inlier agrees with is judged by (L) and dropped when m₋ exceeds this many
   /// times c² (header comment, "confirmed at the end"). 0: off; otherwise ≥ 1.
   double final_confirm_margin = 1.25;

@@ -176,6 +176,20 @@ TEST(LeaveOneOut, FinalizeDropsAnIsolatedFalseClosure) {
   EXPECT_LT(on.F_clean, off.F_clean / 1.02);
 }
 
+// Without corroboration (K = 0) nothing backs a true run, and the final check stays off: on the
+// garage with 10% random false closures it would drop three more true closures there.
+TEST(LeaveOneOut, FinalizeCheckNeedsCorroboration) {
+  const std::string name = "robust/parking-garage_random_0.1";
+  if (!testing::datasetPresent(name) || !testing::datasetPresent("parking-garage"))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(name);
+  const PoseGraph3 clean =
+      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("parking-garage")));
+  const PoseGraph3 graph = std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath(name)));
+  RobustOptions uncorroborated;
+  uncorroborated.corroboration_window = 0;
+  EXPECT_EQ(replayRobust(clean, graph, uncorroborated).unconfirmed, 0);
+}
+
 // With 50% group false closures (seed 1) graduation keeps (29, 35), 6 poses long, of the group
 // (24, 30)…(33, 39); the true (20, 29) "agrees" with it through an estimate the group has bent,
 // so only a partner rule that asks both closures to span more than 2K poses lets the final
