@@ -106,47 +106,64 @@ Outcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
   return out;
 }
 
+// smallGrid3D (shared data) with false closures planted as `arbor generate outliers --seed 1`
+// does, and their (from, to) pairs, low id first as Outcome::rejected has them.
+struct PlantedGrid {
+  PoseGraph3 clean;
+  sim::FalseClosures<SE3> planted;
+  std::set<std::pair<Key, Key>> is_false;
+};
+
+PlantedGrid plantSmallGrid3D(double fraction, sim::OutlierPolicy policy) {
+  PlantedGrid g{
+      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D"))), {}, {}};
+  sim::OutlierOptions o;
+  o.fraction = fraction;
+  o.policy = policy;
+  o.seed = 1;
+  g.planted = sim::addFalseClosures(g.clean, o);
+  for (const auto& [i, j] : g.planted.pairs) {
+    const Key a = g.planted.graph.ids[static_cast<size_t>(i)];
+    const Key b = g.planted.graph.ids[static_cast<size_t>(j)];
+    g.is_false.insert({std::min(a, b), std::max(a, b)});
+  }
+  return g;
+}
+
+// The replay of `g` with `off` and with `on`, printed side by side.
+std::pair<Outcome, Outcome> replayBoth(const PlantedGrid& g, const RobustOptions& off,
+                                       const RobustOptions& on) {
+  std::pair<Outcome, Outcome> r{replayRobust(g.clean, g.planted.graph, off),
+                                replayRobust(g.clean, g.planted.graph, on)};
+  std::cout << "rejected " << r.first.rejected.size() << " -> " << r.second.rejected.size()
+            << " of " << g.is_false.size() << " false, F_clean " << r.first.F_clean << " -> "
+            << r.second.F_clean << "\n";
+  return r;
+}
+
+// The defaults with the final check off (margin 0).
+RobustOptions withoutFinalCheck() {
+  RobustOptions o;
+  o.final_confirm_margin = 0;
+  return o;
+}
+
 TEST(LeaveOneOut, DropsLocalFalseClosuresGraduationKeeps) {
   if (!testing::datasetPresent("smallGrid3D"))
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
-  const PoseGraph3 clean =
-      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D")));
-  sim::OutlierOptions o;
-  o.fraction = 0.9;
-  o.policy = sim::OutlierPolicy::kLocal;
-  o.seed = 1;
-  const sim::FalseClosures<SE3> planted = sim::addFalseClosures(clean, o);
-  std::set<std::pair<Key, Key>> is_false;
-  for (const auto& [i, j] : planted.pairs)
-    is_false.insert(
-        {planted.graph.ids[static_cast<size_t>(i)], planted.graph.ids[static_cast<size_t>(j)]});
-  RobustOptions off_options;
-  off_options.final_confirm_margin = 0;  // (L) online only
-  RobustOptions on_options = off_options;
+  const PlantedGrid g = plantSmallGrid3D(0.9, sim::OutlierPolicy::kLocal);
+  RobustOptions on_options = withoutFinalCheck();  // (L) online only
   on_options.confirm = true;
-  const Outcome off = replayRobust(clean, planted.graph, off_options);
-  const Outcome on = replayRobust(clean, planted.graph, on_options);
-  std::cout << "rejected " << off.rejected.size() << " -> " << on.rejected.size() << " of "
-            << is_false.size() << " false, F_clean " << off.F_clean << " -> " << on.F_clean << "\n";
+  const auto [off, on] = replayBoth(g, withoutFinalCheck(), on_options);
   EXPECT_EQ(off.unconfirmed, 0);
   EXPECT_GT(on.unconfirmed, 0);
   // Every closure rejected either way is false; (L) rejects as many (it swaps graduation's
   // kept (1, 27) for another, (14, 53), which its drop lets in) and F over the clean edges falls
   // by a sixth.
   for (const auto& pair : on.rejected)
-    EXPECT_TRUE(is_false.count(pair)) << "a true closure " << pair.first << " " << pair.second;
+    EXPECT_TRUE(g.is_false.count(pair)) << "a true closure " << pair.first << " " << pair.second;
   EXPECT_GE(on.rejected.size(), off.rejected.size());
   EXPECT_LT(on.F_clean, 0.9 * off.F_clean);
-}
-
-std::set<std::pair<Key, Key>> falsePairs(const sim::FalseClosures<SE3>& planted) {
-  std::set<std::pair<Key, Key>> out;
-  for (const auto& [i, j] : planted.pairs) {
-    const Key a = planted.graph.ids[static_cast<size_t>(i)];
-    const Key b = planted.graph.ids[static_cast<size_t>(j)];
-    out.insert({std::min(a, b), std::max(a, b)});
-  }
-  return out;
 }
 
 // Graduation keeps smallGrid3D's isolated false (58, 100) (10% random false closures, seed 1:
@@ -155,24 +172,12 @@ std::set<std::pair<Key, Key>> falsePairs(const sim::FalseClosures<SE3>& planted)
 TEST(LeaveOneOut, FinalizeDropsAnIsolatedFalseClosure) {
   if (!testing::datasetPresent("smallGrid3D"))
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
-  const PoseGraph3 clean =
-      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D")));
-  sim::OutlierOptions o;
-  o.fraction = 0.1;
-  o.policy = sim::OutlierPolicy::kRandom;
-  o.seed = 1;
-  const sim::FalseClosures<SE3> planted = sim::addFalseClosures(clean, o);
-  const std::set<std::pair<Key, Key>> is_false = falsePairs(planted);
-  RobustOptions off_options;
-  off_options.final_confirm_margin = 0;
-  const Outcome off = replayRobust(clean, planted.graph, off_options);
-  const Outcome on = replayRobust(clean, planted.graph, RobustOptions{});
-  std::cout << "rejected " << off.rejected.size() << " -> " << on.rejected.size() << " of "
-            << is_false.size() << " false, F_clean " << off.F_clean << " -> " << on.F_clean << "\n";
+  const PlantedGrid g = plantSmallGrid3D(0.1, sim::OutlierPolicy::kRandom);
+  const auto [off, on] = replayBoth(g, withoutFinalCheck(), RobustOptions{});
   EXPECT_EQ(off.unconfirmed, 0);
-  EXPECT_LT(off.rejected.size(), is_false.size());  // graduation keeps one
+  EXPECT_LT(off.rejected.size(), g.is_false.size());  // graduation keeps one
   EXPECT_GT(on.unconfirmed, 0);
-  EXPECT_EQ(on.rejected, is_false);  // every false closure, and no true one
+  EXPECT_EQ(on.rejected, g.is_false);  // every false closure, and no true one
   EXPECT_LT(on.F_clean, off.F_clean / 1.02);
 }
 
@@ -197,22 +202,10 @@ TEST(LeaveOneOut, FinalizeCheckNeedsCorroboration) {
 TEST(LeaveOneOut, FinalizeDropsAShortGroupMember) {
   if (!testing::datasetPresent("smallGrid3D"))
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
-  const PoseGraph3 clean =
-      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D")));
-  sim::OutlierOptions o;
-  o.fraction = 0.5;
-  o.policy = sim::OutlierPolicy::kGroup;
-  o.seed = 1;
-  const sim::FalseClosures<SE3> planted = sim::addFalseClosures(clean, o);
-  const std::set<std::pair<Key, Key>> is_false = falsePairs(planted);
-  RobustOptions off_options;
-  off_options.final_confirm_margin = 0;
-  const Outcome off = replayRobust(clean, planted.graph, off_options);
-  const Outcome on = replayRobust(clean, planted.graph, RobustOptions{});
-  std::cout << "rejected " << off.rejected.size() << " -> " << on.rejected.size() << " of "
-            << is_false.size() << " false, F_clean " << off.F_clean << " -> " << on.F_clean << "\n";
-  EXPECT_LT(off.rejected.size(), is_false.size());
-  EXPECT_EQ(on.rejected, is_false);
+  const PlantedGrid g = plantSmallGrid3D(0.5, sim::OutlierPolicy::kGroup);
+  const auto [off, on] = replayBoth(g, withoutFinalCheck(), RobustOptions{});
+  EXPECT_LT(off.rejected.size(), g.is_false.size());
+  EXPECT_EQ(on.rejected, g.is_false);
   EXPECT_LT(on.F_clean, off.F_clean / 1.02);
 }
 
