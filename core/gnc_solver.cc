@@ -35,6 +35,10 @@ void checkOptions(const GncOptions& o, int edges) {
   if (!o.trusted.empty() && static_cast<int>(o.trusted.size()) != edges)
     throw std::invalid_argument("GncOptions.trusted has " + std::to_string(o.trusted.size()) +
                                 " marks for " + std::to_string(edges) + " edges");
+  if (!o.known_outliers.empty() && static_cast<int>(o.known_outliers.size()) != edges)
+    throw std::invalid_argument("GncOptions.known_outliers has " +
+                                std::to_string(o.known_outliers.size()) + " marks for " +
+                                std::to_string(edges) + " edges");
   if (!o.kernels.empty() && static_cast<int>(o.kernels.size()) != edges)
     throw std::invalid_argument("GncOptions.kernels has " + std::to_string(o.kernels.size()) +
                                 " kernels for " + std::to_string(edges) + " edges");
@@ -106,6 +110,8 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
                                 " poses for a graph of " + std::to_string(graph.numPoses()));
   GncResult result;
   result.trusted.assign(m, 0);
+  // Known outliers: weight 0 throughout (GTSAM's knownOutliers).
+  std::vector<char> fixed_out(m, 0);
   // Each weighted edge's kernel kind: its own (GncOptions::kernels) or options.kernel.
   std::vector<KernelKind> kind(m, options.kernel);
   bool any_graduated = false, all_tls = true;
@@ -115,6 +121,13 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
                         (!options.trusted.empty() && options.trusted[k]);
     if (!options.kernels.empty() && options.kernels[k] != KernelKind::kNone)
       kind[k] = options.kernels[k];
+    if (!options.known_outliers.empty() && options.known_outliers[k]) {
+      if (result.trusted[k])
+        throw std::invalid_argument("solveGnc: edge " + std::to_string(k) + " (" +
+                                    std::to_string(e.i) + ", " + std::to_string(e.j) +
+                                    ") is both trusted and a known outlier");
+      fixed_out[k] = 1;
+    }
     if (result.trusted[k]) continue;
     ++result.candidates;
     const RobustKernel probe{kind[k], 1.0, 1.0};
@@ -129,6 +142,10 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   WeightedBatchSolver<G> solver(graph);
   std::vector<double>& w = result.weights;
   w.assign(m, 1.0);
+  for (int k = 0; k < m; ++k)
+    if (fixed_out[k]) w[k] = 0.0;
+  // The edges whose weight GNC moves: neither trusted nor known outliers.
+  auto judged = [&](int k) { return !result.trusted[k] && !fixed_out[k]; };
   // x⁰: plain least squares from x_init (Algorithm 1, line 1).
   const BatchSummary ls = solver.solve(w, poses, outer);
   result.lm_iterations += ls.iterations;
@@ -137,6 +154,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   const std::vector<G> x_ls = *poses;
   std::vector<double> s = edgeCosts(graph, *poses);
   std::vector<char> inlier(m, 1);
+  for (int k = 0; k < m; ++k) inlier[k] = !fixed_out[k];
   const bool restart = options.inner_start == GncInnerStart::kInitial;
   // The threshold: given, the χ² quantile, or that quantile times the variance factor σ̂²
   // (estimate_scale), re-estimated over the inliers between rounds (header comment).
@@ -160,7 +178,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
       const std::vector<double>& s0 = options.mu_start == GncMuStart::kInitial ? s_init : s;
       double s_max = 0.0;
       for (int k = 0; k < m; ++k)
-        if (!result.trusted[k] && static_cast<int>(kind[k]) == c) s_max = std::max(s_max, s0[k]);
+        if (judged(k) && static_cast<int>(kind[k]) == c) s_max = std::max(s_max, s0[k]);
       kernels[c].mu = kernels[c].initialMu(s_max);
     }
     kernels[0].mu = 1.0;
@@ -178,7 +196,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
       // when s_max ≤ c²/2 at its initial values.
       double s_max_ls = 0.0;
       for (int k = 0; k < m; ++k)
-        if (!result.trusted[k]) s_max_ls = std::max(s_max_ls, s[k]);
+        if (judged(k)) s_max_ls = std::max(s_max_ls, s[k]);
       if (std::isinf(tls.mu) || s_max_ls <= result.threshold) {
         result.converged = done = true;
         result.message = "every residual within c² at the least-squares start";
@@ -198,7 +216,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
       bool binary = true;   // every TLS weight within tolerance of 0 or 1
       double change = 0.0;  // the largest move of a reweighted (Huber, Cauchy) weight
       for (int k = 0; k < m; ++k) {
-        if (result.trusted[k]) continue;
+        if (!judged(k)) continue;
         const RobustKernel& kernel = kernelOf(k);
         w[k] = kernel.weight(s[k]);
         if (kernel.kind == KernelKind::kTruncatedLeastSquares &&
@@ -251,8 +269,10 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
         if (kernel.isGraduated()) kernel.mu = kernel.nextMu(options.mu_factor);
     }
     if (!result.converged && !result.cancelled) result.message = "GNC iteration limit reached";
-    if (result.converged && done) std::fill(w.begin(), w.end(), 1.0);
-    for (int k = 0; k < m; ++k) inlier[k] = result.trusted[k] || w[k] >= kernelOf(k).inlierCut();
+    if (result.converged && done)
+      for (int k = 0; k < m; ++k) w[k] = fixed_out[k] ? 0.0 : 1.0;
+    for (int k = 0; k < m; ++k)
+      inlier[k] = result.trusted[k] || (!fixed_out[k] && w[k] >= kernelOf(k).inlierCut());
     result.mu = any_graduated ? (all_tls ? tls.mu : gm.mu) : 1.0;
     if (!automatic || result.cancelled) break;
     const double scale = varianceFactor(graph, *poses, s, inlier);
@@ -324,12 +344,55 @@ CertifiedInliers certifyInliers(const PoseGraph<G>& graph, GncResult* gnc, std::
   return out;
 }
 
+template <class G>
+int readmitFitting(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
+                   double threshold, const BatchOptions& options, int max_passes) {
+  const int m = graph.numEdges();
+  if (static_cast<int>(gnc->inlier.size()) != m || static_cast<int>(gnc->weights.size()) != m)
+    throw std::invalid_argument("readmitFitting: a classification of " +
+                                std::to_string(gnc->inlier.size()) + " edges for a graph of " +
+                                std::to_string(m));
+  if (!(threshold >= 0) || !std::isfinite(threshold))
+    throw std::invalid_argument("readmitFitting: the threshold must be finite and >= 0, got " +
+                                std::to_string(threshold));
+  WeightedBatchSolver<G> solver(graph);
+  std::vector<double> binary(m);
+  int readmitted = 0;
+  for (int pass = 0; pass < max_passes; ++pass) {
+    const std::vector<double> s = edgeCosts(graph, *poses);
+    int taken = 0;
+    for (int k = 0; k < m; ++k) {
+      if (gnc->inlier[k] || !(s[k] <= threshold)) continue;
+      gnc->inlier[k] = 1;
+      gnc->weights[k] = 1.0;
+      ++taken;
+    }
+    if (taken == 0) break;
+    readmitted += taken;
+    for (int k = 0; k < m; ++k) binary[k] = gnc->inlier[k] ? 1.0 : 0.0;
+    const BatchSummary solved = solver.solve(binary, poses, options);
+    gnc->lm_iterations += solved.iterations;
+  }
+  gnc->rejected = 0;
+  for (int k = 0; k < m; ++k) {
+    binary[k] = gnc->inlier[k] ? 1.0 : 0.0;
+    gnc->rejected += !gnc->inlier[k];
+  }
+  gnc->F_all = objective(graph, *poses);
+  gnc->F_inliers = weightedObjective(graph, binary, *poses);
+  return readmitted;
+}
+
 template GncResult solveGnc(const PoseGraph<SE2>&, std::vector<SE2>*, const GncOptions&);
 template GncResult solveGnc(const PoseGraph<SE3>&, std::vector<SE3>*, const GncOptions&);
 template CertifiedInliers certifyInliers(const PoseGraph<SE2>&, GncResult*, std::vector<SE2>*,
                                          const RtrOptions&, int);
 template CertifiedInliers certifyInliers(const PoseGraph<SE3>&, GncResult*, std::vector<SE3>*,
                                          const RtrOptions&, int);
+template int readmitFitting(const PoseGraph<SE2>&, GncResult*, std::vector<SE2>*, double,
+                            const BatchOptions&, int);
+template int readmitFitting(const PoseGraph<SE3>&, GncResult*, std::vector<SE3>*, double,
+                            const BatchOptions&, int);
 template PoseGraph<SE2> keepEdges(const PoseGraph<SE2>&, const std::vector<char>&);
 template PoseGraph<SE3> keepEdges(const PoseGraph<SE3>&, const std::vector<char>&);
 

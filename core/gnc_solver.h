@@ -31,7 +31,9 @@
 // warm-started, until the weights stop changing.
 //
 // Trusted edges (weight 1 throughout; GTSAM's known inliers): odometry, |i − j| = 1 in dense
-// indices, or the edges the caller marks; priors are never weighted.
+// indices, or the edges the caller marks; priors are never weighted. Known outliers
+// (GncOptions::known_outliers; GTSAM's setKnownOutliers) have weight 0 throughout, x⁰ included,
+// and play no part in μ⁰ or the early stop; readmitFitting() may take them back afterwards.
 //
 // Per-edge kernels (GncOptions::kernels): each weighted edge graduates by its own kind, each
 // kind with its own μ (μ⁰ from the largest residual of its edges, its own schedule); GNC stops
@@ -104,6 +106,9 @@ struct GncOptions {
   /// Per-edge marks of trusted edges (the sender's), one per edge, or empty: none beyond
   /// odometry.
   std::vector<char> trusted;
+  /// Per-edge marks of known outliers (weight 0 throughout: GTSAM's knownOutliers), one per
+  /// edge, or empty: none. An edge cannot be both trusted and a known outlier.
+  std::vector<char> known_outliers;
   /// Per-edge kernel kinds, one per edge, or empty: `kernel` for every edge. KernelKind::kNone
   /// in it: `kernel` for that edge. Ignored on trusted edges.
   std::vector<KernelKind> kernels;
@@ -165,6 +170,18 @@ struct CertifiedInliers {
 template <class G>
 CertifiedInliers certifyInliers(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
                                 const RtrOptions& options = {}, int max_passes = 5);
+
+/// Takes back the rejected edges that fit: every edge gnc classified an outlier (known outliers
+/// included, trusted ones never rejected) whose s = eᵀΩe at *poses is within `threshold` becomes
+/// an inlier, and the inlier problem is solved again by `options` from *poses, until no edge is
+/// taken back (at most `max_passes` solves). The online smoother's hysteresis in a batch: `arbor
+/// batch --init online` starts GNC with the replay's rejected closures as known outliers, so GNC's
+/// graduation cannot let them back in, and takes back here those that the refined estimate fits
+/// at the replay's own c² (its entry test). Updates gnc's classification, weights and F figures;
+/// returns the number taken back.
+template <class G>
+int readmitFitting(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
+                   double threshold, const BatchOptions& options, int max_passes = 5);
 
 /// The graph without the edges marked false in `keep` (same poses, ids, priors and fixed).
 template <class G>

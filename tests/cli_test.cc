@@ -358,6 +358,50 @@ TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   }
 }
 
+// arbor batch --robust --init online holds the replay's rejected closures out of GNC (known
+// outliers) and takes back only those that fit at the replay's c²: on smallGrid3D with 50% group
+// false closures (`arbor generate outliers`, seed 1; shared data), where the replay rejects
+// exactly the planted ones, the batch ends with the same set. GNC graduating every closure again
+// from the replay's estimate let 25 false ones back in there (F_clean 17.5 F*).
+TEST(Cli, BatchFromTheOnlineReplayKeepsItsRejections) {
+  const char* shared = std::getenv("ARBOR_SHARED_DIR");
+  const std::string input =
+      std::string(shared && *shared ? shared : ARBOR_SHARED_DIR) + "/datasets/smallGrid3D.g2o";
+  if (!std::filesystem::exists(input)) GTEST_SKIP() << "shared dataset absent: " << input;
+  const std::string file = tempPath("online_group.g2o");
+  const std::string labels = tempPath("online_group.labels");
+  ASSERT_EQ(run("generate outliers --input " + input + " -o " + file +
+                " --outliers 0.5 --outlier-policy group --seed 1")
+                .status,
+            0);
+  std::set<std::pair<long, long>> planted;
+  for (const auto& [i, j] : arbor::readLabelsFile(labels))
+    planted.emplace(std::min<long>(i, j), std::max<long>(i, j));
+  auto readRejected = [](const std::string& path) {
+    std::set<std::pair<long, long>> out;
+    std::ifstream in(path);
+    long i, k;
+    while (in >> i >> k) out.emplace(std::min(i, k), std::max(i, k));
+    return out;
+  };
+  const std::string replay_rej = tempPath("online_group.replay.rej");
+  ASSERT_EQ(run("replay " + file + " --robust --rejected-out " + replay_rej).status, 0);
+  const std::string batch_rej = tempPath("online_group.batch.rej");
+  const Result r =
+      run("batch " + file +
+          " --robust --json --init online --inlier-threshold online --rejected-out " + batch_rej);
+  ASSERT_EQ(r.status, 0) << r.out;
+  const auto j = nlohmann::json::parse(r.out);
+  const auto replay_rejected = readRejected(replay_rej);
+  EXPECT_EQ(replay_rejected, planted);
+  EXPECT_EQ(j["known_outliers"].get<int>(), static_cast<int>(replay_rejected.size()));
+  EXPECT_EQ(j["readmitted_online"].get<int>(), 0);
+  EXPECT_EQ(readRejected(batch_rej), planted);
+  const Result text = run("batch " + file + " --robust --init online --inlier-threshold online");
+  ASSERT_EQ(text.status, 0) << text.out;
+  EXPECT_NE(text.out.find("held out of GNC"), std::string::npos) << text.out;
+}
+
 // arbor replay --robust on the same kind of graph: online GNC per loop closure rejects every
 // planted closure, --rejected-out writes as many edges as the JSON counts as outliers, the text
 // summary prints the closure counts, and the robust flags are refused without --robust (and

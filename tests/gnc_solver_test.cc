@@ -2,7 +2,8 @@
 // plain ones exactly; GNC-TLS on small generated graphs with planted false loop closures (random
 // ones and a mutually consistent group) rejects every one and keeps every true one, ending at
 // the clean solve's F (one 2D graph excepted: disabled, the measured reason beside it); on clean
-// data it rejects at most 1% of the true closures and F stays within 0.1%.
+// data it rejects at most 1% of the true closures and F stays within 0.1%; known outliers stay
+// out until readmitFitting takes back those that fit.
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -240,6 +241,69 @@ TYPED_TEST(GncSolverTest, BadOptionsThrow) {
   EXPECT_THROW(solveGnc(p.graph, &poses, bad), std::invalid_argument);
   bad.trusted.clear();
   bad.confidence = 1.5;
+  EXPECT_THROW(solveGnc(p.graph, &poses, bad), std::invalid_argument);
+}
+
+// Known outliers (GTSAM's knownOutliers) keep weight 0 from x⁰ on, whatever they fit; GNC judges
+// the rest. Given every planted closure and three true ones as known outliers, GNC keeps every
+// other true closure, and readmitFitting takes the three true ones back (chosen among those that
+// fit at the clean estimate without them), not one false closure, and ends at the clean optimum.
+TYPED_TEST(GncSolverTest, KnownOutliersStayOutUntilReadmittedWhereTheyFit) {
+  using G = TypeParam;
+  const Planted<G> p = makeGraph<G>(120, 40, 8, 5, 1);
+  const int m = p.graph.numEdges();
+  GncOptions o;
+  o.threshold = chiSquareThreshold(0.9999, G::kDoF);
+  o.known_outliers.assign(m, 0);
+  // The three true closures held out: the first that fit (s ≤ c²/2) at the clean optimum
+  // without themselves (a closure the others do not back, such as the only one over a stretch
+  // of odometry, does not; that is right, and not this test's case).
+  std::vector<char> keep(m);
+  for (int k = 0; k < m; ++k) keep[k] = !p.is_false[k];
+  const BatchOptions lm{BatchMethod::kLevenbergMarquardt, 200, 1e-10};
+  std::vector<G> clean = p.graph.poses;
+  solveBatch(keepEdges(p.graph, keep), &clean, lm);
+  int true_held = 0;
+  for (int k = 0; k < m; ++k) {
+    const auto& e = p.graph.edges[k];
+    if (p.is_false[k]) o.known_outliers[k] = 1;
+    if (p.is_false[k] || std::abs(e.i - e.j) == 1 || true_held == 3) continue;
+    std::vector<char> without = keep;
+    for (int h = 0; h < m; ++h) without[h] = without[h] && !o.known_outliers[h];
+    without[k] = 0;
+    std::vector<G> x = clean;
+    solveBatch(keepEdges(p.graph, without), &x, lm);
+    if (e.cost(x[e.i], x[e.j]) > o.threshold / 2) continue;
+    o.known_outliers[k] = 1;
+    ++true_held;
+  }
+  ASSERT_EQ(true_held, 3);
+  std::vector<G> poses = p.graph.poses;
+  GncResult r = solveGnc(p.graph, &poses, o);
+  for (int k = 0; k < m; ++k) {
+    if (o.known_outliers[k]) {
+      EXPECT_EQ(r.weights[k], 0.0) << k;
+      EXPECT_FALSE(r.inlier[k]) << k;
+    } else {
+      EXPECT_TRUE(r.inlier[k]) << k;  // every other edge is true, and kept
+    }
+  }
+  EXPECT_EQ(r.rejected, 16);
+  const int taken = readmitFitting(p.graph, &r, &poses, o.threshold, o.outer);
+  EXPECT_EQ(taken, 3);
+  EXPECT_EQ(r.rejected, 13);
+  for (int k = 0; k < m; ++k) EXPECT_EQ(r.inlier[k], !p.is_false[k]) << k;
+  const double F_star = cleanOptimum(p);
+  EXPECT_NEAR(r.F_inliers, F_star, 1e-6 * F_star);
+  EXPECT_NEAR(cleanF(p, poses), F_star, 1e-6 * F_star);
+  // Nothing fits at c² = 0: nothing is taken back.
+  EXPECT_EQ(readmitFitting(p.graph, &r, &poses, 0.0, o.outer), 0);
+  EXPECT_THROW(readmitFitting(p.graph, &r, &poses, -1.0, o.outer), std::invalid_argument);
+  // An odometry edge (trusted) cannot be a known outlier; the marks must match the edges.
+  GncOptions bad = o;
+  bad.known_outliers[0] = 1;
+  EXPECT_THROW(solveGnc(p.graph, &poses, bad), std::invalid_argument);
+  bad.known_outliers.pop_back();
   EXPECT_THROW(solveGnc(p.graph, &poses, bad), std::invalid_argument);
 }
 

@@ -199,7 +199,27 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     online = onlineThreshold(graph, run.gnc.kernel, choices, init_online ? &poses : nullptr);
     if (run.online_threshold) options.threshold = online->c2;
   }
-  const GncResult gncFirst = solveGnc(graph, &poses, options);
+  // --init online: the replay's rejected closures are GNC's known outliers (its graduation from
+  // a nearly convex start would let them back in), and afterwards each one the refined estimate
+  // fits at the replay's own c² (its entry test) is taken back: the online smoother's
+  // hysteresis, kept by the batch (core/gnc_solver.h readmitFitting).
+  int known_outliers = 0;
+  if (init_online) {
+    options.known_outliers.assign(graph.numEdges(), 0);
+    for (int k = 0; k < graph.numEdges(); ++k) {
+      const auto& e = graph.edges[k];
+      const bool trusted = (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
+                           (!options.trusted.empty() && options.trusted[k]);
+      options.known_outliers[k] = !online->kept[k] && !trusted;
+      known_outliers += options.known_outliers[k];
+    }
+  }
+  GncResult gncFirst = solveGnc(graph, &poses, options);
+  int readmitted_online = 0;
+  if (init_online && !gncFirst.cancelled) {
+    const double entry = run.online_threshold ? online->c2_in_use : gncFirst.threshold;
+    readmitted_online = readmitFitting(graph, &gncFirst, &poses, entry, options.outer);
+  }
 
   // rtr: the certifiable path on the inlier set (core/gnc_solver.h certifyInliers), which may
   // take rejected edges back; the counts below are after it.
@@ -260,6 +280,10 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
         {"information_repaired", report.repaired},
         {"information_isotropic", report.made_isotropic},
     });
+    if (init_online) {
+      j["known_outliers"] = known_outliers;
+      j["readmitted_online"] = readmitted_online;
+    }
     if (online)
       j["online_threshold"] = {{"c2", online->c2},
                                {"c2_in_use", online->c2_in_use},
@@ -309,6 +333,10 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
             << graph.numEdges() - loops << " odometry edges trusted)\n"
             << "gnc          " << gnc.rounds << " round(s), " << gnc.iterations << " steps, "
             << gnc.lm_iterations << " LM iterations (" << gnc.message << ")\n";
+  if (init_online)
+    std::cout << "online       " << known_outliers
+              << " closure(s) the replay rejected held out of GNC, " << readmitted_online
+              << " taken back (fit within the replay's c²)\n";
   if (certified) {
     const RtrSummary& r = certified->rtr;
     std::cout << "readmitted   " << certified->readmitted
@@ -351,7 +379,8 @@ int batchCommand(const std::vector<std::string>& args) {
       "init", po::value(&run.init),
       "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
       "odometry; rtr starts from its own chordal relaxation); with --robust also online: the "
-      "estimate of the robust online replay (arbor replay --robust, without its final pass)")(
+      "estimate of the robust online replay (arbor replay --robust), whose rejected closures GNC "
+      "holds out and takes back only where they fit at the replay's c²")(
       "max-iterations", po::value(&run.settings.max_iterations)->default_value(100),
       "iteration limit (gn, lm, dogleg)")(
       "rel-tol", po::value(&run.settings.relative_tolerance)->default_value(1e-5, "1e-05"),

@@ -31,6 +31,7 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
   out.noise_scale = st.noise_scale;
   out.estimated = st.noise_scale_estimated;
   out.samples = st.noise_samples;
+  out.kept = keptEdges(graph, replay.closures);
   out.replay_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

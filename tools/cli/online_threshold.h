@@ -26,6 +26,8 @@ struct OnlineThreshold {
   bool estimated = false;  ///< σ̂² is an estimate (false: Ω at its word)
   int samples = 0;         ///< innovations it was estimated from
   double replay_s = 0;     ///< wall time of the replay
+  /// Per edge of the graph: the replay kept it (false: a loop closure it rejected).
+  std::vector<char> kept;
 };
 
 /// Replays `graph` (edges in order of max(i, j), one update each, then finalize()) through the
