@@ -27,4 +27,15 @@ inline LatencySummary summarizeLatency(std::vector<double> ms) {
   return s;
 }
 
+/// The percentiles of the first and of the last tenth of `ms` in its order (issue 17's flatness:
+/// the last tenth's p99 within 2× of the first's). Fewer than ten samples: both of them all.
+struct TenthsSummary {
+  LatencySummary first, last;
+};
+inline TenthsSummary summarizeTenths(const std::vector<double>& ms) {
+  const size_t n = ms.size(), tenth = std::max<size_t>(n / 10, n < 10 ? n : 1);
+  return {summarizeLatency(std::vector<double>(ms.begin(), ms.begin() + tenth)),
+          summarizeLatency(std::vector<double>(ms.end() - tenth, ms.end()))};
+}
+
 }  // namespace arbor::cli

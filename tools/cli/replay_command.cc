@@ -104,6 +104,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"first_update_s", r.first_update_s},
         {"finalize_s", r.finalize_s},
         {"latency_ms", {{"p50", lat.p50}, {"p90", lat.p90}, {"p99", lat.p99}, {"max", lat.max}}},
+        {"p99_first_tenth_ms", r.tenths.first.p99},
+        {"p99_last_tenth_ms", r.tenths.last.p99},
         {"F_incremental", r.F_incremental},
         {"F_final", r.F_final},
         {"F_batch", r.batch.F_final},
@@ -169,6 +171,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
               << " s (the latency below is of the updates after it)\n";
   std::cout << "latency ms    p50 " << lat.p50 << "  p90 " << lat.p90 << "  p99 " << lat.p99
             << "  max " << lat.max << "\n"
+            << "p99 tenths    first " << r.tenths.first.p99 << "  last " << r.tenths.last.p99
+            << " (ms, of the first and the last tenth of the updates)\n"
             << std::setprecision(10) << "F incremental " << r.F_incremental
             << " (before the final relinearisation)\n"
             << "F final       " << r.F_final << "\n"

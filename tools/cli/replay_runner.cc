@@ -109,6 +109,7 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     ms.erase(ms.begin());
   }
   result.latency = summarizeLatency(ms);
+  result.tenths = summarizeTenths(ms);
   result.total_s = result.update_s + result.finalize_s;
 
   // The estimate in the graph's dense order (poses never reached keep their graph value).
