@@ -61,7 +61,7 @@ template <class G>
 struct ReplayResult {
   std::vector<UpdateRow> rows;
   LatencySummary latency;
-  TenthsSummary tenths;  ///< of the first and the last tenth of the updates (the load apart)
+  TenthsSummary tenths;       ///< of the first and the last tenth of the updates (the load apart)
   double total_s = 0;         ///< updates + final relinearisation
   double update_s = 0;        ///< sum of update latencies
   double first_update_s = 0;  ///< with ReplaySettings::first_update_edges: that update's time
