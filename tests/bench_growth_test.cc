@@ -28,7 +28,14 @@ void expectSlicesCoverTheReplay(const PoseGraph<G>& graph, bool per_pose, int sl
   int updates = 0, relin = 0, previous_poses = 0;
   for (const auto& r : replay.rows) relin += r.variables_relinearized > 0 ? 1 : 0;
   int relin_in_slices = 0;
+  double largest = 0;
+  for (const auto& r : replay.rows) largest = std::max(largest, r.latency_ms);
+  double largest_in_slices = 0;
   for (const bench::GrowthSlice& s : out) {
+    // The largest update of the slice bounds every figure of it.
+    EXPECT_GE(s.max_ms, s.relin_max_ms);
+    EXPECT_GE(s.max_ms, s.other_p99_ms);
+    largest_in_slices = std::max(largest_in_slices, s.max_ms);
     EXPECT_GT(s.poses, previous_poses);
     previous_poses = s.poses;
     updates += s.relin_updates + s.other_updates;
@@ -48,6 +55,7 @@ void expectSlicesCoverTheReplay(const PoseGraph<G>& graph, bool per_pose, int sl
   }
   EXPECT_EQ(updates, static_cast<int>(replay.rows.size()));
   EXPECT_EQ(relin_in_slices, relin);
+  EXPECT_EQ(largest_in_slices, largest);
   EXPECT_EQ(out.back().poses, graph.numPoses());
   EXPECT_EQ(out.back().edges, graph.numEdges());
   // The whole graph costs more to factor than its first slice.
