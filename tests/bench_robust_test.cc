@@ -15,6 +15,7 @@
 #include "arbor/tools/bench/robust_bench.h"
 #include "arbor/tools/bench/robust_metrics.h"
 #include "arbor/tools/bench/robust_replay_hooks.h"
+#include "arbor/tools/cli/online_threshold.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
 
@@ -332,6 +333,42 @@ TEST(RobustBench, GeneratedRowsGoThroughBatchAndTheReplayHooks) {
   EXPECT_FALSE(plain[1].replay.has_value());
   EXPECT_EQ(bench::robustMarkdown(plain).find("total/clean"), std::string::npos);
   fs::remove_all(shared);
+}
+
+// --batch-start online: the batch starts from the robust online replay and keeps its
+// classification: every closure the replay rejected stays rejected unless taken back (none is on
+// this graph), and with a planted group the batch rejects exactly the planted closures.
+TEST(RobustBench, TheOnlineStartKeepsTheReplaysRejections) {
+  const PoseGraph2 base = smallManhattan();
+  sim::OutlierOptions o;
+  o.fraction = 0.3;
+  o.policy = sim::OutlierPolicy::kGroup;
+  o.seed = 3;
+  const auto planted = sim::addFalseClosures(base, o);
+  std::vector<SE2> replayed;
+  const cli::OnlineThreshold online =
+      cli::onlineThreshold(planted.graph, KernelKind::kTruncatedLeastSquares, {}, &replayed);
+  bench::RobustBatchSettings settings;
+  settings.start = bench::BatchStart::kOnline;
+  const bench::RobustEstimate<SE2> e = bench::robustBatch(planted.graph, settings);
+  EXPECT_EQ(e.note.rfind("online: ", 0), 0u) << e.note;
+  EXPECT_NE(e.note.find(" 0 taken back"), std::string::npos) << e.note;
+  std::vector<char> is_false(planted.graph.edges.size(), 0);
+  for (const auto& [i, j] : planted.pairs)
+    for (size_t k = 0; k < planted.graph.edges.size(); ++k) {
+      const auto& edge = planted.graph.edges[k];
+      if (std::min(edge.i, edge.j) == std::min(i, j) && std::max(edge.i, edge.j) == std::max(i, j))
+        is_false[k] = 1;
+    }
+  int held = 0;
+  for (size_t k = 0; k < planted.graph.edges.size(); ++k) {
+    if (!online.kept[k]) {
+      ++held;
+      EXPECT_TRUE(e.rejected[k]) << "edge " << k << " the replay rejected came back";
+    }
+    EXPECT_EQ(e.rejected[k], is_false[k]) << "edge " << k;
+  }
+  EXPECT_GT(held, 0);
 }
 
 // The hooks `arbor bench robust` registers (robust_replay_hooks.h): the robust replay rejects

@@ -621,7 +621,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   DatasetOptions data;
   bool no_generated = false;
   std::string generate_from, fractions, policies, kernel = "tls", threshold = "chi2", solver,
-                                                  keep_dir;
+                                                  keep_dir, batch_start;
   bench::GenerationPlan plan;
   po::options_description options =
       datasetOptions("arbor bench robust [options]", &data, default_shared);
@@ -639,6 +639,10 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       cli::kInlierThresholdHelp)("solver", po::value(&solver)->default_value("lm"),
                                  "lm: GNC over LM; rtr: then the certifiable solver on GNC's "
                                  "inlier set (as arbor batch --robust --solver rtr)")(
+      "batch-start", po::value(&batch_start)->default_value("file"),
+      "file: the robust batch from the file's vertices (arbor batch --robust); online: from "
+      "the robust online replay, its rejected closures held out (arbor batch --robust --init "
+      "online --inlier-threshold online)")(
       "keep-generated", po::value(&keep_dir),
       "write the generated files (NAME.g2o, NAME.labels) here and keep them (default: a "
       "temporary directory, removed at the end)");
@@ -648,6 +652,9 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   if (solver != "lm" && solver != "rtr")
     throw cli::UsageError("--solver must be lm or rtr, not '" + solver + "'");
   settings.certify = solver == "rtr";
+  if (batch_start != "file" && batch_start != "online")
+    throw cli::UsageError("--batch-start must be file or online, not '" + batch_start + "'");
+  settings.start = batch_start == "online" ? bench::BatchStart::kOnline : bench::BatchStart::kFile;
   plan.bases = splitList(generate_from);
   plan.fractions.clear();
   for (const std::string& f : splitList(fractions))
@@ -711,9 +718,12 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   std::cout
       << "Robust batch: GNC-" << toString(settings.gnc.kernel) << " over LM"
       << (settings.certify ? ", then the certifiable solver on its inlier set" : "")
-      << " (as `arbor batch --robust" << (settings.certify ? " --solver rtr" : "") << "`), c² "
-      << threshold
-      << ", from the file's vertices, odometry (|i − j| = 1) trusted. F_clean / F*: F over the "
+      << " (as `arbor batch --robust" << (settings.certify ? " --solver rtr" : "")
+      << (settings.start == bench::BatchStart::kOnline
+              ? " --init online --inlier-threshold online`), from the robust online replay, its "
+                "rejected closures held out"
+              : "`), c² " + threshold + ", from the file's vertices")
+      << ", odometry (|i − j| = 1) trusted. F_clean / F*: F over the "
          "base file's edges against optimum.tsv; ATE: RMS position error against the clean "
          "optimum after a rigid alignment; precision and recall of the rejected edges against "
          "the labels (pairs unordered); total: start and solve; GNC steps over all rounds. "

@@ -1,5 +1,7 @@
 #include "arbor/tools/bench/robust_bench.h"
 
+#include "arbor/tools/cli/online_threshold.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -218,9 +220,17 @@ template <class G>
 RobustEstimate<G> robustBatch(const PoseGraph<G>& graph, const RobustBatchSettings& settings) {
   const cli::Stopwatch watch;
   RobustEstimate<G> out;
-  out.poses = fileStart(graph);
-  GncResult gnc = solveGnc(graph, &out.poses, settings.gnc);
-  out.note = gnc.message;
+  GncResult gnc;
+  if (settings.start == BatchStart::kOnline) {
+    cli::OnlineBatch b = cli::solveGncFromOnline(graph, settings.gnc, {}, true, &out.poses);
+    gnc = std::move(b.gnc);
+    out.note = "online: " + std::to_string(b.known_outliers) + " held out, " +
+               std::to_string(b.readmitted) + " taken back; " + gnc.message;
+  } else {
+    out.poses = fileStart(graph);
+    gnc = solveGnc(graph, &out.poses, settings.gnc);
+    out.note = gnc.message;
+  }
   if (settings.certify) {
     const CertifiedInliers c = certifyInliers(graph, &gnc, &out.poses);
     out.note +=

@@ -136,13 +136,22 @@ std::map<std::pair<std::string, std::string>, RobustAnchor> readRobustAnchorTabl
     const std::string& shared_dir);
 
 /// The robust batch, as `arbor batch --robust` runs it.
+/// Where the robust batch starts (`arbor bench robust --batch-start`).
+enum class BatchStart {
+  kFile,    ///< the file's vertices, GNC at the given c² (`arbor batch --robust`'s defaults)
+  kOnline,  ///< the robust online replay, its classification kept (`arbor batch --robust --init
+            ///< online --inlier-threshold online`; cli::solveGncFromOnline)
+};
+
 struct RobustBatchSettings {
   GncOptions gnc;        ///< --kernel, --inlier-threshold (outer LM: 100 iterations, 1e-5)
   bool certify = false;  ///< --solver rtr: then certifyInliers on GNC's inlier set
+  BatchStart start = BatchStart::kFile;
 };
 
-/// Starts from the file's vertices (the odometry chain without them), solveGnc, and with
-/// `certify` certifyInliers; rejected = the edges neither trusted nor inliers.
+/// Starts from the file's vertices (the odometry chain without them) and runs solveGnc, or with
+/// BatchStart::kOnline cli::solveGncFromOnline (its time included); with `certify` then
+/// certifyInliers; rejected = the edges neither trusted nor inliers.
 template <class G>
 RobustEstimate<G> robustBatch(const PoseGraph<G>& graph, const RobustBatchSettings& settings);
 

@@ -195,30 +195,20 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     applyEdgeChoices(choices, graph, &options);
   }
   std::optional<OnlineThreshold> online;
-  if (run.online_threshold || init_online) {
-    online = onlineThreshold(graph, run.gnc.kernel, choices, init_online ? &poses : nullptr);
-    if (run.online_threshold) options.threshold = online->c2;
-  }
-  // --init online: the replay's rejected closures are GNC's known outliers (its graduation from
-  // a nearly convex start would let them back in), and afterwards each one the refined estimate
-  // fits at the replay's own c² (its entry test) is taken back: the online smoother's
-  // hysteresis, kept by the batch (core/gnc_solver.h readmitFitting).
-  int known_outliers = 0;
-  if (init_online) {
-    options.known_outliers.assign(graph.numEdges(), 0);
-    for (int k = 0; k < graph.numEdges(); ++k) {
-      const auto& e = graph.edges[k];
-      const bool trusted = (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
-                           (!options.trusted.empty() && options.trusted[k]);
-      options.known_outliers[k] = !online->kept[k] && !trusted;
-      known_outliers += options.known_outliers[k];
+  GncResult gncFirst;
+  int known_outliers = 0, readmitted_online = 0;
+  if (init_online) {  // the replay's classification kept (online_threshold.h solveGncFromOnline)
+    OnlineBatch b = solveGncFromOnline(graph, options, choices, run.online_threshold, &poses);
+    online = b.online;
+    gncFirst = std::move(b.gnc);
+    known_outliers = b.known_outliers;
+    readmitted_online = b.readmitted;
+  } else {
+    if (run.online_threshold) {
+      online = onlineThreshold(graph, run.gnc.kernel, choices);
+      options.threshold = online->c2;
     }
-  }
-  GncResult gncFirst = solveGnc(graph, &poses, options);
-  int readmitted_online = 0;
-  if (init_online && !gncFirst.cancelled) {
-    const double entry = run.online_threshold ? online->c2_in_use : gncFirst.threshold;
-    readmitted_online = readmitFitting(graph, &gncFirst, &poses, entry, options.outer);
+    gncFirst = solveGnc(graph, &poses, options);
   }
 
   // rtr: the certifiable path on the inlier set (core/gnc_solver.h certifyInliers), which may

@@ -1,6 +1,7 @@
 #include "arbor/tools/cli/online_threshold.h"
 
 #include <chrono>
+#include <cstdlib>
 #include <utility>
 
 #include "arbor/tools/cli/replay_runner.h"
@@ -36,9 +37,36 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
   return out;
 }
 
+template <class G>
+OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
+                               const EdgeChoices& choices, bool online_threshold,
+                               std::vector<G>* poses) {
+  OnlineBatch out;
+  out.online = onlineThreshold(graph, options.kernel, choices, poses);
+  if (online_threshold) options.threshold = out.online.c2;
+  options.known_outliers.assign(graph.numEdges(), 0);
+  for (int k = 0; k < graph.numEdges(); ++k) {
+    const auto& e = graph.edges[k];
+    const bool trusted = (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
+                         (!options.trusted.empty() && options.trusted[k]);
+    options.known_outliers[k] = !out.online.kept[k] && !trusted;
+    out.known_outliers += options.known_outliers[k];
+  }
+  out.gnc = solveGnc(graph, poses, options);
+  if (!out.gnc.cancelled) {
+    const double entry = online_threshold ? out.online.c2_in_use : out.gnc.threshold;
+    out.readmitted = readmitFitting(graph, &out.gnc, poses, entry, options.outer);
+  }
+  return out;
+}
+
 template OnlineThreshold onlineThreshold(const PoseGraph<SE2>&, KernelKind, const EdgeChoices&,
                                          std::vector<SE2>*);
 template OnlineThreshold onlineThreshold(const PoseGraph<SE3>&, KernelKind, const EdgeChoices&,
                                          std::vector<SE3>*);
+template OnlineBatch solveGncFromOnline(const PoseGraph<SE2>&, GncOptions, const EdgeChoices&, bool,
+                                        std::vector<SE2>*);
+template OnlineBatch solveGncFromOnline(const PoseGraph<SE3>&, GncOptions, const EdgeChoices&, bool,
+                                        std::vector<SE3>*);
 
 }  // namespace arbor::cli

@@ -13,6 +13,7 @@
 
 #include <vector>
 
+#include "arbor/core/gnc_solver.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/robust_kernel.h"
 #include "arbor/io/edge_choice_file.h"
@@ -36,5 +37,24 @@ struct OnlineThreshold {
 template <class G>
 OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
                                 const EdgeChoices& choices, std::vector<G>* estimate = nullptr);
+
+/// The robust batch from the online replay (`arbor batch --robust --init online`): the replay
+/// (onlineThreshold, its estimate the start), then solveGnc with the closures the replay rejected
+/// as known outliers (GNC's graduation from a nearly convex start would let them back in) and,
+/// with `online_threshold`, c² = the replay's bound for a settled inlier (OnlineThreshold::c2);
+/// then readmitFitting takes back each held-out closure the refined estimate fits within the
+/// replay's own c² in use (its entry test; GNC's c² without `online_threshold`): the online
+/// smoother's hysteresis at both ends. `options` as for solveGnc (its trusted edges are never
+/// held out); the estimate is written to *poses.
+struct OnlineBatch {
+  OnlineThreshold online;
+  GncResult gnc;
+  int known_outliers = 0;  ///< closures the replay rejected, held out of GNC
+  int readmitted = 0;      ///< of them, taken back by readmitFitting
+};
+template <class G>
+OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
+                               const EdgeChoices& choices, bool online_threshold,
+                               std::vector<G>* poses);
 
 }  // namespace arbor::cli
