@@ -80,7 +80,43 @@ double varianceFactor(const PoseGraph<G>& graph, const std::vector<G>& poses,
   return f / redundancy;
 }
 
+// Takes back every rejected edge whose s is within `threshold` (weight 1, inlier); returns how
+// many (certifyInliers' and readmitFitting's pass).
+int takeBackFitting(const std::vector<double>& s, double threshold, GncResult* gnc) {
+  int taken = 0;
+  for (size_t k = 0; k < s.size(); ++k) {
+    if (gnc->inlier[k] || !(s[k] <= threshold)) continue;
+    gnc->inlier[k] = 1;
+    gnc->weights[k] = 1.0;
+    ++taken;
+  }
+  return taken;
+}
+
+// 1 for an inlier, 0 for an outlier: the inlier problem's weights.
+std::vector<double> inlierWeights(const GncResult& gnc) {
+  std::vector<double> binary(gnc.inlier.size());
+  for (size_t k = 0; k < binary.size(); ++k) binary[k] = gnc.inlier[k] ? 1.0 : 0.0;
+  return binary;
+}
+
+// The rejected count and the F figures of gnc's classification at `poses`.
+template <class G>
+void recountClassification(const PoseGraph<G>& graph, const std::vector<G>& poses, GncResult* gnc) {
+  gnc->rejected = 0;
+  for (char in : gnc->inlier) gnc->rejected += !in;
+  gnc->F_all = objective(graph, poses);
+  gnc->F_inliers = weightedObjective(graph, inlierWeights(*gnc), poses);
+}
+
 }  // namespace
+
+template <class G>
+bool trustedEdge(const PoseGraph<G>& graph, const GncOptions& options, int k) {
+  const auto& e = graph.edges[static_cast<size_t>(k)];
+  return (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
+         (!options.trusted.empty() && options.trusted[static_cast<size_t>(k)]);
+}
 
 template <class G>
 PoseGraph<G> keepEdges(const PoseGraph<G>& graph, const std::vector<char>& keep) {
@@ -117,8 +153,7 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
   bool any_graduated = false, all_tls = true;
   for (int k = 0; k < m; ++k) {
     const auto& e = graph.edges[k];
-    result.trusted[k] = (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
-                        (!options.trusted.empty() && options.trusted[k]);
+    result.trusted[k] = trustedEdge(graph, options, k);
     if (!options.kernels.empty() && options.kernels[k] != KernelKind::kNone)
       kind[k] = options.kernels[k];
     if (!options.known_outliers.empty() && options.known_outliers[k]) {
@@ -317,30 +352,15 @@ template <class G>
 CertifiedInliers certifyInliers(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
                                 const RtrOptions& options, int max_passes) {
   CertifiedInliers out;
-  const int m = graph.numEdges();
   for (int pass = 0; pass < max_passes; ++pass) {
     const PoseGraph<G> inliers = keepEdges(graph, gnc->inlier);
     out.rtr = solveRtr(inliers, poses, options);
     ++out.passes;
-    const std::vector<double> s = edgeCosts(graph, *poses);
-    int taken = 0;
-    for (int k = 0; k < m; ++k) {
-      if (gnc->inlier[k] || !(s[k] <= gnc->threshold)) continue;
-      gnc->inlier[k] = 1;
-      gnc->weights[k] = 1.0;
-      ++taken;
-    }
+    const int taken = takeBackFitting(edgeCosts(graph, *poses), gnc->threshold, gnc);
     out.readmitted += taken;
     if (taken == 0) break;
   }
-  std::vector<double> binary(m);
-  gnc->rejected = 0;
-  for (int k = 0; k < m; ++k) {
-    binary[k] = gnc->inlier[k] ? 1.0 : 0.0;
-    gnc->rejected += !gnc->inlier[k];
-  }
-  gnc->F_all = objective(graph, *poses);
-  gnc->F_inliers = weightedObjective(graph, binary, *poses);
+  recountClassification(graph, *poses, gnc);
   return out;
 }
 
@@ -356,30 +376,14 @@ int readmitFitting(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* po
     throw std::invalid_argument("readmitFitting: the threshold must be finite and >= 0, got " +
                                 std::to_string(threshold));
   WeightedBatchSolver<G> solver(graph);
-  std::vector<double> binary(m);
   int readmitted = 0;
   for (int pass = 0; pass < max_passes; ++pass) {
-    const std::vector<double> s = edgeCosts(graph, *poses);
-    int taken = 0;
-    for (int k = 0; k < m; ++k) {
-      if (gnc->inlier[k] || !(s[k] <= threshold)) continue;
-      gnc->inlier[k] = 1;
-      gnc->weights[k] = 1.0;
-      ++taken;
-    }
+    const int taken = takeBackFitting(edgeCosts(graph, *poses), threshold, gnc);
     if (taken == 0) break;
     readmitted += taken;
-    for (int k = 0; k < m; ++k) binary[k] = gnc->inlier[k] ? 1.0 : 0.0;
-    const BatchSummary solved = solver.solve(binary, poses, options);
-    gnc->lm_iterations += solved.iterations;
+    gnc->lm_iterations += solver.solve(inlierWeights(*gnc), poses, options).iterations;
   }
-  gnc->rejected = 0;
-  for (int k = 0; k < m; ++k) {
-    binary[k] = gnc->inlier[k] ? 1.0 : 0.0;
-    gnc->rejected += !gnc->inlier[k];
-  }
-  gnc->F_all = objective(graph, *poses);
-  gnc->F_inliers = weightedObjective(graph, binary, *poses);
+  recountClassification(graph, *poses, gnc);
   return readmitted;
 }
 
@@ -393,6 +397,8 @@ template int readmitFitting(const PoseGraph<SE2>&, GncResult*, std::vector<SE2>*
                             const BatchOptions&, int);
 template int readmitFitting(const PoseGraph<SE3>&, GncResult*, std::vector<SE3>*, double,
                             const BatchOptions&, int);
+template bool trustedEdge(const PoseGraph<SE2>&, const GncOptions&, int);
+template bool trustedEdge(const PoseGraph<SE3>&, const GncOptions&, int);
 template PoseGraph<SE2> keepEdges(const PoseGraph<SE2>&, const std::vector<char>&);
 template PoseGraph<SE3> keepEdges(const PoseGraph<SE3>&, const std::vector<char>&);
 

@@ -183,6 +183,11 @@ template <class G>
 int readmitFitting(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
                    double threshold, const BatchOptions& options, int max_passes = 5);
 
+/// Whether solveGnc holds edge k at weight 1: odometry (|i − j| = 1 in dense indices) with
+/// options.trust_odometry, or marked in options.trusted.
+template <class G>
+bool trustedEdge(const PoseGraph<G>& graph, const GncOptions& options, int k);
+
 /// The graph without the edges marked false in `keep` (same poses, ids, priors and fixed).
 template <class G>
 PoseGraph<G> keepEdges(const PoseGraph<G>& graph, const std::vector<char>& keep);

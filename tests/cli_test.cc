@@ -251,6 +251,15 @@ TEST(Cli, BatchRunsEverySolverOfTheTable) {
 
 // A 300-pose generated Manhattan world with six false loop closures appended (7–12 m off);
 // their (file id) pairs in `planted`.
+// The pairs of an `i j` a line file (--rejected-out), as written, or each as (min, max).
+std::set<std::pair<long, long>> readPairs(const std::string& path, bool unordered = false) {
+  std::set<std::pair<long, long>> out;
+  std::ifstream in(path);
+  long i, k;
+  while (in >> i >> k) out.emplace(unordered ? std::min(i, k) : i, unordered ? std::max(i, k) : k);
+  return out;
+}
+
 void plantFalseClosures(const std::string& file, std::set<std::pair<long, long>>* planted) {
   ASSERT_EQ(run("generate manhattan --poses 300 --grid 6 --seed 5 -o " + file).status, 0);
   std::vector<long> ids;
@@ -298,10 +307,7 @@ TEST(Cli, BatchRobustWritesTheRejectedEdges) {
     if (solver == "rtr") {
       EXPECT_EQ(j["certified"], true);
     }
-    std::set<std::pair<long, long>> written;
-    std::ifstream in(rejected);
-    long i, k;
-    while (in >> i >> k) written.emplace(i, k);
+    const std::set<std::pair<long, long>> written = readPairs(rejected);
     EXPECT_EQ(static_cast<int>(written.size()), j["rejected"].get<int>()) << solver;
     for (const auto& edge : planted) EXPECT_EQ(written.count(edge), 1u) << solver;
   }
@@ -342,10 +348,7 @@ TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   EXPECT_DOUBLE_EQ(j["online_threshold"]["c2"].get<double>(), margin * c2);
   EXPECT_DOUBLE_EQ(j["online_threshold"]["c2_in_use"].get<double>(), c2);
   EXPECT_TRUE(j["online_threshold"]["noise_scale_estimated"].get<bool>());
-  std::set<std::pair<long, long>> written;
-  std::ifstream in(rejected);
-  long i, k;
-  while (in >> i >> k) written.emplace(i, k);
+  const std::set<std::pair<long, long>> written = readPairs(rejected);
   for (const auto& edge : planted) EXPECT_EQ(written.count(edge), 1u);
   const Result chi2 = run("batch " + file + " --robust --json");
   ASSERT_EQ(chi2.status, 0) << chi2.out;
@@ -377,13 +380,6 @@ TEST(Cli, BatchFromTheOnlineReplayKeepsItsRejections) {
   std::set<std::pair<long, long>> planted;
   for (const auto& [i, j] : arbor::readLabelsFile(labels))
     planted.emplace(std::min<long>(i, j), std::max<long>(i, j));
-  auto readRejected = [](const std::string& path) {
-    std::set<std::pair<long, long>> out;
-    std::ifstream in(path);
-    long i, k;
-    while (in >> i >> k) out.emplace(std::min(i, k), std::max(i, k));
-    return out;
-  };
   const std::string replay_rej = tempPath("online_group.replay.rej");
   ASSERT_EQ(run("replay " + file + " --robust --rejected-out " + replay_rej).status, 0);
   const std::string batch_rej = tempPath("online_group.batch.rej");
@@ -392,11 +388,11 @@ TEST(Cli, BatchFromTheOnlineReplayKeepsItsRejections) {
           " --robust --json --init online --inlier-threshold online --rejected-out " + batch_rej);
   ASSERT_EQ(r.status, 0) << r.out;
   const auto j = nlohmann::json::parse(r.out);
-  const auto replay_rejected = readRejected(replay_rej);
+  const auto replay_rejected = readPairs(replay_rej, /*unordered=*/true);
   EXPECT_EQ(replay_rejected, planted);
   EXPECT_EQ(j["known_outliers"].get<int>(), static_cast<int>(replay_rejected.size()));
   EXPECT_EQ(j["readmitted_online"].get<int>(), 0);
-  EXPECT_EQ(readRejected(batch_rej), planted);
+  EXPECT_EQ(readPairs(batch_rej, /*unordered=*/true), planted);
   const Result text = run("batch " + file + " --robust --init online --inlier-threshold online");
   ASSERT_EQ(text.status, 0) << text.out;
   EXPECT_NE(text.out.find("held out of GNC"), std::string::npos) << text.out;
@@ -420,10 +416,7 @@ TEST(Cli, ReplayRobustWritesTheRejectedEdges) {
   EXPECT_EQ(j["robust"]["closures_graduating"], 0);
   EXPECT_GT(j["robust"]["closures_inlier"].get<int>(), 0);
   EXPECT_LT(j["robust"]["F_kept"].get<double>(), j["F_final"].get<double>());
-  std::set<std::pair<long, long>> written;
-  std::ifstream in(rejected);
-  long i, k;
-  while (in >> i >> k) written.emplace(i, k);
+  const std::set<std::pair<long, long>> written = readPairs(rejected);
   EXPECT_EQ(static_cast<int>(written.size()), j["robust"]["closures_outlier"].get<int>());
   for (const auto& edge : planted) EXPECT_EQ(written.count(edge), 1u);
   const Result text = run("replay " + file + " --robust --kernel gm");

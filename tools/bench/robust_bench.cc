@@ -1,7 +1,5 @@
 #include "arbor/tools/bench/robust_bench.h"
 
-#include "arbor/tools/cli/online_threshold.h"
-
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -17,6 +15,7 @@
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/bench/format.h"
 #include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/online_threshold.h"
 #include "arbor/tools/refine/batch_solvers.h"
 
 namespace arbor::bench {

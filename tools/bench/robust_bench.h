@@ -135,7 +135,6 @@ struct RobustAnchor {
 std::map<std::pair<std::string, std::string>, RobustAnchor> readRobustAnchorTable(
     const std::string& shared_dir);
 
-/// The robust batch, as `arbor batch --robust` runs it.
 /// Where the robust batch starts (`arbor bench robust --batch-start`).
 enum class BatchStart {
   kFile,    ///< the file's vertices, GNC at the given c² (`arbor batch --robust`'s defaults)
@@ -143,6 +142,7 @@ enum class BatchStart {
             ///< online --inlier-threshold online`; cli::solveGncFromOnline)
 };
 
+/// The robust batch, as `arbor batch --robust` runs it.
 struct RobustBatchSettings {
   GncOptions gnc;        ///< --kernel, --inlier-threshold (outer LM: 100 iterations, 1e-5)
   bool certify = false;  ///< --solver rtr: then certifyInliers on GNC's inlier set

@@ -1,7 +1,6 @@
 #include "arbor/tools/cli/online_threshold.h"
 
 #include <chrono>
-#include <cstdlib>
 #include <utility>
 
 #include "arbor/tools/cli/replay_runner.h"
@@ -46,10 +45,7 @@ OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
   if (online_threshold) options.threshold = out.online.c2;
   options.known_outliers.assign(graph.numEdges(), 0);
   for (int k = 0; k < graph.numEdges(); ++k) {
-    const auto& e = graph.edges[k];
-    const bool trusted = (options.trust_odometry && std::abs(e.i - e.j) == 1) ||
-                         (!options.trusted.empty() && options.trusted[k]);
-    options.known_outliers[k] = !out.online.kept[k] && !trusted;
+    options.known_outliers[k] = !out.online.kept[k] && !trustedEdge(graph, options, k);
     out.known_outliers += options.known_outliers[k];
   }
   out.gnc = solveGnc(graph, poses, options);
