@@ -56,7 +56,7 @@ RelinearizedTree<G> eliminateAt(const RelinearizationSnapshot<G>& s, const std::
   out.cliques = eliminated.cliques;
   out.indeterminate = eliminated.indeterminate;
   out.tree.releaseFreeStorage();
-  out.solve.run(&out.tree, /*full=*/true, 0.0, &out.delta, &threads);
+  out.solve.run(&out.tree, /*full=*/true, 0.0, /*budget=*/0.0, &out.delta, &threads);
   return out;
 }
 

@@ -33,6 +33,7 @@ void BayesTree<D>::freeClique(int id) {
   c.children.clear();
   c.parent = -1;
   c.dirty = false;
+  if (!c.unseen.empty()) clearUnseen(id);
   c.damped = false;
   c.cached = true;
   c.in_use = false;
@@ -54,6 +55,32 @@ bool BayesTree<D>::isAncestorOrSelf(int ancestor, int c) const {
   for (; c >= 0; c = cliques[c].parent)
     if (c == ancestor) return true;
   return false;
+}
+
+template <int D>
+void BayesTree<D>::addUnseen(int id, int v) {
+  std::vector<int>& unseen = cliques[id].unseen;
+  if (unseen.empty()) {
+    ++num_deferred;
+    deferred.push_back(id);
+  } else if (std::find(unseen.begin(), unseen.end(), v) != unseen.end()) {
+    return;
+  }
+  unseen.push_back(v);
+}
+
+template <int D>
+void BayesTree<D>::clearUnseen(int id) {
+  if (cliques[id].unseen.empty()) return;
+  cliques[id].unseen.clear();
+  --num_deferred;
+}
+
+template <int D>
+void BayesTree<D>::clearAllUnseen() {
+  for (int id : deferred)
+    if (id < static_cast<int>(cliques.size())) clearUnseen(id);
+  deferred.clear();
 }
 
 template <int D>
@@ -99,6 +126,19 @@ void BayesTree<D>::removeTop(const std::vector<int>& marked, Top* top) {
     }
   }
   if (removed_.empty()) return;
+  // Deferred solves of removed cliques: an orphan that holds one of their unseen variables in
+  // its separator has not seen its move either (running intersection: it lies below the
+  // clique that deferred it), so it inherits it.
+  unseen_.clear();
+  for (int c : removed_)
+    unseen_.insert(unseen_.end(), cliques[c].unseen.begin(), cliques[c].unseen.end());
+  if (!unseen_.empty()) {
+    std::sort(unseen_.begin(), unseen_.end());
+    unseen_.erase(std::unique(unseen_.begin(), unseen_.end()), unseen_.end());
+    for (int o : top->orphans)
+      for (int v : cliques[o].separator)
+        if (std::binary_search(unseen_.begin(), unseen_.end(), v)) addUnseen(o, v);
+  }
   roots.erase(std::remove_if(roots.begin(), roots.end(),
                              [&](int r) { return cliques[r].removed_stamp == stamp; }),
               roots.end());
@@ -171,6 +211,23 @@ void BayesTree<D>::checkInvariants(const std::vector<Factor>& factors,
       if (++steps > nc) fail(name + " lies on a parent cycle");
   }
   if (in_use != num_cliques) fail("clique count mismatch");
+  // Deferred solves: counted, listed, and unseen variables are separator variables.
+  int deferred_count = 0;
+  std::vector<char> listed(static_cast<size_t>(nc), 0);
+  for (int id : deferred)
+    if (id >= 0 && id < nc) listed[id] = 1;
+  for (int id = 0; id < nc; ++id) {
+    const CliqueD& c = cliques[id];
+    if (c.unseen.empty()) continue;
+    if (!c.in_use) fail("free clique " + std::to_string(id) + " has unseen variables");
+    ++deferred_count;
+    if (!listed[id]) fail("deferred clique " + std::to_string(id) + " is not listed");
+    for (int v : c.unseen)
+      if (std::find(c.separator.begin(), c.separator.end(), v) == c.separator.end())
+        fail("clique " + std::to_string(id) + " has unseen variable " + std::to_string(v) +
+             " outside its separator");
+  }
+  if (deferred_count != num_deferred) fail("deferred count mismatch");
   double sum_flops = 0, sum_doubles = 0;
   for (const CliqueD& c : cliques)
     if (c.in_use) {

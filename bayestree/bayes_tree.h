@@ -37,6 +37,10 @@ class BayesTree {
   /// extends.
   double flops = 0;
   double doubles = 0;
+  /// Deferred cliques (Clique::unseen not empty), oldest first; may also hold ids since solved or
+  /// freed (skipped: unseen empty or not in use). num_deferred counts the deferred cliques.
+  std::vector<int> deferred;
+  int num_deferred = 0;
   /// Which cliques keep their cached factor (the top elimination applies it); by default every
   /// one (a bare tree; the smoother sets its options).
   CachedFactorOptions cached_factors{0, 0};
@@ -107,6 +111,13 @@ class BayesTree {
 
   bool isAncestorOrSelf(int ancestor, int c) const;
 
+  /// Adds v to clique `id`'s unseen variables (listing the clique as deferred if it was not).
+  void addUnseen(int id, int v);
+  /// Empties clique `id`'s unseen variables: it has been solved.
+  void clearUnseen(int id);
+  /// Empties every clique's unseen variables (a solve of every clique). O(deferred list).
+  void clearAllUnseen();
+
   /// Adds to `marked` every clique that holds v (frontal or separator), for each v of `vars`:
   /// the subtree below v's frontal clique where v appears in the separator.
   void cliquesContaining(const std::vector<int>& vars, std::vector<int>* marked);
@@ -117,7 +128,8 @@ class BayesTree {
   /// appends their frontals to top->variables and their children not removed to top->orphans
   /// (both in removal order), takes them off the roots and frees them. A child without a cached
   /// factor (Clique::cached) is removed too, not orphaned: nothing would stand for it in the
-  /// re-eliminated top.
+  /// re-eliminated top. The unseen variables of the removed cliques pass to the orphans that hold
+  /// any of them in their separator (their solve was deferred with the removed clique's).
   void removeTop(const std::vector<int>& marked, Top* top);
 
   /// Hangs subtree `orphan` below clique `parent` (IJRR 2012 Alg. 4 step 6).
@@ -142,7 +154,7 @@ class BayesTree {
 
  private:
   int remove_stamp_ = 0;
-  std::vector<int> removed_, stack_;
+  std::vector<int> removed_, stack_, unseen_;
   std::vector<int> freed_since_release_;  // may hold ids recycled since (skipped: in use)
 };
 

@@ -48,7 +48,12 @@ struct Clique {
   int F = 0, Sn = 0, ld = 0, ldh = 0;
   int eliminated_sn = 0;  ///< Sn when last eliminated (the separator grows by fold-ins)
   bool dirty = false;     ///< changed since the last back-substitution
-  bool damped = false;    ///< the factor is of a damped (indeterminate) Hessian
+  /// Separator variables that moved by at least the wildfire threshold since this clique was
+  /// last solved, which a solve budget (PartialSolve) left for a later update; not empty ⇔ the
+  /// clique is deferred (BayesTree::deferred lists it). Its solve passes them on to the cliques
+  /// below that hold them.
+  std::vector<int> unseen;
+  bool damped = false;  ///< the factor is of a damped (indeterminate) Hessian
   bool in_use = false;
   /// Keeps its cached factor (BayesTree::keepsCachedFactor when eliminated). Without one
   /// (ldh = 0 once its parent has read it) the clique cannot be an orphan: BayesTree::removeTop

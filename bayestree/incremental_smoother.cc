@@ -74,6 +74,7 @@ double secondsSince(Clock::time_point start) {
 void accumulate(UpdateStats* total, const UpdateStats& s) {
   addUpdateCounts(total, s);
   total->async_pending = s.async_pending;  // the state after the last update
+  total->cliques_deferred = s.cliques_deferred;
 }
 
 int threadCount(int requested) {
@@ -122,6 +123,12 @@ void validate(const SmootherOptions& o) {
     bad("cached_factors.max_ratio", o.cached_factors.max_ratio, "finite and ≥ 0");
   if (!(o.cached_factors.min_tree_doubles >= 0))
     bad("cached_factors.min_tree_doubles", o.cached_factors.min_tree_doubles, "≥ 0");
+  if (!(o.solve_budget_mb >= 0 && std::isfinite(o.solve_budget_mb)))
+    bad("solve_budget_mb", o.solve_budget_mb, "finite and ≥ 0");
+  if (o.solve_budget_mb > 0 && (o.dogleg || o.full_backsubstitution))
+    throw std::invalid_argument(
+        "IncrementalSmoother: bad options: solve_budget_mb needs Gauss–Newton and partial "
+        "back-substitution (not dogleg, not full_backsubstitution)");
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw std::invalid_argument(
         "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
@@ -1131,10 +1138,11 @@ struct IncrementalSmoother<G>::Impl {
   // Alg. 7, "Partial state update" (full: every clique, for relinearizeAll or
   // full_backsubstitution), then the dogleg step when the tree changed.
   void partialStateUpdate(bool relinearize_all, bool tree_changed, UpdateStats* st) {
-    const auto out =
-        partial_solve.run(&tree, relinearize_all || opt.full_backsubstitution,
-                          opt.wildfire_threshold, opt.dogleg ? nullptr : &delta, &threads);
+    const auto out = partial_solve.run(&tree, relinearize_all || opt.full_backsubstitution,
+                                       opt.wildfire_threshold, solveBudgetEntries(),
+                                       opt.dogleg ? nullptr : &delta, &threads);
     st->cliques_solved += out.solved;
+    st->cliques_deferred = out.deferred;
     st->cliques_on_helpers += out.on_helpers;
     noteSolved();
     if (opt.dogleg && tree_changed) {
@@ -1142,6 +1150,24 @@ struct IncrementalSmoother<G>::Impl {
       updated_all = true;
       check_all = true;
     }
+  }
+
+  // SmootherOptions::solve_budget_mb in entries of [L; Sᵀ] (0: none).
+  double solveBudgetEntries() const { return opt.solve_budget_mb * 1e6 / sizeof(double); }
+
+  // solveDeferred(): the backlog solved whole (a run without a budget solves it).
+  UpdateStats solveDeferred() {
+    UpdateStats st;
+    if (tree.num_deferred == 0) return st;
+    const auto t0 = Clock::now();
+    beginUpdated();
+    const auto out = partial_solve.run(&tree, false, opt.wildfire_threshold, 0.0, &delta, &threads);
+    st.cliques_solved = out.solved;
+    st.cliques_deferred = out.deferred;
+    noteSolved();
+    finishUpdated();
+    st.solve_s = st.time_s = secondsSince(t0);
+    return st;
   }
 
   // Σ w eᵀΩe at θ ⊞ x for every pose (w = 1 for every factor unless `weighted`): the dogleg and
@@ -1271,6 +1297,10 @@ UpdateStats IncrementalSmoother<G>::update() {
 template <class G>
 UpdateStats IncrementalSmoother<G>::relinearizeAll(const CancellationToken* cancel) {
   return impl_->relinearizeAll(cancel);
+}
+template <class G>
+UpdateStats IncrementalSmoother<G>::solveDeferred() {
+  return impl_->solveDeferred();
 }
 template <class G>
 bool IncrementalSmoother<G>::relinearizationPending() const {

@@ -155,6 +155,14 @@ struct SmootherOptions {
   /// since the value the clique was last solved with.
   double wildfire_threshold = 0.001;
   bool full_backsubstitution = false;  ///< solve every clique on each update
+  /// A bounded back-substitution (Extension, docs/design.md "A bounded back-substitution").
+  /// 0: each update solves every clique the wildfire reaches. > 0: besides the cliques the
+  /// update re-eliminated or folded into, it reads at most about this many MB of conditionals
+  /// ([L; Sᵀ], PartialSolve::solveEntries) per update; the cliques past it keep the Δ of an
+  /// earlier update until a later update's budget reaches them, oldest first
+  /// (UpdateStats::cliques_deferred; solveDeferred() and relinearizeAll() solve them all).
+  /// The walk is then on one thread. Needs Gauss–Newton and not full_backsubstitution.
+  double solve_budget_mb = 0;
   /// Fold an update made only of factors between variables already in the tree (nothing
   /// relinearised) into the Bayes tree by rank updates along their paths to the root, instead
   /// of re-eliminating those paths (false: always re-eliminate, as GTSAM's iSAM2).
@@ -201,6 +209,9 @@ struct UpdateStats {
   int variables_relinearized = 0;
   int indeterminate_cliques = 0;  ///< nearly singular cliques that had to be damped
   int cliques_solved = 0;         ///< cliques re-solved by back-substitution
+  /// after the update: cliques whose solve SmootherOptions::solve_budget_mb left for later
+  /// updates (their poses keep an earlier update's Δ)
+  int cliques_deferred = 0;
   /// of the cliques re-eliminated and solved, those done by the smoother's helper threads
   /// (SmootherOptions::threads)
   int cliques_on_helpers = 0;
@@ -237,7 +248,7 @@ struct UpdateStats {
 };
 
 /// Adds s's counts, phase times and flops to `total` (time_s, the caller's to set, and
-/// async_pending, the state after s, excepted).
+/// async_pending and cliques_deferred, the state after s, excepted).
 void addUpdateCounts(UpdateStats* total, const UpdateStats& s);
 
 /// Memory held by the Bayes tree (bytes of double storage) and the shape of its cliques.
@@ -311,6 +322,10 @@ class IncrementalSmoother {
   /// that of the last iteration completed (UpdateStats::cancelled); an iteration is never cut
   /// in the middle. Returns the summed stats.
   UpdateStats relinearizeAll(const CancellationToken* cancel = nullptr);
+  /// SmootherOptions::solve_budget_mb: solves every clique the budget deferred, so the
+  /// estimate is the one the updates would have given without a budget (to the wildfire
+  /// threshold); updatedPoses() lists the poses it moved. No-op without a backlog.
+  UpdateStats solveDeferred();
   /// RelinearizationMode::kAsync: whether a background relinearisation has been started and not
   /// yet swapped in (it is swapped in by a later update()).
   bool relinearizationPending() const;

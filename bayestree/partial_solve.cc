@@ -1,6 +1,7 @@
 #include "arbor/bayestree/partial_solve.h"
 
 #include <deque>
+#include <limits>
 
 #include "arbor/bayestree/dense_kernels.h"
 
@@ -29,8 +30,19 @@ void PartialSolve<D>::resetVariable(int v) {
 
 template <int D>
 typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool full,
-                                                      double threshold, std::vector<Vec>* delta,
+                                                      double threshold, double budget,
+                                                      std::vector<Vec>* delta,
                                                       UpdateThreads* threads) {
+  if (!full && (budget > 0 || tree->num_deferred > 0)) {
+    for (Lane& l : threads->lanes) {
+      l.solved = 0;
+      l.solved_list.clear();
+    }
+    return runBudgeted(tree, threshold,
+                       budget > 0 ? budget : std::numeric_limits<double>::infinity(), delta,
+                       &threads->lanes[0]);
+  }
+  if (full) tree->clearAllUnseen();  // every clique is solved below
   const std::vector<Clique<D>>& cliques = tree->cliques;
   auto needs_solving = [&](const Clique<D>& c) {
     if (full || c.dirty) return true;
@@ -95,6 +107,78 @@ typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool f
     for (int v : lane.changed_list) changed_[v] = 0;
     lane.changed_list.clear();
   }
+  out.deferred = tree->num_deferred;
+  return out;
+}
+
+template <int D>
+typename PartialSolve<D>::Output PartialSolve<D>::runBudgeted(BayesTree<D>* tree, double threshold,
+                                                              double budget,
+                                                              std::vector<Vec>* delta, Lane* lane) {
+  std::vector<Clique<D>>& cliques = tree->cliques;
+  auto needs_solving = [&](const Clique<D>& c) {
+    if (c.dirty || !c.unseen.empty()) return true;
+    for (int v : c.separator)
+      if (changed_[v]) return true;
+    return false;
+  };
+  double spent = 0;
+  // Depth-first from the cliques on stack_ (Alg. 7 step 2), a clique that was not re-eliminated
+  // or folded into deferred once the budget is spent: it records the separator variables that
+  // moved (changed_) as unseen, and its subtree waits with it.
+  auto walk = [&]() {
+    while (!stack_.empty()) {
+      const int id = stack_.back();
+      stack_.pop_back();
+      Clique<D>& c = cliques[id];
+      if (!c.in_use || !needs_solving(c)) continue;  // a backlog entry solved since
+      if (!c.dirty && spent >= budget) {
+        for (int v : c.separator)
+          if (changed_[v]) tree->addUnseen(id, v);
+        continue;
+      }
+      // The moves it had not seen are changes for the cliques below that hold them.
+      for (int v : c.unseen)
+        if (!changed_[v]) {
+          changed_[v] = 1;
+          lane->changed_list.push_back(v);
+        }
+      tree->clearUnseen(id);
+      solveClique(c, /*full=*/false, threshold, delta, lane);
+      spent += solveEntries(c);
+      c.dirty = false;
+      for (int ch : c.children)
+        if (needs_solving(cliques[ch])) stack_.push_back(ch);
+    }
+  };
+  stack_.clear();
+  for (auto r = tree->roots.rbegin(); r != tree->roots.rend(); ++r)
+    if (needs_solving(cliques[*r])) stack_.push_back(*r);
+  walk();
+  // The backlog, oldest first, while the budget lasts; cliques deferred by this run were
+  // appended to tree->deferred and stay behind it.
+  backlog_.swap(tree->deferred);
+  tree->deferred.clear();
+  size_t k = 0;
+  for (; k < backlog_.size() && spent < budget; ++k) {
+    stack_.push_back(backlog_[k]);
+    walk();
+  }
+  std::vector<int> newly = std::move(tree->deferred);
+  tree->deferred.clear();
+  for (; k < backlog_.size(); ++k) {
+    const int id = backlog_[k];
+    if (cliques[id].in_use && !cliques[id].unseen.empty()) tree->deferred.push_back(id);
+  }
+  for (int id : newly)
+    if (cliques[id].in_use && !cliques[id].unseen.empty()) tree->deferred.push_back(id);
+  backlog_.clear();
+  Output out;
+  out.solved = lane->solved;
+  out.deferred = tree->num_deferred;
+  solved_variables.assign(lane->solved_list.begin(), lane->solved_list.end());
+  for (int v : lane->changed_list) changed_[v] = 0;
+  lane->changed_list.clear();
   return out;
 }
 

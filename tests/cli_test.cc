@@ -126,7 +126,8 @@ TEST(Cli, ReplayLatencyCsvSplitsEachUpdateIntoItsPhases) {
                                              "prepare_ms",
                                              "top_ms",
                                              "solve_ms",
-                                             "reelimination_mflop"};
+                                             "reelimination_mflop",
+                                             "cliques_deferred"};
   ASSERT_EQ(header, expected);
   int rows = 0, reeliminating = 0;
   while (std::getline(csv, line)) {
@@ -138,7 +139,8 @@ TEST(Cli, ReplayLatencyCsvSplitsEachUpdateIntoItsPhases) {
     for (size_t k = 9; k < 13; ++k) EXPECT_GE(v[k], 0.0) << "row " << rows << " " << header[k];
     EXPECT_LE(phases, latency * (1 + 1e-5) + 1e-6) << "row " << rows;
     EXPECT_EQ(v[3] > 0, v[13] > 0) << "row " << rows;
-    if (v[7] == 0 && v[8] == 0) {  // no job around: nothing swapped or handed over
+    EXPECT_EQ(v[14], 0.0) << "row " << rows;  // no solve budget: nothing deferred
+    if (v[7] == 0 && v[8] == 0) {             // no job around: nothing swapped or handed over
       EXPECT_EQ(v[9], 0.0) << "row " << rows;
     }
     reeliminating += v[3] > 0 ? 1 : 0;

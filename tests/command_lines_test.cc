@@ -181,6 +181,18 @@ TEST(SmootherFlags, AsyncRelinearizationReachesItsFieldsInReplayAndServeAlike) {
   EXPECT_THROW(replaySmoother({"--relinearize", "async", "--dogleg"}), UsageError);
 }
 
+// The bounded back-substitution: its flag reaches the field in replay and serve; it is refused
+// beside a full back-substitution or dogleg (which need every Δ each update), and below 0.
+TEST(SmootherFlags, SolveBudgetReachesItsFieldAndRefusesWhatNeedsEveryDelta) {
+  EXPECT_EQ(SmootherOptions{}.solve_budget_mb, 0.0);
+  EXPECT_EQ(replaySmoother({"--solve-budget-mb", "2.5"}).solve_budget_mb, 2.5);
+  EXPECT_EQ(serveSmoother({"--solve-budget-mb", "2.5"}).solve_budget_mb, 2.5);
+  EXPECT_THROW(replaySmoother({"--solve-budget-mb", "2", "--dogleg"}), UsageError);
+  EXPECT_THROW(replaySmoother({"--solve-budget-mb", "2", "--full-backsubstitution"}), UsageError);
+  EXPECT_THROW(replaySmoother({"--solve-budget-mb", "-1"}), UsageError);
+  EXPECT_NO_THROW(replaySmoother({"--solve-budget-mb", "0", "--dogleg"}));
+}
+
 TEST(SmootherFlags, OneThresholdSetsBothAndTheSpecificOneWins) {
   SmootherOptions o = replaySmoother({"--relinearize-threshold", "0.4"});
   EXPECT_EQ(o.relinearize_threshold_translation, 0.4);

@@ -18,7 +18,7 @@ using testing::SmallProblem;
 Eigen::VectorXd solveTree(SmallProblem* p) {
   bayestree::PartialSolve<3> solve;
   for (int v = 0; v < p->n(); ++v) solve.addVariable();
-  solve.run(&p->tree, /*full=*/true, 0.0, nullptr, &p->threads);
+  solve.run(&p->tree, /*full=*/true, 0.0, 0.0, nullptr, &p->threads);
   Eigen::VectorXd x = Eigen::VectorXd::Zero(p->n() * 3);
   for (int v = 0; v < p->n(); ++v) x.segment<3>(v * 3) = solve.delta_newton[v];
   return x;

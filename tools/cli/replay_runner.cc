@@ -69,6 +69,7 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
                            s.cliques_reeliminated, s.variables_relinearized, s.cliques_updated,
                            s.cliques_solved});
     result.rows.back().batch_reeliminations = s.batch_reeliminations;
+    result.rows.back().cliques_deferred = s.cliques_deferred;
     result.rows.back().async_swapped = s.async_swapped;
     result.rows.back().async_job_running = s.async_pending && !s.async_swapped ? 1 : 0;
     result.rows.back().swap_ms = 1e3 * s.swap_s;
@@ -160,14 +161,14 @@ void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows
   if (!csv) throw std::runtime_error("cannot write " + path);
   csv << "step,edges,latency_ms,cliques_reeliminated,variables_relinearized,cliques_updated,"
          "cliques_solved,async_job_running,async_swapped,swap_ms,prepare_ms,top_ms,solve_ms,"
-         "reelimination_mflop\n";
+         "reelimination_mflop,cliques_deferred\n";
   csv << std::setprecision(6);
   for (const auto& r : rows) {
     csv << r.step << "," << r.edges_so_far << "," << r.latency_ms << "," << r.cliques_reeliminated
         << "," << r.variables_relinearized << "," << r.cliques_updated << "," << r.cliques_solved
         << "," << r.async_job_running << "," << r.async_swapped << "," << r.swap_ms << ","
         << r.prepare_ms << "," << r.top_ms << "," << r.solve_ms << "," << r.reelimination_mflop
-        << "\n";
+        << "," << r.cliques_deferred << "\n";
   }
   if (!csv) throw std::runtime_error("error writing " + path);
 }

@@ -47,6 +47,7 @@ struct UpdateRow {
   int variables_relinearized = 0;
   int cliques_updated = 0;       ///< cliques given a rank update instead of re-eliminated
   int cliques_solved = 0;        ///< cliques re-solved by back-substitution
+  int cliques_deferred = 0;      ///< after it: cliques a solve budget left for later updates
   int batch_reeliminations = 0;  ///< 1: the whole graph re-eliminated (BatchSwitchOptions)
   /// --relinearize async: 1 when a relinearisation job (or its catch-up) ran during the update
   /// (in flight before and after it, or started by it), and when the update swapped one in
@@ -106,7 +107,8 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
                            OnlineSmoother<G>& smoother, const ReplayHooks<G>& hooks = {});
 
 /// Writes `rows` as CSV (step, edges, latency_ms, cliques_reeliminated, variables_relinearized,
-/// cliques_updated, cliques_solved, async_job_running, async_swapped).
+/// cliques_updated, cliques_solved, async_job_running, async_swapped, the phase times,
+/// reelimination_mflop, cliques_deferred).
 void writeLatencyCsv(const std::string& path, const std::vector<UpdateRow>& rows);
 
 }  // namespace arbor::cli

@@ -71,6 +71,9 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       po::value<double>()->default_value(d.wildfire_threshold, text(d.wildfire_threshold)),
       "partial back-substitution threshold")("full-backsubstitution", po::bool_switch(),
                                              "solve every clique on each update")(
+      "solve-budget-mb", po::value<double>()->default_value(d.solve_budget_mb),
+      "bounded back-substitution: MB of conditionals an update reads past what it "
+      "re-eliminated (0: no bound; the rest is deferred to later updates)")(
       "no-rank-updates", po::bool_switch(),
       "re-eliminate the path of every loop closure (as GTSAM's iSAM2) instead of folding it in "
       "by rank updates")("dogleg", po::bool_switch(), "Powell's dogleg instead of Gauss-Newton")(
@@ -158,6 +161,9 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   o.wildfire_threshold = valueOf(vm, "wildfire", o.wildfire_threshold);
   require(o.wildfire_threshold >= 0, "wildfire", ">= 0", o.wildfire_threshold);
   o.full_backsubstitution = o.full_backsubstitution || valueOf(vm, "full-backsubstitution", false);
+  o.solve_budget_mb = valueOf(vm, "solve-budget-mb", o.solve_budget_mb);
+  require(o.solve_budget_mb >= 0 && std::isfinite(o.solve_budget_mb), "solve-budget-mb",
+          "finite and >= 0", o.solve_budget_mb);
   o.rank_updates = o.rank_updates && !valueOf(vm, "no-rank-updates", false);
   o.dogleg = o.dogleg || valueOf(vm, "dogleg", false);
   o.dogleg_initial_radius = valueOf(vm, "dogleg-radius", o.dogleg_initial_radius);
@@ -205,6 +211,10 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
           "cached-factor-max-ratio", "finite and >= 0", o.cached_factors.max_ratio);
   if (o.relinearize == RelinearizationMode::kAsync && o.dogleg)
     throw UsageError("--relinearize async needs Gauss-Newton: drop --dogleg");
+  if (o.solve_budget_mb > 0 && (o.dogleg || o.full_backsubstitution))
+    throw UsageError(
+        "--solve-budget-mb needs Gauss-Newton and partial back-substitution: drop --dogleg and "
+        "--full-backsubstitution");
   return o;
 }
 
@@ -224,6 +234,7 @@ std::string describeSmoother(const SmootherOptions& o) {
     out << ", radius " << o.dogleg_initial_radius << " (min " << o.dogleg_min_radius << ")";
   }
   if (o.full_backsubstitution) out << ", full back-substitution";
+  if (o.solve_budget_mb > 0) out << ", solve budget " << o.solve_budget_mb << " MB";
   if (!o.rank_updates) out << ", no rank updates";
   if (o.nested_dissection_min != d.nested_dissection_min)
     out << ", nested dissection from " << o.nested_dissection_min << " variables";
