@@ -1156,12 +1156,16 @@ struct IncrementalSmoother<G>::Impl {
   double solveBudgetEntries() const { return opt.solve_budget_mb * 1e6 / sizeof(double); }
 
   // solveDeferred(): the backlog solved whole (a run without a budget solves it).
-  UpdateStats solveDeferred() {
+  UpdateStats solveDeferred(double budget_mb) {
     UpdateStats st;
     if (tree.num_deferred == 0) return st;
+    if (!(budget_mb >= 0 && std::isfinite(budget_mb)))
+      throw std::invalid_argument("IncrementalSmoother::solveDeferred: bad budget_mb " +
+                                  std::to_string(budget_mb) + " (must be finite and ≥ 0)");
     const auto t0 = Clock::now();
     beginUpdated();
-    const auto out = partial_solve.run(&tree, false, opt.wildfire_threshold, 0.0, &delta, &threads);
+    const auto out = partial_solve.run(&tree, false, opt.wildfire_threshold,
+                                       budget_mb * 1e6 / sizeof(double), &delta, &threads);
     st.cliques_solved = out.solved;
     st.cliques_deferred = out.deferred;
     noteSolved();
@@ -1299,8 +1303,12 @@ UpdateStats IncrementalSmoother<G>::relinearizeAll(const CancellationToken* canc
   return impl_->relinearizeAll(cancel);
 }
 template <class G>
-UpdateStats IncrementalSmoother<G>::solveDeferred() {
-  return impl_->solveDeferred();
+UpdateStats IncrementalSmoother<G>::solveDeferred(double budget_mb) {
+  return impl_->solveDeferred(budget_mb);
+}
+template <class G>
+int IncrementalSmoother<G>::cliquesDeferred() const {
+  return impl_->tree.num_deferred;
 }
 template <class G>
 bool IncrementalSmoother<G>::relinearizationPending() const {

@@ -156,12 +156,14 @@ struct SmootherOptions {
   double wildfire_threshold = 0.001;
   bool full_backsubstitution = false;  ///< solve every clique on each update
   /// A bounded back-substitution (Extension, docs/design.md "A bounded back-substitution").
-  /// 0: each update solves every clique the wildfire reaches. > 0: besides the cliques the
-  /// update re-eliminated or folded into, it reads at most about this many MB of conditionals
-  /// ([L; Sᵀ], PartialSolve::solveEntries) per update; the cliques past it keep the Δ of an
-  /// earlier update until a later update's budget reaches them, oldest first
-  /// (UpdateStats::cliques_deferred; solveDeferred() and relinearizeAll() solve them all).
-  /// The walk is then on one thread. Needs Gauss–Newton and not full_backsubstitution.
+  /// 0: each update solves every clique the wildfire reaches. > 0: an update's back-
+  /// substitution reads about this many MB of conditionals ([L; Sᵀ],
+  /// PartialSolve::solveEntries) at most, or what the cliques it re-eliminated or folded into
+  /// hold if that is more (those are always solved); the other cliques the wildfire reaches
+  /// past it keep the Δ of an earlier update until a later update's budget reaches them,
+  /// oldest first (UpdateStats::cliques_deferred; solveDeferred() and relinearizeAll() solve
+  /// them all). The walk is then on one thread. Needs Gauss–Newton and not
+  /// full_backsubstitution.
   double solve_budget_mb = 0;
   /// Fold an update made only of factors between variables already in the tree (nothing
   /// relinearised) into the Bayes tree by rank updates along their paths to the root, instead
@@ -324,8 +326,12 @@ class IncrementalSmoother {
   UpdateStats relinearizeAll(const CancellationToken* cancel = nullptr);
   /// SmootherOptions::solve_budget_mb: solves every clique the budget deferred, so the
   /// estimate is the one the updates would have given without a budget (to the wildfire
-  /// threshold); updatedPoses() lists the poses it moved. No-op without a backlog.
-  UpdateStats solveDeferred();
+  /// threshold); updatedPoses() lists the poses it moved. `budget_mb` > 0: about that much of
+  /// the backlog only, oldest first (a caller with idle time solves it in slices). No-op
+  /// without a backlog.
+  UpdateStats solveDeferred(double budget_mb = 0);
+  /// SmootherOptions::solve_budget_mb: the cliques whose solve is deferred now.
+  int cliquesDeferred() const;
   /// RelinearizationMode::kAsync: whether a background relinearisation has been started and not
   /// yet swapped in (it is swapped in by a later update()).
   bool relinearizationPending() const;

@@ -208,6 +208,9 @@ class OnlineSmoother {
   /// the estimate is then that of the last step completed (UpdateStats::cancelled). The same
   /// count of passed checks (CancellationToken::cancelAfterChecks) repeats the cut exactly.
   UpdateStats finalize(const CancellationToken* cancel = nullptr);
+  /// SmootherOptions::solve_budget_mb: solves the cliques the budget deferred, all of them or
+  /// about `budget_mb` of them (IncrementalSmoother::solveDeferred); adds nothing queued.
+  UpdateStats solveDeferred(double budget_mb = 0) { return smoother_.solveDeferred(budget_mb); }
   /// With robust smoothing: every loop closure's weight and status (empty without it).
   std::vector<ClosureReport> closures() const;
   /// The robust layer, or nullptr without robust smoothing (exclude/include a factor).

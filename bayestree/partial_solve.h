@@ -4,8 +4,8 @@
 // independent subtrees on different threads.
 //
 // With a solve budget (Extension, docs/design.md "A bounded back-substitution"), the cliques the
-// update re-eliminated or folded into are solved as always, and of the others the wildfire
-// enters, those past the budget's share of [L; Sᵀ] read are deferred: each keeps the separator
+// update re-eliminated or folded into are solved as always, and the others the wildfire enters
+// once the entries of [L; Sᵀ] read reach the budget are deferred: each keeps the separator
 // variables it has not seen move (Clique::unseen), and later updates solve the backlog, oldest
 // first, with what their budget has left.
 #pragma once
@@ -44,10 +44,10 @@ class PartialSolve {
   void resetVariable(int v);
 
   /// Solves the cliques that need it (`full`: every clique) into delta_newton and, when `delta`
-  /// is not null, into *delta too; α = `threshold`. `budget` > 0 (and not `full`): at most
-  /// about that many entries of [L; Sᵀ] read in cliques that were not re-eliminated or folded
-  /// into (dirty), the rest deferred; on one thread. 0: no budget (a backlog left by an earlier
-  /// budgeted run is solved too).
+  /// is not null, into *delta too; α = `threshold`. `budget` > 0 (and not `full`): once the
+  /// entries read (solveEntries, every clique solved counted) reach `budget`, a clique that is
+  /// not dirty (re-eliminated or folded into) is deferred instead of solved; on one thread.
+  /// 0: no budget (a backlog left by an earlier budgeted run is solved too).
   Output run(BayesTree<D>* tree, bool full, double threshold, double budget,
              std::vector<Vec>* delta, UpdateThreads* threads);
 

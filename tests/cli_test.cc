@@ -184,6 +184,42 @@ TEST(Cli, ReplayLoadsAMapInTheFirstUpdateThenStreams) {
   std::filesystem::remove(file);
 }
 
+// `replay --solve-budget-mb`: a tiny budget leaves cliques deferred after the last update; the
+// replay reports them and F once they are solved, and the final pass ends where the unbounded
+// replay's does. The CSV's last column counts the backlog.
+TEST(Cli, ReplayWithASolveBudgetReportsTheBacklogAndEndsAtTheSameOptimum) {
+  const std::string file = tempPath("budget.g2o"), csv_path = tempPath("budget.csv");
+  ASSERT_EQ(run("generate manhattan --poses 600 --grid 8 --seed 3 -o " + file).status, 0);
+  const Result plain = run("replay " + file + " --json");
+  ASSERT_EQ(plain.status, 0) << plain.out;
+  const auto p = nlohmann::json::parse(plain.out);
+  EXPECT_EQ(p["deferred_at_end"].get<int>(), 0);
+  EXPECT_EQ(p["F_drained"].get<double>(), p["F_incremental"].get<double>());
+  const Result bounded =
+      run("replay " + file + " --json --solve-budget-mb 0.0002 --latency-csv " + csv_path);
+  ASSERT_EQ(bounded.status, 0) << bounded.out;
+  const auto b = nlohmann::json::parse(bounded.out);
+  EXPECT_GT(b["deferred_at_end"].get<int>(), 0);
+  EXPECT_NE(b["F_drained"].get<double>(), b["F_incremental"].get<double>());
+  const double F = p["F_final"].get<double>();
+  EXPECT_NEAR(b["F_final"].get<double>(), F, 1e-7 * F);
+  std::ifstream csv(csv_path);
+  std::string line;
+  std::getline(csv, line);
+  ASSERT_EQ(line.substr(line.rfind(',') + 1), "cliques_deferred");
+  int rows = 0, deferring = 0;
+  while (std::getline(csv, line)) {
+    ++rows;
+    deferring += std::stoi(line.substr(line.rfind(',') + 1)) > 0 ? 1 : 0;
+  }
+  EXPECT_GT(rows, 0);
+  EXPECT_GT(deferring, rows / 4);
+  const Result text = run("replay " + file + " --solve-budget-mb 0.0002");
+  EXPECT_NE(text.out.find("F drained"), std::string::npos) << text.out;
+  std::filesystem::remove(file);
+  std::filesystem::remove(csv_path);
+}
+
 // `replay --initial file` starts every pose at its VERTEX line: a map saved at its optimum and
 // loaded in one update stays there (one Gauss–Newton step from the optimum), where the same load
 // from odometry is one step from dead reckoning; a file without VERTEX lines is refused.

@@ -191,6 +191,10 @@ TEST(SmootherFlags, SolveBudgetReachesItsFieldAndRefusesWhatNeedsEveryDelta) {
   EXPECT_THROW(replaySmoother({"--solve-budget-mb", "2", "--full-backsubstitution"}), UsageError);
   EXPECT_THROW(replaySmoother({"--solve-budget-mb", "-1"}), UsageError);
   EXPECT_NO_THROW(replaySmoother({"--solve-budget-mb", "0", "--dogleg"}));
+  // The robust layer judges closures against the estimate: refused as with async.
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--robust", "--solve-budget-mb", "1"}),
+               UsageError);
+  EXPECT_THROW(parseServeCommandLine({"--robust", "--solve-budget-mb", "1"}), UsageError);
 }
 
 TEST(SmootherFlags, OneThresholdSetsBothAndTheSpecificOneWins) {

@@ -107,6 +107,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
         {"p99_first_tenth_ms", r.tenths.first.p99},
         {"p99_last_tenth_ms", r.tenths.last.p99},
         {"F_incremental", r.F_incremental},
+        {"deferred_at_end", r.deferred_at_end},
+        {"F_drained", r.F_drained},
         {"F_final", r.F_final},
         {"F_batch", r.batch.F_final},
         {"batch_time_s", r.batch.time_s},
@@ -174,8 +176,11 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
             << "p99 tenths    first " << r.tenths.first.p99 << "  last " << r.tenths.last.p99
             << " (ms, of the first and the last tenth of the updates)\n"
             << std::setprecision(10) << "F incremental " << r.F_incremental
-            << " (before the final relinearisation)\n"
-            << "F final       " << r.F_final << "\n"
+            << " (before the final relinearisation)\n";
+  if (r.deferred_at_end > 0)
+    std::cout << "F drained     " << r.F_drained << " (" << r.deferred_at_end
+              << " deferred cliques solved)\n";
+  std::cout << "F final       " << r.F_final << "\n"
             << batchLabel(run) << r.batch.F_final << " (" << r.batch.iterations
             << " iterations from the incremental estimate"
             << (run.robust.robust ? ", kept edges" : "") << ", " << std::setprecision(4)

@@ -92,7 +92,12 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     if (any) smoother.update();
   }
   if (hooks.after_stream) hooks.after_stream(smoother);
-  result.F_incremental = smoother.smoother().objective();
+  result.F_incremental = result.F_drained = smoother.smoother().objective();
+  result.deferred_at_end = smoother.smoother().cliquesDeferred();
+  if (result.deferred_at_end > 0) {
+    smoother.solveDeferred();
+    result.F_drained = smoother.smoother().objective();
+  }
   Stopwatch finalize_clock;
   if (settings.finalize) {
     const UpdateStats s = smoother.finalize();

@@ -68,6 +68,10 @@ struct ReplayResult {
   double first_update_s = 0;  ///< with ReplaySettings::first_update_edges: that update's time
   double finalize_s = 0;      ///< the final relinearise-all pass
   double F_incremental = 0;   ///< before the final pass
+  /// --solve-budget-mb: the cliques still deferred after the last update, and F once they are
+  /// solved (before the final pass; F_incremental when none is)
+  int deferred_at_end = 0;
+  double F_drained = 0;
   double F_final = 0;
   BatchSummary batch;  ///< LM from the final estimate (if settings.batch)
   int relinearized = 0, indeterminate = 0, duplicates = 0, rejected = 0, pending = 0;

@@ -146,6 +146,11 @@ void requireInlineWithRobust(bool robust_on, const SmootherOptions& smoother) {
     throw UsageError(
         "--robust needs --relinearize inline: with async the loop closures are judged against an "
         "estimate that lags the background job (docs/design.md, \"Online robust smoothing\")");
+  if (robust_on && smoother.solve_budget_mb > 0)
+    throw UsageError(
+        "--robust needs an unbounded back-substitution (drop --solve-budget-mb): the loop "
+        "closures are judged against the estimate, which a budget leaves partly deferred "
+        "(docs/design.md, \"A bounded back-substitution\")");
 }
 
 }  // namespace arbor::cli

@@ -51,6 +51,13 @@ class EngineImpl final : public Engine {
     noteChanged(smoother_.smoother().updatedPoses());
     return st;
   }
+  int cliquesDeferred() const override { return smoother_.smoother().cliquesDeferred(); }
+  int solveDeferred(double budget_mb) override {
+    if (smoother_.smoother().cliquesDeferred() == 0) return 0;
+    smoother_.solveDeferred(budget_mb);
+    noteChanged(smoother_.smoother().updatedPoses());
+    return smoother_.smoother().cliquesDeferred();
+  }
   UpdateStats refine(const CancellationToken* cancel) override {
     const UpdateStats st = smoother_.finalize(cancel);
     noteChanged(smoother_.smoother().updatedPoses());

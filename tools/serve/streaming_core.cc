@@ -317,6 +317,7 @@ void StreamingCore::smootherLoop() {
         held_ = 0;
       }
       for (const auto& c : commands) handleCommand(c);
+      solveDeferredWhileIdle();
       pollBatch(false, true);  // a background batch that finished while idle
       if (std::chrono::duration<double>(std::chrono::steady_clock::now() - last_status_).count() >=
           options_.status_period_s) {
@@ -331,6 +332,21 @@ void StreamingCore::smootherLoop() {
       if (queue_.empty() && commands_.empty()) return;
     }
   }
+}
+
+void StreamingCore::solveDeferredWhileIdle() {
+  const double budget = options_.smoother.solve_budget_mb;
+  if (!engine_ || budget <= 0) return;
+  bool solved = false;
+  while (engine_->cliquesDeferred() > 0) {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (!queue_.empty() || !commands_.empty() || smoother_stop_) break;
+    }
+    engine_->solveDeferred(budget);
+    solved = true;
+  }
+  if (solved) publishEstimate(false);
 }
 
 bool StreamingCore::journalUpdate(int n) {

@@ -240,6 +240,10 @@ class StreamingCore {
   static Queued queued(IntakeResult accepted, std::chrono::steady_clock::time_point received);
 
   void smootherLoop();
+  /// --solve-budget-mb: while nothing waits in the queue, solves the cliques the budget deferred,
+  /// one budget's worth at a time (a measurement that arrives waits one slice at most), and
+  /// publishes the poses they moved.
+  void solveDeferredWhileIdle();
   void replayJournal();
   /// False when the update could not be journaled (nothing applied; the caller holds it).
   bool applyBatch(std::vector<Queued>& batch, bool from_journal);
