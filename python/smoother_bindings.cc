@@ -2,6 +2,7 @@
 // with poses named by ids, edges and priors in any order, updates, the estimate and statistics
 // as numpy arrays and dicts, and marginal and joint covariances from the Bayes tree.
 #include <algorithm>
+#include <cmath>
 #include <optional>
 #include <string>
 #include <vector>
@@ -25,6 +26,7 @@ py::dict statsDict(const UpdateStats& s) {
   d["variables_relinearized"] = s.variables_relinearized;
   d["indeterminate_cliques"] = s.indeterminate_cliques;
   d["cliques_solved"] = s.cliques_solved;
+  d["cliques_deferred"] = s.cliques_deferred;
   d["time_s"] = s.time_s;
   return d;
 }
@@ -76,7 +78,8 @@ void throwUnlessApplied(const EdgeSwitchResult& r) {
 template <class G>
 OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, int threads,
                                    double relinearize_translation, double relinearize_rotation,
-                                   int relinearize_skip, double wildfire, bool dogleg) {
+                                   int relinearize_skip, double wildfire, bool dogleg,
+                                   double solve_budget_mb) {
   OnlineSmootherOptions<G> o;
   if (threads < 0)
     throw std::invalid_argument("threads must be >= 0, not " + std::to_string(threads));
@@ -91,6 +94,14 @@ OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, 
   o.smoother.relinearize_skip = relinearize_skip;
   o.smoother.wildfire_threshold = wildfire;
   o.smoother.dogleg = dogleg;
+  if (!(solve_budget_mb >= 0) || !std::isfinite(solve_budget_mb))
+    throw std::invalid_argument("solve_budget_mb must be finite and >= 0, not " +
+                                std::to_string(solve_budget_mb));
+  if (solve_budget_mb > 0 && (dogleg || robust))
+    throw std::invalid_argument(
+        "solve_budget_mb needs Gauss-Newton and no robust options (the robust layer judges "
+        "closures against the estimate, which a budget leaves partly deferred)");
+  o.smoother.solve_budget_mb = solve_budget_mb;
   if (robust) {
     if (robust->estimate_scale)
       throw std::invalid_argument(
@@ -118,9 +129,9 @@ void defineSmootherOf(py::module_& m, const char* name) {
                        "an incremental update at a time (docs/python.md).")
       .def(
           py::init([](const std::optional<RobustSettings>& robust, int threads, double rt,
-                      double rr, int skip, double wildfire, bool dogleg) {
+                      double rr, int skip, double wildfire, bool dogleg, double budget) {
             return std::make_unique<Smoother>(
-                optionsOf<G>(robust, threads, rt, rr, skip, wildfire, dogleg));
+                optionsOf<G>(robust, threads, rt, rr, skip, wildfire, dogleg, budget));
           }),
           py::arg("robust") = py::none(), py::arg("threads") = defaults.threads,
           py::arg("relinearize_threshold_translation") = defaults.relinearize_threshold_translation,
@@ -128,9 +139,11 @@ void defineSmootherOf(py::module_& m, const char* name) {
           py::arg("relinearize_skip") = defaults.relinearize_skip,
           py::arg("wildfire_threshold") = defaults.wildfire_threshold,
           py::arg("dogleg") = defaults.dogleg,
+          py::arg("solve_budget_mb") = defaults.solve_budget_mb,
           "robust: an arbor.RobustOptions (online GNC per loop closure, as `arbor replay "
           "--robust`); the rest as `arbor replay`'s smoother flags (threads 0: one per core, "
-          "at most 4; the estimate does not depend on it).")
+          "at most 4; the estimate does not depend on it; solve_budget_mb as "
+          "--solve-budget-mb).")
       .def(
           "add_edge",
           [](Smoother& s, Key from, Key to, const Eigen::VectorXd& z,
@@ -196,6 +209,22 @@ void defineSmootherOf(py::module_& m, const char* name) {
             return statsDict(st);
           },
           "Relinearises everything and iterates to convergence (the end of a replay).")
+      .def(
+          "solve_deferred",
+          [](Smoother& s, double budget_mb) {
+            UpdateStats st;
+            {
+              py::gil_scoped_release release;
+              st = s.solveDeferred(budget_mb);
+            }
+            return statsDict(st);
+          },
+          py::arg("budget_mb") = 0.0,
+          "With solve_budget_mb: solves the cliques the budget deferred (all, or about "
+          "budget_mb of them); returns the statistics (cliques_deferred: those left).")
+      .def_property_readonly(
+          "cliques_deferred", [](const Smoother& s) { return s.smoother().cliquesDeferred(); },
+          "With solve_budget_mb: the cliques whose solve the budget deferred.")
       .def("objective", &Smoother::objective,
            "F = Σ eᵀΩe at the estimate (disabled edges left out)")
       .def("has_pose", &Smoother::hasPose, py::arg("id"))

@@ -91,3 +91,38 @@ def test_replay_covariances_and_tum_output(name, data_dir, arbor_cli, tmp_path):
         assert np.allclose(rows[:, 1:], poses, rtol=0, atol=1e-9)
     else:
         assert np.allclose(rows[:, 1:3], poses[:, :2], rtol=0, atol=1e-9)
+
+
+def test_solve_budget_defers_and_solve_deferred_catches_up(data_dir):
+    """solve_budget_mb bounds each update's back-substitution; solve_deferred() solves the
+    backlog, and the final pass ends where the unbounded replay does."""
+    graph = arbor.read(os.path.join(data_dir, "manhattan_2d.g2o"))
+    _, F = replay(graph)
+    smoother = arbor.OnlineSmoother2(solve_budget_mb=0.0002)
+    index = {int(i): k for k, i in enumerate(graph.ids)}
+    edges = graph.edges
+    order = sorted(range(len(edges)),
+                   key=lambda e: max(index[int(edges[e, 0])], index[int(edges[e, 1])]))
+    deferring = 0
+    for e in order:
+        smoother.add_edge(int(edges[e, 0]), int(edges[e, 1]), graph.measurements[e],
+                          graph.information[e])
+        stats = smoother.update()
+        assert stats["cliques_deferred"] == smoother.cliques_deferred
+        deferring += stats["cliques_deferred"] > 0
+    assert deferring > len(order) // 4
+    assert smoother.cliques_deferred > 0
+    drained = smoother.solve_deferred()
+    assert drained["cliques_solved"] > 0
+    assert drained["cliques_deferred"] == smoother.cliques_deferred == 0
+    smoother.finalize()
+    assert smoother.objective() == pytest.approx(F, rel=1e-7)
+
+
+def test_solve_budget_refuses_what_needs_every_delta():
+    with pytest.raises(ValueError, match="solve_budget_mb"):
+        arbor.OnlineSmoother2(solve_budget_mb=-1)
+    with pytest.raises(ValueError, match="solve_budget_mb"):
+        arbor.OnlineSmoother2(solve_budget_mb=1, dogleg=True)
+    with pytest.raises(ValueError, match="solve_budget_mb"):
+        arbor.OnlineSmoother3(solve_budget_mb=1, robust=arbor.RobustOptions(kernel="tls"))
