@@ -1139,7 +1139,7 @@ struct IncrementalSmoother<G>::Impl {
   // full_backsubstitution), then the dogleg step when the tree changed.
   void partialStateUpdate(bool relinearize_all, bool tree_changed, UpdateStats* st) {
     const auto out = partial_solve.run(&tree, relinearize_all || opt.full_backsubstitution,
-                                       opt.wildfire_threshold, solveBudgetEntries(),
+                                       opt.wildfire_threshold, entriesOf(opt.solve_budget_mb),
                                        opt.dogleg ? nullptr : &delta, &threads);
     st->cliques_solved += out.solved;
     st->cliques_deferred = out.deferred;
@@ -1152,8 +1152,8 @@ struct IncrementalSmoother<G>::Impl {
     }
   }
 
-  // SmootherOptions::solve_budget_mb in entries of [L; Sᵀ] (0: none).
-  double solveBudgetEntries() const { return opt.solve_budget_mb * 1e6 / sizeof(double); }
+  // A budget in MB as entries of [L; Sᵀ] (0: none).
+  static double entriesOf(double budget_mb) { return budget_mb * 1e6 / sizeof(double); }
 
   // solveDeferred(): the backlog solved whole (a run without a budget solves it).
   UpdateStats solveDeferred(double budget_mb) {
@@ -1164,8 +1164,8 @@ struct IncrementalSmoother<G>::Impl {
                                   std::to_string(budget_mb) + " (must be finite and ≥ 0)");
     const auto t0 = Clock::now();
     beginUpdated();
-    const auto out = partial_solve.run(&tree, false, opt.wildfire_threshold,
-                                       budget_mb * 1e6 / sizeof(double), &delta, &threads);
+    const auto out = partial_solve.run(&tree, false, opt.wildfire_threshold, entriesOf(budget_mb),
+                                       &delta, &threads);
     st.cliques_solved = out.solved;
     st.cliques_deferred = out.deferred;
     noteSolved();

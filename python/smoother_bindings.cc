@@ -2,7 +2,6 @@
 // with poses named by ids, edges and priors in any order, updates, the estimate and statistics
 // as numpy arrays and dicts, and marginal and joint covariances from the Bayes tree.
 #include <algorithm>
-#include <cmath>
 #include <optional>
 #include <string>
 #include <vector>
@@ -94,13 +93,11 @@ OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, 
   o.smoother.relinearize_skip = relinearize_skip;
   o.smoother.wildfire_threshold = wildfire;
   o.smoother.dogleg = dogleg;
-  if (!(solve_budget_mb >= 0) || !std::isfinite(solve_budget_mb))
-    throw std::invalid_argument("solve_budget_mb must be finite and >= 0, not " +
-                                std::to_string(solve_budget_mb));
-  if (solve_budget_mb > 0 && (dogleg || robust))
+  // The smoother refuses a bad budget and one beside dogleg; the robust layer is this one's.
+  if (solve_budget_mb > 0 && robust)
     throw std::invalid_argument(
-        "solve_budget_mb needs Gauss-Newton and no robust options (the robust layer judges "
-        "closures against the estimate, which a budget leaves partly deferred)");
+        "solve_budget_mb needs no robust options (the robust layer judges closures against the "
+        "estimate, which a budget leaves partly deferred)");
   o.smoother.solve_budget_mb = solve_budget_mb;
   if (robust) {
     if (robust->estimate_scale)

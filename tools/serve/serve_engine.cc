@@ -52,11 +52,10 @@ class EngineImpl final : public Engine {
     return st;
   }
   int cliquesDeferred() const override { return smoother_.smoother().cliquesDeferred(); }
-  int solveDeferred(double budget_mb) override {
-    if (smoother_.smoother().cliquesDeferred() == 0) return 0;
+  void solveDeferred(double budget_mb) override {
+    if (smoother_.smoother().cliquesDeferred() == 0) return;  // updatedPoses() is the update's
     smoother_.solveDeferred(budget_mb);
     noteChanged(smoother_.smoother().updatedPoses());
-    return smoother_.smoother().cliquesDeferred();
   }
   UpdateStats refine(const CancellationToken* cancel) override {
     const UpdateStats st = smoother_.finalize(cancel);

@@ -33,8 +33,8 @@ class Engine {
   virtual UpdateStats update() = 0;
   /// SmootherOptions::solve_budget_mb: solves about `budget_mb` of the cliques the budget
   /// deferred (0: all; OnlineSmoother::solveDeferred), their poses marked changed for the next
-  /// estimate(false). Returns the cliques still deferred.
-  virtual int solveDeferred(double budget_mb) = 0;
+  /// estimate(false).
+  virtual void solveDeferred(double budget_mb) = 0;
   /// The cliques the budget left deferred (IncrementalSmoother::cliquesDeferred).
   virtual int cliquesDeferred() const = 0;
   /// Relinearises everything and iterates to convergence (OnlineSmoother::finalize), or until
