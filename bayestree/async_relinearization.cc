@@ -110,6 +110,7 @@ RelinearizedTree<G> relinearizeSnapshot(const RelinearizationSnapshot<G>& s) {
 template <class G>
 void AsyncRelinearization<G>::Job::run() {
   try {
+    free_first = RelinearizedTree<G>();
     result = relinearizeSnapshot(snapshot);
   } catch (...) {
     error = std::current_exception();
@@ -157,10 +158,12 @@ void AsyncRelinearization<G>::join() const {
 }
 
 template <class G>
-void AsyncRelinearization<G>::start(RelinearizationSnapshot<G> snapshot, bool synchronous) {
+void AsyncRelinearization<G>::start(RelinearizationSnapshot<G> snapshot, bool synchronous,
+                                    RelinearizedTree<G> free_first) {
   join();
   job_ = std::make_unique<Job>();
   job_->snapshot = std::move(snapshot);
+  job_->free_first = std::move(free_first);
   Job* job = job_.get();
   if (synchronous) {
     job->run();

@@ -18,6 +18,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <variant>
 
 #include <Eigen/Core>
@@ -230,6 +231,10 @@ struct IncrementalSmoother<G>::Impl {
   bayestree::BackgroundJob<Impl> catch_up;
   int catch_up_poses = 0, catch_up_factors = 0, catch_up_relinearized = 0, catch_up_rounds = 0;
   std::vector<G> theta_at_catch_up;
+  // What the last swap replaced (its tree, linearisations, solve and Δ), freed by the next
+  // relinearisation job's thread before its work (AsyncRelinearization::start), or by
+  // relinearizeAll, which re-eliminates everything anyway.
+  bayestree::RelinearizedTree<G> replaced;
   int pass_first_factor = 0;  // the first factor of the current pass (the snapshot's end)
   bool second_core_busy = false;
 
@@ -529,7 +534,7 @@ struct IncrementalSmoother<G>::Impl {
     moved_since_snapshot.clear();
     reweighted_since_snapshot.clear();
     released_since_snapshot.clear();
-    async.start(std::move(s), opt.async.synchronous);
+    async.start(std::move(s), opt.async.synchronous, std::exchange(replaced, {}));
     st->async_started = 1;
     return true;
   }
@@ -630,7 +635,11 @@ struct IncrementalSmoother<G>::Impl {
     std::vector<int> pending_relinearize;
     for (int f : src.to_relinearize)
       if (f < base.f) pending_relinearize.push_back(f);
-    // The base's state becomes this smoother's.
+    // The base's state becomes this smoother's; the old waits in `replaced` for the next job.
+    replaced.tree = std::move(tree);
+    replaced.factors = std::move(factors);
+    replaced.solve = std::move(partial_solve);
+    replaced.delta = std::move(delta);
     theta = std::move(new_theta);
     tree = std::move(base.tree);
     factors = std::move(base.factors);
@@ -1198,6 +1207,7 @@ struct IncrementalSmoother<G>::Impl {
   UpdateStats relinearizeAll(const CancellationToken* cancel) {
     const auto t0 = Clock::now();
     UpdateStats total;
+    replaced = bayestree::RelinearizedTree<G>();
     if (relinearizationPending()) {  // everything is relinearised below: the job is not needed
       async.abandon();
       catch_up.abandon();
