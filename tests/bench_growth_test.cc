@@ -36,6 +36,13 @@ void expectSlicesCoverTheReplay(const PoseGraph<G>& graph, bool per_pose, int sl
     EXPECT_GE(s.max_ms, s.relin_max_ms);
     EXPECT_GE(s.max_ms, s.other_p99_ms);
     largest_in_slices = std::max(largest_in_slices, s.max_ms);
+    // The largest update is named by its row: its step, its latency, its kind.
+    const auto row =
+        std::find_if(replay.rows.begin(), replay.rows.end(),
+                     [&](const cli::UpdateRow& r) { return r.step == s.largest_step; });
+    ASSERT_NE(row, replay.rows.end());
+    EXPECT_EQ(row->latency_ms, s.max_ms);
+    EXPECT_EQ(s.largest_kind, bench::updateKind(*row));
     EXPECT_GT(s.poses, previous_poses);
     previous_poses = s.poses;
     updates += s.relin_updates + s.other_updates;
@@ -76,6 +83,21 @@ TEST(BenchGrowth, SlicesCoverEveryUpdateOfAManhattanWorld) {
   options.poses = 400;
   const auto world = sim::manhattanWorld(options);
   expectSlicesCoverTheReplay(world.graph, /*per_pose=*/false, 5);
+}
+
+TEST(BenchGrowth, NamesAnUpdateByWhatItDid) {
+  cli::UpdateRow row;
+  EXPECT_EQ(bench::updateKind(row), "other");
+  row.cliques_updated = 3;
+  EXPECT_EQ(bench::updateKind(row), "fold-in");
+  row.cliques_reeliminated = 3;
+  EXPECT_EQ(bench::updateKind(row), "top");
+  row.variables_relinearized = 5;
+  EXPECT_EQ(bench::updateKind(row), "relinearisation");
+  row.batch_reeliminations = 1;
+  EXPECT_EQ(bench::updateKind(row), "batch");
+  row.async_swapped = 1;
+  EXPECT_EQ(bench::updateKind(row), "swap");
 }
 
 TEST(BenchGrowth, RejectsRowsOfAnotherFeedingAndZeroSlices) {

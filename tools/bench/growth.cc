@@ -70,7 +70,11 @@ std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::Repl
       if (after > limit) break;
       known = after;
       const cli::UpdateRow& row = replay.rows[u];
-      slice.max_ms = std::max(slice.max_ms, row.latency_ms);
+      if (row.latency_ms > slice.max_ms || slice.largest_kind.empty()) {
+        slice.max_ms = row.latency_ms;
+        slice.largest_step = row.step;
+        slice.largest_kind = updateKind(row);
+      }
       if (row.variables_relinearized > 0) {
         relin_ms.push_back(row.latency_ms);
         share += static_cast<double>(row.variables_relinearized) / known;
@@ -103,6 +107,15 @@ std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::Repl
   return out;
 }
 
+std::string updateKind(const cli::UpdateRow& row) {
+  if (row.async_swapped > 0) return "swap";
+  if (row.batch_reeliminations > 0) return "batch";
+  if (row.variables_relinearized > 0) return "relinearisation";
+  if (row.cliques_reeliminated > 2) return "top";
+  if (row.cliques_updated > 0) return "fold-in";
+  return "other";
+}
+
 void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices) {
   // A ratio against issue 17's bound, marked where the bound applies (a factorisation of at
   // least 1 ms; timed) and is missed.
@@ -113,8 +126,8 @@ void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices)
          "updates | relin. p50 "
          "ms | relin. max ms | relinearised | relin. / factorisation | other updates | other p50 "
          "ms | other p99 ms | largest ms | largest / factorisation | other p99 / factorisation "
-         "| batch updates | peak RSS MB | RSS / pose KB |\n"
-      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+         "| batch updates | peak RSS MB | RSS / pose KB | largest: update, kind |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const GrowthSlice& s : slices) {
     const bool timed = s.factorization_ms > 0;
     out << "| " << s.poses << " | " << s.edges << " | " << fmt("%.1f", s.factorization_flops / 1e6)
@@ -127,7 +140,8 @@ void printGrowthTable(std::ostream& out, const std::vector<GrowthSlice>& slices)
         << (timed ? bound(s.max_ms / s.factorization_ms, 1.5, s.factorization_ms) : "—") << " | "
         << (timed ? bound(s.other_p99_ms / s.factorization_ms, 0.25, s.factorization_ms) : "—")
         << " | " << s.batch_updates << " | " << fmt("%.0f", s.peak_rss_mb) << " | "
-        << fmt("%.2f", s.rss_per_pose_kb) << " |\n";
+        << fmt("%.2f", s.rss_per_pose_kb) << " | " << s.largest_step << ", " << s.largest_kind
+        << " |\n";
   }
 }
 

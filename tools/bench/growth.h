@@ -33,12 +33,22 @@ struct GrowthSlice {
   double relin_share = 0;   ///< their mean variables relinearised / poses known
   int other_updates = 0;    ///< the rest
   double other_p50_ms = 0, other_p99_ms = 0;
-  double max_ms = 0;      ///< the slice's largest update of any kind
+  double max_ms = 0;     ///< the slice's largest update of any kind
+  int largest_step = 0;  ///< its UpdateRow::step
+  /// What it was (updateKind): swap, batch, relinearisation, top (more than two cliques
+  /// re-eliminated), fold-in (rank updates only), or other (at most two cliques).
+  std::string largest_kind;
   int batch_updates = 0;  ///< updates that re-eliminated the whole graph (BatchSwitchOptions)
   /// The process's peak RSS after the slice's last update (getrusage, = VmHWM): the smoother,
   /// the loaded graph and the process's baseline; and it per pose known.
   double peak_rss_mb = 0, rss_per_pose_kb = 0;
 };
+
+/// What an update did, by its row's counts, first match: "swap" (an async swap), "batch" (the
+/// whole graph re-eliminated), "relinearisation", "top" (more than two cliques re-eliminated,
+/// nothing relinearised: a loop closure's path), "fold-in" (rank updates only), "other" (new
+/// poses and edges within at most two cliques).
+std::string updateKind(const cli::UpdateRow& row);
 
 /// Splits `replay` (one row per update of cli::replayGroups(graph, per_pose), as replayInto
 /// returns it) into `slices` slices of equal pose count and measures each. Throws
