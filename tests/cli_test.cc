@@ -15,6 +15,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "process_temp_dir.h"
+
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/io/labels_file.h"
 #include "arbor/io/pose_graph_file.h"
@@ -41,9 +43,7 @@ Result run(const std::string& args) {
 }
 
 std::string tempPath(const std::string& name) {
-  return (std::filesystem::temp_directory_path() /
-          ("arbor_cli_" + std::to_string(::getpid()) + "_" + name))
-      .string();
+  return (arbor::testing::processTempDir() / ("arbor_cli_" + name)).string();
 }
 
 TEST(Cli, UnknownCommandAndBadArgumentsExitNonZeroWithOneLine) {

@@ -19,6 +19,8 @@
 
 #include <lcm/lcm-cpp.hpp>
 
+#include "process_temp_dir.h"
+
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/io/lcm_messages.h"
 #include "arbor/tools/cli/publish_stream.h"
@@ -135,9 +137,7 @@ inline bool feed(OnlineSmoother2& smoother, const StreamBytes& m) {
 
 /// A path in the temp directory unique to this process, removed if it exists.
 inline std::string tempPath(const std::string& prefix, const std::string& name) {
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            (prefix + "_" + std::to_string(getpid()) + "_" + name))
-                               .string();
+  const std::string path = (arbor::testing::processTempDir() / (prefix + "_" + name)).string();
   std::remove(path.c_str());
   return path;
 }
