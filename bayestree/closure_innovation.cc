@@ -11,6 +11,7 @@ namespace {
 // r at the estimate and AΣAᵀ; false when a pose has no Σ yet.
 template <class G>
 bool residualAndPrediction(const IncrementalSmoother<G>& smoother, const RelativePoseEdge<G>& edge,
+                           typename IncrementalSmoother<G>::PredictionPaths paths,
                            typename RelativePoseEdge<G>::Vector* r,
                            typename RelativePoseEdge<G>::Matrix* P) {
   using Matrix = typename RelativePoseEdge<G>::Matrix;
@@ -21,7 +22,7 @@ bool residualAndPrediction(const IncrementalSmoother<G>& smoother, const Relativ
   edge.linearize(theta[static_cast<size_t>(edge.i)], theta[static_cast<size_t>(edge.j)], &A_i, &A_j,
                  &r_theta);
   try {
-    *P = smoother.predictionCovariance(edge.i, A_i, edge.j, A_j);
+    *P = smoother.predictionCovariance(edge.i, A_i, edge.j, A_j, paths);
   } catch (const std::logic_error&) {
     return false;  // a pose not through an update yet
   }
@@ -38,33 +39,39 @@ std::optional<double> finite(double m) {
 
 template <class G>
 std::optional<double> closureInnovation(const IncrementalSmoother<G>& smoother,
-                                        const RelativePoseEdge<G>& edge) {
+                                        const RelativePoseEdge<G>& edge,
+                                        typename IncrementalSmoother<G>::PredictionPaths paths) {
   using Matrix = typename RelativePoseEdge<G>::Matrix;
   typename RelativePoseEdge<G>::Vector r;
   Matrix P;
-  if (!residualAndPrediction(smoother, edge, &r, &P)) return std::nullopt;
+  if (!residualAndPrediction(smoother, edge, paths, &r, &P)) return std::nullopt;
   return finite(r.dot((Matrix::Identity() + P).ldlt().solve(r)));
 }
 
 template <class G>
-std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<G>& smoother,
-                                            const RelativePoseEdge<G>& edge) {
+std::optional<double> leaveOneOutInnovation(
+    const IncrementalSmoother<G>& smoother, const RelativePoseEdge<G>& edge,
+    typename IncrementalSmoother<G>::PredictionPaths paths) {
   using Matrix = typename RelativePoseEdge<G>::Matrix;
   typename RelativePoseEdge<G>::Vector r;
   Matrix P;
-  if (!residualAndPrediction(smoother, edge, &r, &P)) return std::nullopt;
+  if (!residualAndPrediction(smoother, edge, paths, &r, &P)) return std::nullopt;
   const Eigen::LLT<Matrix> llt(Matrix::Identity() - P);
   if (llt.info() != Eigen::Success) return std::nullopt;
   return finite(r.dot(llt.solve(r)));
 }
 
 template std::optional<double> closureInnovation(const IncrementalSmoother<SE2>&,
-                                                 const RelativePoseEdge<SE2>&);
+                                                 const RelativePoseEdge<SE2>&,
+                                                 IncrementalSmoother<SE2>::PredictionPaths);
 template std::optional<double> closureInnovation(const IncrementalSmoother<SE3>&,
-                                                 const RelativePoseEdge<SE3>&);
+                                                 const RelativePoseEdge<SE3>&,
+                                                 IncrementalSmoother<SE3>::PredictionPaths);
 template std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<SE2>&,
-                                                     const RelativePoseEdge<SE2>&);
+                                                     const RelativePoseEdge<SE2>&,
+                                                     IncrementalSmoother<SE2>::PredictionPaths);
 template std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<SE3>&,
-                                                     const RelativePoseEdge<SE3>&);
+                                                     const RelativePoseEdge<SE3>&,
+                                                     IncrementalSmoother<SE3>::PredictionPaths);
 
 }  // namespace arbor

@@ -26,24 +26,34 @@ namespace arbor {
 
 /// (E): std::nullopt when a pose of the edge has not been through an update (no Σ) or m is not
 /// finite.
+/// `paths`: how AΣAᵀ is read (IncrementalSmoother::PredictionPaths; kKept for many closures
+/// judged on one tree).
 template <class G>
 std::optional<double> closureInnovation(const IncrementalSmoother<G>& smoother,
-                                        const RelativePoseEdge<G>& edge);
+                                        const RelativePoseEdge<G>& edge,
+                                        typename IncrementalSmoother<G>::PredictionPaths paths =
+                                            IncrementalSmoother<G>::PredictionPaths::kOnce);
 
 /// (L): std::nullopt when a pose has no Σ, I − AΣAᵀ is not positive definite (the edge is not
 /// in the tree at weight 1: it cannot explain more than all of its own residual) or m₋ is not
 /// finite.
 template <class G>
 std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<G>& smoother,
-                                            const RelativePoseEdge<G>& edge);
+                                            const RelativePoseEdge<G>& edge,
+                                            typename IncrementalSmoother<G>::PredictionPaths paths =
+                                                IncrementalSmoother<G>::PredictionPaths::kOnce);
 
 extern template std::optional<double> closureInnovation(const IncrementalSmoother<SE2>&,
-                                                        const RelativePoseEdge<SE2>&);
+                                                        const RelativePoseEdge<SE2>&,
+                                                        IncrementalSmoother<SE2>::PredictionPaths);
 extern template std::optional<double> closureInnovation(const IncrementalSmoother<SE3>&,
-                                                        const RelativePoseEdge<SE3>&);
-extern template std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<SE2>&,
-                                                            const RelativePoseEdge<SE2>&);
-extern template std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<SE3>&,
-                                                            const RelativePoseEdge<SE3>&);
+                                                        const RelativePoseEdge<SE3>&,
+                                                        IncrementalSmoother<SE3>::PredictionPaths);
+extern template std::optional<double> leaveOneOutInnovation(
+    const IncrementalSmoother<SE2>&, const RelativePoseEdge<SE2>&,
+    IncrementalSmoother<SE2>::PredictionPaths);
+extern template std::optional<double> leaveOneOutInnovation(
+    const IncrementalSmoother<SE3>&, const RelativePoseEdge<SE3>&,
+    IncrementalSmoother<SE3>::PredictionPaths);
 
 }  // namespace arbor

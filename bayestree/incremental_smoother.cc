@@ -844,6 +844,7 @@ struct IncrementalSmoother<G>::Impl {
 
   // One pass of IJRR 2012 Alg. 6, "One step of the iSAM2 algorithm".
   UpdateStats step(const StepOptions& pass) {
+    marginals.forget();  // the tree changes below: no kept path solve holds for it
     const auto t0 = Clock::now();
     UpdateStats st;
     ++stamp;
@@ -1447,9 +1448,12 @@ auto IncrementalSmoother<G>::jointMarginalCovariance(int a, int b) const
 }
 
 template <class G>
-auto IncrementalSmoother<G>::predictionCovariance(
-    int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
-    const Eigen::Matrix<double, kDoF, kDoF>& A_b) const -> Eigen::Matrix<double, kDoF, kDoF> {
+auto IncrementalSmoother<G>::predictionCovariance(int a,
+                                                  const Eigen::Matrix<double, kDoF, kDoF>& A_a,
+                                                  int b,
+                                                  const Eigen::Matrix<double, kDoF, kDoF>& A_b,
+                                                  PredictionPaths paths) const
+    -> Eigen::Matrix<double, kDoF, kDoF> {
   const Impl& m = *impl_;
   for (int v : {a, b}) {
     if (v < 0 || v >= m.numPoses())
@@ -1461,7 +1465,18 @@ auto IncrementalSmoother<G>::predictionCovariance(
                              std::to_string(v) +
                              ": not in the Bayes tree yet (call update() first)");
   }
-  return bayestree::TreeMarginals<kDoF>::predicted(m.tree, {a, b}, {A_a, A_b});
+  if (paths == PredictionPaths::kOnce)
+    return bayestree::TreeMarginals<kDoF>::predicted(m.tree, {a, b}, {A_a, A_b});
+  // A Σ Aᵀ = [A_a A_b] [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] [A_a A_b]ᵀ (a fixed pose: zero rows).
+  if (a == b) {
+    if (m.fixed[a]) return Eigen::Matrix<double, kDoF, kDoF>::Zero();
+    const Eigen::Matrix<double, kDoF, kDoF> A = A_a + A_b;
+    return A * m.marginals.jointKept(m.tree, a, a).template topLeftCorner<kDoF, kDoF>() *
+           A.transpose();
+  }
+  Eigen::Matrix<double, kDoF, 2 * kDoF> A;
+  A << A_a, A_b;
+  return A * m.marginals.jointKept(m.tree, a, b) * A.transpose();
 }
 
 template <class G>

@@ -384,14 +384,19 @@ class IncrementalSmoother {
   /// Σ_ab = 0 between components), e.g. for a Mahalanobis gate on a candidate edge a → b: two
   /// forward substitutions along the poses' paths, Σ_ab summed over the cliques they share.
   Eigen::Matrix<double, 2 * kDoF, 2 * kDoF> jointMarginalCovariance(int a, int b) const;
+  /// How predictionCovariance reads the tree: kOnce, one forward substitution along the two
+  /// poses' paths to the root (TreeMarginals::predicted), for a single query; kKept, from each
+  /// pose's path solve, kept until the tree next changes (TreeMarginals::jointKept), for many
+  /// queries on one tree (each pose's path is solved once).
+  enum class PredictionPaths { kOnce, kKept };
   /// A Σ Aᵀ for a candidate factor on poses a and b with whitened Jacobian blocks A_a, A_b
   /// (Σ their joint covariance, as jointMarginalCovariance): the covariance its whitened residual
-  /// is predicted with, beside the factor's own I. One forward substitution along the two poses'
-  /// paths to the root (TreeMarginals::predicted); a fixed pose contributes
-  /// nothing. Throws as jointMarginalCovariance.
+  /// is predicted with, beside the factor's own I. A fixed pose contributes nothing. Throws as
+  /// jointMarginalCovariance.
   Eigen::Matrix<double, kDoF, kDoF> predictionCovariance(
       int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
-      const Eigen::Matrix<double, kDoF, kDoF>& A_b) const;
+      const Eigen::Matrix<double, kDoF, kDoF>& A_b,
+      PredictionPaths paths = PredictionPaths::kOnce) const;
   /// Every pose's marginal covariance (as marginalCovariance), in one walk down the tree that
   /// holds the joints of one path at a time (not the cache). Throws std::logic_error if a pose
   /// has not been through update() yet.

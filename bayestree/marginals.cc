@@ -124,27 +124,65 @@ typename TreeMarginals<D>::Block TreeMarginals<D>::marginal(const BayesTree<D>& 
 // ancestor to the root (none when a and b are in different trees), each from the later of the
 // two first rows.
 template <int D>
-typename TreeMarginals<D>::JointBlock TreeMarginals<D>::joint(const BayesTree<D>& tree, int a,
-                                                              int b) {
+typename TreeMarginals<D>::JointBlock TreeMarginals<D>::combine(const BayesTree<D>& tree,
+                                                                const PathSolve& pa,
+                                                                const Block& aa,
+                                                                const PathSolve& pb,
+                                                                const Block& bb) {
   using Rows = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, D>>;
-  std::lock_guard<std::mutex> lock(mutex_);
   JointBlock out = JointBlock::Zero();
-  const int ca = tree.clique_of[a], cb = tree.clique_of[b];
-  if (ca >= 0) out.template topLeftCorner<D, D>() = solvePath(tree, a, &pa_, &by_);
-  if (cb >= 0) out.template bottomRightCorner<D, D>() = solvePath(tree, b, &pb_, &by_);
-  if (ca < 0 || cb < 0) return out;  // a constant: no correlation
+  out.template topLeftCorner<D, D>() = aa;
+  out.template bottomRightCorner<D, D>() = bb;
   Block ab = Block::Zero();
-  for (int i = static_cast<int>(pa_.path.size()) - 1, j = static_cast<int>(pb_.path.size()) - 1;
-       i >= 0 && j >= 0 && pa_.path[i] == pb_.path[j]; --i, --j) {
-    const int F = tree.cliques[pa_.path[i]].F, f = std::max(pa_.first[i], pb_.first[j]);
+  for (int i = static_cast<int>(pa.path.size()) - 1, j = static_cast<int>(pb.path.size()) - 1;
+       i >= 0 && j >= 0 && pa.path[i] == pb.path[j]; --i, --j) {
+    const int F = tree.cliques[pa.path[i]].F, f = std::max(pa.first[i], pb.first[j]);
     if (f >= F) continue;
-    const Rows ya(pa_.y.data() + static_cast<size_t>(pa_.offset[i]) * D, F, D);
-    const Rows yb(pb_.y.data() + static_cast<size_t>(pb_.offset[j]) * D, F, D);
+    const Rows ya(pa.y.data() + static_cast<size_t>(pa.offset[i]) * D, F, D);
+    const Rows yb(pb.y.data() + static_cast<size_t>(pb.offset[j]) * D, F, D);
     ab.noalias() += ya.bottomRows(F - f).transpose() * yb.bottomRows(F - f);
   }
   out.template topRightCorner<D, D>() = ab;
   out.template bottomLeftCorner<D, D>() = ab.transpose();
   return out;
+}
+
+template <int D>
+typename TreeMarginals<D>::JointBlock TreeMarginals<D>::joint(const BayesTree<D>& tree, int a,
+                                                              int b) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const int ca = tree.clique_of[a], cb = tree.clique_of[b];
+  JointBlock out = JointBlock::Zero();
+  if (ca >= 0) out.template topLeftCorner<D, D>() = solvePath(tree, a, &pa_, &by_);
+  if (cb >= 0) out.template bottomRightCorner<D, D>() = solvePath(tree, b, &pb_, &by_);
+  if (ca < 0 || cb < 0) return out;  // a constant: no correlation
+  return combine(tree, pa_, out.template topLeftCorner<D, D>(), pb_,
+                 out.template bottomRightCorner<D, D>());
+}
+
+template <int D>
+typename TreeMarginals<D>::JointBlock TreeMarginals<D>::jointKept(const BayesTree<D>& tree, int a,
+                                                                  int b) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto kept = [&](int v) -> const std::pair<PathSolve, Block>& {
+    auto [it, fresh] = kept_.try_emplace(v);
+    if (fresh) it->second.second = solvePath(tree, v, &it->second.first, &by_);
+    return it->second;
+  };
+  const int ca = tree.clique_of[a], cb = tree.clique_of[b];
+  JointBlock out = JointBlock::Zero();
+  if (ca >= 0) out.template topLeftCorner<D, D>() = kept(a).second;
+  if (cb >= 0) out.template bottomRightCorner<D, D>() = kept(b).second;
+  if (ca < 0 || cb < 0) return out;  // a constant: no correlation
+  const auto& [pa, aa] = kept(a);
+  const auto& [pb, bb] = kept(b);
+  return combine(tree, pa, aa, pb, bb);
+}
+
+template <int D>
+void TreeMarginals<D>::forget() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  kept_.clear();
 }
 
 // Depth first from the roots; a clique's joint is kept until its last child has read it, so the

@@ -31,6 +31,8 @@
 #pragma once
 
 #include <mutex>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -40,8 +42,9 @@
 namespace arbor::bayestree {
 
 /// D: the dimension of one variable. Thread-safe (the path solves' scratch is serialised on a
-/// mutex); a copy starts with empty scratch. Nothing is cached between queries: every query
-/// reads the tree as it is.
+/// mutex); a copy, or an assignment, starts with empty scratch. Nothing is cached between
+/// queries but by jointKept(), whose path solves last until forget(): the owner of the tree
+/// calls forget() whenever the tree changes.
 template <int D>
 class TreeMarginals {
  public:
@@ -50,7 +53,10 @@ class TreeMarginals {
 
   TreeMarginals() = default;
   TreeMarginals(const TreeMarginals&) {}
-  TreeMarginals& operator=(const TreeMarginals&) { return *this; }
+  TreeMarginals& operator=(const TreeMarginals&) {
+    forget();
+    return *this;
+  }
 
   /// Σ_vv of variable v by the path solve (2); v must be frontal in some clique
   /// (tree.clique_of[v] ≥ 0). O(Σ (F² + F·Sn) D) over the cliques on v's path.
@@ -58,6 +64,12 @@ class TreeMarginals {
   /// [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] by two path solves (2); a variable with clique_of < 0 (a
   /// constant) has zero rows. Twice a marginal's cost, plus O(F·D²) per shared clique.
   JointBlock joint(const BayesTree<D>& tree, int a, int b);
+  /// joint() from each variable's path solve kept across calls until forget(): for many
+  /// queries on one tree (a pose's path is then solved once, and a query costs the shared
+  /// cliques' products alone). The caller must forget() before the tree changes.
+  JointBlock jointKept(const BayesTree<D>& tree, int a, int b);
+  /// Drops the kept path solves.
+  void forget();
   /// (*out)[v] = Σ_vv for every variable frontal in the tree (others untouched), in one walk
   /// down the tree (1) that keeps a clique's joint only until its children have read it. out
   /// must have an entry per variable.
@@ -84,9 +96,15 @@ class TreeMarginals {
   /// Position of v (block index) among clique c's frontals then separator.
   static int position(const Clique<D>& c, int v);
 
+  /// Σ_ab from two path solves (over their common tail) into a joint with their Σ_aa, Σ_bb.
+  static JointBlock combine(const BayesTree<D>& tree, const PathSolve& pa, const Block& aa,
+                            const PathSolve& pb, const Block& bb);
+
   std::mutex mutex_;
   PathSolve pa_, pb_;       ///< the path solves of a query (a and b for a joint)
   std::vector<double> by_;  ///< B y_c, per clique of a path solve
+  /// jointKept's path solves and Σ_vv, by variable, until forget().
+  std::unordered_map<int, std::pair<PathSolve, Block>> kept_;
 };
 
 extern template class TreeMarginals<3>;

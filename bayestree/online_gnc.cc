@@ -267,10 +267,10 @@ bool OnlineGnc<G>::scaleKnown() const {
 // (E): m = rᵀ(I + A Σ Aᵀ)⁻¹r, r the whitened residual at the estimate, A the whitened Jacobian
 // at the linearisation point (the tangent Σ is of), Σ the poses' joint covariance in the tree.
 template <class G>
-double OnlineGnc<G>::innovation(const IncrementalSmoother<G>& smoother, const Edge& edge,
-                                double s) const {
+double OnlineGnc<G>::innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s,
+                                Paths paths) const {
   if (options_.entry == EntryTest::kResidual) return s;
-  const std::optional<double> m = closureInnovation(smoother, edge);
+  const std::optional<double> m = closureInnovation(smoother, edge, paths);
   return m ? std::min(*m, s) : s;  // no Σ (a pose not through an update yet): s
 }
 
@@ -311,7 +311,8 @@ bool OnlineGnc<G>::backed(const Closure& c) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin) {
+bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin,
+                               Paths paths) {
   if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
       c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
       backed(*c))
@@ -319,7 +320,7 @@ bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, dou
   c->judged_c2 = c2_;
   const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
   // In the tree at weight 1 (checked above): (L); without Σ it is kept.
-  const std::optional<double> m = leaveOneOutInnovation(smoother, edge);
+  const std::optional<double> m = leaveOneOutInnovation(smoother, edge, paths);
   if (!m || *m <= margin * c2_) return false;
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
@@ -339,7 +340,8 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   int changed = 0;
   dropped->assign(closures_.size(), 0);
   for (size_t id = 0; id < closures_.size(); ++id) {
-    if (!unconfirmed(smoother, &closures_[id], options_.final_confirm_margin)) continue;
+    if (!unconfirmed(smoother, &closures_[id], options_.final_confirm_margin, Paths::kKept))
+      continue;
     (*dropped)[id] = 1;
     ++changed;
   }
@@ -605,8 +607,9 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       // (σ̂² after the warm-up), and in finalize() (a path to the root each: not every update).
       if (!recheck_all && c2_ <= 1.1 * c.judged_c2) continue;
       c.judged_c2 = c2_;
-      const double m = innovation(
-          smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s);
+      const double m =
+          innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s,
+                     recheck_all ? Paths::kKept : Paths::kOnce);
       if (m > c2_) continue;
       c.state = State::kSettled;
       setWeight(smoother, &c, 1.0);

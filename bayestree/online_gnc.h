@@ -380,6 +380,7 @@ class OnlineGnc {
 
  private:
   enum class State { kGraduating, kSettled, kTrusted, kExcluded };
+  using Paths = typename IncrementalSmoother<G>::PredictionPaths;
   struct Closure {
     Key from = 0, to = 0;
     int i = 0, j = 0;  ///< dense indices
@@ -410,14 +411,17 @@ class OnlineGnc {
   void enter(Closure* c, double s, double m, bool may_reject);
   /// (E) for the edge at the smoother's estimate; s when Σ is not there (EntryTest::kResidual,
   /// a pose not in the tree yet).
-  double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s) const;
+  /// `paths`: kKept when many closures are judged on one tree (finalize(), a re-check of all).
+  double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s,
+                    Paths paths = Paths::kOnce) const;
   /// Whether a closure that agrees with c (P) is a settled inlier now.
   bool backed(const Closure& c) const;
   /// Whether c's ends are more than 2·corroboration_window poses apart (a partner's must be).
   bool spansLoop(const Closure& c) const;
   /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with: sets
   /// weight 0 and returns true when it exceeds margin·c².
-  bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin);
+  bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin,
+                   Paths paths = Paths::kOnce);
   /// (L) for the closures graduation settled at weight 1 in the last step. Returns the
   /// weights changed.
   int confirm(IncrementalSmoother<G>& smoother);

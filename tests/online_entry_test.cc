@@ -150,6 +150,12 @@ void predictionMatchesDense() {
     EXPECT_LE((tree - dense).norm(), 1e-8 * dense.norm()) << a << ", " << b << "\n"
                                                           << tree << "\n\n"
                                                           << dense;
+    // From the kept path solves: the first query solves the paths, the second reuses them.
+    for (int again = 0; again < 2; ++again) {
+      const Matrix kept =
+          s.predictionCovariance(a, A_a, b, A_b, IncrementalSmoother<G>::PredictionPaths::kKept);
+      EXPECT_LE((kept - dense).norm(), 1e-8 * dense.norm()) << a << ", " << b << " kept";
+    }
   }
   EXPECT_THROW(s.predictionCovariance(-1, Matrix::Identity(), 2, Matrix::Identity()),
                std::out_of_range);
@@ -157,6 +163,37 @@ void predictionMatchesDense() {
 
 TEST(OnlineEntry, PredictionCovarianceMatchesDense2D) { predictionMatchesDense<SE2>(); }
 TEST(OnlineEntry, PredictionCovarianceMatchesDense3D) { predictionMatchesDense<SE3>(); }
+
+// Kept path solves last only while the tree does: after an update that adds a loop closure
+// between the two poses, a kept query gives the new tree's A·Σ·Aᵀ (the single forward
+// substitution's), not the old one's.
+template <class G>
+void keptPathSolvesFollowTheTree() {
+  constexpr int D = G::kDoF;
+  using Matrix = Eigen::Matrix<double, D, D>;
+  using Paths = typename IncrementalSmoother<G>::PredictionPaths;
+  Laps<G> laps(60, 12, 3, 1.0, 21);
+  IncrementalSmoother<G> s;
+  s.addFixedPose(G::Identity());
+  for (size_t k = 1; k < laps.truth.size(); ++k) s.addPose(laps.truth[k]);
+  for (const auto& e : laps.edges)
+    s.addFactor(RelativePoseEdge<G>::make(e.from, e.to, e.z, laps.omega));
+  s.update();
+  // A = [−I, I]: about the covariance of the two poses' difference.
+  const Matrix A = Matrix::Identity();
+  const Matrix before = s.predictionCovariance(5, -A, 40, A, Paths::kKept);
+  const G z = laps.truth[5].inverse().compose(laps.truth[40]);
+  s.addFactor(RelativePoseEdge<G>::make(5, 40, z, 100.0 * laps.omega));
+  s.update();
+  const Matrix once = s.predictionCovariance(5, -A, 40, A, Paths::kOnce);
+  const Matrix kept = s.predictionCovariance(5, -A, 40, A, Paths::kKept);
+  EXPECT_LE((kept - once).norm(), 1e-10 * once.norm());
+  // The closure ties the two poses: their difference is known far better than before.
+  EXPECT_LT(once.trace(), 0.5 * before.trace());
+}
+
+TEST(OnlineEntry, KeptPathSolvesFollowTheTree2D) { keptPathSolvesFollowTheTree<SE2>(); }
+TEST(OnlineEntry, KeptPathSolvesFollowTheTree3D) { keptPathSolvesFollowTheTree<SE3>(); }
 
 // The false closures' innovations are far beyond c²: they enter at weight 0 and never graduate;
 // every true closure ends at weight 1 (those in the χ² tail after a few graduation steps).
