@@ -1467,13 +1467,8 @@ auto IncrementalSmoother<G>::predictionCovariance(int a,
   }
   if (paths == PredictionPaths::kOnce)
     return bayestree::TreeMarginals<kDoF>::predicted(m.tree, {a, b}, {A_a, A_b});
-  // A Σ Aᵀ = [A_a A_b] [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] [A_a A_b]ᵀ (a fixed pose: zero rows).
-  if (a == b) {
-    if (m.fixed[a]) return Eigen::Matrix<double, kDoF, kDoF>::Zero();
-    const Eigen::Matrix<double, kDoF, kDoF> A = A_a + A_b;
-    return A * m.marginals.jointKept(m.tree, a, a).template topLeftCorner<kDoF, kDoF>() *
-           A.transpose();
-  }
+  // A Σ Aᵀ = [A_a A_b] [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] [A_a A_b]ᵀ (a fixed pose: zero rows; a = b:
+  // every block Σ_aa).
   Eigen::Matrix<double, kDoF, 2 * kDoF> A;
   A << A_a, A_b;
   return A * m.marginals.jointKept(m.tree, a, b) * A.transpose();

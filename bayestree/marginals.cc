@@ -152,12 +152,14 @@ typename TreeMarginals<D>::JointBlock TreeMarginals<D>::joint(const BayesTree<D>
                                                               int b) {
   std::lock_guard<std::mutex> lock(mutex_);
   const int ca = tree.clique_of[a], cb = tree.clique_of[b];
-  JointBlock out = JointBlock::Zero();
+  if (ca >= 0 && cb >= 0) {
+    const Block aa = solvePath(tree, a, &pa_, &by_), bb = solvePath(tree, b, &pb_, &by_);
+    return combine(tree, pa_, aa, pb_, bb);
+  }
+  JointBlock out = JointBlock::Zero();  // a constant: zero rows, no correlation
   if (ca >= 0) out.template topLeftCorner<D, D>() = solvePath(tree, a, &pa_, &by_);
   if (cb >= 0) out.template bottomRightCorner<D, D>() = solvePath(tree, b, &pb_, &by_);
-  if (ca < 0 || cb < 0) return out;  // a constant: no correlation
-  return combine(tree, pa_, out.template topLeftCorner<D, D>(), pb_,
-                 out.template bottomRightCorner<D, D>());
+  return out;
 }
 
 template <int D>
@@ -170,13 +172,15 @@ typename TreeMarginals<D>::JointBlock TreeMarginals<D>::jointKept(const BayesTre
     return it->second;
   };
   const int ca = tree.clique_of[a], cb = tree.clique_of[b];
-  JointBlock out = JointBlock::Zero();
+  if (ca >= 0 && cb >= 0) {
+    const auto& [pa, aa] = kept(a);
+    const auto& [pb, bb] = kept(b);
+    return combine(tree, pa, aa, pb, bb);
+  }
+  JointBlock out = JointBlock::Zero();  // a constant: zero rows, no correlation
   if (ca >= 0) out.template topLeftCorner<D, D>() = kept(a).second;
   if (cb >= 0) out.template bottomRightCorner<D, D>() = kept(b).second;
-  if (ca < 0 || cb < 0) return out;  // a constant: no correlation
-  const auto& [pa, aa] = kept(a);
-  const auto& [pb, bb] = kept(b);
-  return combine(tree, pa, aa, pb, bb);
+  return out;
 }
 
 template <int D>

@@ -29,6 +29,14 @@ void PartialSolve<D>::resetVariable(int v) {
 }
 
 template <int D>
+bool PartialSolve<D>::needsSolving(const Clique<D>& c) const {
+  if (c.dirty || !c.unseen.empty()) return true;
+  for (int v : c.separator)
+    if (changed_[v]) return true;
+  return false;
+}
+
+template <int D>
 typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool full,
                                                       double threshold, double budget,
                                                       std::vector<Vec>* delta,
@@ -44,12 +52,7 @@ typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool f
   }
   if (full) tree->clearAllUnseen();  // every clique is solved below
   const std::vector<Clique<D>>& cliques = tree->cliques;
-  auto needs_solving = [&](const Clique<D>& c) {
-    if (full || c.dirty) return true;
-    for (int v : c.separator)
-      if (changed_[v]) return true;
-    return false;
-  };
+  auto needs_solving = [&](const Clique<D>& c) { return full || needsSolving(c); };
   for (Lane& l : threads->lanes) {
     l.solved = 0;
     l.solved_list.clear();
@@ -116,12 +119,6 @@ typename PartialSolve<D>::Output PartialSolve<D>::runBudgeted(BayesTree<D>* tree
                                                               double budget,
                                                               std::vector<Vec>* delta, Lane* lane) {
   std::vector<Clique<D>>& cliques = tree->cliques;
-  auto needs_solving = [&](const Clique<D>& c) {
-    if (c.dirty || !c.unseen.empty()) return true;
-    for (int v : c.separator)
-      if (changed_[v]) return true;
-    return false;
-  };
   double spent = 0;
   // Depth-first from the cliques on stack_ (Alg. 7 step 2), a clique that was not re-eliminated
   // or folded into deferred once the budget is spent: it records the separator variables that
@@ -131,7 +128,7 @@ typename PartialSolve<D>::Output PartialSolve<D>::runBudgeted(BayesTree<D>* tree
       const int id = stack_.back();
       stack_.pop_back();
       Clique<D>& c = cliques[id];
-      if (!c.in_use || !needs_solving(c)) continue;  // a backlog entry solved since
+      if (!c.in_use || !needsSolving(c)) continue;  // a backlog entry solved since
       if (!c.dirty && spent >= budget) {
         for (int v : c.separator)
           if (changed_[v]) tree->addUnseen(id, v);
@@ -148,12 +145,12 @@ typename PartialSolve<D>::Output PartialSolve<D>::runBudgeted(BayesTree<D>* tree
       spent += solveEntries(c);
       c.dirty = false;
       for (int ch : c.children)
-        if (needs_solving(cliques[ch])) stack_.push_back(ch);
+        if (needsSolving(cliques[ch])) stack_.push_back(ch);
     }
   };
   stack_.clear();
   for (auto r = tree->roots.rbegin(); r != tree->roots.rend(); ++r)
-    if (needs_solving(cliques[*r])) stack_.push_back(*r);
+    if (needsSolving(cliques[*r])) stack_.push_back(*r);
   walk();
   // The backlog, oldest first, while the budget lasts; cliques deferred by this run were
   // appended to tree->deferred and stay behind it.

@@ -61,6 +61,10 @@ class PartialSolve {
   Output runBudgeted(BayesTree<D>* tree, double threshold, double budget, std::vector<Vec>* delta,
                      Lane* lane);
 
+  // Alg. 7's test: re-eliminated or folded into (dirty), deferred with moves it has not seen
+  // (unseen), or a separator variable changed by at least α in this solve.
+  bool needsSolving(const Clique<D>& c) const;
+
   // x_f = R⁻¹ (d − S x_s) for one clique; marks the frontals that moved by at least α as
   // changed.
   void solveClique(const Clique<D>& c, bool full, double threshold, std::vector<Vec>* delta,

@@ -104,6 +104,16 @@ OnlineSmootherOptions<G> robust(NoiseScale scale = NoiseScale::kEstimated) {
   return o;
 }
 
+// The laps into a smoother, pose 0 fixed, in one update.
+template <class G>
+void feedLaps(const Laps<G>& laps, IncrementalSmoother<G>* s) {
+  s->addFixedPose(G::Identity());
+  for (size_t k = 1; k < laps.truth.size(); ++k) s->addPose(laps.truth[k]);
+  for (const auto& e : laps.edges)
+    s->addFactor(RelativePoseEdge<G>::make(e.from, e.to, e.z, laps.omega));
+  s->update();
+}
+
 // A·Σ·Aᵀ by the forward substitution equals A·H⁻¹·Aᵀ with H the dense information matrix the
 // tree holds (every factor linearised at θ after relinearizeAll), for pairs in one clique, far
 // apart, and with a fixed pose.
@@ -113,11 +123,7 @@ void predictionMatchesDense() {
   using Matrix = Eigen::Matrix<double, D, D>;
   Laps<G> laps(60, 12, 3, 1.0, 21);
   IncrementalSmoother<G> s;
-  s.addFixedPose(G::Identity());
-  for (size_t k = 1; k < laps.truth.size(); ++k) s.addPose(laps.truth[k]);
-  for (const auto& e : laps.edges)
-    s.addFactor(RelativePoseEdge<G>::make(e.from, e.to, e.z, laps.omega));
-  s.update();
+  feedLaps(laps, &s);
   s.relinearizeAll();
   const int n = s.numPoses() - 1;  // variables 1..n → rows (v − 1)·D
   Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n * D, n * D);
@@ -174,11 +180,7 @@ void keptPathSolvesFollowTheTree() {
   using Paths = typename IncrementalSmoother<G>::PredictionPaths;
   Laps<G> laps(60, 12, 3, 1.0, 21);
   IncrementalSmoother<G> s;
-  s.addFixedPose(G::Identity());
-  for (size_t k = 1; k < laps.truth.size(); ++k) s.addPose(laps.truth[k]);
-  for (const auto& e : laps.edges)
-    s.addFactor(RelativePoseEdge<G>::make(e.from, e.to, e.z, laps.omega));
-  s.update();
+  feedLaps(laps, &s);
   // A = [−I, I]: about the covariance of the two poses' difference.
   const Matrix A = Matrix::Identity();
   const Matrix before = s.predictionCovariance(5, -A, 40, A, Paths::kKept);
