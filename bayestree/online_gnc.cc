@@ -80,6 +80,7 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
   out.estimated = true;
   // The tail's fixed point, within max_tail_scale of the median's.
   const double median_sigma2 = sigma2;
+  out.median_sigma2 = median_sigma2;
   for (int round = 0; round < 50 && keep(); ++round) {
     const double next = std::max(sigma2, quantile(&kept, o.confidence) / q_tail);
     if (next > o.max_tail_scale * median_sigma2) {
@@ -122,6 +123,9 @@ std::string RobustOptions::problem() const {
   if (!(recheck_margin >= 1) || !std::isfinite(recheck_margin))
     return bad("recheck_margin", recheck_margin, "finite and >= 1");
   if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
+  if (end_scale_samples < 0) return bad("end_scale_samples", end_scale_samples, ">= 0");
+  if (!(end_scale_gap >= 1) || !std::isfinite(end_scale_gap))
+    return bad("end_scale_gap", end_scale_gap, "finite and >= 1");
   if (!(final_confirm_margin == 0 || final_confirm_margin >= 1) ||
       !std::isfinite(final_confirm_margin))
     return bad("final_confirm_margin", final_confirm_margin, "0 (off) or finite and >= 1");
@@ -311,7 +315,7 @@ bool OnlineGnc<G>::backed(const Closure& c) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double margin,
+bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
                                Paths paths) {
   if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
       c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
@@ -321,7 +325,7 @@ bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, dou
   const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
   // In the tree at weight 1 (checked above): (L); without Σ it is kept.
   const std::optional<double> m = leaveOneOutInnovation(smoother, edge, paths);
-  if (!m || *m <= margin * c2_) return false;
+  if (!m || *m <= bound) return false;
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
   return true;
@@ -330,7 +334,7 @@ bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, dou
 template <class G>
 int OnlineGnc<G>::confirm(IncrementalSmoother<G>& smoother) {
   int changed = 0;
-  for (int id : confirming_) changed += unconfirmed(smoother, &closures_[id], 1.0) ? 1 : 0;
+  for (int id : confirming_) changed += unconfirmed(smoother, &closures_[id], c2_) ? 1 : 0;
   confirming_.clear();
   return changed;
 }
@@ -339,13 +343,57 @@ template <class G>
 int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped) {
   int changed = 0;
   dropped->assign(closures_.size(), 0);
+  c2_end_ = endThreshold(smoother);
+  const double bound = options_.final_confirm_margin * c2_end_;
   for (size_t id = 0; id < closures_.size(); ++id) {
-    if (!unconfirmed(smoother, &closures_[id], options_.final_confirm_margin, Paths::kKept))
-      continue;
+    if (!unconfirmed(smoother, &closures_[id], bound, Paths::kKept)) continue;
     (*dropped)[id] = 1;
     ++changed;
   }
   return changed;
+}
+
+// The end's scale: σ²_med of the settled inliers' (L) (a minority of false closures sits in
+// its tail), times the tail's reach past the median in the trusted edges' (L) (no false edge
+// among them); c² from it as on entry, never above the c² in use.
+template <class G>
+double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const {
+  const size_t cap = static_cast<size_t>(options_.end_scale_samples);
+  if (cap == 0) return c2_;
+  const auto& factors = smoother.factors();
+  std::vector<int> inliers, trusted;
+  for (const Closure& c : closures_)
+    if (c.state == State::kSettled && c.weight == 1.0 && !c.held && c.factor >= 0 &&
+        c.factor < smoother.numFactors() && c.kernel == KernelKind::kTruncatedLeastSquares)
+      inliers.push_back(c.factor);
+  for (size_t f = 0; f < factors.size(); ++f) {
+    const int id = closureOf(static_cast<int>(f));
+    const bool trusted_closure =
+        id >= 0 && closures_[static_cast<size_t>(id)].state == State::kTrusted;
+    if (factors[f].relativePose() != nullptr && factors[f].inlierWeight() == 1.0 &&
+        (id < 0 || trusted_closure))
+      trusted.push_back(static_cast<int>(f));
+  }
+  // At most `cap` of each, one in every ⌈n/cap⌉.
+  auto sample = [&](const std::vector<int>& fs) {
+    std::vector<double> m;
+    const size_t stride = std::max<size_t>(1, (fs.size() + cap - 1) / cap);
+    for (size_t k = 0; k < fs.size(); k += stride) {
+      const Edge& e = *factors[static_cast<size_t>(fs[k])].relativePose();
+      if (const std::optional<double> l = leaveOneOutInnovation(smoother, e, Paths::kKept))
+        m.push_back(*l);
+    }
+    return m;
+  };
+  const std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
+  const size_t enough = static_cast<size_t>(options_.scale_min_samples);
+  if (m_in.size() < enough || m_tr.size() < enough) return c2_;
+  const NoiseScaleEstimate in = estimateNoiseScale(m_in, G::kDoF, c2_given_, options_, true);
+  const NoiseScaleEstimate tr = estimateNoiseScale(m_tr, G::kDoF, c2_given_, options_, true);
+  if (!in.estimated || !tr.estimated) return c2_;
+  const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
+  const double c2 = options_.tail_factor * c2_given_ * sigma2;
+  return c2 * options_.end_scale_gap < c2_ ? c2 : c2_;
 }
 
 template <class G>
@@ -610,7 +658,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       const double m =
           innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s,
                      recheck_all ? Paths::kKept : Paths::kOnce);
-      if (m > c2_) continue;
+      if (m > c2_ || (scope == StepScope::kFinalize && c2_end_ > 0 && m > c2_end_)) continue;
       c.state = State::kSettled;
       setWeight(smoother, &c, 1.0);
       ++totals_.regraduated;

@@ -288,8 +288,8 @@ TEST(HeapFlag, ReachesReplayAndServe) {
   EXPECT_TRUE(parseServeCommandLine({"--bounded-heap"})->bounded_heap);
 }
 
-// --entry, --noise-scale, --warm-up, --corroboration-window and --final-confirm-margin
-// (tools/cli/robust_flags.h)
+// --entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin,
+// --finalize-rounds and --end-scale-samples (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
@@ -298,7 +298,9 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "given",    "--warm-up",
                                          "given",    "--corroboration-window",
                                          "7",        "--final-confirm-margin",
-                                         "1.5"};
+                                         "1.5",      "--finalize-rounds",
+                                         "4",        "--end-scale-samples",
+                                         "0"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -308,6 +310,8 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.warm_up, WarmUp::kGiven);
   EXPECT_EQ(replay->online.corroboration_window, 7);
   EXPECT_EQ(replay->online.final_confirm_margin, 1.5);
+  EXPECT_EQ(replay->online.finalize_rounds, 4);
+  EXPECT_EQ(replay->online.end_scale_samples, 0);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -316,6 +320,8 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->warm_up, WarmUp::kGiven);
   EXPECT_EQ(serve->options.robust->corroboration_window, 7);
   EXPECT_EQ(serve->options.robust->final_confirm_margin, 1.5);
+  EXPECT_EQ(serve->options.robust->finalize_rounds, 4);
+  EXPECT_EQ(serve->options.robust->end_scale_samples, 0);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -324,7 +330,20 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->warm_up, RobustOptions{}.warm_up);
   EXPECT_EQ(plain->options.robust->corroboration_window, RobustOptions{}.corroboration_window);
   EXPECT_EQ(plain->options.robust->final_confirm_margin, RobustOptions{}.final_confirm_margin);
+  EXPECT_EQ(plain->options.robust->finalize_rounds, RobustOptions{}.finalize_rounds);
+  EXPECT_EQ(plain->options.robust->end_scale_samples, RobustOptions{}.end_scale_samples);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
+  EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);
+  for (const auto& [flag, bad] : std::vector<std::pair<std::string, std::string>>{
+           {"--finalize-rounds", "0"}, {"--end-scale-samples", "-1"}}) {
+    try {
+      parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
+      ADD_FAILURE() << flag << " " << bad << " accepted";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find(flag), std::string::npos) << e.what();
+    }
+  }
   for (const std::string bad : {"0.5", "nan", "-1"}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", "--final-confirm-margin", bad});

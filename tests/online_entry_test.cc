@@ -245,6 +245,7 @@ TEST(OnlineEntry, EstimateNoiseScaleOfChiSquare) {
       EXPECT_TRUE(est.estimated);
       EXPECT_FALSE(est.tail_cut);
       EXPECT_NEAR(est.sigma2, sigma2, 0.15 * sigma2) << "dof " << dof;
+      EXPECT_NEAR(est.median_sigma2, sigma2, 0.15 * sigma2) << "dof " << dof;
     }
   }
   EXPECT_EQ(estimateNoiseScale({}, 3, 11.3, RobustOptions{}).sigma2, 1.0);
@@ -272,6 +273,23 @@ TEST(OnlineEntry, EstimateNoiseScaleFromTheMedian) {
 // would climb by about tail_factor a round until all of them are in; it is cut at
 // max_tail_scale·σ²_med and the median's σ̂² stands (within 15%: the false ones inside the
 // truncation raise the median a little).
+// A heavy tail of true closures (a fifth of them four times as noisy): the tail's fixed point
+// raises σ̂² above the median's, which NoiseScaleEstimate::median_sigma2 keeps (the end's scale
+// takes the closures' median and the trusted edges' tail).
+TEST(OnlineEntry, EstimateNoiseScaleReportsTheMediansScale) {
+  const int dof = 3;
+  const double c2 = chiSquareThreshold(0.99, dof), sigma2 = 2.0;
+  std::mt19937 rng(47);
+  std::chi_squared_distribution<double> chi2(dof);
+  std::vector<double> m;
+  for (int k = 0; k < 1000; ++k) m.push_back((k % 5 == 4 ? 4 : 1) * sigma2 * chi2(rng));
+  const NoiseScaleEstimate est = estimateNoiseScale(m, dof, c2, RobustOptions{});
+  EXPECT_TRUE(est.estimated);
+  EXPECT_FALSE(est.tail_cut);
+  EXPECT_NEAR(est.median_sigma2, 1.2 * sigma2, 0.25 * sigma2);
+  EXPECT_GT(est.sigma2, 1.5 * est.median_sigma2);
+}
+
 TEST(OnlineEntry, EstimateNoiseScaleDoesNotRunAway) {
   const int dof = 3;
   const double c2 = chiSquareThreshold(0.99, dof), sigma2 = 0.02;
@@ -509,7 +527,11 @@ TEST(OnlineEntry, BadOptionsRefused) {
                    +[](RobustOptions* o) { o->max_tail_scale = 0.5; },
                    +[](RobustOptions* o) { o->corroboration_window = -1; },
                    +[](RobustOptions* o) { o->final_confirm_margin = 0.5; },
-                   +[](RobustOptions* o) { o->final_confirm_margin = std::nan(""); }}) {
+                   +[](RobustOptions* o) { o->final_confirm_margin = std::nan(""); },
+                   +[](RobustOptions* o) { o->finalize_rounds = 0; },
+                   +[](RobustOptions* o) { o->end_scale_samples = -1; },
+                   +[](RobustOptions* o) { o->end_scale_gap = 0.5; },
+                   +[](RobustOptions* o) { o->end_scale_gap = std::nan(""); }}) {
     RobustOptions o;
     set(&o);
     EXPECT_NE(o.problem(), "");

@@ -98,7 +98,15 @@ void addOnlineRobustFlags(po::options_description& options) {
       po::value<double>()->default_value(RobustOptions{}.final_confirm_margin),
       "with --robust, the final pass drops an inlier no other inlier agrees with when keeping it "
       "costs the objective more than this many times the threshold (its leave-one-out "
-      "innovation; docs/design.md, \"Confirmed at the end\"); 0: off");
+      "innovation; docs/design.md, \"Confirmed at the end\"); 0: off")(
+      "finalize-rounds", po::value<int>()->default_value(RobustOptions{}.finalize_rounds),
+      "with --robust, at most this many rounds of the final pass (each graduates every closure "
+      "to the end, relinearises everything and re-checks every closure; another round only "
+      "while a re-check changed a weight)")(
+      "end-scale-samples", po::value<int>()->default_value(RobustOptions{}.end_scale_samples),
+      "with --robust, the final pass re-estimates the threshold from the leave-one-out "
+      "innovations of at most this many inliers and as many trusted edges, and uses it where it "
+      "is tighter (docs/design.md, \"The end's scale\"); 0: off");
 }
 
 void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
@@ -107,12 +115,18 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const std::string warm_up = vm["warm-up"].as<std::string>();
   const int window = vm["corroboration-window"].as<int>();
   const double margin = vm["final-confirm-margin"].as<double>();
+  const int rounds = vm["finalize-rounds"].as<int>();
+  const int end_samples = vm["end-scale-samples"].as<int>();
   if (!robust_on &&
       (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
-       !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted()))
+       !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
+       !vm["finalize-rounds"].defaulted() || !vm["end-scale-samples"].defaulted()))
     throw UsageError(
-        "--entry, --noise-scale, --warm-up, --corroboration-window and --final-confirm-margin "
-        "need --robust");
+        "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
+        "--finalize-rounds and --end-scale-samples need --robust");
+  if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
+  if (end_samples < 0)
+    throw UsageError("--end-scale-samples must be >= 0, not " + std::to_string(end_samples));
   if (window < 0)
     throw UsageError("--corroboration-window must be >= 0, not " + std::to_string(window));
   if (!(margin == 0 || margin >= 1) || !std::isfinite(margin))
@@ -129,6 +143,8 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
   robust->corroboration_window = window;
   robust->final_confirm_margin = margin;
+  robust->finalize_rounds = rounds;
+  robust->end_scale_samples = end_samples;
 }
 
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {
