@@ -393,6 +393,9 @@ class OnlineGnc {
   std::vector<ClosureReport> closures() const;
   /// c² in use: the given c² (warm-up, NoiseScale::kGiven), then tail_factor · c² · σ̂².
   double threshold() const { return c2_; }
+  /// The c² finalize()'s last (L) pass judged by (header comment, "the end's scale"; 0 before
+  /// one).
+  double thresholdAtEnd() const { return c2_end_; }
   /// σ̂² (1 until scale_min_samples innovations, without an estimate, and with
   /// NoiseScale::kGiven).
   double noiseScale() const { return scale_; }
@@ -443,7 +446,7 @@ class OnlineGnc {
   /// Whether c's ends are more than 2·corroboration_window poses apart (a partner's must be).
   bool spansLoop(const Closure& c) const;
   /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with: sets
-  /// weight 0 and returns true when it exceeds margin·c².
+  /// weight 0 and returns true when it exceeds `bound`.
   bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
                    Paths paths = Paths::kOnce);
   /// finalize()'s c² (header comment, "the end's scale"): at most the c² in use.
@@ -451,7 +454,8 @@ class OnlineGnc {
   /// (L) for the closures graduation settled at weight 1 in the last step. Returns the
   /// weights changed.
   int confirm(IncrementalSmoother<G>& smoother);
-  /// finalize()'s (L) over every settled inlier at final_confirm_margin·c²; marks the closures
+  /// finalize()'s (L) over every settled inlier at final_confirm_margin·c²_end (endThreshold);
+  /// marks the closures
   /// it drops in `dropped` (by id), which the same step's re-checks leave alone (the tree still
   /// holds them at 1 until the next update). Returns the weights changed.
   int confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped);

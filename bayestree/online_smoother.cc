@@ -630,6 +630,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.graduation_steps = c.graduation_steps;
     s.closures_unconfirmed = c.unconfirmed;
     s.closure_threshold = gnc_->threshold();
+    s.closure_threshold_at_end = gnc_->thresholdAtEnd();
     s.noise_scale = gnc_->noiseScale();
     s.noise_samples = gnc_->noiseSamples();
     s.noise_scale_estimated = gnc_->noiseEstimate().estimated;

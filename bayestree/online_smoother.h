@@ -141,6 +141,10 @@ struct OnlineStats {
   /// With robust smoothing: c² in use (OnlineGnc::threshold), σ̂² (OnlineGnc::noiseScale,
   /// 1 without robust smoothing) and the innovations it is estimated from.
   double closure_threshold = 0;
+  /// The c² finalize()'s last leave-one-out pass judged by (OnlineGnc::thresholdAtEnd: the
+  /// end's scale where it is at least end_scale_gap times tighter, else closure_threshold);
+  /// 0 before such a pass.
+  double closure_threshold_at_end = 0;
   double noise_scale = 1;
   int noise_samples = 0;
   /// σ̂² is an estimate (NoiseScaleEstimate::estimated); false: Ω at its word.

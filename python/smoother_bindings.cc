@@ -55,6 +55,7 @@ py::dict statsDict(const OnlineStats& s) {
   d["graduation_updates"] = s.graduation_updates;
   d["warm_up_relinearizations"] = s.warm_up_relinearizations;
   d["closure_threshold"] = s.closure_threshold;
+  d["closure_threshold_at_end"] = s.closure_threshold_at_end;
   d["noise_scale"] = s.noise_scale;
   d["noise_samples"] = s.noise_samples;
   d["noise_scale_estimated"] = s.noise_scale_estimated;

@@ -57,6 +57,8 @@ def test_robust_stats_match_the_cli(data_dir, arbor_cli):
     assert stats["graduation_steps"] > 0
     assert stats["noise_scale"] == pytest.approx(expected["noise_scale"], rel=1e-12)
     assert stats["closure_threshold"] == pytest.approx(expected["threshold_in_use"], rel=1e-12)
+    assert stats["closure_threshold_at_end"] == pytest.approx(expected["threshold_at_end"],
+                                                              rel=1e-12)
 
 
 @pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
