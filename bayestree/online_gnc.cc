@@ -224,17 +224,17 @@ const std::vector<double>* OnlineGnc<G>::scaleSource() const {
   return nullptr;
 }
 
-// (P): closure b turned into a second measurement of a's a→b through the estimate's chains
-// between their ends, against a's own.
+// (P)'s s: closure b turned into a second measurement of a's a→b through the estimate's chains
+// between their ends, against a's own (+∞ when their ends are not within K of each other's).
 template <class G>
-bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a,
-                         const Closure& b) {
+double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure& a,
+                           const Closure& b) const {
   const Key K = options_.corroboration_window;
   auto near = [K](Key x, Key y) { return x - y <= K && y - x <= K; };
   G z2 = b.z;
   int c = b.i, d = b.j;
   if (!(near(a.from, b.from) && near(a.to, b.to))) {
-    if (!(near(a.from, b.to) && near(a.to, b.from))) return false;
+    if (!(near(a.from, b.to) && near(a.to, b.from))) return std::numeric_limits<double>::infinity();
     z2 = z2.inverse();  // b reversed: d→c read as c→d (Ω₂ kept, the ends being close)
     std::swap(c, d);
   }
@@ -248,6 +248,14 @@ bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& 
   const typename Edge::Vector e = relativePoseError(a.z, G::Identity(), z_hat);
   const typename Edge::Matrix cov = a.information.inverse() + b.information.inverse();
   const double s = e.dot(cov.ldlt().solve(e));
+  return std::isfinite(s) ? s : std::numeric_limits<double>::infinity();
+}
+
+// (P): b agrees with a.
+template <class G>
+bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a,
+                         const Closure& b) {
+  const double s = pairS(smoother, a, b);
   if (!std::isfinite(s)) return false;
   // On the pairs' own scale: estimateNoiseScale of every neighbouring pair's s so far, from
   // their untruncated median (true pairs, which come in runs, are most of them over a run),
@@ -306,25 +314,28 @@ bool OnlineGnc<G>::spansLoop(const Closure& c) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::backed(const Closure& c) const {
+bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) const {
   for (int id : c.partners) {
     const Closure& p = closures_[static_cast<size_t>(id)];
-    if (p.state == State::kSettled && !p.held && isInlier(p)) return true;
+    if (p.state == State::kSettled && !p.held && isInlier(p) &&
+        (now == nullptr || pairS(*now, c, p) <= c2_given_ * pair_scale_))
+      return true;
   }
   return false;
 }
 
 template <class G>
 bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
-                               Paths paths) {
+                               bool at_the_end) {
   if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
       c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
-      backed(*c))
+      backed(*c, at_the_end && options_.end_partners_agree ? &smoother : nullptr))
     return false;
   c->judged_c2 = c2_;
   const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
   // In the tree at weight 1 (checked above): (L); without Σ it is kept.
-  const std::optional<double> m = leaveOneOutInnovation(smoother, edge, paths);
+  const std::optional<double> m =
+      leaveOneOutInnovation(smoother, edge, at_the_end ? Paths::kKept : Paths::kOnce);
   if (!m || *m <= bound) return false;
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
@@ -346,7 +357,7 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   c2_end_ = endThreshold(smoother);
   const double bound = options_.final_confirm_margin * c2_end_;
   for (size_t id = 0; id < closures_.size(); ++id) {
-    if (!unconfirmed(smoother, &closures_[id], bound, Paths::kKept)) continue;
+    if (!unconfirmed(smoother, &closures_[id], bound, /*at_the_end=*/true)) continue;
     (*dropped)[id] = 1;
     ++changed;
   }
