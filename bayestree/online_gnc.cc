@@ -124,6 +124,8 @@ std::string RobustOptions::problem() const {
     return bad("recheck_margin", recheck_margin, "finite and >= 1");
   if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
   if (end_scale_samples < 0) return bad("end_scale_samples", end_scale_samples, ">= 0");
+  if (!(rehold_growth == 0 || rehold_growth > 1) || !std::isfinite(rehold_growth))
+    return bad("rehold_growth", rehold_growth, "0 (off) or finite and > 1");
   if (!(end_scale_gap >= 1) || !std::isfinite(end_scale_gap))
     return bad("end_scale_gap", end_scale_gap, "finite and >= 1");
   if (!(final_confirm_margin == 0 || final_confirm_margin >= 1) ||
@@ -205,11 +207,27 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   if (source == last_source_ && n < next_estimate_) return;
   last_source_ = source;
   samples_used_ = static_cast<int>(n);
+  const bool had_estimate = estimate_.estimated;
   estimate_ = estimateNoiseScale(*source, G::kDoF, c2_given_, options_,
                                  /*from_median=*/source == &corroborated_);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
+  const double c2_before = c2_;
   c2_ = estimate_.estimated ? options_.tail_factor * c2_given_ * scale_ : c2_given_;
+  // The first estimate, many times Ω's word: what was rejected at Ω's word is held again, to be
+  // judged as the warm-up's closures are (RobustOptions::rehold_growth; header, "warm-up").
+  const double growth = options_.rehold_growth;
+  if (growth > 0 && !had_estimate && estimate_.estimated && c2_ >= growth * c2_before &&
+      options_.warm_up == WarmUp::kHold) {
+    for (size_t k = 0; k < closures_.size(); ++k) {
+      Closure& o = closures_[k];
+      if (o.state != State::kSettled || o.weight != 0.0 || o.held || !binaryKernel(o) ||
+          growth * o.judged_c2 > c2_)
+        continue;
+      o.held = true;
+      held_.push_back(static_cast<int>(k));
+    }
+  }
   next_estimate_ = nextEstimateAt(n);
 }
 

@@ -300,7 +300,8 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "7",        "--final-confirm-margin",
                                          "1.5",      "--finalize-rounds",
                                          "4",        "--end-scale-samples",
-                                         "0"};
+                                         "0",        "--rehold-growth",
+                                         "4"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -312,6 +313,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.final_confirm_margin, 1.5);
   EXPECT_EQ(replay->online.finalize_rounds, 4);
   EXPECT_EQ(replay->online.end_scale_samples, 0);
+  EXPECT_EQ(replay->online.rehold_growth, 4.0);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -322,6 +324,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->final_confirm_margin, 1.5);
   EXPECT_EQ(serve->options.robust->finalize_rounds, 4);
   EXPECT_EQ(serve->options.robust->end_scale_samples, 0);
+  EXPECT_EQ(serve->options.robust->rehold_growth, 4.0);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -332,11 +335,15 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->final_confirm_margin, RobustOptions{}.final_confirm_margin);
   EXPECT_EQ(plain->options.robust->finalize_rounds, RobustOptions{}.finalize_rounds);
   EXPECT_EQ(plain->options.robust->end_scale_samples, RobustOptions{}.end_scale_samples);
+  EXPECT_EQ(plain->options.robust->rehold_growth, RobustOptions{}.rehold_growth);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);
-  for (const auto& [flag, bad] : std::vector<std::pair<std::string, std::string>>{
-           {"--finalize-rounds", "0"}, {"--end-scale-samples", "-1"}}) {
+  for (const auto& [flag, bad] :
+       std::vector<std::pair<std::string, std::string>>{{"--finalize-rounds", "0"},
+                                                        {"--end-scale-samples", "-1"},
+                                                        {"--rehold-growth", "0.5"},
+                                                        {"--rehold-growth", "nan"}}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
       ADD_FAILURE() << flag << " " << bad << " accepted";

@@ -531,7 +531,9 @@ TEST(OnlineEntry, BadOptionsRefused) {
                    +[](RobustOptions* o) { o->finalize_rounds = 0; },
                    +[](RobustOptions* o) { o->end_scale_samples = -1; },
                    +[](RobustOptions* o) { o->end_scale_gap = 0.5; },
-                   +[](RobustOptions* o) { o->end_scale_gap = std::nan(""); }}) {
+                   +[](RobustOptions* o) { o->end_scale_gap = std::nan(""); },
+                   +[](RobustOptions* o) { o->rehold_growth = 1.0; },
+                   +[](RobustOptions* o) { o->rehold_growth = -2.0; }}) {
     RobustOptions o;
     set(&o);
     EXPECT_NE(o.problem(), "");

@@ -103,6 +103,10 @@ void addOnlineRobustFlags(po::options_description& options) {
       "with --robust, at most this many rounds of the final pass (each graduates every closure "
       "to the end, relinearises everything and re-checks every closure; another round only "
       "while a re-check changed a weight)")(
+      "rehold-growth", po::value<double>()->default_value(RobustOptions{}.rehold_growth),
+      "with --robust, X > 1: when the noise scale is first estimated and that raises the "
+      "threshold X times or more, the loop closures rejected before it are judged again as the "
+      "warm-up's are (docs/design.md, \"The warm-up\"); 0: off")(
       "end-scale-samples", po::value<int>()->default_value(RobustOptions{}.end_scale_samples),
       "with --robust, the final pass re-estimates the threshold from the leave-one-out "
       "innovations of at most this many inliers and as many trusted edges, and uses it where it "
@@ -117,16 +121,20 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const double margin = vm["final-confirm-margin"].as<double>();
   const int rounds = vm["finalize-rounds"].as<int>();
   const int end_samples = vm["end-scale-samples"].as<int>();
+  const double rehold = vm["rehold-growth"].as<double>();
   if (!robust_on &&
       (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
        !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
-       !vm["finalize-rounds"].defaulted() || !vm["end-scale-samples"].defaulted()))
+       !vm["finalize-rounds"].defaulted() || !vm["end-scale-samples"].defaulted() ||
+       !vm["rehold-growth"].defaulted()))
     throw UsageError(
         "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
-        "--finalize-rounds and --end-scale-samples need --robust");
+        "--finalize-rounds, --end-scale-samples and --rehold-growth need --robust");
   if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
   if (end_samples < 0)
     throw UsageError("--end-scale-samples must be >= 0, not " + std::to_string(end_samples));
+  if (!(rehold == 0 || rehold > 1) || !std::isfinite(rehold))
+    throw UsageError("--rehold-growth must be 0 (off) or > 1, not " + std::to_string(rehold));
   if (window < 0)
     throw UsageError("--corroboration-window must be >= 0, not " + std::to_string(window));
   if (!(margin == 0 || margin >= 1) || !std::isfinite(margin))
@@ -145,6 +153,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->final_confirm_margin = margin;
   robust->finalize_rounds = rounds;
   robust->end_scale_samples = end_samples;
+  robust->rehold_growth = rehold;
 }
 
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {

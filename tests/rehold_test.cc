@@ -1,0 +1,93 @@
+// Closures rejected at Ω's word before σ̂² is first estimated are held again when that estimate
+// raises c² many times (RobustOptions::rehold_growth, opt-in; bayestree/online_gnc.h,
+// "warm-up"). A
+// generated sphere with Ω 100 times too confident in rotation and 10% random false closures:
+// without it the round robin of re-checks takes rejected closures back one at a time on an
+// estimate that has none of them, false ones among them, and the replay is wrecked (seed 1:
+// F_clean 5·10²⁵ F*); with it the false closures, and only they, are rejected.
+#include <algorithm>
+#include <iostream>
+#include <set>
+#include <utility>
+
+#include <gtest/gtest.h>
+
+#include "arbor/bayestree/online_gnc.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/cli/replay_runner.h"
+#include "arbor/tools/generator/false_closures.h"
+#include "arbor/tools/generator/graph_generator.h"
+
+namespace arbor {
+namespace {
+
+struct Planted {
+  PoseGraph3 clean;
+  PoseGraph3 graph;
+  std::set<std::pair<int, int>> is_false;  ///< dense indices, low first
+};
+
+// 10 rings of 30 poses, rotation noise 0.1 rad, every Ω's rotation block 100 times the truth's.
+Planted overconfidentSphere(std::uint64_t seed) {
+  sim::SphereOptions o;
+  o.rings = 10;
+  o.poses_per_ring = 30;
+  o.noise = {0.05, 0.1};
+  o.seed = seed;
+  Planted p;
+  p.clean = sim::sphereWorld(o).graph;
+  for (auto& e : p.clean.edges) e.information.bottomRightCorner<3, 3>() *= 100.0;
+  sim::OutlierOptions outliers;
+  outliers.seed = seed;
+  const sim::FalseClosures<SE3> planted = sim::addFalseClosures(p.clean, outliers);
+  p.graph = planted.graph;
+  for (const auto& [i, j] : planted.pairs) p.is_false.insert({std::min(i, j), std::max(i, j)});
+  return p;
+}
+
+struct Outcome {
+  std::set<std::pair<int, int>> rejected;
+  double F_clean = 0;
+};
+
+Outcome replayRobust(const Planted& p, const RobustOptions& robust) {
+  cli::ReplaySettings settings;
+  settings.robust = robust;
+  settings.batch = false;
+  const cli::ReplayResult<SE3> r = cli::runReplay(p.graph, settings);
+  Outcome out;
+  for (const ClosureReport& c : r.closures) {
+    if (c.status != ClosureStatus::kOutlier) continue;
+    const int i = p.graph.index.at(c.from), j = p.graph.index.at(c.to);
+    out.rejected.insert({std::min(i, j), std::max(i, j)});
+  }
+  out.F_clean = objective(p.clean, r.poses);
+  return out;
+}
+
+TEST(Rehold, RejectedAtOmegasWordAreJudgedAgain) {
+  for (std::uint64_t seed : {1, 2, 3}) {
+    const Planted p = overconfidentSphere(seed);
+    ASSERT_GE(p.is_false.size(), 20U);
+    RobustOptions on;
+    on.rehold_growth = 4;
+    const Outcome without = replayRobust(p, RobustOptions{});
+    const Outcome with = replayRobust(p, on);
+    // The clean graph's optimum from the plain replay of it.
+    cli::ReplaySettings plain;
+    plain.batch = false;
+    const double F_star = objective(p.clean, cli::runReplay(p.clean, plain).poses);
+    std::cout << "seed " << seed << ": rejected " << without.rejected.size() << " -> "
+              << with.rejected.size() << " of " << p.is_false.size() << " false, F_clean / F* "
+              << without.F_clean / F_star << " -> " << with.F_clean / F_star << "\n";
+    EXPECT_EQ(with.rejected, p.is_false) << "seed " << seed;
+    EXPECT_LT(with.F_clean, 1.01 * F_star) << "seed " << seed;
+    // Seed 1 is wrecked without it (seeds 2 and 3 are not: their estimate came in time).
+    if (seed == 1) {
+      EXPECT_GT(without.F_clean, 2 * F_star);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace arbor
