@@ -14,7 +14,7 @@
 #include "arbor/core/pose_graph.h"
 #include "arbor/io/labels_file.h"
 #include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "robust_replay_outcome.h"
 #include "shared_data.h"
 
 namespace arbor {
@@ -39,29 +39,8 @@ PoseGraph3 firstPoses(const std::string& name) {
   return g;
 }
 
-struct Outcome {
-  std::set<std::pair<Key, Key>> rejected;
-  int unconfirmed = 0;
-  double F_clean = 0;
-  double c2 = 0, c2_end = 0;  ///< OnlineStats::closure_threshold and closure_threshold_at_end
-};
-
-Outcome replayRobust(const PoseGraph3& clean, const PoseGraph3& graph,
-                     const RobustOptions& robust) {
-  cli::ReplaySettings settings;
-  settings.robust = robust;
-  settings.batch = false;
-  const cli::ReplayResult<SE3> r = cli::runReplay(graph, settings);
-  Outcome out;
-  for (const ClosureReport& c : r.closures)
-    if (c.status == ClosureStatus::kOutlier)
-      out.rejected.insert({std::min(c.from, c.to), std::max(c.from, c.to)});
-  out.unconfirmed = r.online.closures_unconfirmed;
-  out.c2 = r.online.closure_threshold;
-  out.c2_end = r.online.closure_threshold_at_end;
-  out.F_clean = objective(clean, r.poses);
-  return out;
-}
+using Outcome = testing::RobustOutcome;
+using testing::replayRobust;
 
 // The planted false closures among those poses, low id first.
 std::set<std::pair<Key, Key>> falseClosures() {

@@ -23,13 +23,16 @@
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "random_walks.h"
+#include "robust_replay_outcome.h"
 #include "shared_data.h"
 
 namespace arbor {
 namespace {
 
+using Outcome = testing::RobustOutcome;
 using testing::diagonalInformation;
 using testing::isotropicNoise;
+using testing::replayRobust;
 
 template <class G>
 void leaveOneOutIsTheInnovationWithout() {
@@ -84,27 +87,6 @@ TEST(LeaveOneOut, IsTheInnovationWithoutTheClosure3D) { leaveOneOutIsTheInnovati
 // towards is within c²; (L) asks what keeping it costs. On smallGrid3D with 90% local false
 // closures (seed 1) graduation keeps the false (1, 27) at s 61.6 against c² 192.8, where (L) is
 // 423.
-struct Outcome {
-  std::set<std::pair<Key, Key>> rejected;
-  int unconfirmed = 0;
-  double F_clean = 0;
-};
-
-template <class G>
-Outcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
-                     const RobustOptions& robust) {
-  cli::ReplaySettings settings;
-  settings.robust = robust;
-  settings.batch = false;
-  const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
-  Outcome out;
-  for (const ClosureReport& c : r.closures)
-    if (c.status == ClosureStatus::kOutlier)
-      out.rejected.insert({std::min(c.from, c.to), std::max(c.from, c.to)});
-  out.unconfirmed = r.online.closures_unconfirmed;
-  out.F_clean = objective(clean, r.poses);
-  return out;
-}
 
 // smallGrid3D (shared data) with false closures planted as `arbor generate outliers --seed 1`
 // does, and their (from, to) pairs, low id first as Outcome::rejected has them.

@@ -269,10 +269,6 @@ TEST(OnlineEntry, EstimateNoiseScaleFromTheMedian) {
   EXPECT_NEAR(est.sigma2, sigma2, 0.2 * sigma2);
 }
 
-// False closures spread over decades, down to just inside the truncation: the tail's estimate
-// would climb by about tail_factor a round until all of them are in; it is cut at
-// max_tail_scale·σ²_med and the median's σ̂² stands (within 15%: the false ones inside the
-// truncation raise the median a little).
 // A heavy tail of true closures (a fifth of them four times as noisy): the tail's fixed point
 // raises σ̂² above the median's, which NoiseScaleEstimate::median_sigma2 keeps (the end's scale
 // takes the closures' median and the trusted edges' tail).
@@ -290,6 +286,10 @@ TEST(OnlineEntry, EstimateNoiseScaleReportsTheMediansScale) {
   EXPECT_GT(est.sigma2, 1.5 * est.median_sigma2);
 }
 
+// False closures spread over decades, down to just inside the truncation: the tail's estimate
+// would climb by about tail_factor a round until all of them are in; it is cut at
+// max_tail_scale·σ²_med and the median's σ̂² stands (within 15%: the false ones inside the
+// truncation raise the median a little).
 TEST(OnlineEntry, EstimateNoiseScaleDoesNotRunAway) {
   const int dof = 3;
   const double c2 = chiSquareThreshold(0.99, dof), sigma2 = 0.02;

@@ -1,0 +1,41 @@
+// Test helper: a robust replay (`arbor replay --robust`'s runner) of a graph, and what it ended
+// with: the rejected closures, the counters and F over a clean graph's edges at its estimate.
+#pragma once
+
+#include <algorithm>
+#include <set>
+#include <utility>
+
+#include "arbor/bayestree/online_gnc.h"
+#include "arbor/core/pose_graph.h"
+#include "arbor/tools/cli/replay_runner.h"
+
+namespace arbor::testing {
+
+struct RobustOutcome {
+  std::set<std::pair<Key, Key>> rejected;  ///< (from, to), low id first
+  int unconfirmed = 0;                     ///< OnlineStats::closures_unconfirmed
+  double F_clean = 0;                      ///< F over `clean`'s edges at the estimate
+  double c2 = 0, c2_end = 0;  ///< OnlineStats::closure_threshold and closure_threshold_at_end
+};
+
+/// `graph` replayed with `robust` (no batch); F_clean over `clean` (same poses, same order).
+template <class G>
+RobustOutcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
+                           const RobustOptions& robust) {
+  cli::ReplaySettings settings;
+  settings.robust = robust;
+  settings.batch = false;
+  const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
+  RobustOutcome out;
+  for (const ClosureReport& c : r.closures)
+    if (c.status == ClosureStatus::kOutlier)
+      out.rejected.insert({std::min(c.from, c.to), std::max(c.from, c.to)});
+  out.unconfirmed = r.online.closures_unconfirmed;
+  out.F_clean = objective(clean, r.poses);
+  out.c2 = r.online.closure_threshold;
+  out.c2_end = r.online.closure_threshold_at_end;
+  return out;
+}
+
+}  // namespace arbor::testing
