@@ -17,6 +17,7 @@
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
+#include "robust_replay_outcome.h"
 
 namespace arbor {
 namespace {
@@ -24,7 +25,7 @@ namespace {
 struct Planted {
   PoseGraph3 clean;
   PoseGraph3 graph;
-  std::set<std::pair<int, int>> is_false;  ///< dense indices, low first
+  std::set<std::pair<Key, Key>> is_false;  ///< (from, to) ids, low first
 };
 
 // 10 rings of 30 poses, rotation noise 0.1 rad, every Ω's rotation block 100 times the truth's.
@@ -41,28 +42,17 @@ Planted overconfidentSphere(std::uint64_t seed) {
   outliers.seed = seed;
   const sim::FalseClosures<SE3> planted = sim::addFalseClosures(p.clean, outliers);
   p.graph = planted.graph;
-  for (const auto& [i, j] : planted.pairs) p.is_false.insert({std::min(i, j), std::max(i, j)});
+  for (const auto& [i, j] : planted.pairs) {
+    const Key a = p.graph.ids[static_cast<size_t>(i)], b = p.graph.ids[static_cast<size_t>(j)];
+    p.is_false.insert({std::min(a, b), std::max(a, b)});
+  }
   return p;
 }
 
-struct Outcome {
-  std::set<std::pair<int, int>> rejected;
-  double F_clean = 0;
-};
+using Outcome = testing::RobustOutcome;
 
 Outcome replayRobust(const Planted& p, const RobustOptions& robust) {
-  cli::ReplaySettings settings;
-  settings.robust = robust;
-  settings.batch = false;
-  const cli::ReplayResult<SE3> r = cli::runReplay(p.graph, settings);
-  Outcome out;
-  for (const ClosureReport& c : r.closures) {
-    if (c.status != ClosureStatus::kOutlier) continue;
-    const int i = p.graph.index.at(c.from), j = p.graph.index.at(c.to);
-    out.rejected.insert({std::min(i, j), std::max(i, j)});
-  }
-  out.F_clean = objective(p.clean, r.poses);
-  return out;
+  return testing::replayRobust(p.clean, p.graph, robust);
 }
 
 TEST(Rehold, RejectedAtOmegasWordAreJudgedAgain) {
