@@ -128,6 +128,11 @@ std::string RobustOptions::problem() const {
     return bad("rehold_growth", rehold_growth, "0 (off) or finite and > 1");
   if (!(end_scale_gap >= 1) || !std::isfinite(end_scale_gap))
     return bad("end_scale_gap", end_scale_gap, "finite and >= 1");
+  if (!(end_backed_margin == 0 || end_backed_margin >= 1) || !std::isfinite(end_backed_margin))
+    return bad("end_backed_margin", end_backed_margin, "0 (off) or finite and >= 1");
+  if (!(end_backed_pair_margin > 0) || !std::isfinite(end_backed_pair_margin))
+    return bad("end_backed_pair_margin", end_backed_pair_margin, "finite and > 0");
+  if (end_backed_partners < 1) return bad("end_backed_partners", end_backed_partners, ">= 1");
   if (!(final_confirm_margin == 0 || final_confirm_margin >= 1) ||
       !std::isfinite(final_confirm_margin))
     return bad("final_confirm_margin", final_confirm_margin, "0 (off) or finite and >= 1");
@@ -358,6 +363,30 @@ bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, dou
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
   return true;
+}
+
+template <class G>
+double OnlineGnc<G>::endBound() const {
+  return c2_end_ > 0 ? std::min(c2_, c2_end_) : c2_;
+}
+
+// Backed at the end: within end_backed_margin·c² and agreed with (P) by at least
+// end_backed_partners settled inliers at the closures' own scale, pairS ≤ pair_margin·c².
+template <class G>
+bool OnlineGnc<G>::backedAtTheEnd(const IncrementalSmoother<G>& smoother, const Closure& c,
+                                  double value, double bound) const {
+  if (options_.end_backed_margin == 0 || !confirmsAtTheEnd() ||
+      c.kernel != KernelKind::kTruncatedLeastSquares || value > options_.end_backed_margin * bound)
+    return false;
+  int agreeing = 0;
+  for (int id : c.partners) {
+    const Closure& p = closures_[static_cast<size_t>(id)];
+    if (p.state == State::kSettled && !p.held && isInlier(p) &&
+        pairS(smoother, c, p) <= options_.end_backed_pair_margin * bound &&
+        ++agreeing >= options_.end_backed_partners)
+      return true;
+  }
+  return false;
 }
 
 template <class G>
@@ -687,14 +716,19 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       const double m =
           innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s,
                      recheck_all ? Paths::kKept : Paths::kOnce);
-      if (m > c2_ || (scope == StepScope::kFinalize && c2_end_ > 0 && m > c2_end_)) continue;
+      const double bound = scope == StepScope::kFinalize ? endBound() : c2_;
+      if (m > bound && !(scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, m, bound)))
+        continue;
       c.state = State::kSettled;
       setWeight(smoother, &c, 1.0);
       ++totals_.regraduated;
       ++changed;
       continue;
     }
-    const bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
+    bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
+    if (flip && inlier && scope == StepScope::kFinalize &&
+        backedAtTheEnd(smoother, c, s, endBound()))
+      flip = false;
     const bool drift = c.kernel != KernelKind::kTruncatedLeastSquares &&
                        c.kernel != KernelKind::kGemanMcClure &&
                        std::abs(finalWeight(c, s) - c.weight) > 10 * options_.weight_tolerance;

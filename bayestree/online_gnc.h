@@ -159,6 +159,17 @@
 //                 with 10% random false closures: c² 22386 from the innovations, c²_end 6700 in
 //                 the first pass and about 5000 later, where its true closures' m₋ reach 4760;
 //                 on the other shared robust files c²_end is within 0.6–1.3 of c².
+//   backed at the end (RobustOptions::end_backed_margin, 4 by default; 0: off) in finalize()'s
+//                 re-checks a TLS closure that at least end_backed_partners (5) settled inliers
+//                 agree with (P) at the end's estimate, at the closures' own scale (pairS ≤
+//                 end_backed_pair_margin·c², 1.5; not the pairs' scale, which false pairs
+//                 inflate where they are many: 80·c² on smallGrid3D with 90% local false
+//                 closures), is taken back when rejected and its innovation (E) is within
+//                 end_backed_margin·c², and kept when an inlier and s is within it (c² the end's,
+//                 or the one in use). The clean garage's closures have a heavy tail: 526–646,
+//                 644–711 and 771–1016 sit at 2.5–2.9·c² by (E) with 7–14 such partners each,
+//                 where the false closures of smallGrid3D that true ones agree with have at most
+//                 4 (seed 1, 90% local).
 //   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
 //                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
 //                 GncOptimizer and the reference figures count), for GM at μ = 1 w ≥ ¼.
@@ -269,6 +280,16 @@ struct RobustOptions {
   /// the estimate of the whole graph (header comment, "confirmed at the end"); false: a
   /// partner that agreed once backs it for good.
   bool end_partners_agree = true;
+  /// finalize(): a TLS closure that end_backed_partners settled inliers agree with (P) at the
+  /// end's estimate and the closures' own scale is kept, or taken back, up to this many times
+  /// c² (by s for an inlier, by its innovation (E) for a rejected one) (header comment,
+  /// "backed at the end"); 0: off, else ≥ 1.
+  double end_backed_margin = 4.0;
+  /// ... agreeing at pairS ≤ this many times c² (the c² in use, or the end's), not at the
+  /// pairs' scale, which false pairs inflate where they are many (> 0).
+  double end_backed_pair_margin = 1.5;
+  /// ... this many of them (≥ 1).
+  int end_backed_partners = 5;
   /// TLS, GM: a closure whose first check exceeds entry_band·c² enters at weight 0; between c²
   /// and that it graduates (≥ 1).
   double entry_band = 2.0;
@@ -484,6 +505,12 @@ class OnlineGnc {
   /// the estimate.
   bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
                    bool at_the_end = false);
+  /// The c² finalize() judges by: the end's where there is one, else the c² in use.
+  double endBound() const;
+  /// In finalize(): whether c, a TLS closure with s or innovation `value`, is within
+  /// end_backed_margin·bound and a settled inlier still agrees with it (P) at the estimate.
+  bool backedAtTheEnd(const IncrementalSmoother<G>& smoother, const Closure& c, double value,
+                      double bound) const;
   /// finalize()'s c² (header comment, "the end's scale"): at most the c² in use.
   double endThreshold(const IncrementalSmoother<G>& smoother) const;
   /// (L) for the closures graduation settled at weight 1 in the last step. Returns the

@@ -289,7 +289,8 @@ TEST(HeapFlag, ReachesReplayAndServe) {
 }
 
 // --entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin,
-// --finalize-rounds and --end-scale-samples (tools/cli/robust_flags.h)
+// --finalize-rounds, --end-scale-samples, --rehold-growth and --end-backed-margin
+// (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
@@ -301,7 +302,8 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "1.5",      "--finalize-rounds",
                                          "4",        "--end-scale-samples",
                                          "0",        "--rehold-growth",
-                                         "4"};
+                                         "4",        "--end-backed-margin",
+                                         "0"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -314,6 +316,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.finalize_rounds, 4);
   EXPECT_EQ(replay->online.end_scale_samples, 0);
   EXPECT_EQ(replay->online.rehold_growth, 4.0);
+  EXPECT_EQ(replay->online.end_backed_margin, 0.0);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -325,6 +328,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->finalize_rounds, 4);
   EXPECT_EQ(serve->options.robust->end_scale_samples, 0);
   EXPECT_EQ(serve->options.robust->rehold_growth, 4.0);
+  EXPECT_EQ(serve->options.robust->end_backed_margin, 0.0);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -336,14 +340,18 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->finalize_rounds, RobustOptions{}.finalize_rounds);
   EXPECT_EQ(plain->options.robust->end_scale_samples, RobustOptions{}.end_scale_samples);
   EXPECT_EQ(plain->options.robust->rehold_growth, RobustOptions{}.rehold_growth);
+  EXPECT_EQ(plain->options.robust->end_backed_margin, RobustOptions{}.end_backed_margin);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);
+  EXPECT_THROW(parseServeCommandLine({"--end-backed-margin", "2"}), UsageError);
   for (const auto& [flag, bad] :
        std::vector<std::pair<std::string, std::string>>{{"--finalize-rounds", "0"},
                                                         {"--end-scale-samples", "-1"},
                                                         {"--rehold-growth", "0.5"},
-                                                        {"--rehold-growth", "nan"}}) {
+                                                        {"--rehold-growth", "nan"},
+                                                        {"--end-backed-margin", "0.5"},
+                                                        {"--end-backed-margin", "inf"}}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
       ADD_FAILURE() << flag << " " << bad << " accepted";

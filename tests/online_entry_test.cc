@@ -533,7 +533,11 @@ TEST(OnlineEntry, BadOptionsRefused) {
                    +[](RobustOptions* o) { o->end_scale_gap = 0.5; },
                    +[](RobustOptions* o) { o->end_scale_gap = std::nan(""); },
                    +[](RobustOptions* o) { o->rehold_growth = 1.0; },
-                   +[](RobustOptions* o) { o->rehold_growth = -2.0; }}) {
+                   +[](RobustOptions* o) { o->rehold_growth = -2.0; },
+                   +[](RobustOptions* o) { o->end_backed_margin = 0.5; },
+                   +[](RobustOptions* o) { o->end_backed_margin = std::nan(""); },
+                   +[](RobustOptions* o) { o->end_backed_pair_margin = 0.0; },
+                   +[](RobustOptions* o) { o->end_backed_partners = 0; }}) {
     RobustOptions o;
     set(&o);
     EXPECT_NE(o.problem(), "");
