@@ -15,6 +15,7 @@
 #include "arbor/core/pose_graph.h"
 #include "arbor/io/labels_file.h"
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/online_threshold.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "robust_replay_outcome.h"
 #include "shared_data.h"
@@ -55,6 +56,27 @@ TEST(EndBacked, KeepsTheCleanGaragesHeavyTail) {
   EXPECT_GT(without.F_clean, 1.005 * F_plain);
   EXPECT_TRUE(with.rejected.empty());
   EXPECT_NEAR(with.F_clean, F_plain, 1e-3 * F_plain);  // issue 14: within 0.1%
+}
+
+// `arbor batch --robust --init online --inlier-threshold online`: GNC at twice the replay's c²
+// would reject the three again (s 2.1–2.4·c² at the replay's estimate); the batch holds what the
+// replay's end kept beyond its c² as trusted, and ends where the replay does.
+TEST(EndBacked, TheBatchFromTheReplayKeepsWhatItsEndKept) {
+  if (!testing::datasetPresent(kClean))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kClean);
+  const PoseGraph3 clean = load(kClean);
+  std::vector<SE3> poses;
+  const cli::OnlineBatch b = cli::solveGncFromOnline(clean, GncOptions{}, EdgeChoices{},
+                                                     /*online_threshold=*/true, &poses);
+  EXPECT_EQ(b.kept_beyond, 3);
+  EXPECT_EQ(b.known_outliers, 0);
+  int rejected = 0;
+  for (size_t k = 0; k < b.gnc.inlier.size(); ++k) rejected += b.gnc.inlier[k] ? 0 : 1;
+  EXPECT_EQ(rejected, 0);
+  cli::ReplaySettings plain_settings;
+  plain_settings.batch = false;
+  const double F_plain = objective(clean, cli::runReplay(clean, plain_settings).poses);
+  EXPECT_NEAR(objective(clean, poses), F_plain, 1e-3 * F_plain);
 }
 
 TEST(EndBacked, TakesBackOnlyTrueClosuresOfTheRobustGarage) {

@@ -196,13 +196,14 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   }
   std::optional<OnlineThreshold> online;
   GncResult gncFirst;
-  int known_outliers = 0, readmitted_online = 0;
+  int known_outliers = 0, readmitted_online = 0, kept_beyond = 0;
   if (init_online) {  // the replay's classification kept (online_threshold.h solveGncFromOnline)
     OnlineBatch b = solveGncFromOnline(graph, options, choices, run.online_threshold, &poses);
     online = b.online;
     gncFirst = std::move(b.gnc);
     known_outliers = b.known_outliers;
     readmitted_online = b.readmitted;
+    kept_beyond = b.kept_beyond;
   } else {
     if (run.online_threshold) {
       online = onlineThreshold(graph, run.gnc.kernel, choices);
@@ -231,6 +232,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     ++rejected_loops;
     rejected << graph.ids[graph.edges[k].i] << " " << graph.ids[graph.edges[k].j] << "\n";
   }
+  loops += kept_beyond;  // loop closures GNC held as trusted (solveGncFromOnline)
   if (!run.rejected_out.empty()) {
     std::ofstream out(run.rejected_out);
     out << rejected.str();
@@ -273,6 +275,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     if (init_online) {
       j["known_outliers"] = known_outliers;
       j["readmitted_online"] = readmitted_online;
+      j["kept_beyond_online"] = kept_beyond;
     }
     if (online)
       j["online_threshold"] = {{"c2", online->c2},
@@ -326,7 +329,8 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   if (init_online)
     std::cout << "online       " << known_outliers
               << " closure(s) the replay rejected held out of GNC, " << readmitted_online
-              << " taken back (fit within the replay's c²)\n";
+              << " taken back (fit within the replay's c²), " << kept_beyond
+              << " it kept beyond GNC's c² held\n";
   if (certified) {
     const RtrSummary& r = certified->rtr;
     std::cout << "readmitted   " << certified->readmitted

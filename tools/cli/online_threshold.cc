@@ -44,9 +44,22 @@ OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
   out.online = onlineThreshold(graph, options.kernel, choices, poses);
   if (online_threshold) options.threshold = out.online.c2;
   options.known_outliers.assign(graph.numEdges(), 0);
+  // The closures the replay's end kept beyond that bound (backed at the end) are its own
+  // judgement, not GNC's to undo: held at weight 1 as trusted edges.
+  std::vector<char> backed(graph.numEdges(), 0);
   for (int k = 0; k < graph.numEdges(); ++k) {
-    options.known_outliers[k] = !out.online.kept[k] && !trustedEdge(graph, options, k);
+    const bool trusted = trustedEdge(graph, options, k);
+    options.known_outliers[k] = !out.online.kept[k] && !trusted;
     out.known_outliers += options.known_outliers[k];
+    const auto& e = graph.edges[static_cast<size_t>(k)];
+    backed[k] = online_threshold && out.online.kept[k] && !trusted &&
+                e.cost((*poses)[static_cast<size_t>(e.i)], (*poses)[static_cast<size_t>(e.j)]) >
+                    out.online.c2;
+    out.kept_beyond += backed[k];
+  }
+  if (out.kept_beyond > 0) {
+    if (options.trusted.empty()) options.trusted.assign(graph.numEdges(), 0);
+    for (int k = 0; k < graph.numEdges(); ++k) options.trusted[k] |= backed[k];
   }
   out.gnc = solveGnc(graph, poses, options);
   if (!out.gnc.cancelled) {

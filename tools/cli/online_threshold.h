@@ -44,13 +44,17 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
 /// with `online_threshold`, c² = the replay's bound for a settled inlier (OnlineThreshold::c2);
 /// then readmitFitting takes back each held-out closure the refined estimate fits within the
 /// replay's own c² in use (its entry test; GNC's c² without `online_threshold`): the online
-/// smoother's hysteresis at both ends. `options` as for solveGnc (its trusted edges are never
-/// held out); the estimate is written to *poses.
+/// smoother's hysteresis at both ends. A closure the replay kept with s above that c² at its
+/// estimate (backed at the end) is held at weight 1 (OnlineBatch::kept_beyond). `options` as for
+/// solveGnc (its trusted edges are never held out); the estimate is written to *poses.
 struct OnlineBatch {
   OnlineThreshold online;
   GncResult gnc;
   int known_outliers = 0;  ///< closures the replay rejected, held out of GNC
   int readmitted = 0;      ///< of them, taken back by readmitFitting
+  /// With `online_threshold`: closures the replay kept with s above OnlineThreshold::c2 at its
+  /// estimate (backed at the end, RobustOptions::end_backed_margin), held as trusted edges.
+  int kept_beyond = 0;
 };
 template <class G>
 OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
