@@ -726,8 +726,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       continue;
     }
     bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
-    if (flip && inlier && scope == StepScope::kFinalize &&
-        backedAtTheEnd(smoother, c, s, endBound()))
+    if (flip && inlier && scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, s, c2_))
       flip = false;
     const bool drift = c.kernel != KernelKind::kTruncatedLeastSquares &&
                        c.kernel != KernelKind::kGemanMcClure &&

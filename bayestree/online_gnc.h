@@ -165,8 +165,10 @@
 //                 end_backed_pair_margin·c², 1.5; not the pairs' scale, which false pairs
 //                 inflate where they are many: 80·c² on smallGrid3D with 90% local false
 //                 closures), is taken back when rejected and its innovation (E) is within
-//                 end_backed_margin·c², and kept when an inlier and s is within it (c² the end's,
-//                 or the one in use). The clean garage's closures have a heavy tail: 526–646,
+//                 end_backed_margin·c² (c² the end's, or the one in use), and kept when an
+//                 inlier whose s is past recheck_margin·c² is within end_backed_margin times the
+//                 c² in use, the one that re-check reads (by the end's, the garage's three went
+//                 out and in every round). The clean garage's closures have a heavy tail: 526–646,
 //                 644–711 and 771–1016 sit at 2.5–2.9·c² by (E) with 7–14 such partners each,
 //                 where the false closures of smallGrid3D that true ones agree with have at most
 //                 4 (seed 1, 90% local).
