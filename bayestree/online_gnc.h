@@ -510,7 +510,8 @@ class OnlineGnc {
   /// The c² finalize() judges by: the end's where there is one, else the c² in use.
   double endBound() const;
   /// In finalize(): whether c, a TLS closure with s or innovation `value`, is within
-  /// end_backed_margin·bound and a settled inlier still agrees with it (P) at the estimate.
+  /// end_backed_margin·bound and at least end_backed_partners settled inliers among its
+  /// partners agree with it (P) at the smoother's estimate within end_backed_pair_margin·bound.
   bool backedAtTheEnd(const IncrementalSmoother<G>& smoother, const Closure& c, double value,
                       double bound) const;
   /// finalize()'s c² (header comment, "the end's scale"): at most the c² in use.
