@@ -39,15 +39,20 @@ RobustOptions withoutBacking() {
   return o;
 }
 
+// F over the graph's edges at the plain (non-robust) replay's estimate.
+double plainReplayF(const PoseGraph3& clean) {
+  cli::ReplaySettings settings;
+  settings.batch = false;
+  return objective(clean, cli::runReplay(clean, settings).poses);
+}
+
 const std::set<std::pair<Key, Key>> kHeavyTail = {{526, 646}, {644, 711}, {771, 1016}};
 
 TEST(EndBacked, KeepsTheCleanGaragesHeavyTail) {
   if (!testing::datasetPresent(kClean))
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kClean);
   const PoseGraph3 clean = load(kClean);
-  cli::ReplaySettings plain_settings;
-  plain_settings.batch = false;
-  const double F_plain = objective(clean, cli::runReplay(clean, plain_settings).poses);
+  const double F_plain = plainReplayF(clean);
   const Outcome without = replayRobust(clean, clean, withoutBacking());
   const Outcome with = replayRobust(clean, clean, RobustOptions{});
   std::cout << "F plain " << F_plain << ", robust " << without.F_clean << " -> " << with.F_clean
@@ -73,9 +78,7 @@ TEST(EndBacked, TheBatchFromTheReplayKeepsWhatItsEndKept) {
   int rejected = 0;
   for (size_t k = 0; k < b.gnc.inlier.size(); ++k) rejected += b.gnc.inlier[k] ? 0 : 1;
   EXPECT_EQ(rejected, 0);
-  cli::ReplaySettings plain_settings;
-  plain_settings.batch = false;
-  const double F_plain = objective(clean, cli::runReplay(clean, plain_settings).poses);
+  const double F_plain = plainReplayF(clean);
   EXPECT_NEAR(objective(clean, poses), F_plain, 1e-3 * F_plain);
 }
 
