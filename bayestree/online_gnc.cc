@@ -337,14 +337,21 @@ bool OnlineGnc<G>::spansLoop(const Closure& c) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) const {
+bool OnlineGnc<G>::agreedBy(const Closure& c, const IncrementalSmoother<G>* now, double pair_bound,
+                            int needed) const {
+  int agreeing = 0;
   for (int id : c.partners) {
     const Closure& p = closures_[static_cast<size_t>(id)];
     if (p.state == State::kSettled && !p.held && isInlier(p) &&
-        (now == nullptr || pairS(*now, c, p) <= c2_given_ * pair_scale_))
+        (now == nullptr || pairS(*now, c, p) <= pair_bound) && ++agreeing >= needed)
       return true;
   }
   return false;
+}
+
+template <class G>
+bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) const {
+  return agreedBy(c, now, c2_given_ * pair_scale_, 1);
 }
 
 template <class G>
@@ -375,18 +382,11 @@ double OnlineGnc<G>::endBound() const {
 template <class G>
 bool OnlineGnc<G>::backedAtTheEnd(const IncrementalSmoother<G>& smoother, const Closure& c,
                                   double value, double bound) const {
-  if (options_.end_backed_margin == 0 || !confirmsAtTheEnd() ||
-      c.kernel != KernelKind::kTruncatedLeastSquares || value > options_.end_backed_margin * bound)
-    return false;
-  int agreeing = 0;
-  for (int id : c.partners) {
-    const Closure& p = closures_[static_cast<size_t>(id)];
-    if (p.state == State::kSettled && !p.held && isInlier(p) &&
-        pairS(smoother, c, p) <= options_.end_backed_pair_margin * bound &&
-        ++agreeing >= options_.end_backed_partners)
-      return true;
-  }
-  return false;
+  return options_.end_backed_margin > 0 && confirmsAtTheEnd() &&
+         c.kernel == KernelKind::kTruncatedLeastSquares &&
+         value <= options_.end_backed_margin * bound &&
+         agreedBy(c, &smoother, options_.end_backed_pair_margin * bound,
+                  options_.end_backed_partners);
 }
 
 template <class G>
