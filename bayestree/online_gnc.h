@@ -130,7 +130,11 @@
 //                 which false closures may have bent; with end_partners_agree (default) it backs
 //                 the closure only while the two still agree (P) at the end's estimate
 //                 (sphere_bignoise with 10% random false closures: 619 → 627 of 645 rejected,
-//                 1.034 → 1.015 F*; no other shared or generated robust file changes).
+//                 1.034 → 1.015 F*; no other shared or generated robust file changes), read in
+//                 both closures' frames (pairSBothWays) and within the c² in use, not the
+//                 pairs' scale (smallGrid3D with 50% local false closures, seed 2: the false
+//                 (1, 33) was backed by the true (11, 38) at 62.5 in its own frame, 1005 in the
+//                 other's, and ended at 1.145 F*; now 1.018).
 //                 By then sphere_bignoise's closures agree with their runs (none of its
 //                 inliers is unbacked above 0.4·c²), and the margin sits between the largest
 //                 unbacked true closure's m₋ measured on the shared and generated robust files
@@ -503,6 +507,9 @@ class OnlineGnc {
   /// (P)'s s of closures a and b at the smoother's estimate (+∞ when their ends are not within
   /// corroboration_window of each other's).
   double pairS(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b) const;
+  /// The larger of pairS(a, b) and pairS(b, a): (P) read in both closures' frames.
+  double pairSBothWays(const IncrementalSmoother<G>& smoother, const Closure& a,
+                       const Closure& b) const;
   /// Whether c's ends are more than 2·corroboration_window poses apart (a partner's must be).
   bool spansLoop(const Closure& c) const;
   /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with: sets
