@@ -205,9 +205,8 @@ TEST(LeaveOneOut, FinalizeReadsAgreementInBothFrames) {
   plain.batch = false;
   const double F_plain = objective(g.clean, cli::runReplay(g.clean, plain).poses);
   const Outcome r = replayRobust(g.clean, g.planted.graph, RobustOptions{});
-  std::cout << "rejected " << r.rejected.size() << " of " << g.is_false.size()
-            << " false, F_clean " << r.F_clean << " against the clean replay's " << F_plain
-            << "\n";
+  std::cout << "rejected " << r.rejected.size() << " of " << g.is_false.size() << " false, F_clean "
+            << r.F_clean << " against the clean replay's " << F_plain << "\n";
   EXPECT_TRUE(r.rejected.count({1, 33}));
   for (const auto& pair : r.rejected)
     EXPECT_TRUE(g.is_false.count(pair)) << "a true closure " << pair.first << " " << pair.second;
