@@ -1475,6 +1475,13 @@ auto IncrementalSmoother<G>::predictionCovariance(int a,
 }
 
 template <class G>
+int IncrementalSmoother<G>::keepSharedCliqueJoints(
+    const std::vector<std::pair<int, int>>& pose_pairs) const {
+  const Impl& m = *impl_;
+  return m.marginals.keepSharedCliqueJoints(m.tree, pose_pairs);
+}
+
+template <class G>
 auto IncrementalSmoother<G>::marginalCovariances() const
     -> std::vector<Eigen::Matrix<double, kDoF, kDoF>> {
   const Impl& m = *impl_;

@@ -397,6 +397,12 @@ class IncrementalSmoother {
       int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
       const Eigen::Matrix<double, kDoF, kDoF>& A_b,
       PredictionPaths paths = PredictionPaths::kOnce) const;
+  /// Before many kKept queries on one tree: the joint covariance of every pair of poses that
+  /// share a clique (the two poses of every factor the tree holds) read off one walk down the
+  /// tree instead of each pose's path solve (TreeMarginals::keepSharedCliqueJoints), kept until
+  /// the tree next changes; the same values to rounding. Pairs that share no clique are left
+  /// to the path solves. Returns how many pairs it kept.
+  int keepSharedCliqueJoints(const std::vector<std::pair<int, int>>& pose_pairs) const;
   /// Every pose's marginal covariance (as marginalCovariance), in one walk down the tree that
   /// holds the joints of one path at a time (not the cache). Throws std::logic_error if a pose
   /// has not been through update() yet.

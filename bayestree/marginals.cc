@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 
 #include <Eigen/Core>
@@ -166,6 +167,16 @@ template <int D>
 typename TreeMarginals<D>::JointBlock TreeMarginals<D>::jointKept(const BayesTree<D>& tree, int a,
                                                                   int b) {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (!kept_pairs_.empty()) {
+    if (const auto it = kept_pairs_.find(pairKey(a, b)); it != kept_pairs_.end()) return it->second;
+    if (const auto it = kept_pairs_.find(pairKey(b, a)); it != kept_pairs_.end()) {
+      JointBlock out;  // the same joint, its two variables swapped
+      out << it->second.template bottomRightCorner<D, D>(),
+          it->second.template bottomLeftCorner<D, D>(), it->second.template topRightCorner<D, D>(),
+          it->second.template topLeftCorner<D, D>();
+      return out;
+    }
+  }
   auto kept = [&](int v) -> const std::pair<PathSolve, Block>& {
     auto [it, fresh] = kept_.try_emplace(v);
     if (fresh) it->second.second = solvePath(tree, v, &it->second.first, &by_);
@@ -187,6 +198,79 @@ template <int D>
 void TreeMarginals<D>::forget() {
   std::lock_guard<std::mutex> lock(mutex_);
   kept_.clear();
+  kept_pairs_.clear();
+}
+
+// all()'s walk, restricted to the cliques the pairs are read at and their ancestors: each
+// pair at the clique of whichever of its variables holds the other among its [frontals;
+// separator] (a factor's two variables: the one eliminated first, whose clique's separator
+// or frontals hold the other).
+template <int D>
+int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
+                                             const std::vector<std::pair<int, int>>& pairs) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const int nc = static_cast<int>(tree.cliques.size());
+  const int nv = static_cast<int>(tree.clique_of.size());
+  auto holds = [&](int c, int v) {
+    const Clique<D>& k = tree.cliques[c];
+    return std::find(k.frontals.begin(), k.frontals.end(), v) != k.frontals.end() ||
+           std::find(k.separator.begin(), k.separator.end(), v) != k.separator.end();
+  };
+  std::unordered_map<int, std::vector<std::pair<int, int>>> at;  // clique → its pairs
+  std::unordered_set<std::uint64_t> seen;
+  for (const auto& [a, b] : pairs) {
+    if (a < 0 || b < 0 || a >= nv || b >= nv || a == b) continue;
+    const int ca = tree.clique_of[a], cb = tree.clique_of[b];
+    if (ca < 0 || cb < 0 || kept_pairs_.count(pairKey(a, b)) || !seen.insert(pairKey(a, b)).second)
+      continue;
+    if (holds(ca, b)) {
+      at[ca].emplace_back(a, b);
+    } else if (holds(cb, a)) {
+      at[cb].emplace_back(a, b);
+    }
+  }
+  if (at.empty()) return 0;
+  // The cliques needed: those the pairs are read at and their ancestors; each keeps its
+  // joint until its needed children have read it.
+  std::vector<char> needed(nc, 0);
+  std::vector<int> waiting(nc, 0);
+  for (const auto& entry : at)
+    for (int c = entry.first; c >= 0 && !needed[c]; c = tree.cliques[c].parent) {
+      needed[c] = 1;
+      if (tree.cliques[c].parent >= 0) ++waiting[tree.cliques[c].parent];
+    }
+  std::vector<Eigen::MatrixXd> joint(nc);
+  std::vector<int> stack;
+  for (int r : tree.roots)
+    if (needed[r]) stack.push_back(r);
+  Eigen::MatrixXd X;
+  int count = 0;
+  auto release = [&](int c) {  // c and every ancestor whose needed children are all done
+    while (c >= 0 && waiting[c] == 0) {
+      joint[c].resize(0, 0);
+      c = tree.cliques[c].parent;
+      if (c >= 0) --waiting[c];
+    }
+  };
+  while (!stack.empty()) {
+    const int c = stack.back();
+    stack.pop_back();
+    const Clique<D>& k = tree.cliques[c];
+    jointOf(tree, c, k.parent >= 0 ? &joint[k.parent] : nullptr, &joint[c], &X);
+    if (const auto it = at.find(c); it != at.end()) {
+      for (const auto& [a, b] : it->second) {
+        const int pa = position(k, a) * D, pb = position(k, b) * D;
+        JointBlock& out = kept_pairs_[pairKey(a, b)];
+        out << joint[c].template block<D, D>(pa, pa), joint[c].template block<D, D>(pa, pb),
+            joint[c].template block<D, D>(pb, pa), joint[c].template block<D, D>(pb, pb);
+        ++count;
+      }
+    }
+    for (int ch : k.children)
+      if (needed[ch]) stack.push_back(ch);
+    release(c);
+  }
+  return count;
 }
 
 // Depth first from the roots; a clique's joint is kept until its last child has read it, so the

@@ -30,6 +30,7 @@
 // tree).
 #pragma once
 
+#include <cstdint>
 #include <mutex>
 #include <unordered_map>
 #include <utility>
@@ -68,7 +69,17 @@ class TreeMarginals {
   /// queries on one tree (a pose's path is then solved once, and a query costs the shared
   /// cliques' products alone). The caller must forget() before the tree changes.
   JointBlock jointKept(const BayesTree<D>& tree, int a, int b);
-  /// Drops the kept path solves.
+  /// For many jointKept() queries on one tree: the joint of every pair (a, b) whose two
+  /// variables share a clique (both among the [frontals; separator] of a's clique or of b's:
+  /// the two poses of every factor the tree holds do) is read off that clique's joint, from
+  /// one walk (1) down the cliques the pairs need and their ancestors, and kept, as the path
+  /// solves are, until forget(). jointKept() answers those pairs from it; other pairs (and
+  /// pairs with a constant) still take path solves. About one factorisation's flops however
+  /// many pairs, where a path solve per pose costs its path's cliques each. Returns how many
+  /// of the pairs were kept.
+  int keepSharedCliqueJoints(const BayesTree<D>& tree,
+                             const std::vector<std::pair<int, int>>& pairs);
+  /// Drops the kept path solves and joints.
   void forget();
   /// (*out)[v] = Σ_vv for every variable frontal in the tree (others untouched), in one walk
   /// down the tree (1) that keeps a clique's joint only until its children have read it. out
@@ -105,6 +116,12 @@ class TreeMarginals {
   std::vector<double> by_;  ///< B y_c, per clique of a path solve
   /// jointKept's path solves and Σ_vv, by variable, until forget().
   std::unordered_map<int, std::pair<PathSolve, Block>> kept_;
+  /// keepSharedCliqueJoints' joints, by pair (a, b) as given, until forget().
+  std::unordered_map<std::uint64_t, JointBlock> kept_pairs_;
+  static std::uint64_t pairKey(int a, int b) {
+    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) |
+           static_cast<std::uint32_t>(b);
+  }
 };
 
 extern template class TreeMarginals<3>;

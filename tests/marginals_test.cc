@@ -73,6 +73,59 @@ TEST(TreeMarginals, EveryMarginalAndJointMatchTheDenseInverse) {
   EXPECT_GT(same_clique, 0);
 }
 
+// keepSharedCliqueJoints: every pair whose variables share a clique (the two poses of every
+// factor among them) is read off one walk down the tree, jointKept then returns it (in either
+// order) equal to the dense inverse, and every other pair still gets its path solves.
+TEST(TreeMarginals, SharedCliqueJointsMatchTheDenseInverse) {
+  constexpr int D = 3;
+  for (unsigned seed = 1; seed <= 6; ++seed) {
+    testing::SmallProblem p(18, 5, seed);
+    p.linearizeAll();
+    bayestree::TopElimination<SE2> elimination;
+    p.eliminateAll(&elimination);
+    Eigen::MatrixXd H;
+    Eigen::VectorXd g;
+    p.denseSystem(&H, &g);
+    const Eigen::MatrixXd Sigma = H.ldlt().solve(Eigen::MatrixXd::Identity(H.rows(), H.cols()));
+    const std::vector<int> vars = p.variables();
+    auto holds = [&](int c, int v) {
+      const auto& k = p.tree.cliques[c];
+      return std::count(k.frontals.begin(), k.frontals.end(), v) +
+                 std::count(k.separator.begin(), k.separator.end(), v) >
+             0;
+    };
+    std::vector<std::pair<int, int>> pairs;
+    int sharing = 0;
+    for (int a : vars)
+      for (int b : vars) {
+        if (a >= b) continue;
+        pairs.emplace_back(a, b);
+        if (holds(p.tree.clique_of[a], b) || holds(p.tree.clique_of[b], a)) ++sharing;
+      }
+    int edges_between_variables = 0;
+    for (int f = 0; f < p.factors.numFactors(); ++f)
+      if (const auto* e = p.factors.factors[f].relativePose(); e && !p.fixed[e->i]) {
+        ++edges_between_variables;
+        EXPECT_TRUE(holds(p.tree.clique_of[e->i], e->j) || holds(p.tree.clique_of[e->j], e->i))
+            << "seed " << seed << " factor " << f;
+      }
+    ASSERT_GT(edges_between_variables, 0);
+    bayestree::TreeMarginals<D> marginals;
+    EXPECT_EQ(marginals.keepSharedCliqueJoints(p.tree, pairs), sharing) << "seed " << seed;
+    EXPECT_LT(sharing, static_cast<int>(pairs.size()));  // some are left to the path solves
+    for (const auto& [a, b] : pairs)
+      for (const auto& [x, y] : {std::pair{a, b}, std::pair{b, a}}) {
+        Eigen::MatrixXd want(2 * D, 2 * D);
+        want << Sigma.block<D, D>(x * D, x * D), Sigma.block<D, D>(x * D, y * D),
+            Sigma.block<D, D>(y * D, x * D), Sigma.block<D, D>(y * D, y * D);
+        EXPECT_LT(relativeError(marginals.jointKept(p.tree, x, y), want), 1e-8)
+            << "seed " << seed << " poses " << x << ", " << y;
+      }
+    marginals.forget();  // and again, from nothing kept
+    EXPECT_EQ(marginals.keepSharedCliqueJoints(p.tree, pairs), sharing);
+  }
+}
+
 // ---- The smoother, fed incrementally --------------------------------------------------------
 
 /// A random graph of `n` poses per component: a chain with random loop closures, optionally a
