@@ -128,6 +128,8 @@ std::string RobustOptions::problem() const {
     return bad("rehold_growth", rehold_growth, "0 (off) or finite and > 1");
   if (!(end_scale_gap >= 1) || !std::isfinite(end_scale_gap))
     return bad("end_scale_gap", end_scale_gap, "finite and >= 1");
+  if (!(end_scale_growth == 0 || end_scale_growth > 1) || !std::isfinite(end_scale_growth))
+    return bad("end_scale_growth", end_scale_growth, "0 (off) or finite and > 1");
   if (!(end_backed_margin == 0 || end_backed_margin >= 1) || !std::isfinite(end_backed_margin))
     return bad("end_backed_margin", end_backed_margin, "0 (off) or finite and >= 1");
   if (!(end_backed_pair_margin > 0) || !std::isfinite(end_backed_pair_margin))
@@ -416,14 +418,7 @@ template <class G>
 int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped) {
   int changed = 0;
   dropped->assign(closures_.size(), 0);
-  // The (L) below and in endThreshold are of factors the tree holds: their joints from one
-  // walk down the tree, not a path solve per pose (sphere_bignoise: the end's samples took
-  // 11 of finalize()'s 19 s).
-  std::vector<std::pair<int, int>> held;
-  for (const Factor<G>& f : smoother.factors())
-    if (const Edge* e = f.relativePose(); e != nullptr && f.inlierWeight() > 0)
-      held.emplace_back(e->i, e->j);
-  smoother.keepSharedCliqueJoints(held);
+  keepHeldJoints(smoother);
   c2_end_ = endThreshold(smoother);
   const double bound = options_.final_confirm_margin * c2_end_;
   for (size_t id = 0; id < closures_.size(); ++id) {
@@ -431,6 +426,38 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
     (*dropped)[id] = 1;
     ++changed;
   }
+  return changed;
+}
+
+// The (L) of finalize() and of the end's scale are of factors the tree holds: their joints
+// from one walk down the tree, not a path solve per pose (sphere_bignoise: the end's samples
+// took 11 of finalize()'s 19 s).
+template <class G>
+void OnlineGnc<G>::keepHeldJoints(const IncrementalSmoother<G>& smoother) const {
+  std::vector<std::pair<int, int>> held;
+  for (const Factor<G>& f : smoother.factors())
+    if (const Edge* e = f.relativePose(); e != nullptr && f.inlierWeight() > 0)
+      held.emplace_back(e->i, e->j);
+  smoother.keepSharedCliqueJoints(held);
+}
+
+template <class G>
+int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother) {
+  if (options_.end_scale_growth == 0 || options_.end_scale_samples == 0 || !confirmsAtTheEnd())
+    return 0;
+  const int poses = smoother.numPoses();
+  if (poses < next_reading_) return 0;
+  next_reading_ = static_cast<int>(std::ceil(options_.end_scale_growth * poses));
+  keepHeldJoints(smoother);
+  c2_end_ = endThreshold(smoother);
+  if (c2_end_ >= c2_) return 0;
+  const double bound = options_.final_confirm_margin * c2_end_;
+  int changed = 0;
+  for (Closure& c : closures_)
+    if (unconfirmed(smoother, &c, bound, true)) {
+      c.dropped_on_the_way = true;
+      ++changed;
+    }
   return changed;
 }
 
@@ -739,7 +766,8 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       const double m =
           innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s,
                      recheck_all ? Paths::kKept : Paths::kOnce);
-      const double bound = scope == StepScope::kFinalize ? endBound() : c2_;
+      // A closure the end's scale dropped on the way is taken back by it, as in finalize().
+      const double bound = scope == StepScope::kFinalize || c.dropped_on_the_way ? endBound() : c2_;
       if (m > bound && !(scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, m, bound)))
         continue;
       c.state = State::kSettled;

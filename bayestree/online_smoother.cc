@@ -364,6 +364,14 @@ UpdateStats OnlineSmoother<G>::update() {
     excludeDisabled(first);
     ++stats_.graduation_updates;
   }
+  // The end's scale on the way (RobustOptions::end_scale_growth): its drops in an update of
+  // their own, as finalize()'s are taken in by its next relinearisation.
+  if (gnc_->readEndScaleOnTheWay(smoother_) > 0) {
+    first = smoother_.numFactors();
+    addStats(&total, smoother_.update());
+    gnc_->resolve(smoother_);
+    excludeDisabled(first);
+  }
   return recordUpdate(total);
 }
 

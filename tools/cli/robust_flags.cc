@@ -111,6 +111,10 @@ void addOnlineRobustFlags(po::options_description& options) {
       "with --robust, the final pass re-estimates the threshold from the leave-one-out "
       "innovations of at most this many inliers and as many trusted edges, and uses it where it "
       "is tighter (docs/design.md, \"The end's scale\"); 0: off")(
+      "end-scale-growth", po::value<double>()->default_value(RobustOptions{}.end_scale_growth),
+      "with --robust, X > 1: the end's threshold is read during the replay too, each time the "
+      "poses have grown X times, and where it is tighter the inliers past it are dropped then "
+      "(docs/design.md, \"The end's scale on the way\"); 0: only at the end")(
       "end-backed-margin", po::value<double>()->default_value(RobustOptions{}.end_backed_margin),
       "with --robust, the final pass keeps, or takes back, a loop closure within this many "
       "times the threshold when enough inliers agree with it at the end (docs/design.md, "
@@ -127,20 +131,24 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const int end_samples = vm["end-scale-samples"].as<int>();
   const double rehold = vm["rehold-growth"].as<double>();
   const double backed = vm["end-backed-margin"].as<double>();
+  const double growth = vm["end-scale-growth"].as<double>();
   if (!robust_on &&
       (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
        !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
        !vm["finalize-rounds"].defaulted() || !vm["end-scale-samples"].defaulted() ||
-       !vm["rehold-growth"].defaulted() || !vm["end-backed-margin"].defaulted()))
+       !vm["rehold-growth"].defaulted() || !vm["end-backed-margin"].defaulted() ||
+       !vm["end-scale-growth"].defaulted()))
     throw UsageError(
         "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
-        "--finalize-rounds, --end-scale-samples, --rehold-growth and --end-backed-margin need "
-        "--robust");
+        "--finalize-rounds, --end-scale-samples, --end-scale-growth, --rehold-growth and "
+        "--end-backed-margin need --robust");
   if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
   if (end_samples < 0)
     throw UsageError("--end-scale-samples must be >= 0, not " + std::to_string(end_samples));
   if (!(rehold == 0 || rehold > 1) || !std::isfinite(rehold))
     throw UsageError("--rehold-growth must be 0 (off) or > 1, not " + std::to_string(rehold));
+  if (!(growth == 0 || growth > 1) || !std::isfinite(growth))
+    throw UsageError("--end-scale-growth must be 0 (off) or > 1, not " + std::to_string(growth));
   if (!(backed == 0 || backed >= 1) || !std::isfinite(backed))
     throw UsageError("--end-backed-margin must be 0 (off) or >= 1, not " + std::to_string(backed));
   if (window < 0)
@@ -163,6 +171,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->end_scale_samples = end_samples;
   robust->rehold_growth = rehold;
   robust->end_backed_margin = backed;
+  robust->end_scale_growth = growth;
 }
 
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {
