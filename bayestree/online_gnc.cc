@@ -130,6 +130,8 @@ std::string RobustOptions::problem() const {
     return bad("end_scale_gap", end_scale_gap, "finite and >= 1");
   if (!(end_scale_growth == 0 || end_scale_growth > 1) || !std::isfinite(end_scale_growth))
     return bad("end_scale_growth", end_scale_growth, "0 (off) or finite and > 1");
+  if (!(end_scale_work >= 0) || !std::isfinite(end_scale_work))
+    return bad("end_scale_work", end_scale_work, "finite and >= 0");
   if (!(end_backed_margin == 0 || end_backed_margin >= 1) || !std::isfinite(end_backed_margin))
     return bad("end_backed_margin", end_backed_margin, "0 (off) or finite and >= 1");
   if (!(end_backed_pair_margin > 0) || !std::isfinite(end_backed_pair_margin))
@@ -442,11 +444,15 @@ void OnlineGnc<G>::keepHeldJoints(const IncrementalSmoother<G>& smoother) const 
 }
 
 template <class G>
-int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother) {
+int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double update_flops) {
   if (options_.end_scale_growth == 0 || options_.end_scale_samples == 0 || !confirmsAtTheEnd())
     return 0;
+  flops_since_reading_ += update_flops;
   const int poses = smoother.numPoses();
-  if (poses < next_reading_) return 0;
+  if (poses < next_reading_ ||
+      flops_since_reading_ < options_.end_scale_work * smoother.factorizationFlops())
+    return 0;
+  flops_since_reading_ = 0;
   next_reading_ = static_cast<int>(std::ceil(options_.end_scale_growth * poses));
   keepHeldJoints(smoother);
   c2_end_ = endThreshold(smoother);
@@ -458,6 +464,7 @@ int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother) {
       c.dropped_on_the_way = true;
       ++changed;
     }
+  if (changed > 0) dropped_on_the_way_ = true;
   return changed;
 }
 
@@ -501,7 +508,8 @@ double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const 
   if (!in.estimated || !tr.estimated) return c2_;
   const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
   const double c2 = options_.tail_factor * c2_given_ * sigma2;
-  return c2 * options_.end_scale_gap < c2_ ? c2 : c2_;
+  const double gap = dropped_on_the_way_ ? 1.0 : options_.end_scale_gap;
+  return c2 * gap < c2_ ? c2 : c2_;
 }
 
 template <class G>

@@ -163,17 +163,18 @@
 //                 with 10% random false closures: c² 22386 from the innovations, c²_end 6700 in
 //                 the first pass and about 5000 later, where its true closures' m₋ reach 4760;
 //                 on the other shared robust files c²_end is within 0.6–1.3 of c².
-//   the end's scale on the way (RobustOptions::end_scale_growth, 1.25 by default; 0: off)
-//                 the same reading after an update, each time the poses have grown by that
-//                 factor since the last one: where c²_end is at least end_scale_gap below c²,
-//                 the settled inliers no inlier agrees with are dropped past
-//                 final_confirm_margin·c²_end, as finalize()'s pass drops them, and a closure
-//                 so dropped is taken back only within c²_end. On sphere_bignoise with 10%
-//                 random false closures the false closures come out during the replay, where
-//                 each held the tops it touched open until finalize(): updates 131 → 45 s,
-//                 p99 258 → 88 ms, the same classification to two closures. A reading walks
-//                 the tree twice over (keepSharedCliqueJoints, then the samples), so they are
-//                 spaced geometrically: O(log n) in a replay.
+//   the end's scale on the way (RobustOptions::end_scale_growth, 1.05, and end_scale_work, 2;
+//                 growth 0: off) the same reading after an update, once the poses have grown
+//                 by that factor and the updates re-eliminated that many times the tree's
+//                 factorisation flops since the last one: where c²_end is at least
+//                 end_scale_gap below c², the settled inliers no inlier agrees with are
+//                 dropped past final_confirm_margin·c²_end, as finalize()'s pass drops them,
+//                 and a closure so dropped is taken back only within c²_end. Once a reading
+//                 has dropped closures, the end's scale stands in finalize() wherever it is
+//                 below c² (the drops change σ̂²'s samples, and c² could end within the gap).
+//                 On sphere_bignoise with 10% random false closures the false closures come
+//                 out during the replay, where each held the tops it touched open until
+//                 finalize(): updates 128 → 28–31 s, p99 246 → 41–45 ms, 1.0139 → 1.0107 F*.
 //   backed at the end (RobustOptions::end_backed_margin, 4 by default; 0: off) in finalize()'s
 //                 re-checks a TLS closure that at least end_backed_partners (5) settled inliers
 //                 agree with (P) at the end's estimate, at the closures' own scale (pairS ≤
@@ -293,7 +294,11 @@ struct RobustOptions {
   /// it is at least end_scale_gap times below the c² in use, the settled inliers no inlier
   /// agrees with are dropped past final_confirm_margin times it, as finalize()'s (L) pass
   /// drops them; 0: off, else > 1.
-  double end_scale_growth = 1.25;
+  double end_scale_growth = 1.05;
+  /// ... and only once the updates since the last reading have re-eliminated at least this
+  /// many times the tree's factorisation flops (a reading costs about two), so that readings
+  /// cost a bounded share of the updates' work (≥ 0).
+  double end_scale_work = 2.0;
   /// With WarmUp::kHold: when σ̂² is first estimated and that raises the c² in use at least
   /// this many times, the closures rejected at the c² before (Ω at its word, the loosening rule
   /// having refused an estimate) are held again and judged at the next update as the warm-up's
@@ -438,7 +443,7 @@ class OnlineGnc {
   /// on the way"); where it is at least end_scale_gap times below the c² in use, the settled
   /// inliers no inlier agrees with are dropped past final_confirm_margin times it. Returns the
   /// weights changed (the next smoother update takes them in).
-  int readEndScaleOnTheWay(IncrementalSmoother<G>& smoother);
+  int readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double update_flops);
   /// After a smoother update: the indices of the closures it added.
   void resolve(const IncrementalSmoother<G>& smoother);
   /// After the smoother was rebuilt with the same factors in another order (reseed).
@@ -590,8 +595,12 @@ class OnlineGnc {
   RobustOptions options_;
   double c2_given_ = 0;  ///< RobustOptions::threshold or the χ² quantile
   double c2_ = 0;
-  double c2_end_ = 0;     ///< endThreshold at its last reading (0: none yet)
-  int next_reading_ = 0;  ///< poses at which readEndScaleOnTheWay reads it next
+  double c2_end_ = 0;               ///< endThreshold at its last reading (0: none yet)
+  int next_reading_ = 0;            ///< poses at which readEndScaleOnTheWay reads it next
+  double flops_since_reading_ = 0;  ///< the updates' re-elimination flops since the last one
+  /// A reading on the way dropped closures: the end's scale then stands wherever it is below
+  /// the c² in use, not only end_scale_gap below it.
+  bool dropped_on_the_way_ = false;
   NoiseScaleEstimate estimate_;
   double scale_ = 1.0;
   std::vector<double> innovations_;                   ///< of every judged closure

@@ -366,7 +366,7 @@ UpdateStats OnlineSmoother<G>::update() {
   }
   // The end's scale on the way (RobustOptions::end_scale_growth): its drops in an update of
   // their own, as finalize()'s are taken in by its next relinearisation.
-  if (gnc_->readEndScaleOnTheWay(smoother_) > 0) {
+  if (gnc_->readEndScaleOnTheWay(smoother_, total.reelimination_flops) > 0) {
     first = smoother_.numFactors();
     addStats(&total, smoother_.update());
     gnc_->resolve(smoother_);

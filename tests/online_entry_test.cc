@@ -534,6 +534,8 @@ TEST(OnlineEntry, BadOptionsRefused) {
                    +[](RobustOptions* o) { o->end_scale_gap = std::nan(""); },
                    +[](RobustOptions* o) { o->end_scale_growth = 1.0; },
                    +[](RobustOptions* o) { o->end_scale_growth = -1.25; },
+                   +[](RobustOptions* o) { o->end_scale_work = -1.0; },
+                   +[](RobustOptions* o) { o->end_scale_work = std::nan(""); },
                    +[](RobustOptions* o) { o->rehold_growth = 1.0; },
                    +[](RobustOptions* o) { o->rehold_growth = -2.0; },
                    +[](RobustOptions* o) { o->end_backed_margin = 0.5; },
