@@ -83,7 +83,7 @@ TEST(EndScale, DropsTheFalseClosuresTheEntrysScaleLetsIn) {
 // The end's scale read on the way (RobustOptions::end_scale_growth, end_scale_work): read again
 // as the poses and the updates' work grow, and where it is far below the c² in use the false
 // closures come out during the replay, not only in finalize(), so the updates after carry
-// less fill. Measured: on the whole file the updates take 28–31 s against 128 s without.
+// less fill. Measured: on the whole file the updates take 28 s against 128 s without.
 TEST(EndScale, ReadOnTheWayDropsBeforeTheEnd) {
   if (!present()) GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kRobust);
   const PoseGraph3 graph = firstPoses(kRobust), clean = firstPoses(kClean);
