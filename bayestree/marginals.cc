@@ -201,7 +201,41 @@ void TreeMarginals<D>::forget() {
   kept_pairs_.clear();
 }
 
-// all()'s walk, restricted to the cliques the pairs are read at and their ancestors: each
+template <int D>
+template <class Visit>
+void TreeMarginals<D>::walkJoints(const BayesTree<D>& tree, const std::vector<char>* needed,
+                                  Visit&& visit) {
+  const int nc = static_cast<int>(tree.cliques.size());
+  auto marked = [&](int c) { return needed == nullptr || (*needed)[c]; };
+  std::vector<Eigen::MatrixXd> joint(nc);
+  std::vector<int> waiting(nc, 0);
+  std::vector<int> stack;
+  for (int r : tree.roots)
+    if (marked(r)) stack.push_back(r);
+  Eigen::MatrixXd X;
+  auto release = [&](int c) {  // c and every ancestor whose marked children are all done
+    while (c >= 0 && waiting[c] == 0) {
+      joint[c].resize(0, 0);
+      c = tree.cliques[c].parent;
+      if (c >= 0) --waiting[c];
+    }
+  };
+  while (!stack.empty()) {
+    const int c = stack.back();
+    stack.pop_back();
+    const Clique<D>& k = tree.cliques[c];
+    jointOf(tree, c, k.parent >= 0 ? &joint[k.parent] : nullptr, &joint[c], &X);
+    visit(c, joint[c]);
+    for (int ch : k.children)
+      if (marked(ch)) {
+        stack.push_back(ch);
+        ++waiting[c];
+      }
+    release(c);
+  }
+}
+
+// The walk of all(), restricted to the cliques the pairs are read at and their ancestors: each
 // pair at the clique of whichever of its variables holds the other among its [frontals;
 // separator] (a factor's two variables: the one eliminated first, whose clique's separator
 // or frontals hold the other).
@@ -230,77 +264,34 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
     }
   }
   if (at.empty()) return 0;
-  // The cliques needed: those the pairs are read at and their ancestors; each keeps its
-  // joint until its needed children have read it.
+  // The cliques needed: those the pairs are read at and their ancestors.
   std::vector<char> needed(nc, 0);
-  std::vector<int> waiting(nc, 0);
   for (const auto& entry : at)
-    for (int c = entry.first; c >= 0 && !needed[c]; c = tree.cliques[c].parent) {
-      needed[c] = 1;
-      if (tree.cliques[c].parent >= 0) ++waiting[tree.cliques[c].parent];
-    }
-  std::vector<Eigen::MatrixXd> joint(nc);
-  std::vector<int> stack;
-  for (int r : tree.roots)
-    if (needed[r]) stack.push_back(r);
-  Eigen::MatrixXd X;
+    for (int c = entry.first; c >= 0 && !needed[c]; c = tree.cliques[c].parent) needed[c] = 1;
   int count = 0;
-  auto release = [&](int c) {  // c and every ancestor whose needed children are all done
-    while (c >= 0 && waiting[c] == 0) {
-      joint[c].resize(0, 0);
-      c = tree.cliques[c].parent;
-      if (c >= 0) --waiting[c];
-    }
-  };
-  while (!stack.empty()) {
-    const int c = stack.back();
-    stack.pop_back();
+  walkJoints(tree, &needed, [&](int c, const Eigen::MatrixXd& joint) {
+    const auto it = at.find(c);
+    if (it == at.end()) return;
     const Clique<D>& k = tree.cliques[c];
-    jointOf(tree, c, k.parent >= 0 ? &joint[k.parent] : nullptr, &joint[c], &X);
-    if (const auto it = at.find(c); it != at.end()) {
-      for (const auto& [a, b] : it->second) {
-        const int pa = position(k, a) * D, pb = position(k, b) * D;
-        JointBlock& out = kept_pairs_[pairKey(a, b)];
-        out << joint[c].template block<D, D>(pa, pa), joint[c].template block<D, D>(pa, pb),
-            joint[c].template block<D, D>(pb, pa), joint[c].template block<D, D>(pb, pb);
-        ++count;
-      }
+    for (const auto& [a, b] : it->second) {
+      const int pa = position(k, a) * D, pb = position(k, b) * D;
+      kept_pairs_[pairKey(a, b)] << joint.template block<D, D>(pa, pa),
+          joint.template block<D, D>(pa, pb), joint.template block<D, D>(pb, pa),
+          joint.template block<D, D>(pb, pb);
+      ++count;
     }
-    for (int ch : k.children)
-      if (needed[ch]) stack.push_back(ch);
-    release(c);
-  }
+  });
   return count;
 }
 
-// Depth first from the roots; a clique's joint is kept until its last child has read it, so the
-// memory held is that of the cliques on the current path and their waiting siblings' parents.
 template <int D>
 void TreeMarginals<D>::all(const BayesTree<D>& tree, std::vector<Block>* out) {
-  const int nc = static_cast<int>(tree.cliques.size());
-  std::vector<Eigen::MatrixXd> joint(nc);
-  std::vector<int> waiting(nc, 0);
-  std::vector<int> stack(tree.roots.begin(), tree.roots.end());
-  Eigen::MatrixXd X;
-  auto release = [&](int c) {  // c and every ancestor whose children are all done
-    while (c >= 0 && waiting[c] == 0) {
-      joint[c].resize(0, 0);
-      c = tree.cliques[c].parent;
-      if (c >= 0) --waiting[c];
-    }
-  };
-  while (!stack.empty()) {
-    const int c = stack.back();
-    stack.pop_back();
+  walkJoints(tree, nullptr, [&](int c, const Eigen::MatrixXd& joint) {
     const Clique<D>& k = tree.cliques[c];
-    jointOf(tree, c, k.parent >= 0 ? &joint[k.parent] : nullptr, &joint[c], &X);
     for (size_t a = 0; a < k.frontals.size(); ++a)
       (*out)[k.frontals[a]] =
-          joint[c].template block<D, D>(static_cast<int>(a) * D, static_cast<int>(a) * D);
-    waiting[c] = static_cast<int>(k.children.size());
-    for (int ch : k.children) stack.push_back(ch);
-    release(c);
-  }
+          joint.template block<D, D>(static_cast<int>(a) * D, static_cast<int>(a) * D);
+  });
 }
 
 // With H = RᵀR (R the tree's square-root information, block row [Lᵀ | Bᵀ] per clique, [L; B]

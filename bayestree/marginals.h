@@ -104,6 +104,12 @@ class TreeMarginals {
   /// (1) for clique c, given its parent's joint (null for a root): its joint.
   static void jointOf(const BayesTree<D>& tree, int c, const Eigen::MatrixXd* parent,
                       Eigen::MatrixXd* joint, Eigen::MatrixXd* X);
+  /// Depth first from the roots over the cliques `needed` marks (null: every clique; a marked
+  /// clique's ancestors must be marked too): each clique's joint by (1) from its parent's,
+  /// handed to visit(c, joint) and kept until its last marked child has read it, so the memory
+  /// held is that of the cliques on the current path and their waiting siblings' parents.
+  template <class Visit>
+  static void walkJoints(const BayesTree<D>& tree, const std::vector<char>* needed, Visit&& visit);
   /// Position of v (block index) among clique c's frontals then separator.
   static int position(const Clique<D>& c, int v);
 

@@ -33,18 +33,32 @@ double relativeError(const Eigen::MatrixXd& got, const Eigen::MatrixXd& want) {
 
 // ---- The unit, on a whole-graph elimination -----------------------------------------------
 
+// Eliminates the whole of p into its tree and returns H⁻¹ of its dense system.
+Eigen::MatrixXd eliminateAndInvert(testing::SmallProblem* p) {
+  p->linearizeAll();
+  bayestree::TopElimination<SE2> elimination;
+  p->eliminateAll(&elimination);
+  Eigen::MatrixXd H;
+  Eigen::VectorXd g;
+  p->denseSystem(&H, &g);
+  return H.ldlt().solve(Eigen::MatrixXd::Identity(H.rows(), H.cols()));
+}
+
+// [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] of variables a and b (D each) from the dense Σ.
+template <int D>
+Eigen::MatrixXd denseJoint(const Eigen::MatrixXd& Sigma, int a, int b) {
+  Eigen::MatrixXd joint(2 * D, 2 * D);
+  joint << Sigma.block<D, D>(a * D, a * D), Sigma.block<D, D>(a * D, b * D),
+      Sigma.block<D, D>(b * D, a * D), Sigma.block<D, D>(b * D, b * D);
+  return joint;
+}
+
 TEST(TreeMarginals, EveryMarginalAndJointMatchTheDenseInverse) {
   constexpr int D = 3;
   int cross_branch = 0, same_clique = 0, ancestor = 0;
   for (unsigned seed = 1; seed <= 6; ++seed) {
     testing::SmallProblem p(18, 5, seed);
-    p.linearizeAll();
-    bayestree::TopElimination<SE2> elimination;
-    p.eliminateAll(&elimination);
-    Eigen::MatrixXd H;
-    Eigen::VectorXd g;
-    p.denseSystem(&H, &g);
-    const Eigen::MatrixXd Sigma = H.ldlt().solve(Eigen::MatrixXd::Identity(H.rows(), H.cols()));
+    const Eigen::MatrixXd Sigma = eliminateAndInvert(&p);
     bayestree::TreeMarginals<D> marginals;
     const std::vector<int> vars = p.variables();
     for (int v : vars) {
@@ -61,10 +75,7 @@ TEST(TreeMarginals, EveryMarginalAndJointMatchTheDenseInverse) {
           ++ancestor;
         else
           ++cross_branch;
-        Eigen::MatrixXd want(2 * D, 2 * D);
-        want << Sigma.block<D, D>(a * D, a * D), Sigma.block<D, D>(a * D, b * D),
-            Sigma.block<D, D>(b * D, a * D), Sigma.block<D, D>(b * D, b * D);
-        EXPECT_LT(relativeError(marginals.joint(p.tree, a, b), want), 1e-8)
+        EXPECT_LT(relativeError(marginals.joint(p.tree, a, b), denseJoint<D>(Sigma, a, b)), 1e-8)
             << "seed " << seed << " poses " << a << ", " << b;
       }
   }
@@ -80,13 +91,7 @@ TEST(TreeMarginals, SharedCliqueJointsMatchTheDenseInverse) {
   constexpr int D = 3;
   for (unsigned seed = 1; seed <= 6; ++seed) {
     testing::SmallProblem p(18, 5, seed);
-    p.linearizeAll();
-    bayestree::TopElimination<SE2> elimination;
-    p.eliminateAll(&elimination);
-    Eigen::MatrixXd H;
-    Eigen::VectorXd g;
-    p.denseSystem(&H, &g);
-    const Eigen::MatrixXd Sigma = H.ldlt().solve(Eigen::MatrixXd::Identity(H.rows(), H.cols()));
+    const Eigen::MatrixXd Sigma = eliminateAndInvert(&p);
     const std::vector<int> vars = p.variables();
     auto holds = [&](int c, int v) {
       const auto& k = p.tree.cliques[c];
@@ -115,10 +120,8 @@ TEST(TreeMarginals, SharedCliqueJointsMatchTheDenseInverse) {
     EXPECT_LT(sharing, static_cast<int>(pairs.size()));  // some are left to the path solves
     for (const auto& [a, b] : pairs)
       for (const auto& [x, y] : {std::pair{a, b}, std::pair{b, a}}) {
-        Eigen::MatrixXd want(2 * D, 2 * D);
-        want << Sigma.block<D, D>(x * D, x * D), Sigma.block<D, D>(x * D, y * D),
-            Sigma.block<D, D>(y * D, x * D), Sigma.block<D, D>(y * D, y * D);
-        EXPECT_LT(relativeError(marginals.jointKept(p.tree, x, y), want), 1e-8)
+        EXPECT_LT(relativeError(marginals.jointKept(p.tree, x, y), denseJoint<D>(Sigma, x, y)),
+                  1e-8)
             << "seed " << seed << " poses " << x << ", " << y;
       }
     marginals.forget();  // and again, from nothing kept
@@ -255,9 +258,7 @@ void expectMatchesDense(const IncrementalSmoother<G>& s, const std::string& what
   }
   for (int a = 0; a < n; ++a)
     for (int b = 0; b < n; ++b) {
-      Eigen::MatrixXd want(2 * D, 2 * D);
-      want << Sigma.block<D, D>(a * D, a * D), Sigma.block<D, D>(a * D, b * D),
-          Sigma.block<D, D>(b * D, a * D), Sigma.block<D, D>(b * D, b * D);
+      const Eigen::MatrixXd want = denseJoint<D>(Sigma, a, b);
       const Eigen::MatrixXd got = s.jointMarginalCovariance(a, b);
       if (want.norm() == 0) {
         EXPECT_EQ(got.norm(), 0.0) << what << " poses " << a << ", " << b;

@@ -113,8 +113,9 @@ void addOnlineRobustFlags(po::options_description& options) {
       "is tighter (docs/design.md, \"The end's scale\"); 0: off")(
       "end-scale-growth", po::value<double>()->default_value(RobustOptions{}.end_scale_growth),
       "with --robust, X > 1: the end's threshold is read during the replay too, each time the "
-      "poses have grown X times, and where it is tighter the inliers past it are dropped then "
-      "(docs/design.md, \"The end's scale on the way\"); 0: only at the end")(
+      "poses have grown X times and the updates' work with them, and where it is tighter the "
+      "inliers past it are dropped then (docs/design.md, \"The end's scale on the way\"); 0: "
+      "only at the end")(
       "end-backed-margin", po::value<double>()->default_value(RobustOptions{}.end_backed_margin),
       "with --robust, the final pass keeps, or takes back, a loop closure within this many "
       "times the threshold when enough inliers agree with it at the end (docs/design.md, "
