@@ -8,21 +8,28 @@
 namespace arbor {
 namespace {
 
-// r at the estimate and AΣAᵀ; false when a pose has no Σ yet.
+// What AΣAᵀ (or its bound) is read as.
+enum class Prediction { kOnce, kKept, kBound };
+
+// r at the estimate and AΣAᵀ (kBound: the bound B ⪰ AΣAᵀ); false when a pose has no Σ yet.
 template <class G>
 bool residualAndPrediction(const IncrementalSmoother<G>& smoother, const RelativePoseEdge<G>& edge,
-                           typename IncrementalSmoother<G>::PredictionPaths paths,
-                           typename RelativePoseEdge<G>::Vector* r,
+                           Prediction prediction, typename RelativePoseEdge<G>::Vector* r,
                            typename RelativePoseEdge<G>::Matrix* P) {
   using Matrix = typename RelativePoseEdge<G>::Matrix;
   using Vector = typename RelativePoseEdge<G>::Vector;
+  using Paths = typename IncrementalSmoother<G>::PredictionPaths;
   const auto& theta = smoother.linearizationPoint();
   Matrix A_i, A_j;
   Vector r_theta;
   edge.linearize(theta[static_cast<size_t>(edge.i)], theta[static_cast<size_t>(edge.j)], &A_i, &A_j,
                  &r_theta);
   try {
-    *P = smoother.predictionCovariance(edge.i, A_i, edge.j, A_j, paths);
+    *P = prediction == Prediction::kBound
+             ? smoother.predictionCovarianceBound(edge.i, A_i, edge.j, A_j)
+             : smoother.predictionCovariance(
+                   edge.i, A_i, edge.j, A_j,
+                   prediction == Prediction::kKept ? Paths::kKept : Paths::kOnce);
   } catch (const std::logic_error&) {
     return false;  // a pose not through an update yet
   }
@@ -35,6 +42,12 @@ std::optional<double> finite(double m) {
   return m;
 }
 
+template <class G>
+Prediction predictionOf(typename IncrementalSmoother<G>::PredictionPaths paths) {
+  return paths == IncrementalSmoother<G>::PredictionPaths::kKept ? Prediction::kKept
+                                                                 : Prediction::kOnce;
+}
+
 }  // namespace
 
 template <class G>
@@ -44,8 +57,18 @@ std::optional<double> closureInnovation(const IncrementalSmoother<G>& smoother,
   using Matrix = typename RelativePoseEdge<G>::Matrix;
   typename RelativePoseEdge<G>::Vector r;
   Matrix P;
-  if (!residualAndPrediction(smoother, edge, paths, &r, &P)) return std::nullopt;
+  if (!residualAndPrediction(smoother, edge, predictionOf<G>(paths), &r, &P)) return std::nullopt;
   return finite(r.dot((Matrix::Identity() + P).ldlt().solve(r)));
+}
+
+template <class G>
+std::optional<double> closureInnovationLowerBound(const IncrementalSmoother<G>& smoother,
+                                                  const RelativePoseEdge<G>& edge) {
+  using Matrix = typename RelativePoseEdge<G>::Matrix;
+  typename RelativePoseEdge<G>::Vector r;
+  Matrix B;
+  if (!residualAndPrediction(smoother, edge, Prediction::kBound, &r, &B)) return std::nullopt;
+  return finite(r.dot((Matrix::Identity() + B).ldlt().solve(r)));
 }
 
 template <class G>
@@ -55,7 +78,7 @@ std::optional<double> leaveOneOutInnovation(
   using Matrix = typename RelativePoseEdge<G>::Matrix;
   typename RelativePoseEdge<G>::Vector r;
   Matrix P;
-  if (!residualAndPrediction(smoother, edge, paths, &r, &P)) return std::nullopt;
+  if (!residualAndPrediction(smoother, edge, predictionOf<G>(paths), &r, &P)) return std::nullopt;
   const Eigen::LLT<Matrix> llt(Matrix::Identity() - P);
   if (llt.info() != Eigen::Success) return std::nullopt;
   return finite(r.dot(llt.solve(r)));
@@ -67,6 +90,10 @@ template std::optional<double> closureInnovation(const IncrementalSmoother<SE2>&
 template std::optional<double> closureInnovation(const IncrementalSmoother<SE3>&,
                                                  const RelativePoseEdge<SE3>&,
                                                  IncrementalSmoother<SE3>::PredictionPaths);
+template std::optional<double> closureInnovationLowerBound(const IncrementalSmoother<SE2>&,
+                                                           const RelativePoseEdge<SE2>&);
+template std::optional<double> closureInnovationLowerBound(const IncrementalSmoother<SE3>&,
+                                                           const RelativePoseEdge<SE3>&);
 template std::optional<double> leaveOneOutInnovation(const IncrementalSmoother<SE2>&,
                                                      const RelativePoseEdge<SE2>&,
                                                      IncrementalSmoother<SE2>::PredictionPaths);

@@ -13,6 +13,11 @@
 //       I + AΣ₋Aᵀ = (I − AΣAᵀ)⁻¹; and one Gauss–Newton step adding it moves the residual from r₋
 //       to r = (I − AΣAᵀ) r₋. Hence m₋ = r₋ᵀ (I + AΣ₋Aᵀ)⁻¹ r₋ = rᵀ (I − AΣAᵀ)⁻¹ r: what keeping
 //       it costs the whole linearised objective, to first order.
+//   (E) from below, without Σ_ab: with B = 2 (A_i Σ_ii A_iᵀ + A_j Σ_jj A_jᵀ) ⪰ A Σ Aᵀ
+//       (IncrementalSmoother::predictionCovarianceBound), (I + A Σ Aᵀ)⁻¹ ⪰ (I + B)⁻¹, so
+//         m ≥ m_lb = rᵀ (I + B)⁻¹ r.
+//       A closure with m_lb past a bound is past it by (E) too, from the two poses' marginals
+//       alone (kept from one walk down the tree) instead of their path solves.
 //
 // The online GNC (bayestree/online_gnc.h) judges closures by them.
 #pragma once
@@ -34,6 +39,11 @@ std::optional<double> closureInnovation(const IncrementalSmoother<G>& smoother,
                                         typename IncrementalSmoother<G>::PredictionPaths paths =
                                             IncrementalSmoother<G>::PredictionPaths::kOnce);
 
+/// m_lb ≤ (E) (above): std::nullopt where (E) would be.
+template <class G>
+std::optional<double> closureInnovationLowerBound(const IncrementalSmoother<G>& smoother,
+                                                  const RelativePoseEdge<G>& edge);
+
 /// (L): std::nullopt when a pose has no Σ, I − AΣAᵀ is not positive definite (the edge is not
 /// in the tree at weight 1: it cannot explain more than all of its own residual) or m₋ is not
 /// finite.
@@ -49,6 +59,10 @@ extern template std::optional<double> closureInnovation(const IncrementalSmoothe
 extern template std::optional<double> closureInnovation(const IncrementalSmoother<SE3>&,
                                                         const RelativePoseEdge<SE3>&,
                                                         IncrementalSmoother<SE3>::PredictionPaths);
+extern template std::optional<double> closureInnovationLowerBound(const IncrementalSmoother<SE2>&,
+                                                                  const RelativePoseEdge<SE2>&);
+extern template std::optional<double> closureInnovationLowerBound(const IncrementalSmoother<SE3>&,
+                                                                  const RelativePoseEdge<SE3>&);
 extern template std::optional<double> leaveOneOutInnovation(
     const IncrementalSmoother<SE2>&, const RelativePoseEdge<SE2>&,
     IncrementalSmoother<SE2>::PredictionPaths);

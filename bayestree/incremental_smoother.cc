@@ -247,6 +247,19 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
+  // predictionCovariance's poses: in range and in the tree (or fixed).
+  void checkPredictionPoses(int a, int b) const {
+    for (int v : {a, b}) {
+      if (v < 0 || v >= numPoses())
+        throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
+                                std::to_string(v) + ": out of range (" +
+                                std::to_string(numPoses()) + " poses)");
+      if (!fixed[v] && tree.clique_of[v] < 0)
+        throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
+                               std::to_string(v) +
+                               ": not in the Bayes tree yet (call update() first)");
+    }
+  }
   // A relinearisation job or its catch-up in flight (no check runs; changes are recorded).
   bool relinearizationPending() const { return async.pending() || catch_up.pending(); }
   // Per pose, 1 when it is not a variable of the tree: held fixed, or not in it (yet).
@@ -1455,16 +1468,7 @@ auto IncrementalSmoother<G>::predictionCovariance(int a,
                                                   PredictionPaths paths) const
     -> Eigen::Matrix<double, kDoF, kDoF> {
   const Impl& m = *impl_;
-  for (int v : {a, b}) {
-    if (v < 0 || v >= m.numPoses())
-      throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
-                              std::to_string(v) + ": out of range (" +
-                              std::to_string(m.numPoses()) + " poses)");
-    if (!m.fixed[v] && m.tree.clique_of[v] < 0)
-      throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
-                             std::to_string(v) +
-                             ": not in the Bayes tree yet (call update() first)");
-  }
+  m.checkPredictionPoses(a, b);
   if (paths == PredictionPaths::kOnce)
     return bayestree::TreeMarginals<kDoF>::predicted(m.tree, {a, b}, {A_a, A_b});
   // A Σ Aᵀ = [A_a A_b] [[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]] [A_a A_b]ᵀ (a fixed pose: zero rows; a = b:
@@ -1472,6 +1476,18 @@ auto IncrementalSmoother<G>::predictionCovariance(int a,
   Eigen::Matrix<double, kDoF, 2 * kDoF> A;
   A << A_a, A_b;
   return A * m.marginals.jointKept(m.tree, a, b) * A.transpose();
+}
+
+template <class G>
+auto IncrementalSmoother<G>::predictionCovarianceBound(
+    int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
+    const Eigen::Matrix<double, kDoF, kDoF>& A_b) const -> Eigen::Matrix<double, kDoF, kDoF> {
+  const Impl& m = *impl_;
+  m.checkPredictionPoses(a, b);
+  Eigen::Matrix<double, kDoF, kDoF> out = Eigen::Matrix<double, kDoF, kDoF>::Zero();
+  for (const auto& [v, A_v] : {std::pair{a, &A_a}, std::pair{b, &A_b}})
+    if (!m.fixed[v]) out.noalias() += *A_v * m.marginals.marginalKept(m.tree, v) * A_v->transpose();
+  return 2 * out;
 }
 
 template <class G>

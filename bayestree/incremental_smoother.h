@@ -397,6 +397,15 @@ class IncrementalSmoother {
       int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
       const Eigen::Matrix<double, kDoF, kDoF>& A_b,
       PredictionPaths paths = PredictionPaths::kOnce) const;
+  /// An upper bound B ⪰ A Σ Aᵀ (Loewner order) of predictionCovariance from the two poses'
+  /// marginals alone, without Σ_ab: B = 2 (A_a Σ_aa A_aᵀ + A_b Σ_bb A_bᵀ), since
+  /// 2 diag(Σ_aa, Σ_bb) − Σ = J Σ J ⪰ 0 with J = diag(I, −I). The marginals as kKept reads
+  /// them (TreeMarginals::marginalKept: keepSharedCliqueJoints' walk, else a kept path solve),
+  /// so after keepSharedCliqueJoints it costs no path solve for the poses the walk reached.
+  /// Throws as predictionCovariance.
+  Eigen::Matrix<double, kDoF, kDoF> predictionCovarianceBound(
+      int a, const Eigen::Matrix<double, kDoF, kDoF>& A_a, int b,
+      const Eigen::Matrix<double, kDoF, kDoF>& A_b) const;
   /// Before many kKept queries on one tree: the joint covariance of every pair of poses that
   /// share a clique (the two poses of every factor the tree holds) read off one walk down the
   /// tree instead of each pose's path solve (TreeMarginals::keepSharedCliqueJoints), kept until

@@ -199,6 +199,16 @@ void TreeMarginals<D>::forget() {
   std::lock_guard<std::mutex> lock(mutex_);
   kept_.clear();
   kept_pairs_.clear();
+  kept_marginals_.clear();
+}
+
+template <int D>
+typename TreeMarginals<D>::Block TreeMarginals<D>::marginalKept(const BayesTree<D>& tree, int v) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (const auto it = kept_marginals_.find(v); it != kept_marginals_.end()) return it->second;
+  auto [it, fresh] = kept_.try_emplace(v);
+  if (fresh) it->second.second = solvePath(tree, v, &it->second.first, &by_);
+  return it->second.second;
 }
 
 template <int D>
@@ -270,9 +280,13 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
     for (int c = entry.first; c >= 0 && !needed[c]; c = tree.cliques[c].parent) needed[c] = 1;
   int count = 0;
   walkJoints(tree, &needed, [&](int c, const Eigen::MatrixXd& joint) {
+    const Clique<D>& k = tree.cliques[c];
+    for (size_t f = 0; f < k.frontals.size(); ++f) {
+      const int at_f = static_cast<int>(f) * D;
+      kept_marginals_[k.frontals[f]] = joint.template block<D, D>(at_f, at_f);
+    }
     const auto it = at.find(c);
     if (it == at.end()) return;
-    const Clique<D>& k = tree.cliques[c];
     for (const auto& [a, b] : it->second) {
       const int pa = position(k, a) * D, pb = position(k, b) * D;
       kept_pairs_[pairKey(a, b)] << joint.template block<D, D>(pa, pa),

@@ -75,11 +75,16 @@ class TreeMarginals {
   /// one walk (1) down the cliques the pairs need and their ancestors, and kept, as the path
   /// solves are, until forget(). jointKept() answers those pairs from it; other pairs (and
   /// pairs with a constant) still take path solves. About one factorisation's flops however
-  /// many pairs, where a path solve per pose costs its path's cliques each. Returns how many
+  /// many pairs, where a path solve per pose costs its path's cliques each. The walk keeps the
+  /// marginal of every frontal of the cliques it visits too (marginalKept). Returns how many
   /// of the pairs were kept.
   int keepSharedCliqueJoints(const BayesTree<D>& tree,
                              const std::vector<std::pair<int, int>>& pairs);
-  /// Drops the kept path solves and joints.
+  /// Σ_vv from what is kept until forget(): keepSharedCliqueJoints' walk (the marginal of
+  /// every frontal of the cliques it visited) or jointKept's path solve of v, else v's path
+  /// solve, then kept (v frontal in some clique).
+  Block marginalKept(const BayesTree<D>& tree, int v);
+  /// Drops the kept path solves, joints and marginals.
   void forget();
   /// (*out)[v] = Σ_vv for every variable frontal in the tree (others untouched), in one walk
   /// down the tree (1) that keeps a clique's joint only until its children have read it. out
@@ -124,6 +129,8 @@ class TreeMarginals {
   std::unordered_map<int, std::pair<PathSolve, Block>> kept_;
   /// keepSharedCliqueJoints' joints, by pair (a, b) as given, until forget().
   std::unordered_map<std::uint64_t, JointBlock> kept_pairs_;
+  /// keepSharedCliqueJoints' Σ_vv of the frontals of the cliques it visited, until forget().
+  std::unordered_map<int, Block> kept_marginals_;
   static std::uint64_t pairKey(int a, int b) {
     return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) |
            static_cast<std::uint32_t>(b);

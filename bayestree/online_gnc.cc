@@ -273,7 +273,7 @@ double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure
                       .compose(smoother.estimate(d).inverse())
                       .compose(xb);
   const typename Edge::Vector e = relativePoseError(a.z, G::Identity(), z_hat);
-  const typename Edge::Matrix cov = a.information.inverse() + b.information.inverse();
+  const typename Edge::Matrix cov = a.covariance + b.covariance;
   const double s = e.dot(cov.ldlt().solve(e));
   return std::isfinite(s) ? s : std::numeric_limits<double>::infinity();
 }
@@ -322,6 +322,15 @@ double OnlineGnc<G>::innovation(const IncrementalSmoother<G>& smoother, const Ed
   if (options_.entry == EntryTest::kResidual) return s;
   const std::optional<double> m = closureInnovation(smoother, edge, paths);
   return m ? std::min(*m, s) : s;  // no Σ (a pose not through an update yet): s
+}
+
+// min(m_lb, s) ≤ min(m, s) = innovation(): past a bound, innovation() is past it too.
+template <class G>
+double OnlineGnc<G>::innovationLowerBound(const IncrementalSmoother<G>& smoother, const Edge& edge,
+                                          double s) const {
+  if (options_.entry == EntryTest::kResidual) return s;
+  const std::optional<double> m = closureInnovationLowerBound(smoother, edge);
+  return m ? std::min(*m, s) : 0.0;  // no Σ: nothing known from below
 }
 
 template <class G>
@@ -611,7 +620,7 @@ double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key
   c.i = edge.i;
   c.j = edge.j;
   c.z = edge.measurement;
-  c.information = edge.information;
+  c.covariance = edge.information.inverse();
   if (trust == EdgeTrust::kTrusted || structural) {
     c.state = State::kTrusted;
   } else {
@@ -771,12 +780,21 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       // (σ̂² after the warm-up), and in finalize() (a path to the root each: not every update).
       if (!recheck_all && c2_ <= 1.1 * c.judged_c2) continue;
       c.judged_c2 = c2_;
-      const double m =
-          innovation(smoother, *smoother.factors()[static_cast<size_t>(c.factor)].relativePose(), s,
-                     recheck_all ? Paths::kKept : Paths::kOnce);
+      const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
       // A closure the end's scale dropped on the way is taken back by it, as in finalize().
       const double bound = scope == StepScope::kFinalize || c.dropped_on_the_way ? endBound() : c2_;
-      if (m > bound && !(scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, m, bound)))
+      // Out by (E) = m (past the bound and, in finalize(), not backed within its margin); both
+      // hold for m when they hold for m's lower bound (the poses' marginals, no path solve),
+      // which comes first where the paths are kept (the marginals come from them).
+      auto staysOut = [&](double m) {
+        return m > bound &&
+               !(scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, m, bound));
+      };
+      if (recheck_all && staysOut(innovationLowerBound(smoother, edge, s))) {
+        ++totals_.rechecks_bounded;
+        continue;
+      }
+      if (staysOut(innovation(smoother, edge, s, recheck_all ? Paths::kKept : Paths::kOnce)))
         continue;
       c.state = State::kSettled;
       setWeight(smoother, &c, 1.0);

@@ -417,8 +417,10 @@ struct ClosureCounts {
   int graduating = 0;        ///< of inlier + outlier, those not settled yet
   int graduation_steps = 0;  ///< weight changes made by graduation, in total
   int rechecks = 0;          ///< settled closures re-checked, in total
-  int regraduated = 0;       ///< re-checks that changed a settled closure's weight
-  int unconfirmed = 0;       ///< inliers set to weight 0 by (L), online or in finalize()
+  /// of the rechecks of rejected closures, those (E)'s lower bound kept out without a path solve
+  int rechecks_bounded = 0;
+  int regraduated = 0;  ///< re-checks that changed a settled closure's weight
+  int unconfirmed = 0;  ///< inliers set to weight 0 by (L), online or in finalize()
 };
 
 template <class G>
@@ -508,7 +510,7 @@ class OnlineGnc {
     double m = 0;                     ///< its innovation on entry
     bool corroborated = false;        ///< another closure agrees with it (P)
     std::vector<int> partners;  ///< agreeing closures (P) by id, both spansLoop (recordsPartners)
-    typename Edge::Matrix information = Edge::Matrix::Identity();
+    typename Edge::Matrix covariance = Edge::Matrix::Identity();  ///< Ω⁻¹ of its measurement
   };
 
   RobustKernel kernelAt(const Closure& c, double mu) const;
@@ -527,6 +529,10 @@ class OnlineGnc {
   /// `paths`: kKept when many closures are judged on one tree (finalize(), a re-check of all).
   double innovation(const IncrementalSmoother<G>& smoother, const Edge& edge, double s,
                     Paths paths = Paths::kOnce) const;
+  /// ≤ innovation(): from (E)'s lower bound (closure_innovation.h), the poses' marginals as
+  /// kKept reads them; 0 where Σ is not there.
+  double innovationLowerBound(const IncrementalSmoother<G>& smoother, const Edge& edge,
+                              double s) const;
   /// Whether a closure that agreed with c (P) is a settled inlier now; with `now`, one that
   /// still agrees with it at that smoother's estimate.
   bool backed(const Closure& c, const IncrementalSmoother<G>* now = nullptr) const;

@@ -637,6 +637,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.closures_graduating = c.graduating;
     s.graduation_steps = c.graduation_steps;
     s.closures_unconfirmed = c.unconfirmed;
+    s.rechecks_bounded = c.rechecks_bounded;
     s.closure_threshold = gnc_->threshold();
     s.closure_threshold_at_end = gnc_->thresholdAtEnd();
     s.noise_scale = gnc_->noiseScale();

@@ -135,6 +135,9 @@ struct OnlineStats {
   int graduation_updates = 0;
   /// Inliers dropped by their leave-one-out innovation (ClosureCounts::unconfirmed).
   int closures_unconfirmed = 0;
+  /// Re-checks of rejected closures that (E)'s lower bound settled without a path solve
+  /// (ClosureCounts::rechecks_bounded).
+  int rechecks_bounded = 0;
   /// Relinearisations of everything at the warm-up's end (OnlineSmoother::update): one in a
   /// run whose σ̂² came while closures were held, else 0.
   int warm_up_relinearizations = 0;

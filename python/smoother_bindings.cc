@@ -51,6 +51,7 @@ py::dict statsDict(const OnlineStats& s) {
   d["closures_excluded"] = s.closures_excluded;
   d["closures_graduating"] = s.closures_graduating;
   d["closures_unconfirmed"] = s.closures_unconfirmed;
+  d["rechecks_bounded"] = s.rechecks_bounded;
   d["graduation_steps"] = s.graduation_steps;
   d["graduation_updates"] = s.graduation_updates;
   d["warm_up_relinearizations"] = s.warm_up_relinearizations;

@@ -6,6 +6,7 @@
 // Deterministic: fixed seeds, no timing.
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
 #include <set>
 #include <vector>
@@ -13,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
+#include "arbor/bayestree/closure_innovation.h"
 #include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/tests/random_graphs.h"
@@ -196,6 +198,75 @@ void keptPathSolvesFollowTheTree() {
 
 TEST(OnlineEntry, KeptPathSolvesFollowTheTree2D) { keptPathSolvesFollowTheTree<SE2>(); }
 TEST(OnlineEntry, KeptPathSolvesFollowTheTree3D) { keptPathSolvesFollowTheTree<SE3>(); }
+
+// The bound B = 2 (A_a Σ_aa A_aᵀ + A_b Σ_bb A_bᵀ) lies above A·Σ·Aᵀ (B − AΣAᵀ positive
+// semidefinite), with its marginals from path solves and from keepSharedCliqueJoints' walk
+// alike; and (E)'s lower bound from it is below (E) for every candidate closure, true or false.
+template <class G>
+void predictionBoundIsAbove() {
+  constexpr int D = G::kDoF;
+  using Matrix = Eigen::Matrix<double, D, D>;
+  using Paths = typename IncrementalSmoother<G>::PredictionPaths;
+  Laps<G> laps(60, 12, 3, 1.0, 21);
+  IncrementalSmoother<G> s;
+  feedLaps(laps, &s);
+  s.relinearizeAll();
+  std::mt19937 rng(9);
+  std::normal_distribution<double> N(0.0, 1.0);
+  auto random = [&] {
+    Matrix A;
+    for (int r = 0; r < D; ++r)
+      for (int c = 0; c < D; ++c) A(r, c) = N(rng);
+    return A;
+  };
+  const std::vector<std::pair<int, int>> pairs{{1, 2}, {3, 47}, {58, 59}, {0, 30}, {12, 13}};
+  for (int walked = 0; walked < 2; ++walked) {
+    if (walked == 1) {
+      std::vector<std::pair<int, int>> held;
+      for (int v = 1; v < s.numPoses(); ++v) held.emplace_back(v - 1, v);
+      ASSERT_GT(s.keepSharedCliqueJoints(held), 0);
+    }
+    for (const auto& [a, b] : pairs) {
+      const Matrix A_a = random(), A_b = random();
+      const Matrix P = s.predictionCovariance(a, A_a, b, A_b, Paths::kKept);
+      const Matrix B = s.predictionCovarianceBound(a, A_a, b, A_b);
+      Matrix expected = Matrix::Zero();
+      if (a > 0) expected += A_a * s.marginalCovariance(a) * A_a.transpose();
+      if (b > 0) expected += A_b * s.marginalCovariance(b) * A_b.transpose();
+      EXPECT_LE((B - 2 * expected).norm(), 1e-8 * B.norm()) << a << ", " << b;
+      const Eigen::SelfAdjointEigenSolver<Matrix> gap(B - P);
+      EXPECT_GE(gap.eigenvalues().minCoeff(), -1e-9 * B.norm()) << a << ", " << b;
+      // Not the same matrix: the bound drops Σ_ab, which is not zero for these pairs.
+      if (a > 0) {
+        EXPECT_GT((B - P).norm(), 1e-6 * B.norm()) << a << ", " << b;
+      }
+    }
+  }
+  EXPECT_THROW(s.predictionCovarianceBound(-1, Matrix::Identity(), 2, Matrix::Identity()),
+               std::out_of_range);
+  // Candidate closures: true ones (the truth's relative pose) and false ones of growing size.
+  int below = 0;
+  for (int i = 1; i + 20 < s.numPoses(); i += 4)
+    for (double metres : {0.0, 0.5, 3.0, 20.0}) {
+      G z = laps.truth[i].inverse().compose(laps.truth[i + 20]);
+      typename G::Tangent t = G::Tangent::Zero();
+      t(0) = metres;
+      z = z.compose(G::Exp(t));
+      const auto edge = RelativePoseEdge<G>::make(i, i + 20, z, laps.omega);
+      const std::optional<double> m = closureInnovation(s, edge);
+      const std::optional<double> lb = closureInnovationLowerBound(s, edge);
+      ASSERT_TRUE(m && lb);
+      EXPECT_LE(*lb, *m * (1 + 1e-9) + 1e-12) << i << " " << metres;
+      if (metres >= 3.0) {
+        EXPECT_GT(*lb, 0.05 * *m) << i << " " << metres;  // not vacuous
+      }
+      below += *lb < *m ? 1 : 0;
+    }
+  EXPECT_GT(below, 0);
+}
+
+TEST(OnlineEntry, PredictionBoundIsAbove2D) { predictionBoundIsAbove<SE2>(); }
+TEST(OnlineEntry, PredictionBoundIsAbove3D) { predictionBoundIsAbove<SE3>(); }
 
 // The false closures' innovations are far beyond c²: they enter at weight 0 and never graduate;
 // every true closure ends at weight 1 (those in the χ² tail after a few graduation steps).

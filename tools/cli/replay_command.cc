@@ -146,6 +146,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"graduation_steps", online.graduation_steps},
           {"graduation_updates", online.graduation_updates},
           {"closures_unconfirmed", online.closures_unconfirmed},
+          {"rechecks_bounded", online.rechecks_bounded},
           {"warm_up_relinearizations", online.warm_up_relinearizations},
       };
       if (!run.robust.rejected_out.empty()) j["rejected_out"] = run.robust.rejected_out;
