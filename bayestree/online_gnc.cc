@@ -32,15 +32,16 @@ double chiSquareMedian(int dof) {
 // to 64, then when their number has grown by an eighth (O(k) each, O(k) in all).
 size_t nextEstimateAt(size_t n) { return n < 64 ? n + 1 : n + n / 8; }
 
-// The q-quantile of v (0 ≤ q ≤ 1, v not empty), by selection.
-double quantile(std::vector<double>* v, double q) {
-  const size_t k = std::min(v->size() - 1, static_cast<size_t>(q * static_cast<double>(v->size())));
-  std::nth_element(v->begin(), v->begin() + static_cast<long>(k), v->end());
-  return (*v)[k];
+// The q-quantile of the first j of the sorted v (0 ≤ q ≤ 1, 0 < j ≤ v.size()): what selection
+// (std::nth_element) of element ⌊q·j⌋ picks from them, in any order.
+double quantileOfSorted(const std::vector<double>& sorted, size_t j, double q) {
+  return sorted[std::min(j - 1, static_cast<size_t>(q * static_cast<double>(j)))];
 }
 
 }  // namespace
 
+// The m ≤ t·σ² ("kept") are a prefix of the sorted m, so each step of the two fixed points is a
+// binary search and an index, not a pass over m: O(n log n) in all, once.
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
                                       const RobustOptions& o, bool from_median) {
   const double t = o.tail_factor * c2;
@@ -48,24 +49,26 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
   const double Ft = boost::math::cdf(chi2, t);
   const double q_median = boost::math::quantile(chi2, 0.5 * Ft);         // F⁻¹(F(t)/2)
   const double q_tail = boost::math::quantile(chi2, o.confidence * Ft);  // F⁻¹(q F(t))
+  std::sort(m.begin(), m.end());                                         // m is ours
+  auto within = [&](double bound) {                                      // how many m ≤ bound
+    return static_cast<size_t>(std::upper_bound(m.begin(), m.end(), bound) - m.begin());
+  };
   NoiseScaleEstimate out;
   double sigma2 = 1.0;
   if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
-    const double start = quantile(&m, 0.5) / chiSquareMedian(dof);  // m is ours: reordered
+    const double start = quantileOfSorted(m, m.size(), 0.5) / chiSquareMedian(dof);
     if (start > 0 && std::isfinite(start)) sigma2 = start;
   }
-  std::vector<double> kept;
+  size_t kept = 0;  // the m ≤ t·σ²: m[0, kept)
   auto keep = [&] {
-    kept.clear();
-    for (double x : m)
-      if (x <= t * sigma2) kept.push_back(x);
-    return kept.size() >= 3;
+    kept = within(t * sigma2);
+    return kept >= 3;
   };
-  for (double x : m) out.share_at_word += x <= t ? 1.0 : 0.0;
-  if (!m.empty()) out.share_at_word /= static_cast<double>(m.size());
+  if (!m.empty())
+    out.share_at_word = static_cast<double>(within(t)) / static_cast<double>(m.size());
   // The median's fixed point.
   for (int round = 0; round < 50 && keep(); ++round) {
-    const double next = quantile(&kept, 0.5) / q_median;
+    const double next = quantileOfSorted(m, kept, 0.5) / q_median;
     const bool done = std::abs(next - sigma2) <= 1e-9 * sigma2;
     sigma2 = next;
     if (done || !(sigma2 > 0)) break;
@@ -82,7 +85,7 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
   const double median_sigma2 = sigma2;
   out.median_sigma2 = median_sigma2;
   for (int round = 0; round < 50 && keep(); ++round) {
-    const double next = std::max(sigma2, quantile(&kept, o.confidence) / q_tail);
+    const double next = std::max(sigma2, quantileOfSorted(m, kept, o.confidence) / q_tail);
     if (next > o.max_tail_scale * median_sigma2) {
       out.tail_cut = true;
       sigma2 = median_sigma2;

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
+#include <boost/math/distributions/chi_squared.hpp>
 
 #include "arbor/bayestree/closure_innovation.h"
 #include "arbor/bayestree/incremental_smoother.h"
@@ -321,6 +322,102 @@ TEST(OnlineEntry, EstimateNoiseScaleOfChiSquare) {
   }
   EXPECT_EQ(estimateNoiseScale({}, 3, 11.3, RobustOptions{}).sigma2, 1.0);
   EXPECT_FALSE(estimateNoiseScale({}, 3, 11.3, RobustOptions{}).estimated);
+}
+
+// The fixed points by selection, as the definition reads: each step keeps the m ≤ t·σ² and
+// takes a quantile of them by std::nth_element. estimateNoiseScale must give the same numbers,
+// bit for bit, on samples with outliers, ties, a heavy tail and either start.
+NoiseScaleEstimate noiseScaleBySelection(std::vector<double> m, int dof, double c2,
+                                         const RobustOptions& o, bool from_median) {
+  const double t = o.tail_factor * c2;
+  const boost::math::chi_squared_distribution<double> chi2(dof);
+  const double Ft = boost::math::cdf(chi2, t);
+  const double q_median = boost::math::quantile(chi2, 0.5 * Ft);
+  const double q_tail = boost::math::quantile(chi2, o.confidence * Ft);
+  auto quantile = [](std::vector<double> v, double q) {
+    const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())));
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(k), v.end());
+    return v[k];
+  };
+  NoiseScaleEstimate out;
+  double sigma2 = 1.0;
+  if (from_median && !m.empty()) {
+    const double start = quantile(m, 0.5) / boost::math::quantile(chi2, 0.5);
+    if (start > 0 && std::isfinite(start)) sigma2 = start;
+  }
+  std::vector<double> kept;
+  auto keep = [&] {
+    kept.clear();
+    for (double x : m)
+      if (x <= t * sigma2) kept.push_back(x);
+    return kept.size() >= 3;
+  };
+  for (double x : m) out.share_at_word += x <= t ? 1.0 : 0.0;
+  if (!m.empty()) out.share_at_word /= static_cast<double>(m.size());
+  for (int round = 0; round < 50 && keep(); ++round) {
+    const double next = quantile(kept, 0.5) / q_median;
+    const bool done = std::abs(next - sigma2) <= 1e-9 * sigma2;
+    sigma2 = next;
+    if (done || !(sigma2 > 0)) break;
+  }
+  if (!(sigma2 > 0) || !keep()) return out;
+  if (sigma2 > 1 && out.share_at_word < o.min_kept_share &&
+      m.size() < static_cast<size_t>(o.loosen_min_samples))
+    return out;
+  out.estimated = true;
+  out.median_sigma2 = sigma2;
+  for (int round = 0; round < 50 && keep(); ++round) {
+    const double next = std::max(sigma2, quantile(kept, o.confidence) / q_tail);
+    if (next > o.max_tail_scale * out.median_sigma2) {
+      out.tail_cut = true;
+      sigma2 = out.median_sigma2;
+      break;
+    }
+    const bool done = next - sigma2 <= 1e-9 * sigma2;
+    sigma2 = next;
+    if (done) break;
+  }
+  out.sigma2 = sigma2;
+  return out;
+}
+
+TEST(OnlineEntry, EstimateNoiseScaleIsTheSelectionsFixedPoint) {
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int estimated = 0, tail_cut = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const int dof = trial % 2 == 0 ? 3 : 6;
+    const double c2 = chiSquareThreshold(0.99, dof);
+    const double sigma2 = std::pow(10.0, 3.0 * u(rng) - 1.0);  // 0.1 … 100
+    const double outliers = 0.6 * u(rng), heavy = 0.3 * u(rng);
+    std::chi_squared_distribution<double> chi2(dof);
+    std::vector<double> m;
+    const int n = 3 + static_cast<int>(400 * u(rng));
+    for (int k = 0; k < n; ++k) {
+      const double r = u(rng);
+      double x = sigma2 * chi2(rng);
+      if (r < outliers)
+        x = sigma2 * std::pow(10.0, 2.0 + 4.0 * u(rng));
+      else if (r < outliers + heavy)
+        x *= 40.0;  // past max_tail_scale's reach for some
+      m.push_back(k % 17 == 0 && k > 0 ? m[static_cast<size_t>(k) / 2] : x);  // ties
+    }
+    for (bool from_median : {false, true}) {
+      const NoiseScaleEstimate a = estimateNoiseScale(m, dof, c2, RobustOptions{}, from_median);
+      const NoiseScaleEstimate b = noiseScaleBySelection(m, dof, c2, RobustOptions{}, from_median);
+      ASSERT_EQ(a.estimated, b.estimated) << trial;
+      ASSERT_EQ(a.tail_cut, b.tail_cut) << trial;
+      ASSERT_EQ(a.sigma2, b.sigma2) << trial;
+      ASSERT_EQ(a.median_sigma2, b.median_sigma2) << trial;
+      ASSERT_EQ(a.share_at_word, b.share_at_word) << trial;
+      estimated += a.estimated;
+      tail_cut += a.tail_cut;
+    }
+  }
+  // The trials reach every branch: estimates, none, and the tail cut back to the median's.
+  EXPECT_GT(estimated, 20);
+  EXPECT_LT(estimated, 400);
+  EXPECT_GT(tail_cut, 0);
 }
 
 // Clean samples with Ω 200 times too confident (sphere_bignoise's true closures; the
