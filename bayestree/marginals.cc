@@ -341,19 +341,21 @@ Eigen::MatrixXd TreeMarginals<D>::predicted(const BayesTree<D>& tree, const std:
   for (const auto& [depth, c] : order) {
     const Clique<D>& k = tree.cliques[c];
     const int nf = static_cast<int>(k.frontals.size());
-    Y = Eigen::MatrixXd::Zero(k.F, m);
-    bool any = false;
-    for (int f = 0; f < nf; ++f) {
-      auto it = rhs.find(k.frontals[f]);
-      if (it == rhs.end()) continue;
-      Y.middleRows(f * D, D) = it->second;
-      any = true;
-    }
-    if (!any) continue;
-    k.LS().topRows(k.F).template triangularView<Eigen::Lower>().solveInPlace(Y);
+    // Y is zero above the first frontal its right-hand side reaches (L lower triangular): the
+    // solve, the product and the push start there.
+    int first = nf;
+    for (int f = 0; f < nf && first == nf; ++f)
+      if (rhs.count(k.frontals[f])) first = f;
+    if (first == nf) continue;
+    const int r0 = first * D, rows = k.F - r0;
+    Y = Eigen::MatrixXd::Zero(rows, m);
+    for (int f = first; f < nf; ++f)
+      if (auto it = rhs.find(k.frontals[f]); it != rhs.end())
+        Y.middleRows(f * D - r0, D) = it->second;
+    k.LS().block(r0, r0, rows, rows).template triangularView<Eigen::Lower>().solveInPlace(Y);
     out.noalias() += Y.transpose() * Y;
     if (k.Sn == 0) continue;
-    pushed.noalias() = k.LS().bottomRows(k.Sn) * Y;
+    pushed.noalias() = k.LS().block(k.F, r0, k.Sn, rows) * Y;
     for (size_t b = 0; b < k.separator.size(); ++b) {
       auto [it, fresh] = rhs.try_emplace(k.separator[b], Eigen::MatrixXd::Zero(D, m));
       it->second -= pushed.middleRows(static_cast<int>(b) * D, D);
