@@ -143,6 +143,8 @@ std::string RobustOptions::problem() const {
   if (!(final_confirm_margin == 0 || final_confirm_margin >= 1) ||
       !std::isfinite(final_confirm_margin))
     return bad("final_confirm_margin", final_confirm_margin, "0 (off) or finite and >= 1");
+  if (!(end_confirm_margin > 0) || !std::isfinite(end_confirm_margin))
+    return bad("end_confirm_margin", end_confirm_margin, "finite and > 0");
   if (!(entry_band >= 1) || !std::isfinite(entry_band))
     return bad("entry_band", entry_band, "finite and >= 1");
   if (scale_min_samples < 1) return bad("scale_min_samples", scale_min_samples, ">= 1");
@@ -434,7 +436,8 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   dropped->assign(closures_.size(), 0);
   keepHeldJoints(smoother);
   c2_end_ = endThreshold(smoother);
-  const double bound = options_.final_confirm_margin * c2_end_;
+  const double bound =
+      c2_end_ < c2_ ? options_.end_confirm_margin * c2_end_ : options_.final_confirm_margin * c2_;
   for (size_t id = 0; id < closures_.size(); ++id) {
     if (!unconfirmed(smoother, &closures_[id], bound, /*at_the_end=*/true)) continue;
     (*dropped)[id] = 1;

@@ -304,7 +304,8 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "0",        "--rehold-growth",
                                          "4",        "--end-backed-margin",
                                          "0",        "--end-scale-growth",
-                                         "2"};
+                                         "2",        "--end-confirm-margin",
+                                         "1.5"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -319,6 +320,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.rehold_growth, 4.0);
   EXPECT_EQ(replay->online.end_backed_margin, 0.0);
   EXPECT_EQ(replay->online.end_scale_growth, 2.0);
+  EXPECT_EQ(replay->online.end_confirm_margin, 1.5);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -332,6 +334,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->rehold_growth, 4.0);
   EXPECT_EQ(serve->options.robust->end_backed_margin, 0.0);
   EXPECT_EQ(serve->options.robust->end_scale_growth, 2.0);
+  EXPECT_EQ(serve->options.robust->end_confirm_margin, 1.5);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -345,11 +348,13 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->rehold_growth, RobustOptions{}.rehold_growth);
   EXPECT_EQ(plain->options.robust->end_backed_margin, RobustOptions{}.end_backed_margin);
   EXPECT_EQ(plain->options.robust->end_scale_growth, RobustOptions{}.end_scale_growth);
+  EXPECT_EQ(plain->options.robust->end_confirm_margin, RobustOptions{}.end_confirm_margin);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-backed-margin", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-growth", "2"}), UsageError);
+  EXPECT_THROW(parseServeCommandLine({"--end-confirm-margin", "2"}), UsageError);
   for (const auto& [flag, bad] :
        std::vector<std::pair<std::string, std::string>>{{"--finalize-rounds", "0"},
                                                         {"--end-scale-samples", "-1"},
@@ -358,7 +363,9 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                                         {"--end-backed-margin", "0.5"},
                                                         {"--end-backed-margin", "inf"},
                                                         {"--end-scale-growth", "1"},
-                                                        {"--end-scale-growth", "nan"}}) {
+                                                        {"--end-scale-growth", "nan"},
+                                                        {"--end-confirm-margin", "0"},
+                                                        {"--end-confirm-margin", "inf"}}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
       ADD_FAILURE() << flag << " " << bad << " accepted";

@@ -696,6 +696,8 @@ TEST(OnlineEntry, BadOptionsRefused) {
                    +[](RobustOptions* o) { o->corroboration_window = -1; },
                    +[](RobustOptions* o) { o->final_confirm_margin = 0.5; },
                    +[](RobustOptions* o) { o->final_confirm_margin = std::nan(""); },
+                   +[](RobustOptions* o) { o->end_confirm_margin = 0; },
+                   +[](RobustOptions* o) { o->end_confirm_margin = std::nan(""); },
                    +[](RobustOptions* o) { o->finalize_rounds = 0; },
                    +[](RobustOptions* o) { o->end_scale_samples = -1; },
                    +[](RobustOptions* o) { o->end_scale_gap = 0.5; },

@@ -133,6 +133,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"warm_up", toString(run.online.warm_up)},
           {"corroboration_window", run.online.corroboration_window},
           {"final_confirm_margin", run.online.final_confirm_margin},
+          {"end_confirm_margin", run.online.end_confirm_margin},
           {"threshold_in_use", online.closure_threshold},
           {"threshold_at_end", online.closure_threshold_at_end},
           {"noise_scale", online.noise_scale},

@@ -99,6 +99,9 @@ void addOnlineRobustFlags(po::options_description& options) {
       "with --robust, the final pass drops an inlier no other inlier agrees with when keeping it "
       "costs the objective more than this many times the threshold (its leave-one-out "
       "innovation; docs/design.md, \"Confirmed at the end\"); 0: off")(
+      "end-confirm-margin", po::value<double>()->default_value(RobustOptions{}.end_confirm_margin),
+      "with --robust, the same margin over the end's own threshold where that is the one in "
+      "use (docs/design.md, \"The end's scale\"); > 0")(
       "finalize-rounds", po::value<int>()->default_value(RobustOptions{}.finalize_rounds),
       "with --robust, at most this many rounds of the final pass (each graduates every closure "
       "to the end, relinearises everything and re-checks every closure; another round only "
@@ -128,6 +131,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const std::string warm_up = vm["warm-up"].as<std::string>();
   const int window = vm["corroboration-window"].as<int>();
   const double margin = vm["final-confirm-margin"].as<double>();
+  const double end_margin = vm["end-confirm-margin"].as<double>();
   const int rounds = vm["finalize-rounds"].as<int>();
   const int end_samples = vm["end-scale-samples"].as<int>();
   const double rehold = vm["rehold-growth"].as<double>();
@@ -136,12 +140,13 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   if (!robust_on &&
       (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
        !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
-       !vm["finalize-rounds"].defaulted() || !vm["end-scale-samples"].defaulted() ||
-       !vm["rehold-growth"].defaulted() || !vm["end-backed-margin"].defaulted() ||
-       !vm["end-scale-growth"].defaulted()))
+       !vm["end-confirm-margin"].defaulted() || !vm["finalize-rounds"].defaulted() ||
+       !vm["end-scale-samples"].defaulted() || !vm["rehold-growth"].defaulted() ||
+       !vm["end-backed-margin"].defaulted() || !vm["end-scale-growth"].defaulted()))
     throw UsageError(
         "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
-        "--finalize-rounds, --end-scale-samples, --end-scale-growth, --rehold-growth and "
+        "--end-confirm-margin, --finalize-rounds, --end-scale-samples, --end-scale-growth, "
+        "--rehold-growth and "
         "--end-backed-margin need --robust");
   if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
   if (end_samples < 0)
@@ -157,6 +162,8 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   if (!(margin == 0 || margin >= 1) || !std::isfinite(margin))
     throw UsageError("--final-confirm-margin must be 0 (off) or >= 1, not " +
                      std::to_string(margin));
+  if (!(end_margin > 0) || !std::isfinite(end_margin))
+    throw UsageError("--end-confirm-margin must be > 0, not " + std::to_string(end_margin));
   if (entry != "innovation" && entry != "residual")
     throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
   if (noise_scale != "estimated" && noise_scale != "given")
@@ -168,6 +175,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
   robust->corroboration_window = window;
   robust->final_confirm_margin = margin;
+  robust->end_confirm_margin = end_margin;
   robust->finalize_rounds = rounds;
   robust->end_scale_samples = end_samples;
   robust->rehold_growth = rehold;
