@@ -159,16 +159,16 @@
 //                 taken), each from at most end_scale_samples evenly spaced, and c²_end =
 //                 tail_factor·c²·σ̂²_end. It replaces c² for the pass's drops and for taking
 //                 closures back only when at least end_scale_gap (2) times smaller: the tail of
-//                 a few hundred samples moves by tens of percent. Where it does, the pass drops
-//                 past end_confirm_margin·c²_end (1), not final_confirm_margin·c² (1.25): read
-//                 at the whole graph's estimate, it needs less room than c² from arrivals
-//                 (sphere_bignoise with 10% random false closures: 1.0113 → 1.0090 F*, 631 →
-//                 635 rejected, no true one; smallGrid3D with 10% local ones, seed 3: 1.676 → 1,
-//                 the false (4, 23) dropped and the true (4, 45) taken back; no other robust or
-//                 clean file changes). sphere_bignoise with 10% random false closures: c² 22386
-//                 from the innovations, c²_end 6700 in the first pass and about 5000 later,
-//                 where its true closures' m₋ reach 4760; on the other shared robust files
-//                 c²_end is within 0.6–1.3 of c².
+//                 a few hundred samples moves by tens of percent. sphere_bignoise with 10%
+//                 random false closures: c² 22386 from the innovations, c²_end 6700 in the
+//                 first pass and about 5000 later, where its true closures' m₋ reach 4760; on
+//                 the other shared robust files c²_end is within 0.6–1.3 of c². Where it
+//                 replaces c², the pass drops past end_confirm_margin·c²_end (1), not
+//                 final_confirm_margin·c² (1.25): read at the whole graph's estimate, it needs
+//                 less room than c² from arrivals (that sphere_bignoise file: 1.0113 → 1.0090
+//                 F*, 631 → 635 rejected, no true one; smallGrid3D with 10% local false
+//                 closures, seed 3: 1.676 → 1, the false (4, 23) dropped and the true (4, 45)
+//                 taken back; no other robust or clean file changes).
 //   the end's scale on the way (RobustOptions::end_scale_growth, 1.05, and end_scale_work, 16;
 //                 growth 0: off) the same reading after an update, once the poses have grown
 //                 by that factor and the updates re-eliminated that many times the tree's
