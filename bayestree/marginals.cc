@@ -177,20 +177,15 @@ typename TreeMarginals<D>::JointBlock TreeMarginals<D>::jointKept(const BayesTre
       return out;
     }
   }
-  auto kept = [&](int v) -> const std::pair<PathSolve, Block>& {
-    auto [it, fresh] = kept_.try_emplace(v);
-    if (fresh) it->second.second = solvePath(tree, v, &it->second.first, &by_);
-    return it->second;
-  };
   const int ca = tree.clique_of[a], cb = tree.clique_of[b];
   if (ca >= 0 && cb >= 0) {
-    const auto& [pa, aa] = kept(a);
-    const auto& [pb, bb] = kept(b);
+    const auto& [pa, aa] = keptPath(tree, a);
+    const auto& [pb, bb] = keptPath(tree, b);
     return combine(tree, pa, aa, pb, bb);
   }
   JointBlock out = JointBlock::Zero();  // a constant: zero rows, no correlation
-  if (ca >= 0) out.template topLeftCorner<D, D>() = kept(a).second;
-  if (cb >= 0) out.template bottomRightCorner<D, D>() = kept(b).second;
+  if (ca >= 0) out.template topLeftCorner<D, D>() = keptPath(tree, a).second;
+  if (cb >= 0) out.template bottomRightCorner<D, D>() = keptPath(tree, b).second;
   return out;
 }
 
@@ -206,9 +201,15 @@ template <int D>
 typename TreeMarginals<D>::Block TreeMarginals<D>::marginalKept(const BayesTree<D>& tree, int v) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (const auto it = kept_marginals_.find(v); it != kept_marginals_.end()) return it->second;
+  return keptPath(tree, v).second;
+}
+
+template <int D>
+const std::pair<typename TreeMarginals<D>::PathSolve, typename TreeMarginals<D>::Block>&
+TreeMarginals<D>::keptPath(const BayesTree<D>& tree, int v) {
   auto [it, fresh] = kept_.try_emplace(v);
   if (fresh) it->second.second = solvePath(tree, v, &it->second.first, &by_);
-  return it->second.second;
+  return it->second;
 }
 
 template <int D>

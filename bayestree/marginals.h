@@ -104,6 +104,8 @@ class TreeMarginals {
     std::vector<int> path, offset, first;
     std::vector<double> y;
   };
+  /// v's path solve and Σ_vv from kept_, solved and kept on first use (mutex_ held).
+  const std::pair<PathSolve, Block>& keptPath(const BayesTree<D>& tree, int v);
   /// Fills *out with Y_v (tree.clique_of[v] ≥ 0) and returns Y_vᵀY_v = Σ_vv.
   static Block solvePath(const BayesTree<D>& tree, int v, PathSolve* out, std::vector<double>* By);
   /// (1) for clique c, given its parent's joint (null for a root): its joint.

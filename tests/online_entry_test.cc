@@ -117,6 +117,16 @@ void feedLaps(const Laps<G>& laps, IncrementalSmoother<G>* s) {
   s->update();
 }
 
+// A D×D block of standard normal entries.
+template <int D>
+Eigen::Matrix<double, D, D> randomBlock(std::mt19937* rng) {
+  std::normal_distribution<double> N(0.0, 1.0);
+  Eigen::Matrix<double, D, D> A;
+  for (int r = 0; r < D; ++r)
+    for (int c = 0; c < D; ++c) A(r, c) = N(*rng);
+  return A;
+}
+
 // A·Σ·Aᵀ by the forward substitution equals A·H⁻¹·Aᵀ with H the dense information matrix the
 // tree holds (every factor linearised at θ after relinearizeAll), for pairs in one clique, far
 // apart, and with a fixed pose.
@@ -141,13 +151,7 @@ void predictionMatchesDense() {
   }
   const Eigen::MatrixXd Sigma = H.inverse();
   std::mt19937 rng(5);
-  std::normal_distribution<double> N(0.0, 1.0);
-  auto random = [&] {
-    Matrix A;
-    for (int r = 0; r < D; ++r)
-      for (int c = 0; c < D; ++c) A(r, c) = N(rng);
-    return A;
-  };
+  auto random = [&] { return randomBlock<D>(&rng); };
   for (const auto& [a, b] :
        std::vector<std::pair<int, int>>{{1, 2}, {3, 47}, {58, 59}, {0, 30}, {30, 0}}) {
     const Matrix A_a = random(), A_b = random();
@@ -213,13 +217,7 @@ void predictionBoundIsAbove() {
   feedLaps(laps, &s);
   s.relinearizeAll();
   std::mt19937 rng(9);
-  std::normal_distribution<double> N(0.0, 1.0);
-  auto random = [&] {
-    Matrix A;
-    for (int r = 0; r < D; ++r)
-      for (int c = 0; c < D; ++c) A(r, c) = N(rng);
-    return A;
-  };
+  auto random = [&] { return randomBlock<D>(&rng); };
   const std::vector<std::pair<int, int>> pairs{{1, 2}, {3, 47}, {58, 59}, {0, 30}, {12, 13}};
   for (int walked = 0; walked < 2; ++walked) {
     if (walked == 1) {
