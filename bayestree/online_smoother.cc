@@ -406,6 +406,7 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
     gnc_->resolve(smoother_);
   }
   const int bound = gnc_->options().max_steps_per_closure + 1;
+  gnc_->beginFinalize();
   for (int round = 0;; ++round) {
     graduateFully(bound, &total, cancel);
     if (total.cancelled) break;

@@ -253,5 +253,24 @@ TEST(LeaveOneOut, FinalizeDropsPastTheEndsScaleItself) {
   EXPECT_LT(now.F_clean, before.F_clean / 1.2);
 }
 
+// finalize() reaches a fixed point: a closure (E) keeps taking back at weight 0 and (L) keeps
+// dropping at weight 1 stays out after its second take-back (OnlineGnc::beginFinalize), so
+// allowing more rounds changes nothing. A narrow end margin (0.3·c²_end against (E)'s c²_end)
+// makes such closures on this graph: without the cap, 18 drops in 10 rounds and 63 in 40, and
+// 17 or 20 rejected by the parity of the last round.
+TEST(LeaveOneOut, FinalizeReachesAFixedPoint) {
+  if (!testing::datasetPresent("smallGrid3D"))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
+  const PlantedGrid g = plantSmallGrid3D(0.1, sim::OutlierPolicy::kLocal, 3);
+  RobustOptions narrow;
+  narrow.end_confirm_margin = 0.3;
+  RobustOptions longer = narrow;
+  longer.finalize_rounds = 40;
+  const auto [ten, forty] = replayBoth(g, narrow, longer);
+  EXPECT_LT(ten.c2_end, ten.c2);  // the end's scale stands: the narrow margin applies
+  EXPECT_EQ(ten.rejected, forty.rejected);
+  EXPECT_EQ(ten.unconfirmed, forty.unconfirmed);
+}
+
 }  // namespace
 }  // namespace arbor
