@@ -51,6 +51,7 @@ void expectSlicesCoverTheReplay(const PoseGraph<G>& graph, bool per_pose, int sl
     EXPECT_GT(s.block_ms, 0);
     EXPECT_GT(s.cholmod_ms, 0);
     EXPECT_EQ(s.factorization_ms, std::min(s.block_ms, s.cholmod_ms));
+    EXPECT_GT(s.linearization_ms, 0);
     EXPECT_GE(s.relin_share, 0);
     EXPECT_LE(s.relin_share, 1);
     if (s.relin_updates > 0) {
