@@ -426,9 +426,10 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
                "that relinearised (every skip-th, when a variable's step exceeds β), their latency "
                "and the mean share of the poses they relinearised; \"factorisation\": flops of "
                "one sparse Cholesky factorisation of the graph so far (best of AMD, METIS, "
-               "nested dissection) and its time on one thread with each backend; the faster is "
-               "the least a step that relinearises the whole graph costs, and \"relin. / "
-               "factorisation\" divides the median step by it.\n";
+               "nested dissection) and its time on one thread with each backend, and \"relin. / "
+               "factorisation\" divides the median step by the faster; \"linearisation\": the "
+               "time of linearising every factor with that backend, which a step that "
+               "relinearises the whole graph pays besides.\n";
   bench::forEachDataset(files, [&](const bench::LoadedDataset& d) {
     std::visit(
         [&](const auto& g) {
