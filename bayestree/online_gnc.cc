@@ -792,8 +792,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       // (σ̂² after the warm-up), and in finalize() (a path to the root each: not every update).
       if (!recheck_all && c2_ <= 1.1 * c.judged_c2) continue;
       const bool at_the_end = scope == StepScope::kFinalize;
-      if (at_the_end && c.end_epoch == finalize_calls_ && c.end_take_backs >= kEndTakeBacks)
-        continue;
+      if (at_the_end && c.end_take_backs >= kEndTakeBacks) continue;
       c.judged_c2 = c2_;
       const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
       // A closure the end's scale dropped on the way is taken back by it, as in finalize().
@@ -802,8 +801,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       // hold for m when they hold for m's lower bound (the poses' marginals, no path solve),
       // which comes first where the paths are kept (the marginals come from them).
       auto staysOut = [&](double m) {
-        return m > bound &&
-               !(scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, m, bound));
+        return m > bound && !(at_the_end && backedAtTheEnd(smoother, c, m, bound));
       };
       if (recheck_all && staysOut(innovationLowerBound(smoother, edge, s))) {
         ++totals_.rechecks_bounded;
@@ -812,11 +810,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
       if (staysOut(innovation(smoother, edge, s, recheck_all ? Paths::kKept : Paths::kOnce)))
         continue;
       c.state = State::kSettled;
-      if (at_the_end) {
-        if (c.end_epoch != finalize_calls_) c.end_take_backs = 0;
-        c.end_epoch = finalize_calls_;
-        ++c.end_take_backs;
-      }
+      if (at_the_end) ++c.end_take_backs;
       setWeight(smoother, &c, 1.0);
       ++totals_.regraduated;
       ++changed;

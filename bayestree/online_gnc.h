@@ -463,7 +463,9 @@ class OnlineGnc {
   /// 1, round after round (each reads it at the estimate the other's round left, and they
   /// differ where the problem is not linear), settles out instead of flipping until
   /// finalize_rounds.
-  void beginFinalize() { ++finalize_calls_; }
+  void beginFinalize() {
+    for (Closure& c : closures_) c.end_take_backs = 0;
+  }
   /// After a smoother update: the indices of the closures it added.
   void resolve(const IncrementalSmoother<G>& smoother);
   /// After the smoother was rebuilt with the same factors in another order (reseed).
@@ -524,8 +526,7 @@ class OnlineGnc {
     int steps = 0;
     bool held = false;                ///< at weight 0 until σ̂² is estimated (WarmUp::kHold)
     bool dropped_on_the_way = false;  ///< by readEndScaleOnTheWay: taken back by the end's c²
-    /// Its take-backs from weight 0 in the finalize() numbered end_epoch (beginFinalize).
-    int end_epoch = 0, end_take_backs = 0;
+    int end_take_backs = 0;     ///< from weight 0 in this finalize() (beginFinalize resets it)
     double m = 0;               ///< its innovation on entry
     bool corroborated = false;  ///< another closure agrees with it (P)
     std::vector<int> partners;  ///< agreeing closures (P) by id, both spansLoop (recordsPartners)
@@ -627,7 +628,6 @@ class OnlineGnc {
   /// A reading on the way dropped closures: the end's scale then stands wherever it is below
   /// the c² in use, not only end_scale_gap below it.
   bool dropped_on_the_way_ = false;
-  int finalize_calls_ = 0;  ///< beginFinalize() calls
   NoiseScaleEstimate estimate_;
   double scale_ = 1.0;
   std::vector<double> innovations_;                   ///< of every judged closure

@@ -29,9 +29,9 @@ PoseGraph<G> prefix(const PoseGraph<G>& graph, int m) {
 // linearisation's with the faster back-end, each time the fastest of three runs.
 template <class G>
 void measureFactorization(const PoseGraph<G>& graph, GrowthSlice* slice) {
-  double linearize_ms[2] = {0, 0};
-  int b = 0;
+  double block_linearize_ms = 0, cholmod_linearize_ms = 0;
   for (CholeskyBackend backend : {CholeskyBackend::kBlock, CholeskyBackend::kCholmod}) {
+    const bool block = backend == CholeskyBackend::kBlock;
     NormalEquations<G> equations(graph, backend);
     slice->factorization_flops = equations.factorizationFlops();
     double best = 0, best_linearize = 0;
@@ -45,12 +45,12 @@ void measureFactorization(const PoseGraph<G>& graph, GrowthSlice* slice) {
       const double ms = 1e3 * clock.seconds();
       best = run == 0 ? ms : std::min(best, ms);
     }
-    (backend == CholeskyBackend::kBlock ? slice->block_ms : slice->cholmod_ms) = best;
-    linearize_ms[b++] = best_linearize;
+    (block ? slice->block_ms : slice->cholmod_ms) = best;
+    (block ? block_linearize_ms : cholmod_linearize_ms) = best_linearize;
   }
   slice->factorization_ms = std::min(slice->block_ms, slice->cholmod_ms);
   slice->linearization_ms =
-      slice->block_ms <= slice->cholmod_ms ? linearize_ms[0] : linearize_ms[1];
+      slice->block_ms <= slice->cholmod_ms ? block_linearize_ms : cholmod_linearize_ms;
 }
 
 }  // namespace
