@@ -16,7 +16,7 @@ if [[ ${1:-} == --only ]]; then only=$2; shift 2; fi
 if [[ ${1:-} == -- ]]; then shift; fi
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-printf 'dataset\tthreshold\tF_clean/F*\tprecision\trecall\trejected\tlabels\tsteps\tmessage\tgnc_s\n'
+printf 'dataset\tthreshold\tF_clean/F*\tprecision\trecall\trejected\tlabels\tsteps\tmessage\tgnc_s\theld_out\ttaken_back\ttotal_s\n'
 for g2o in "$SHARED"/datasets/robust/*.g2o; do
   name=$(basename "$g2o" .g2o)
   if [[ -n $only && ",$only," != *",$name,"* ]]; then continue; fi
@@ -39,6 +39,7 @@ precision = hit / len(got) if got else 1.0
 recall = hit / len(truth) if truth else 1.0
 print(f"{name}\t{run['inlier_threshold']:.4g}\t{clean['F_final'] / fstar:.6g}\t{precision:.3f}\t"
       f"{recall:.3f}\t{len(got)}\t{len(truth)}\t{run['gnc_iterations']}\t{run['gnc_message']}\t"
-      f"{run['gnc_time_s']:.3g}")
+      f"{run['gnc_time_s']:.3g}\t{run.get('known_outliers', 0)}\t{run.get('readmitted_online', 0)}\t"
+      f"{run['total_s']:.3g}")
 PY
 done

@@ -291,8 +291,11 @@ TEST(RobustBench, GeneratedRowsGoThroughBatchAndTheReplayHooks) {
   };
   std::map<std::string, bench::Reference> optimum;
   optimum["tiny"].F_star = ref.F;
-  const auto rows =
-      bench::runRobustBench(cases, optimum, {}, bench::RobustBatchSettings{}, hooks, nullptr);
+  // The batch from the file's vertices, where GNC graduates (from the online replay it stops at
+  // its start: TheOnlineStartKeepsTheReplaysRejections).
+  bench::RobustBatchSettings from_file;
+  from_file.start = bench::BatchStart::kFile;
+  const auto rows = bench::runRobustBench(cases, optimum, {}, from_file, hooks, nullptr);
   ASSERT_EQ(rows.size(), 2u);
   EXPECT_EQ(clean_calls, 1);
   for (const bench::RobustRow& r : rows) {

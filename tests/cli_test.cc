@@ -361,10 +361,10 @@ TEST(Cli, BatchRobustWritesTheRejectedEdges) {
   }
 }
 
-// arbor batch --robust --inlier-threshold online --init online: GNC's c² is recheck_margin times
-// the one the robust online replay ends with (`arbor replay --robust`'s), it starts from that
-// replay's estimate and rejects every planted closure; online is refused where it cannot be
-// (replay, --init online without --robust).
+// arbor batch --robust --inlier-threshold online --init online (the defaults with --robust): GNC's
+// c² is recheck_margin times the one the robust online replay ends with (`arbor replay
+// --robust`'s), it starts from that replay's estimate and rejects every planted closure; online
+// is refused where it cannot be (replay, --init online without --robust).
 TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   const std::string file = tempPath("robust_online.g2o");
   std::set<std::pair<long, long>> planted;
@@ -388,9 +388,18 @@ TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   EXPECT_TRUE(j["online_threshold"]["noise_scale_estimated"].get<bool>());
   const std::set<std::pair<long, long>> written = readPairs(rejected);
   for (const auto& edge : planted) EXPECT_EQ(written.count(edge), 1u);
-  const Result chi2 = run("batch " + file + " --robust --json");
+  EXPECT_LE(j["online_threshold"]["c2_take_back"].get<double>(), c2);
+  // The defaults: online start and threshold; GTSAM's GncOptimizer is --init file at chi2.
+  const Result plain = run("batch " + file + " --robust --json");
+  ASSERT_EQ(plain.status, 0) << plain.out;
+  const auto d = nlohmann::json::parse(plain.out);
+  EXPECT_EQ(d["threshold_rule"], "online");
+  EXPECT_EQ(d["init"], "online");
+  EXPECT_DOUBLE_EQ(d["inlier_threshold"].get<double>(), margin * c2);
+  const Result chi2 = run("batch " + file + " --robust --json --init file --inlier-threshold chi2");
   ASSERT_EQ(chi2.status, 0) << chi2.out;
-  EXPECT_EQ(nlohmann::json::parse(chi2.out)["threshold_rule"], "chi2");  // the default
+  EXPECT_EQ(nlohmann::json::parse(chi2.out)["threshold_rule"], "chi2");
+  EXPECT_EQ(nlohmann::json::parse(chi2.out)["init"], "file");
   for (const std::string& args : {"batch " + file + " --init online",
                                   "replay " + file + " --robust --inlier-threshold online"}) {
     const Result bad = run(args);

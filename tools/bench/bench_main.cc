@@ -640,10 +640,10 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       cli::kInlierThresholdHelp)("solver", po::value(&solver)->default_value("lm"),
                                  "lm: GNC over LM; rtr: then the certifiable solver on GNC's "
                                  "inlier set (as arbor batch --robust --solver rtr)")(
-      "batch-start", po::value(&batch_start)->default_value("file"),
-      "file: the robust batch from the file's vertices (arbor batch --robust); online: from "
-      "the robust online replay, its rejected closures held out (arbor batch --robust --init "
-      "online --inlier-threshold online)")(
+      "batch-start", po::value(&batch_start)->default_value("online"),
+      "online: the robust batch from the robust online replay, its rejected closures held out "
+      "and its threshold (arbor batch --robust's defaults); file: from the file's vertices at "
+      "--inlier-threshold (arbor batch --robust --init file, GTSAM's GncOptimizer)")(
       "keep-generated", po::value(&keep_dir),
       "write the generated files (NAME.g2o, NAME.labels) here and keep them (default: a "
       "temporary directory, removed at the end)");
@@ -721,9 +721,9 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       << (settings.certify ? ", then the certifiable solver on its inlier set" : "")
       << " (as `arbor batch --robust" << (settings.certify ? " --solver rtr" : "")
       << (settings.start == bench::BatchStart::kOnline
-              ? " --init online --inlier-threshold online`), from the robust online replay, its "
-                "rejected closures held out"
-              : "`), c² " + threshold + ", from the file's vertices")
+              ? "`, its defaults), from the robust online replay, its rejected closures held out, "
+                "c² its bound"
+              : " --init file`), c² " + threshold + ", from the file's vertices")
       << ", odometry (|i − j| = 1) trusted. F_clean / F*: F over the "
          "base file's edges against optimum.tsv; ATE: RMS position error against the clean "
          "optimum after a rigid alignment; precision and recall of the rejected edges against "

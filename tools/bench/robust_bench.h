@@ -137,16 +137,16 @@ std::map<std::pair<std::string, std::string>, RobustAnchor> readRobustAnchorTabl
 
 /// Where the robust batch starts (`arbor bench robust --batch-start`).
 enum class BatchStart {
-  kFile,    ///< the file's vertices, GNC at the given c² (`arbor batch --robust`'s defaults)
-  kOnline,  ///< the robust online replay, its classification kept (`arbor batch --robust --init
-            ///< online --inlier-threshold online`; cli::solveGncFromOnline)
+  kFile,    ///< the file's vertices, GNC at the given c² (`arbor batch --robust --init file`)
+  kOnline,  ///< the robust online replay, its classification and threshold kept (`arbor batch
+            ///< --robust`'s defaults; cli::solveGncFromOnline)
 };
 
 /// The robust batch, as `arbor batch --robust` runs it.
 struct RobustBatchSettings {
   GncOptions gnc;        ///< --kernel, --inlier-threshold (outer LM: 100 iterations, 1e-5)
   bool certify = false;  ///< --solver rtr: then certifyInliers on GNC's inlier set
-  BatchStart start = BatchStart::kFile;
+  BatchStart start = BatchStart::kOnline;
 };
 
 /// Starts from the file's vertices (the odometry chain without them) and runs solveGnc, or with

@@ -280,6 +280,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     if (online)
       j["online_threshold"] = {{"c2", online->c2},
                                {"c2_in_use", online->c2_in_use},
+                               {"c2_take_back", online->c2_take_back},
                                {"noise_scale", online->noise_scale},
                                {"noise_scale_estimated", online->estimated},
                                {"noise_samples", online->samples},
@@ -372,9 +373,9 @@ int batchCommand(const std::vector<std::string>& args) {
       "solver", po::value(&solver)->default_value(solver), solverHelp().c_str())(
       "init", po::value(&run.init),
       "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
-      "odometry; rtr starts from its own chordal relaxation); with --robust also online: the "
-      "estimate of the robust online replay (arbor replay --robust), whose rejected closures GNC "
-      "holds out and takes back only where they fit at the replay's c²")(
+      "odometry; rtr starts from its own chordal relaxation); with --robust also online, its "
+      "default: the estimate of the robust online replay (arbor replay --robust), whose rejected "
+      "closures GNC holds out and takes back only where they fit at the replay's bound")(
       "max-iterations", po::value(&run.settings.max_iterations)->default_value(100),
       "iteration limit (gn, lm, dogleg)")(
       "rel-tol", po::value(&run.settings.relative_tolerance)->default_value(1e-5, "1e-05"),
@@ -391,7 +392,11 @@ int batchCommand(const std::vector<std::string>& args) {
       "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr");
   addRobustFlags(options,
                  "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| "
-                 "= 1) trusted; with --solver rtr, then the certifiable solver on the edges kept");
+                 "= 1) trusted, by default from the robust online replay's estimate, "
+                 "classification and threshold (--init online, --inlier-threshold online; "
+                 "GTSAM's GncOptimizer: --init file --inlier-threshold chi2); with --solver rtr, "
+                 "then the certifiable solver on the edges kept",
+                 "online");
   options.add_options()(
       "edge-choices", po::value(&run.edge_choices),
       "with --robust: per-edge trust and kernel, \"FROM TO TRUST [KERNEL]\" a line "
@@ -417,6 +422,7 @@ int batchCommand(const std::vector<std::string>& args) {
   if (run.init == "online" && !robust.robust)
     throw UsageError("--init online needs --robust (it is the robust online replay's estimate)");
   run.robust = robust.robust;
+  if (run.robust && run.init.empty()) run.init = "online";
   run.gnc.kernel = robust.kernel;
   run.gnc.threshold = robust.threshold;
   run.gnc.estimate_scale = robust.estimate_scale;

@@ -1,5 +1,6 @@
 #include "arbor/tools/cli/online_threshold.h"
 
+#include <algorithm>
 #include <chrono>
 #include <utility>
 
@@ -28,6 +29,9 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
   OnlineThreshold out;
   out.c2_in_use = st.closure_threshold;
   out.c2 = robust.recheck_margin * st.closure_threshold;
+  out.c2_take_back = st.closure_threshold_at_end > 0
+                         ? std::min(st.closure_threshold, st.closure_threshold_at_end)
+                         : st.closure_threshold;
   out.noise_scale = st.noise_scale;
   out.estimated = st.noise_scale_estimated;
   out.samples = st.noise_samples;
@@ -63,7 +67,7 @@ OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
   }
   out.gnc = solveGnc(graph, poses, options);
   if (!out.gnc.cancelled) {
-    const double entry = online_threshold ? out.online.c2_in_use : out.gnc.threshold;
+    const double entry = online_threshold ? out.online.c2_take_back : out.gnc.threshold;
     out.readmitted = readmitFitting(graph, &out.gnc, poses, entry, options.outer);
   }
   return out;

@@ -21,8 +21,11 @@
 namespace arbor::cli {
 
 struct OnlineThreshold {
-  double c2 = 0;           ///< GNC's: recheck_margin · c2_in_use
-  double c2_in_use = 0;    ///< the online smoother's c² in use at the end of the replay
+  double c2 = 0;         ///< GNC's: recheck_margin · c2_in_use
+  double c2_in_use = 0;  ///< the online smoother's c² in use at the end of the replay
+  /// What its finalize() took a rejected closure back within: the end's scale where it stood
+  /// (RobustOptions::end_scale_samples, OnlineStats::closure_threshold_at_end), else c2_in_use
+  double c2_take_back = 0;
   double noise_scale = 1;  ///< its σ̂²
   bool estimated = false;  ///< σ̂² is an estimate (false: Ω at its word)
   int samples = 0;         ///< innovations it was estimated from
@@ -43,10 +46,13 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
 /// as known outliers (GNC's graduation from a nearly convex start would let them back in) and,
 /// with `online_threshold`, c² = the replay's bound for a settled inlier (OnlineThreshold::c2);
 /// then readmitFitting takes back each held-out closure the refined estimate fits within the
-/// replay's own c² in use (its entry test; GNC's c² without `online_threshold`): the online
-/// smoother's hysteresis at both ends. A closure the replay kept with s above that c² at its
-/// estimate (backed at the end) is held at weight 1 (OnlineBatch::kept_beyond). `options` as for
-/// solveGnc (its trusted edges are never held out); the estimate is written to *poses.
+/// bound the replay's end took closures back within (OnlineThreshold::c2_take_back; GNC's c²
+/// without `online_threshold`): the online smoother's hysteresis at both ends. Within the c² in
+/// use instead, sphere_bignoise_vertex3_random_0.1 took back eight false closures the replay's
+/// end had dropped at its end's scale (F_clean 1.0135 F* against the replay's 1.0090). A closure
+/// the replay kept with s above that c² at its estimate (backed at the end) is held at weight 1
+/// (OnlineBatch::kept_beyond). `options` as for solveGnc (its trusted edges are never held out);
+/// the estimate is written to *poses.
 struct OnlineBatch {
   OnlineThreshold online;
   GncResult gnc;

@@ -13,19 +13,21 @@ const char* const kKernelHelp = "with --robust: tls | gm (graduated) | cauchy | 
 const char* const kInlierThresholdHelp =
     "with --robust: c² on eᵀΩe, a number (2 is GTSAM's barcSq = 1 on ½eᵀΩe, what the shared "
     "robust files need: their Ω are 40-50 times too confident, docs/benchmarks.md); chi2: the "
-    "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default); online "
-    "(batch only): the bound up to which the robust online smoother keeps an inlier after "
-    "replaying the graph, twice its threshold, the χ² quantile on the noise scale estimated from "
-    "its loop closures' innovations (arbor replay --robust's); auto (batch only, experimental: it "
+    "χ² 0.99 quantile of the edge's dimension, Ω taken at its word (GTSAM's default; replay's "
+    "and serve's, which scale it by the noise they estimate); online (batch only, its default): "
+    "the bound up to which the robust online smoother keeps an inlier after replaying the graph, "
+    "twice its threshold, the χ² quantile on the noise scale estimated from its loop closures' "
+    "innovations (arbor replay --robust's); auto (batch only, experimental: it "
     "feeds on its own truncation): that quantile times the variance factor estimated over the "
     "inliers";
 
-void addRobustFlags(po::options_description& options, const std::string& robust_help) {
+void addRobustFlags(po::options_description& options, const std::string& robust_help,
+                    const std::string& default_threshold) {
   options.add_options()("robust", po::bool_switch(), robust_help.c_str())(
       "kernel", po::value<std::string>()->default_value("tls"), kKernelHelp)(
-      "inlier-threshold", po::value<std::string>()->default_value("chi2"), kInlierThresholdHelp)(
-      "rejected-out", po::value<std::string>(),
-      "with --robust: write the rejected edges, `i j` (file ids) a line");
+      "inlier-threshold", po::value<std::string>()->default_value(default_threshold),
+      kInlierThresholdHelp)("rejected-out", po::value<std::string>(),
+                            "with --robust: write the rejected edges, `i j` (file ids) a line");
 }
 
 namespace {

@@ -26,9 +26,10 @@ struct RobustFlags {
   std::string rejected_out;  ///< --rejected-out FILE: the rejected edges, `i j` a line
 };
 
-/// Adds the four flags to `options`; `robust_help` says what --robust does in this command.
+/// Adds the four flags to `options`; `robust_help` says what --robust does in this command,
+/// `default_threshold` is --inlier-threshold's default ("online" for `arbor batch`).
 void addRobustFlags(boost::program_options::options_description& options,
-                    const std::string& robust_help);
+                    const std::string& robust_help, const std::string& default_threshold = "chi2");
 
 /// The flags in `vm` (parsed against a description addRobustFlags filled). Throws UsageError
 /// on a bad kernel or threshold, on `auto` when `allow_auto` is false, and on --kernel,
