@@ -400,6 +400,12 @@ TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   ASSERT_EQ(chi2.status, 0) << chi2.out;
   EXPECT_EQ(nlohmann::json::parse(chi2.out)["threshold_rule"], "chi2");
   EXPECT_EQ(nlohmann::json::parse(chi2.out)["init"], "file");
+  // A given c² from the replay's start: the rule is the given one.
+  const Result given = run("batch " + file + " --robust --json --inlier-threshold 3");
+  ASSERT_EQ(given.status, 0) << given.out;
+  EXPECT_EQ(nlohmann::json::parse(given.out)["threshold_rule"], "given");
+  EXPECT_EQ(nlohmann::json::parse(given.out)["init"], "online");
+  EXPECT_DOUBLE_EQ(nlohmann::json::parse(given.out)["inlier_threshold"].get<double>(), 3.0);
   for (const std::string& args : {"batch " + file + " --init online",
                                   "replay " + file + " --robust --inlier-threshold online"}) {
     const Result bad = run(args);

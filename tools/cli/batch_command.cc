@@ -253,7 +253,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
         {"init", init_name},
         {"inlier_threshold", gnc.threshold},
         {"variance_factor", gnc.scale},
-        {"threshold_rule", online                  ? "online"
+        {"threshold_rule", run.online_threshold    ? "online"
                            : run.gnc.threshold > 0 ? "given"
                                                    : (run.gnc.estimate_scale ? "auto" : "chi2")},
         {"F_least_squares", gnc.F_least_squares},
@@ -310,7 +310,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   std::cout << "init         " << init_name << "\n"
             << "robust       GNC-" << toString(run.gnc.kernel) << " over "
             << toString(run.gnc.inner.method) << ", c² " << gnc.threshold
-            << (online
+            << (run.online_threshold && online
                     ? " (online: the robust replay's, σ̂² " + std::to_string(online->noise_scale) +
                           (online->estimated ? "" : ", no estimate") + ", " +
                           std::to_string(online->replay_s) + " s)"
@@ -330,8 +330,10 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   if (init_online)
     std::cout << "online       " << known_outliers
               << " closure(s) the replay rejected held out of GNC, " << readmitted_online
-              << " taken back (fit within the replay's c²), " << kept_beyond
-              << " it kept beyond GNC's c² held\n";
+              << " taken back (fit within c² "
+              << (run.online_threshold && online ? online->c2_take_back : gnc.threshold)
+              << (run.online_threshold ? ", the replay's end's bound), " : ", GNC's), ")
+              << kept_beyond << " it kept beyond GNC's c² held\n";
   if (certified) {
     const RtrSummary& r = certified->rtr;
     std::cout << "readmitted   " << certified->readmitted
