@@ -245,6 +245,64 @@ TEST(RobustBench, FindsSharedFilesWithLabelsAndTheirBase) {
   fs::remove_all(shared);
 }
 
+// The reference tools of robust-anchors.tsv (GTSAM GNC, riSAM, iSAM2 with a Cauchy kernel) reach
+// a shared file's row by (dataset, tool), each in its own column; a tool with no row for the
+// files benchmarked is said so under the table (the shared table has no isam2_cauchy rows).
+TEST(RobustBench, AnchorsFillTheirColumnsAndAnAbsentToolIsSaid) {
+  const fs::path shared = scratch("anchors");
+  fs::create_directories(shared / "datasets" / "robust");
+  fs::create_directories(shared / "reference");
+  const PoseGraph2 base = smallManhattan();
+  writeG2oFile((shared / "datasets" / "tiny.g2o").string(), base, base.poses);
+  const auto planted = sim::addFalseClosures(base, sim::OutlierOptions{});
+  writeG2oFile((shared / "datasets" / "robust" / "tiny_group_0.5.g2o").string(), planted.graph,
+               planted.graph.poses);
+  writeLabelsFile((shared / "datasets" / "robust" / "tiny_group_0.5.labels").string(),
+                  labelsOf(planted));
+  {
+    std::ofstream tsv(shared / "reference" / "robust-anchors.tsv");
+    tsv << "# a comment\n"
+           "dataset\ttool\ttotal_s\tp50_ms\tp99_ms\tmax_ms\trejected\tstatus\tF_clean\t"
+           "F_clean/F*\tate\tprecision\trecall\n"
+           "tiny_group_0.5\tgnc\t1.5\t0\t0\t0\t9\tok\t10\t1.25\t0.5\t0.9\t0.8\n"
+           "tiny_group_0.5\trisam\t300\t0\t0\t0\t0\ttimeout(300s)\tnan\tnan\tnan\tnan\tnan\n";
+  }
+  const auto anchors = bench::readRobustAnchorTable(shared.string());
+  ASSERT_EQ(anchors.size(), 2u);
+  const auto cases = bench::sharedRobustCases(shared.string());
+  ASSERT_EQ(cases.size(), 1u);
+  std::map<std::string, bench::Reference> optimum;
+  auto rows = bench::runRobustBench(cases, optimum, anchors, bench::RobustBatchSettings{},
+                                    bench::RobustReplayHooks{}, nullptr);
+  ASSERT_EQ(rows.size(), 1u);
+  ASSERT_TRUE(rows[0].gnc.has_value());
+  EXPECT_DOUBLE_EQ(rows[0].gnc->F_ratio, 1.25);
+  ASSERT_TRUE(rows[0].risam.has_value());
+  EXPECT_FALSE(rows[0].isam2_cauchy.has_value());
+  std::string md = bench::robustMarkdown(rows);
+  EXPECT_NE(md.find("| 1.25 · 0.5 · 0.900 · 0.800 · 1.5 | timeout(300s) | — |"), std::string::npos)
+      << md;
+  EXPECT_NE(md.find("holds no row of tool isam2_cauchy"), std::string::npos) << md;
+  EXPECT_EQ(md.find("holds no row of tool risam"), std::string::npos) << md;
+  // With an iSAM2 + Cauchy row, its column holds it and the note goes.
+  bench::RobustAnchor cauchy;
+  cauchy.status = "ok";
+  cauchy.F_ratio = 3.5;
+  cauchy.ate = 0.25;
+  cauchy.precision = 0.5;
+  cauchy.recall = 1.0;
+  cauchy.total_s = 2.0;
+  auto with = anchors;
+  with[{"tiny_group_0.5", "isam2_cauchy"}] = cauchy;
+  rows = bench::runRobustBench(cases, optimum, with, bench::RobustBatchSettings{},
+                               bench::RobustReplayHooks{}, nullptr);
+  ASSERT_TRUE(rows[0].isam2_cauchy.has_value());
+  md = bench::robustMarkdown(rows);
+  EXPECT_NE(md.find("| 3.5 · 0.25 · 0.500 · 1.000 · 2 |"), std::string::npos) << md;
+  EXPECT_EQ(md.find("holds no row of tool"), std::string::npos) << md;
+  fs::remove_all(shared);
+}
+
 TEST(RobustBench, GeneratedRowsGoThroughBatchAndTheReplayHooks) {
   const fs::path shared = scratch("generate");
   fs::create_directories(shared / "datasets");

@@ -187,7 +187,8 @@ struct RobustRow {
   RobustFigures batch;
   std::optional<RobustFigures> replay;             ///< RobustReplayHooks::robust*
   std::optional<CleanReplayFigures> clean_replay;  ///< RobustReplayHooks::clean*
-  std::optional<RobustAnchor> gnc, risam;          ///< robust-anchors.tsv
+  /// robust-anchors.tsv (tools gnc, risam, isam2_cauchy; shared files only)
+  std::optional<RobustAnchor> gnc, risam, isam2_cauchy;
 };
 
 /// Runs every case in turn (the references computed once per base), one line per case on
