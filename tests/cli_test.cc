@@ -446,6 +446,13 @@ TEST(Cli, BatchFromTheOnlineReplayKeepsItsRejections) {
   EXPECT_EQ(j["known_outliers"].get<int>(), static_cast<int>(replay_rejected.size()));
   EXPECT_EQ(j["readmitted_online"].get<int>(), 0);
   EXPECT_EQ(readPairs(batch_rej, /*unordered=*/true), planted);
+  // The same without the flags: they are the defaults with --robust.
+  const std::string default_rej = tempPath("online_group.default.rej");
+  const Result d = run("batch " + file + " --robust --json --rejected-out " + default_rej);
+  ASSERT_EQ(d.status, 0) << d.out;
+  EXPECT_EQ(readPairs(default_rej, /*unordered=*/true), planted);
+  EXPECT_DOUBLE_EQ(nlohmann::json::parse(d.out)["F_final"].get<double>(),
+                   j["F_final"].get<double>());
   const Result text = run("batch " + file + " --robust --init online --inlier-threshold online");
   ASSERT_EQ(text.status, 0) << text.out;
   EXPECT_NE(text.out.find("held out of GNC"), std::string::npos) << text.out;
