@@ -350,13 +350,19 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses, const GncOp
 
 template <class G>
 CertifiedInliers certifyInliers(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
-                                const RtrOptions& options, int max_passes) {
+                                const RtrOptions& options, int max_passes, double take_back) {
+  if (!(take_back >= 0) || !std::isfinite(take_back))
+    throw std::invalid_argument(
+        "certifyInliers: the take-back threshold must be finite and >= 0, "
+        "got " +
+        std::to_string(take_back));
+  const double bound = take_back > 0 ? take_back : gnc->threshold;
   CertifiedInliers out;
   for (int pass = 0; pass < max_passes; ++pass) {
     const PoseGraph<G> inliers = keepEdges(graph, gnc->inlier);
     out.rtr = solveRtr(inliers, poses, options);
     ++out.passes;
-    const int taken = takeBackFitting(edgeCosts(graph, *poses), gnc->threshold, gnc);
+    const int taken = takeBackFitting(edgeCosts(graph, *poses), bound, gnc);
     out.readmitted += taken;
     if (taken == 0) break;
   }
@@ -390,9 +396,9 @@ int readmitFitting(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* po
 template GncResult solveGnc(const PoseGraph<SE2>&, std::vector<SE2>*, const GncOptions&);
 template GncResult solveGnc(const PoseGraph<SE3>&, std::vector<SE3>*, const GncOptions&);
 template CertifiedInliers certifyInliers(const PoseGraph<SE2>&, GncResult*, std::vector<SE2>*,
-                                         const RtrOptions&, int);
+                                         const RtrOptions&, int, double);
 template CertifiedInliers certifyInliers(const PoseGraph<SE3>&, GncResult*, std::vector<SE3>*,
-                                         const RtrOptions&, int);
+                                         const RtrOptions&, int, double);
 template int readmitFitting(const PoseGraph<SE2>&, GncResult*, std::vector<SE2>*, double,
                             const BatchOptions&, int);
 template int readmitFitting(const PoseGraph<SE3>&, GncResult*, std::vector<SE3>*, double,

@@ -156,9 +156,9 @@ GncResult solveGnc(const PoseGraph<G>& graph, std::vector<G>* poses,
 
 /// The certifiable path on GNC's inlier set: SE-Sync's staircase (solveRtr) on the graph without
 /// the rejected edges, then every rejected edge whose s = eᵀΩe at that global optimum is within
-/// gnc->threshold is taken back and the inlier problem solved again (at most `max_passes`
-/// times): LM's answer to the inlier problem can be a local minimum at which true closures look
-/// like outliers (MIT with two planted closures: F 128.7 by LM, 35.25 certified). The
+/// `take_back` (> 0; 0: gnc->threshold) is taken back and the inlier problem solved again (at
+/// most `max_passes` times): LM's answer to the inlier problem can be a local minimum at which true
+/// closures look like outliers (MIT with two planted closures: F 128.7 by LM, 35.25 certified). The
 /// certificate is that of the final inlier problem (the graph without the edges still
 /// rejected), not of the choice of inliers. Updates gnc's classification and F figures; writes
 /// the estimate to *poses. Throws what solveRtr throws (priors, a disconnected inlier graph).
@@ -169,7 +169,8 @@ struct CertifiedInliers {
 };
 template <class G>
 CertifiedInliers certifyInliers(const PoseGraph<G>& graph, GncResult* gnc, std::vector<G>* poses,
-                                const RtrOptions& options = {}, int max_passes = 5);
+                                const RtrOptions& options = {}, int max_passes = 5,
+                                double take_back = 0);
 
 /// Takes back the rejected edges that fit: every edge gnc classified an outlier (known outliers
 /// included, trusted ones never rejected) whose s = eᵀΩe at *poses is within `threshold` becomes

@@ -220,9 +220,11 @@ RobustEstimate<G> robustBatch(const PoseGraph<G>& graph, const RobustBatchSettin
   const cli::Stopwatch watch;
   RobustEstimate<G> out;
   GncResult gnc;
+  double take_back = 0;  // certifyInliers' take-back bound (0: GNC's c²)
   if (settings.start == BatchStart::kOnline) {
     cli::OnlineBatch b = cli::solveGncFromOnline(graph, settings.gnc, {}, true, &out.poses);
     gnc = std::move(b.gnc);
+    take_back = b.online.c2_take_back;
     out.note = "online: " + std::to_string(b.known_outliers) + " held out, " +
                std::to_string(b.readmitted) + " taken back; " + gnc.message;
   } else {
@@ -231,7 +233,8 @@ RobustEstimate<G> robustBatch(const PoseGraph<G>& graph, const RobustBatchSettin
     out.note = gnc.message;
   }
   if (settings.certify) {
-    const CertifiedInliers c = certifyInliers(graph, &gnc, &out.poses);
+    const CertifiedInliers c =
+        certifyInliers(graph, &gnc, &out.poses, RtrOptions{}, /*max_passes=*/5, take_back);
     out.note +=
         std::string("; rtr ") +
         (c.rtr.certified ? "certified"
