@@ -299,6 +299,7 @@ TYPED_TEST(GncSolverTest, KnownOutliersStayOutUntilReadmittedWhereTheyFit) {
   // Nothing fits at c² = 0: nothing is taken back.
   EXPECT_EQ(readmitFitting(p.graph, &r, &poses, 0.0, o.outer), 0);
   EXPECT_THROW(readmitFitting(p.graph, &r, &poses, -1.0, o.outer), std::invalid_argument);
+  EXPECT_THROW(certifyInliers(p.graph, &r, &poses, RtrOptions{}, 5, -1.0), std::invalid_argument);
   // An odometry edge (trusted) cannot be a known outlier; the marks must match the edges.
   GncOptions bad = o;
   bad.known_outliers[0] = 1;
