@@ -220,16 +220,24 @@ TEST(RobustMetrics, JudgesAnEstimateAgainstTheCleanOptimum) {
   EXPECT_FALSE(f.error.empty());
 }
 
-TEST(RobustBench, FindsSharedFilesWithLabelsAndTheirBase) {
-  const fs::path shared = scratch("shared");
+// A scratch shared folder holding datasets/tiny.g2o (smallManhattan) and its copy with
+// planted group closures, datasets/robust/tiny_group_0.5.g2o with its labels; returns the
+// planted graph.
+sim::FalseClosures<SE2> writeSharedRobustFile(const fs::path& shared) {
   fs::create_directories(shared / "datasets" / "robust");
   const PoseGraph2 base = smallManhattan();
   writeG2oFile((shared / "datasets" / "tiny.g2o").string(), base, base.poses);
-  const auto planted = sim::addFalseClosures(base, sim::OutlierOptions{});
+  auto planted = sim::addFalseClosures(base, sim::OutlierOptions{});
   writeG2oFile((shared / "datasets" / "robust" / "tiny_group_0.5.g2o").string(), planted.graph,
                planted.graph.poses);
   writeLabelsFile((shared / "datasets" / "robust" / "tiny_group_0.5.labels").string(),
                   labelsOf(planted));
+  return planted;
+}
+
+TEST(RobustBench, FindsSharedFilesWithLabelsAndTheirBase) {
+  const fs::path shared = scratch("shared");
+  const auto planted = writeSharedRobustFile(shared);
   // Without labels: left out.
   writeG2oFile((shared / "datasets" / "robust" / "tiny_random_0.1.g2o").string(), planted.graph,
                planted.graph.poses);
@@ -250,15 +258,8 @@ TEST(RobustBench, FindsSharedFilesWithLabelsAndTheirBase) {
 // files benchmarked is said so under the table (the shared table has no isam2_cauchy rows).
 TEST(RobustBench, AnchorsFillTheirColumnsAndAnAbsentToolIsSaid) {
   const fs::path shared = scratch("anchors");
-  fs::create_directories(shared / "datasets" / "robust");
+  writeSharedRobustFile(shared);
   fs::create_directories(shared / "reference");
-  const PoseGraph2 base = smallManhattan();
-  writeG2oFile((shared / "datasets" / "tiny.g2o").string(), base, base.poses);
-  const auto planted = sim::addFalseClosures(base, sim::OutlierOptions{});
-  writeG2oFile((shared / "datasets" / "robust" / "tiny_group_0.5.g2o").string(), planted.graph,
-               planted.graph.poses);
-  writeLabelsFile((shared / "datasets" / "robust" / "tiny_group_0.5.labels").string(),
-                  labelsOf(planted));
   {
     std::ofstream tsv(shared / "reference" / "robust-anchors.tsv");
     tsv << "# a comment\n"
