@@ -900,6 +900,14 @@ bool OnlineGnc<G>::judges(int factor) const {
 }
 
 template <class G>
+bool OnlineGnc<G>::rejects(int factor) const {
+  const int id = closureOf(factor);
+  if (id < 0) return false;
+  const Closure& c = closures_[id];
+  return c.state == State::kSettled && !c.held && !isInlier(c);
+}
+
+template <class G>
 KernelKind OnlineGnc<G>::kernelOf(int factor) const {
   return judges(factor) ? closures_[closureOf(factor)].kernel : KernelKind::kNone;
 }

@@ -440,17 +440,16 @@ UpdateStats OnlineSmoother<G>::recordUpdate(const UpdateStats& s) {
 }
 
 template <class G>
-PoseGraph<G> OnlineSmoother<G>::snapshot(std::vector<char>* judged,
-                                         std::vector<KernelKind>* kernels) const {
+PoseGraph<G> OnlineSmoother<G>::snapshot(SnapshotJudgement* judgement) const {
   PoseGraph<G> graph = snapshot();
-  judged->clear();
-  if (kernels != nullptr) kernels->clear();
+  *judgement = {};
   const auto& fs = smoother_.factors();
   for (size_t k = 0; k < fs.size(); ++k) {  // the order snapshot() adds the edges in
     if (disabledFactor(fs[k]) || fs[k].relativePose() == nullptr) continue;
     const int f = static_cast<int>(k);
-    judged->push_back(gnc_ && gnc_->judges(f) ? 1 : 0);
-    if (kernels != nullptr) kernels->push_back(gnc_ ? gnc_->kernelOf(f) : KernelKind::kNone);
+    judgement->judged.push_back(gnc_ && gnc_->judges(f) ? 1 : 0);
+    judgement->kernels.push_back(gnc_ ? gnc_->kernelOf(f) : KernelKind::kNone);
+    judgement->rejected.push_back(gnc_ && gnc_->rejects(f) ? 1 : 0);
   }
   return graph;
 }

@@ -154,6 +154,13 @@ struct OnlineStats {
   bool noise_scale_estimated = false;
 };
 
+/// Per edge of an OnlineSmoother::snapshot(), in its order: how the online GNC holds it.
+struct SnapshotJudgement {
+  std::vector<char> judged;         ///< weighted by the online GNC (the others are trusted)
+  std::vector<KernelKind> kernels;  ///< the kernel it is judged by (OnlineGnc::kernelOf; kNone)
+  std::vector<char> rejected;       ///< a closure the online GNC rejects now (OnlineGnc::rejects)
+};
+
 template <class G>
 class OnlineSmoother {
  public:
@@ -228,12 +235,10 @@ class OnlineSmoother {
   /// the current estimate as `poses`: a problem for a batch solver with the same gauge (ids in
   /// dense order, not sorted).
   PoseGraph<G> snapshot() const;
-  /// As snapshot(), and per snapshot edge whether the online GNC judges it (*judged; all false
-  /// without robust smoothing): the edges a robust batch weights, the others it trusts; with
-  /// `kernels`, per snapshot edge the kernel it is judged by (OnlineGnc::kernelOf; kNone for
-  /// the edges not judged), so that a robust batch weights each edge as the online GNC does.
-  PoseGraph<G> snapshot(std::vector<char>* judged,
-                        std::vector<KernelKind>* kernels = nullptr) const;
+  /// As snapshot(), and per snapshot edge how the online GNC holds it (*judgement; without
+  /// robust smoothing nothing is judged): the edges a robust batch weights and their kernels, so
+  /// that it weights each edge as the online GNC does, and the closures it rejects now.
+  PoseGraph<G> snapshot(SnapshotJudgement* judgement) const;
   /// The robust cost Σρ at the estimate over every factor not disabled: ρ of a judged closure
   /// at its kernel (TLS: min(s, c²)), s = eᵀΩe of everything else (= objective() without robust
   /// smoothing). O(m).

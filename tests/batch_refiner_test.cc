@@ -161,9 +161,10 @@ TEST(BatchRefiner, RobustBatchWeightsEachClosureByItsOwnKernel) {
     }
     s.update();
   }
-  std::vector<char> judged;
-  std::vector<KernelKind> kernels;
-  const PoseGraph<SE2> snapshot = s.snapshot(&judged, &kernels);
+  SnapshotJudgement judgement;
+  const PoseGraph<SE2> snapshot = s.snapshot(&judgement);
+  const std::vector<char>& judged = judgement.judged;
+  const std::vector<KernelKind>& kernels = judgement.kernels;
   ASSERT_EQ(kernels.size(), snapshot.edges.size());
   size_t closure = 0;
   int judged_count = 0;

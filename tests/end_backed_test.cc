@@ -71,7 +71,7 @@ TEST(EndBacked, TheBatchFromTheReplayKeepsWhatItsEndKept) {
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kClean);
   const PoseGraph3 clean = load(kClean);
   std::vector<SE3> poses;
-  const cli::OnlineBatch b = cli::solveGncFromOnline(clean, GncOptions{}, EdgeChoices{},
+  const cli::OnlineBatch b = cli::solveGncFromReplay(clean, GncOptions{}, EdgeChoices{},
                                                      /*online_threshold=*/true, &poses);
   EXPECT_EQ(b.kept_beyond, 3);
   EXPECT_EQ(b.known_outliers, 0);

@@ -222,7 +222,7 @@ RobustEstimate<G> robustBatch(const PoseGraph<G>& graph, const RobustBatchSettin
   GncResult gnc;
   double take_back = 0;  // certifyInliers' take-back bound (0: GNC's c²)
   if (settings.start == BatchStart::kOnline) {
-    cli::OnlineBatch b = cli::solveGncFromOnline(graph, settings.gnc, {}, true, &out.poses);
+    cli::OnlineBatch b = cli::solveGncFromReplay(graph, settings.gnc, {}, true, &out.poses);
     gnc = std::move(b.gnc);
     take_back = b.online.c2_take_back;
     out.note = "online: " + std::to_string(b.known_outliers) + " held out, " +

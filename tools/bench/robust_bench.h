@@ -139,7 +139,7 @@ std::map<std::pair<std::string, std::string>, RobustAnchor> readRobustAnchorTabl
 enum class BatchStart {
   kFile,    ///< the file's vertices, GNC at the given c² (`arbor batch --robust --init file`)
   kOnline,  ///< the robust online replay, its classification and threshold kept (`arbor batch
-            ///< --robust`'s defaults; cli::solveGncFromOnline)
+            ///< --robust`'s defaults; cli::solveGncFromReplay)
 };
 
 /// The robust batch, as `arbor batch --robust` runs it.
@@ -150,7 +150,7 @@ struct RobustBatchSettings {
 };
 
 /// Starts from the file's vertices (the odometry chain without them) and runs solveGnc, or with
-/// BatchStart::kOnline cli::solveGncFromOnline (its time included); with `certify` then
+/// BatchStart::kOnline cli::solveGncFromReplay (its time included); with `certify` then
 /// certifyInliers; rejected = the edges neither trusted nor inliers.
 template <class G>
 RobustEstimate<G> robustBatch(const PoseGraph<G>& graph, const RobustBatchSettings& settings);

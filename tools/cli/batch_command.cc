@@ -197,8 +197,8 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   std::optional<OnlineThreshold> online;
   GncResult gncFirst;
   int known_outliers = 0, readmitted_online = 0, kept_beyond = 0;
-  if (init_online) {  // the replay's classification kept (online_threshold.h solveGncFromOnline)
-    OnlineBatch b = solveGncFromOnline(graph, options, choices, run.online_threshold, &poses);
+  if (init_online) {  // the replay's classification kept (online_threshold.h solveGncFromReplay)
+    OnlineBatch b = solveGncFromReplay(graph, options, choices, run.online_threshold, &poses);
     online = b.online;
     gncFirst = std::move(b.gnc);
     known_outliers = b.known_outliers;
@@ -235,7 +235,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
     ++rejected_loops;
     rejected << graph.ids[graph.edges[k].i] << " " << graph.ids[graph.edges[k].j] << "\n";
   }
-  loops += kept_beyond;  // loop closures GNC held as trusted (solveGncFromOnline)
+  loops += kept_beyond;  // loop closures GNC held as trusted (refine::solveGncFromOnline)
   if (!run.rejected_out.empty()) {
     std::ofstream out(run.rejected_out);
     out << rejected.str();

@@ -119,14 +119,17 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
   result.reseeds = refiner.reseeds();
   result.reseed_s = refiner.reseedSeconds();
 
-  std::vector<char> judged;
-  std::vector<KernelKind> kernels;
-  const PoseGraph<G> snapshot = smoother.snapshot(&judged, &kernels);
+  SnapshotJudgement judgement;
+  const PoseGraph<G> snapshot = smoother.snapshot(&judgement);
   if (loop.final_run && snapshot.numPoses() > 1 && snapshot.numEdges() > 0) {
+    // Robust: from the finalized smoother's classification, as `arbor batch --robust` starts
+    // from the replay's (tools/refine/gnc_from_online.h).
+    const OnlineGnc<G>* gnc = smoother.gnc();
     refine::BatchOutcome<G> last =
-        smoother.gnc() ? refine::solveRobustSnapshot(loop.solver, snapshot, judged,
-                                                     refine::gncOptionsOf(*smoother.gnc(), kernels))
-                       : refine::solveSnapshot(loop.solver, snapshot);
+        gnc ? refine::solveRobustSnapshot(loop.solver, snapshot, judgement.judged,
+                                          refine::gncOptionsOf(*gnc, judgement.kernels),
+                                          refine::onlineClassificationOf(*gnc, judgement.rejected))
+            : refine::solveSnapshot(loop.solver, snapshot);
     last.run.update = static_cast<std::int64_t>(r.rows.size());
     last.run.final_run = true;
     auto toGraphOrder = [&](const std::vector<G>& poses) {

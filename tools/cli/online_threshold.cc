@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "arbor/tools/cli/replay_runner.h"
+#include "arbor/tools/refine/gnc_from_online.h"
 
 namespace arbor::cli {
 
@@ -28,10 +29,10 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
   const OnlineStats st = smoother.stats();
   OnlineThreshold out;
   out.c2_in_use = st.closure_threshold;
-  out.c2 = robust.recheck_margin * st.closure_threshold;
-  out.c2_take_back = st.closure_threshold_at_end > 0
-                         ? std::min(st.closure_threshold, st.closure_threshold_at_end)
-                         : st.closure_threshold;
+  const refine::OnlineClassification bounds = refine::onlineBounds(
+      st.closure_threshold, st.closure_threshold_at_end, robust.recheck_margin);
+  out.c2 = bounds.c2;
+  out.c2_take_back = bounds.c2_take_back;
   out.noise_scale = st.noise_scale;
   out.estimated = st.noise_scale_estimated;
   out.samples = st.noise_samples;
@@ -41,35 +42,23 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
 }
 
 template <class G>
-OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
+OnlineBatch solveGncFromReplay(const PoseGraph<G>& graph, GncOptions options,
                                const EdgeChoices& choices, bool online_threshold,
                                std::vector<G>* poses) {
   OnlineBatch out;
   out.online = onlineThreshold(graph, options.kernel, choices, poses);
-  if (online_threshold) options.threshold = out.online.c2;
-  options.known_outliers.assign(graph.numEdges(), 0);
-  // The closures the replay's end kept beyond that bound (backed at the end) are its own
-  // judgement, not GNC's to undo: held at weight 1 as trusted edges.
-  std::vector<char> backed(graph.numEdges(), 0);
-  for (int k = 0; k < graph.numEdges(); ++k) {
-    const bool trusted = trustedEdge(graph, options, k);
-    options.known_outliers[k] = !out.online.kept[k] && !trusted;
-    out.known_outliers += options.known_outliers[k];
-    const auto& e = graph.edges[static_cast<size_t>(k)];
-    backed[k] = online_threshold && out.online.kept[k] && !trusted &&
-                e.cost((*poses)[static_cast<size_t>(e.i)], (*poses)[static_cast<size_t>(e.j)]) >
-                    out.online.c2;
-    out.kept_beyond += backed[k];
+  refine::OnlineClassification from;
+  from.rejected.resize(out.online.kept.size());
+  for (size_t k = 0; k < from.rejected.size(); ++k) from.rejected[k] = !out.online.kept[k];
+  if (online_threshold) {
+    from.c2 = out.online.c2;
+    from.c2_take_back = out.online.c2_take_back;
   }
-  if (out.kept_beyond > 0) {
-    if (options.trusted.empty()) options.trusted.assign(graph.numEdges(), 0);
-    for (int k = 0; k < graph.numEdges(); ++k) options.trusted[k] |= backed[k];
-  }
-  out.gnc = solveGnc(graph, poses, options);
-  if (!out.gnc.cancelled) {
-    const double entry = online_threshold ? out.online.c2_take_back : out.gnc.threshold;
-    out.readmitted = readmitFitting(graph, &out.gnc, poses, entry, options.outer);
-  }
+  refine::GncFromOnline g = refine::solveGncFromOnline(graph, std::move(options), from, poses);
+  out.gnc = std::move(g.gnc);
+  out.known_outliers = g.known_outliers;
+  out.readmitted = g.readmitted;
+  out.kept_beyond = g.kept_beyond;
   return out;
 }
 
@@ -77,9 +66,9 @@ template OnlineThreshold onlineThreshold(const PoseGraph<SE2>&, KernelKind, cons
                                          std::vector<SE2>*);
 template OnlineThreshold onlineThreshold(const PoseGraph<SE3>&, KernelKind, const EdgeChoices&,
                                          std::vector<SE3>*);
-template OnlineBatch solveGncFromOnline(const PoseGraph<SE2>&, GncOptions, const EdgeChoices&, bool,
+template OnlineBatch solveGncFromReplay(const PoseGraph<SE2>&, GncOptions, const EdgeChoices&, bool,
                                         std::vector<SE2>*);
-template OnlineBatch solveGncFromOnline(const PoseGraph<SE3>&, GncOptions, const EdgeChoices&, bool,
+template OnlineBatch solveGncFromReplay(const PoseGraph<SE3>&, GncOptions, const EdgeChoices&, bool,
                                         std::vector<SE3>*);
 
 }  // namespace arbor::cli

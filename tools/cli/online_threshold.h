@@ -42,17 +42,10 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
                                 const EdgeChoices& choices, std::vector<G>* estimate = nullptr);
 
 /// The robust batch from the online replay (`arbor batch --robust --init online`): the replay
-/// (onlineThreshold, its estimate the start), then solveGnc with the closures the replay rejected
-/// as known outliers (GNC's graduation from a nearly convex start would let them back in) and,
-/// with `online_threshold`, c² = the replay's bound for a settled inlier (OnlineThreshold::c2);
-/// then readmitFitting takes back each held-out closure the refined estimate fits within the
-/// bound the replay's end took closures back within (OnlineThreshold::c2_take_back; GNC's c²
-/// without `online_threshold`): the online smoother's hysteresis at both ends. Within the c² in
-/// use instead, sphere_bignoise_vertex3_random_0.1 took back eight false closures the replay's
-/// end had dropped at its end's scale (F_clean 1.0135 F* against the replay's 1.0090). A closure
-/// the replay kept with s above that c² at its estimate (backed at the end) is held at weight 1
-/// (OnlineBatch::kept_beyond). `options` as for solveGnc (its trusted edges are never held out);
-/// the estimate is written to *poses.
+/// (onlineThreshold, its estimate the start), then refine::solveGncFromOnline
+/// (tools/refine/gnc_from_online.h) from its classification: with `online_threshold` at the
+/// replay's bounds (OnlineThreshold::c2, c2_take_back), without it at GNC's c² (`options`). The
+/// estimate is written to *poses.
 struct OnlineBatch {
   OnlineThreshold online;
   GncResult gnc;
@@ -63,7 +56,7 @@ struct OnlineBatch {
   int kept_beyond = 0;
 };
 template <class G>
-OnlineBatch solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
+OnlineBatch solveGncFromReplay(const PoseGraph<G>& graph, GncOptions options,
                                const EdgeChoices& choices, bool online_threshold,
                                std::vector<G>* poses);
 

@@ -139,6 +139,15 @@ GncOptions gncOptionsOf(const OnlineGnc<G>& online, std::vector<KernelKind> kern
 }
 
 template <class G>
+OnlineClassification onlineClassificationOf(const OnlineGnc<G>& online,
+                                            std::vector<char> rejected) {
+  OnlineClassification c =
+      onlineBounds(online.threshold(), online.thresholdAtEnd(), online.options().recheck_margin);
+  c.rejected = std::move(rejected);
+  return c;
+}
+
+template <class G>
 double robustCost(const PoseGraph<G>& graph, const std::vector<G>& poses,
                   const std::vector<char>& judged, const GncOptions& gnc) {
   // Σρ = F − Σ_judged (s − ρ(s)), F = Σ eᵀΩe over every edge and prior.
@@ -160,7 +169,8 @@ double robustCost(const PoseGraph<G>& graph, const std::vector<G>& poses,
 
 template <class G>
 BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snapshot,
-                                    const std::vector<char>& judged, GncOptions gnc) {
+                                    const std::vector<char>& judged, GncOptions gnc,
+                                    const OnlineClassification& online) {
   requireRefining(solver);
   if (judged.size() != snapshot.edges.size())
     throw std::invalid_argument("solveRobustSnapshot: " + std::to_string(judged.size()) +
@@ -168,7 +178,6 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
   BatchOutcome<G> out;
   BatchRun& run = out.run;
   run.robust = true;
-  run.threshold = gnc.threshold;
   const std::vector<G>& incremental = snapshot.poses;
   run.poses = snapshot.numPoses();
   run.edges = snapshot.numEdges();
@@ -176,13 +185,17 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
   auto rho = [&](const std::vector<G>& x) { return robustCost(snapshot, x, judged, gnc); };
   run.F_incremental = rho(incremental);
 
-  // GNC from the incremental estimate, trusting what the online GNC trusts.
-  gnc.trust_odometry = false;
-  gnc.trusted.assign(judged.size(), 0);
-  for (size_t e = 0; e < judged.size(); ++e) gnc.trusted[e] = judged[e] ? 0 : 1;
+  // GNC from the incremental estimate and the online classification, trusting what the online
+  // GNC trusts.
+  GncOptions options = gnc;
+  options.trust_odometry = false;
+  options.trusted.assign(judged.size(), 0);
+  for (size_t e = 0; e < judged.size(); ++e) options.trusted[e] = judged[e] ? 0 : 1;
   auto t0 = std::chrono::steady_clock::now();
   std::vector<G> estimate = incremental;
-  GncResult result = solveGnc(snapshot, &estimate, gnc);
+  const GncFromOnline from = solveGncFromOnline(snapshot, options, online, &estimate);
+  const GncResult& result = from.gnc;
+  run.threshold = result.threshold;
   run.cancelled = result.cancelled;
   run.lm_time_s = secondsSince(t0);
   run.F_lm = rho(estimate);
@@ -199,7 +212,8 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
       GncResult classified = result;
       RtrOptions rtr;
       rtr.cancel = gnc.cancel;
-      const CertifiedInliers c = certifyInliers(snapshot, &classified, &certified, rtr);
+      const CertifiedInliers c = certifyInliers(snapshot, &classified, &certified, rtr,
+                                                /*max_passes=*/5, online.c2_take_back);
       run.cancelled = c.rtr.cancelled;
       run.F_rtr = rho(certified);
       run.rank = c.rtr.rank;
@@ -255,6 +269,7 @@ struct BatchRefiner<G>::Flight {
   OnlineSmoother<G>* busy = nullptr;  ///< told its second core is free again by collect
   std::vector<char> judged;           ///< robust: per snapshot edge, weighted by GNC
   std::optional<GncOptions> gnc;      ///< robust: the smoother's kernel and c²
+  OnlineClassification online;        ///< robust: what the smoother rejects, and its bounds
   std::int64_t update = 0;
   int updates_during = 0;
   BatchOutcome<G> outcome;
@@ -267,7 +282,7 @@ struct BatchRefiner<G>::Flight {
       if (gnc) {
         GncOptions options = *gnc;
         options.cancel = cancel;  // GNC hands it to its solves; the staircase gets it too
-        outcome = solveRobustSnapshot(solver, snapshot, judged, options);
+        outcome = solveRobustSnapshot(solver, snapshot, judged, options, online);
       } else {
         outcome = solveSnapshot(solver, snapshot, cancel);
       }
@@ -314,15 +329,15 @@ bool BatchRefiner<G>::start(OnlineSmoother<G>& smoother, std::int64_t update) {
     ++skipped_;
     return false;
   }
-  std::vector<char> judged;
-  std::vector<KernelKind> kernels;
-  PoseGraph<G> snapshot = smoother.snapshot(&judged, &kernels);
+  SnapshotJudgement judgement;
+  PoseGraph<G> snapshot = smoother.snapshot(&judgement);
   if (snapshot.numPoses() < 2 || snapshot.numEdges() == 0) return false;
   flight_ = std::make_unique<Flight>();
   flight_->snapshot = std::move(snapshot);
   if (const OnlineGnc<G>* online = smoother.gnc()) {  // robust: GNC as the online one judges
-    flight_->gnc = gncOptionsOf(*online, std::move(kernels));
-    flight_->judged = std::move(judged);
+    flight_->gnc = gncOptionsOf(*online, std::move(judgement.kernels));
+    flight_->online = onlineClassificationOf(*online, std::move(judgement.rejected));
+    flight_->judged = std::move(judgement.judged);
   }
   flight_->update = update;
   flight_->busy = &smoother;
@@ -402,11 +417,15 @@ template std::vector<SE3> seedValues(const OnlineSmoother<SE3>&, const BatchOutc
 template BatchOutcome<SE2> solveSnapshot(BatchSolver, const PoseGraph<SE2>&,
                                          const CancellationToken&);
 template BatchOutcome<SE2> solveRobustSnapshot(BatchSolver, const PoseGraph<SE2>&,
-                                               const std::vector<char>&, GncOptions);
+                                               const std::vector<char>&, GncOptions,
+                                               const OnlineClassification&);
 template BatchOutcome<SE3> solveRobustSnapshot(BatchSolver, const PoseGraph<SE3>&,
-                                               const std::vector<char>&, GncOptions);
+                                               const std::vector<char>&, GncOptions,
+                                               const OnlineClassification&);
 template GncOptions gncOptionsOf(const OnlineGnc<SE2>&, std::vector<KernelKind>);
 template GncOptions gncOptionsOf(const OnlineGnc<SE3>&, std::vector<KernelKind>);
+template OnlineClassification onlineClassificationOf(const OnlineGnc<SE2>&, std::vector<char>);
+template OnlineClassification onlineClassificationOf(const OnlineGnc<SE3>&, std::vector<char>);
 template double robustCost(const PoseGraph<SE2>&, const std::vector<SE2>&, const std::vector<char>&,
                            const GncOptions&);
 template double robustCost(const PoseGraph<SE3>&, const std::vector<SE3>&, const std::vector<char>&,
