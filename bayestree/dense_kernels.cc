@@ -9,6 +9,7 @@
 // character arguments, as gfortran passes them).
 extern "C" {
 void dpotrf_(const char* uplo, const int* n, double* a, const int* lda, int* info, std::size_t);
+void dpotri_(const char* uplo, const int* n, double* a, const int* lda, int* info, std::size_t);
 void dtrsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m,
             const int* n, const double* alpha, const double* a, const int* lda, double* b,
             const int* ldb, std::size_t, std::size_t, std::size_t, std::size_t);
@@ -166,6 +167,13 @@ void rotateRowsAny(double* l, double* const* w, const double* s, const double* i
 }
 
 }  // namespace
+
+bool inverseFromCholesky(double* A, int lda, int n) {
+  if (n == 0) return true;
+  int info = 0;
+  dpotri_("L", &n, A, &lda, &info, 1);
+  return info == 0;
+}
 
 void lowerRankUpdate(double* C, int ldc, int n, const double* A, int lda, int k) {
   if (n == 0 || k == 0) return;

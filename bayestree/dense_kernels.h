@@ -77,6 +77,11 @@ bool partialCholesky(double* A, int lda, int F, int M, const double* dg);
 /// (leading dimension lda): BLAS dsyrk.
 void lowerRankUpdate(double* C, int ldc, int n, const double* A, int lda, int k);
 
+/// (L Lᵀ)⁻¹ from its lower Cholesky factor L, in place on the lower triangle of the n×n
+/// column-major A (leading dimension lda; the strict upper triangle is not touched): LAPACK's
+/// dpotri, 2n³/3 flops. Returns false when L is singular (a zero on its diagonal).
+bool inverseFromCholesky(double* A, int lda, int n);
+
 /// Back-substitution of one conditional R x_f + S x_s = d, stored as LS = [L; Sᵀ] (N×F,
 /// column-major, leading dimension ld) with R = Lᵀ: z = [x_f; x_s] (N entries), x_s given in
 /// z[F..N), x_f written to z[0..F): x_i = (d_i − LS(i+1..N, i)ᵀ z(i+1..N)) / L_ii, from the last
