@@ -9,6 +9,7 @@
 #include <pybind11/stl.h>
 
 #include "arbor/bayestree/online_smoother.h"
+#include "arbor/tools/refine/batch_refiner.h"
 #include "bindings.h"
 #include "conversions.h"
 
@@ -74,6 +75,33 @@ std::string statusOrThrow(const EdgeResult& r) {
 
 void throwUnlessApplied(const EdgeSwitchResult& r) {
   if (!r.applied()) throw std::invalid_argument(r.reason);
+}
+
+// A batch refinement's figures (tools/refine/batch_refiner.h BatchRun), robust ones as Σρ.
+py::dict runDict(const refine::BatchRun& b) {
+  py::dict d;
+  d["poses"] = b.poses;
+  d["edges"] = b.edges;
+  d["F_incremental"] = b.F_incremental;
+  d["F_batch"] = b.F_batch;
+  d["relative_gap"] = b.relative_gap;
+  d["winner"] = b.winner;
+  d["margin"] = b.margin;
+  d["max_translation_diff"] = b.max_translation_diff;
+  d["max_rotation_diff"] = b.max_rotation_diff;
+  d["iterations"] = b.iterations;
+  d["time_s"] = b.time_s;
+  d["certified"] = b.rank > 0 ? py::object(py::bool_(b.certified)) : py::none();
+  d["rank"] = b.rank > 0 ? py::object(py::int_(b.rank)) : py::none();
+  d["lambda_min"] = b.rank > 0 ? py::object(py::float_(b.lambda_min)) : py::none();
+  d["robust"] = b.robust;
+  d["judged"] = b.judged;
+  d["rejected"] = b.rejected;
+  d["inlier_threshold"] = b.threshold;
+  d["rtr_skipped"] = b.rtr_skipped;
+  d["reseeded"] = b.reseeded;
+  d["reseed_rejected"] = b.reseed_rejected;
+  return d;
 }
 
 template <class G>
@@ -208,6 +236,37 @@ void defineSmootherOf(py::module_& m, const char* name) {
             return statsDict(st);
           },
           "Relinearises everything and iterates to convergence (the end of a replay).")
+      .def(
+          "refine",
+          [](Smoother& s, const std::string& solver, bool reseed) {
+            refine::RefinerOptions options;
+            options.solver = refine::parseBatchSolver(solver, "solver", /*refinement_only=*/true);
+            options.synchronous = true;
+            options.reseed = reseed;
+            refine::BatchRefiner<G> refiner(options);
+            const PoseGraph<G> snapshot = s.snapshot();
+            std::optional<refine::BatchOutcome<G>> out;
+            {
+              py::gil_scoped_release release;
+              const std::int64_t updates = s.stats().updates;
+              if (!refiner.start(s, updates))
+                throw std::invalid_argument(
+                    "refine: nothing to solve yet (fewer than 2 poses or no edge updated)");
+              out = refiner.collect(true);
+              if (reseed) refiner.reseed(s, &*out, updates);
+            }
+            py::dict d = runDict(out->run);
+            d["ids"] = idsToArray(snapshot.ids);
+            d["estimate"] = posesToArray(out->batch);
+            return d;
+          },
+          py::arg("solver") = "lm", py::arg("reseed") = false,
+          "A batch refinement of everything updated so far, on request (as `arbor replay "
+          "--batch`): lm, or rtr (the certifiable solver, keep-best with LM); with robust options "
+          "GNC from the smoother's classification (its rejected closures held out, taken back "
+          "within its end's bound), for rtr certifying the inlier problem. reseed: the winner's "
+          "estimate becomes the linearisation point when it lowers the cost. Returns the run's "
+          "figures (F_* are Σρ when robust), ids and the batch estimate.")
       .def(
           "solve_deferred",
           [](Smoother& s, double budget_mb) {

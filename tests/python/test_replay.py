@@ -128,3 +128,60 @@ def test_solve_budget_refuses_what_needs_every_delta():
         arbor.OnlineSmoother2(solve_budget_mb=1, dogleg=True)
     with pytest.raises(ValueError, match="solve_budget_mb"):
         arbor.OnlineSmoother3(solve_budget_mb=1, robust=arbor.RobustOptions(kernel="tls"))
+
+
+@pytest.mark.parametrize("solver", ["lm", "rtr"])
+def test_refine_on_request_matches_the_replays_final_batch(solver, data_dir, arbor_cli):
+    """refine() after a robust replay is `arbor replay --robust --batch SOLVER`'s final run: GNC
+    from the smoother's classification (its rejected closures held out), for rtr certified."""
+    path = os.path.join(data_dir, "manhattan_2d_group_0.1.g2o")
+    graph = arbor.read(path)
+    smoother, _ = replay(graph, robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    run = smoother.refine(solver=solver)
+    expected = arbor_cli("replay", path, "--robust", "--inlier-threshold", "2",
+                         "--batch", solver)["batches"][-1]
+    assert expected["final"]
+    for key in ["poses", "edges", "judged", "rejected", "winner"]:
+        assert run[key] == expected[key], key
+    for key in ["F_incremental", "F_batch", "inlier_threshold"]:
+        assert run[key] == pytest.approx(expected[key], rel=1e-9), key
+    assert run["robust"]
+    assert run["rejected"] >= smoother.stats()["closures_outlier"]  # none taken back here
+    assert run["estimate"].shape == (graph.num_poses, 3)
+    assert sorted(run["ids"]) == sorted(graph.ids)
+    if solver == "rtr":
+        assert run["certified"] is True and run["rank"] >= 2
+    else:
+        assert run["certified"] is None
+    assert not run["reseeded"]  # not asked
+
+
+def test_refine_reseeds_only_when_the_cost_falls(data_dir):
+    graph = arbor.read(os.path.join(data_dir, "manhattan_2d.g2o"))
+    smoother = arbor.OnlineSmoother2()
+    index = {int(i): k for k, i in enumerate(graph.ids)}
+    # Half the file, no finalize: the incremental estimate is not the optimum yet.
+    order = sorted(range(graph.num_edges),
+                   key=lambda e: max(index[int(graph.edges[e, 0])], index[int(graph.edges[e, 1])]))
+    for e in order[: graph.num_edges // 2]:
+        smoother.add_edge(int(graph.edges[e, 0]), int(graph.edges[e, 1]), graph.measurements[e],
+                          graph.information[e])
+        smoother.update()
+    before = smoother.objective()
+    run = smoother.refine(solver="lm", reseed=True)
+    assert not run["robust"]
+    assert run["F_incremental"] == pytest.approx(before, rel=1e-9)
+    if run["reseeded"]:
+        assert smoother.objective() < before
+    else:
+        assert smoother.objective() == before
+
+
+def test_refine_refuses_what_it_cannot_run():
+    smoother = arbor.OnlineSmoother2()
+    with pytest.raises(ValueError, match="nothing to solve"):
+        smoother.refine()
+    smoother.add_edge(0, 1, [1, 0, 0], np.eye(3))
+    smoother.update()
+    with pytest.raises(ValueError, match="lm"):
+        smoother.refine(solver="gn")  # not a refining solver
