@@ -1,6 +1,7 @@
 #include "arbor/bayestree/marginals.h"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -35,9 +36,10 @@ void TreeMarginals<D>::jointOf(const BayesTree<D>& tree, int c, const Eigen::Mat
   joint->resize(F + Sn, F + Sn);
   auto Sff = joint->topLeftCorner(F, F);
   Sff.template triangularView<Eigen::Lower>() = k.LS().topRows(F);
+  // A zero pivot (a singular conditional): NaN, which the covariances and the innovations read
+  // from them pass on as not finite.
   if (!inverseFromCholesky(joint->data(), F + Sn, F))
-    throw std::logic_error("TreeMarginals: clique " + std::to_string(c) +
-                           "'s conditional is singular");
+    Sff.setConstant(std::numeric_limits<double>::quiet_NaN());
   if (Sn > 0) {
     *X = k.LS().bottomRows(Sn).transpose();
     L.transpose().solveInPlace(*X);
@@ -54,7 +56,8 @@ void TreeMarginals<D>::jointOf(const BayesTree<D>& tree, int c, const Eigen::Mat
     Sff.template triangularView<Eigen::Lower>() -= Sfs * X->transpose();
     joint->bottomLeftCorner(Sn, F) = Sfs.transpose();
   }
-  Sff.template triangularView<Eigen::StrictlyUpper>() = Sff.transpose();
+  for (int j = 1; j < F; ++j)  // the upper triangle from the lower
+    for (int i = 0; i < j; ++i) Sff(i, j) = Sff(j, i);
 }
 
 // (2): Y_v = R⁻ᵀE_v by forward substitution along the path from v's clique to the root. Per
