@@ -1,12 +1,14 @@
 // tools/refine/batch_refiner.h: keep-best verdicts, the one-in-flight rule, skip counting,
 // synchronous and background runs on an OnlineSmoother's snapshot, reseeding from the winner;
 // only the batch solvers marked for refinement are accepted.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <random>
 #include <stdexcept>
 #include <thread>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -197,6 +199,46 @@ TEST(BatchRefiner, RobustBatchWeightsEachClosureByItsOwnKernel) {
   GncOptions single = gncOptionsOf(*s.gnc());
   EXPECT_GT(std::abs(robustCost(snapshot, snapshot.poses, judged, single) - s.robustObjective()),
             1e-6 * s.robustObjective());
+}
+
+// OnlineSmoother::snapshot's judgement names the closures the online GNC rejects now (what a
+// robust batch holds out, tools/refine/gnc_from_online.h): here the three planted false ones.
+TEST(BatchRefiner, TheSnapshotNamesTheClosuresTheSmootherRejects) {
+  OnlineSmootherOptions<SE2> options;
+  options.robust = RobustOptions{};
+  OnlineSmoother<SE2> s(options);
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0, 0.05);
+  std::vector<SE2> truth(80);
+  for (int k = 1; k < 80; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / 20));
+  auto z = [&](int a, int b) {
+    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
+  };
+  const Eigen::Matrix3d omega = Eigen::Matrix3d::Identity() * 400;
+  const std::vector<std::pair<Key, Key>> planted = {{30, 55}, {41, 66}, {52, 77}};
+  for (int k = 1; k < 80; ++k) {
+    s.addEdge(k - 1, k, z(k - 1, k), omega);
+    if (k >= 20) s.addEdge(k - 20, k, z(k - 20, k), omega);
+    for (const auto& [a, b] : planted)
+      if (k == b) s.addEdge(a, b, SE2(4, -3, 1.2), omega);
+    s.update();
+  }
+  s.finalize();
+  SnapshotJudgement judgement;
+  const PoseGraph<SE2> snapshot = s.snapshot(&judgement);
+  ASSERT_EQ(judgement.rejected.size(), snapshot.edges.size());
+  ASSERT_EQ(judgement.judged.size(), snapshot.edges.size());
+  std::vector<std::pair<Key, Key>> rejected;
+  for (size_t e = 0; e < snapshot.edges.size(); ++e) {
+    if (!judgement.rejected[e]) continue;
+    EXPECT_TRUE(judgement.judged[e]) << "edge " << e;
+    const auto& edge = snapshot.edges[e];
+    rejected.emplace_back(snapshot.ids[static_cast<size_t>(edge.i)],
+                          snapshot.ids[static_cast<size_t>(edge.j)]);
+  }
+  std::sort(rejected.begin(), rejected.end());
+  EXPECT_EQ(rejected, planted);
+  EXPECT_EQ(static_cast<int>(rejected.size()), s.stats().closures_outlier);
 }
 
 TEST(BatchRefiner, RefusesBadOptionsAndTinySnapshots) {
