@@ -68,6 +68,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
     loop.solver = *run.batch;
     loop.every = run.batch_every;
     loop.reseed = run.reseed;
+    loop.synchronous = run.batch_sync;
     loop_result = runReplayWithBatches(graph, settings, loop);
   } else {
     loop_result.replay = runReplay(graph, settings);
@@ -158,6 +159,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
       j["batch"] = refine::toString(*run.batch);
       j["batch_every"] = run.batch_every;
       j["reseed"] = run.reseed;
+      j["batch_sync"] = run.batch_sync;
       j["batches_skipped"] = loop_result.skipped;
       j["reseeds"] = loop_result.reseeds;
       j["reseed_s"] = loop_result.reseed_s;
@@ -268,6 +270,9 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       "a background batch run every N updates (needs --batch)")(
       "reseed", po::bool_switch(&run.reseed),
       "rebuild the smoother from a batch estimate with lower F")(
+      "batch-sync", po::bool_switch(&run.batch_sync),
+      "run each batch on the replay thread at its snapshot, blocking (not in the updates' "
+      "latency): the same batches and reseeds on any machine, for reproducible comparisons")(
       "bounded-heap", po::bool_switch(&run.bounded_heap),
       "return freed clique storage to the system: glibc's mmap threshold fixed at 1 MiB "
       "(core/heap_policy.h). Lowers the peak of very large graphs; costs page faults where "
@@ -305,8 +310,8 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   if (run.batch_every < 0) {
     throw UsageError("--batch-every must be >= 0, not '" + std::to_string(run.batch_every) + "'");
   }
-  if (!run.batch && (run.batch_every > 0 || run.reseed)) {
-    throw UsageError("--batch-every and --reseed need --batch " +
+  if (!run.batch && (run.batch_every > 0 || run.reseed || run.batch_sync)) {
+    throw UsageError("--batch-every, --reseed and --batch-sync need --batch " +
                      refine::batchSolverNames(true, "|"));
   }
   run.robust = readRobustFlags(vm, /*allow_auto=*/false);

@@ -22,6 +22,9 @@ struct ReplayCommandLine {
   bool bounded_heap = false;  ///< --bounded-heap: arbor::useBoundedHeap before reading the file
   std::optional<refine::BatchSolver> batch;  ///< --batch: a row that refines; none: no loop
   int batch_every = 0;
+  /// --batch-sync: each batch on the replay thread at its snapshot (BatchLoopSettings::
+  /// synchronous): the same runs on any machine
+  bool batch_sync = false;
   int first_update_edges = 0;  ///< --first-update-edges: a map of that many edges loaded at once
   std::string initial = "odometry";  ///< --initial odometry|file: where new poses start
   SmootherOptions smoother;          ///< tools/cli/smoother_flags.h
