@@ -900,11 +900,11 @@ bool OnlineGnc<G>::judges(int factor) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::rejects(int factor) const {
+bool OnlineGnc<G>::settledInlier(int factor) const {
   const int id = closureOf(factor);
   if (id < 0) return false;
   const Closure& c = closures_[id];
-  return c.state == State::kSettled && !c.held && !isInlier(c);
+  return c.state == State::kSettled && !c.held && isInlier(c);
 }
 
 template <class G>

@@ -481,9 +481,9 @@ class OnlineGnc {
   /// Whether the GNC judges factor `factor` (a loop closure graduating or settled; not trusted,
   /// excluded, odometry or a prior).
   bool judges(int factor) const;
-  /// Whether the GNC rejects factor `factor` now: a settled closure (not graduating, not held)
-  /// whose weight is below its kernel's inlierCut (ClosureStatus::kOutlier).
-  bool rejects(int factor) const;
+  /// Whether the GNC holds factor `factor` as a settled inlier now: a closure it judges, not
+  /// graduating, not held in the warm-up, its weight at least its kernel's inlierCut.
+  bool settledInlier(int factor) const;
   /// The kernel factor `factor` is judged by (its closure's own, per edge) when the GNC judges
   /// it, else KernelKind::kNone.
   KernelKind kernelOf(int factor) const;

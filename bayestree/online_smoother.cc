@@ -395,7 +395,11 @@ void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total,
 // re-check changed a weight.
 template <class G>
 UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
-  if (!gnc_) return recordUpdate(smoother_.relinearizeAll(cancel));
+  if (!gnc_) {
+    const UpdateStats s = recordUpdate(smoother_.relinearizeAll(cancel));
+    if (!s.cancelled) finalized_update_ = stats_.updates;
+    return s;
+  }
   UpdateStats total;
   // Closures still held in the warm-up (σ̂² never came: too few corroborated, too few judged)
   // are judged one at a time in arrival order, each at the estimate the ones before it made:
@@ -415,7 +419,9 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
     if (total.cancelled || round + 1 >= gnc_->options().finalize_rounds) break;
     if (gnc_->step(smoother_, StepScope::kFinalize) == 0 && !gnc_->graduating()) break;
   }
-  return recordUpdate(total);
+  const UpdateStats s = recordUpdate(total);
+  if (!total.cancelled) finalized_update_ = stats_.updates;
+  return s;
 }
 
 template <class G>
@@ -449,7 +455,7 @@ PoseGraph<G> OnlineSmoother<G>::snapshot(SnapshotJudgement* judgement) const {
     const int f = static_cast<int>(k);
     judgement->judged.push_back(gnc_ && gnc_->judges(f) ? 1 : 0);
     judgement->kernels.push_back(gnc_ ? gnc_->kernelOf(f) : KernelKind::kNone);
-    judgement->rejected.push_back(gnc_ && gnc_->rejects(f) ? 1 : 0);
+    judgement->held_out.push_back(gnc_ && gnc_->judges(f) && !gnc_->settledInlier(f) ? 1 : 0);
   }
   return graph;
 }

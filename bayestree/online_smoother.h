@@ -158,7 +158,9 @@ struct OnlineStats {
 struct SnapshotJudgement {
   std::vector<char> judged;         ///< weighted by the online GNC (the others are trusted)
   std::vector<KernelKind> kernels;  ///< the kernel it is judged by (OnlineGnc::kernelOf; kNone)
-  std::vector<char> rejected;       ///< a closure the online GNC rejects now (OnlineGnc::rejects)
+  /// a closure the online GNC judges and does not hold as a settled inlier now: rejected, or
+  /// undecided (graduating, held in the warm-up); OnlineGnc::settledInlier
+  std::vector<char> held_out;
 };
 
 template <class G>
@@ -222,6 +224,10 @@ class OnlineSmoother {
   /// the estimate is then that of the last step completed (UpdateStats::cancelled). The same
   /// count of passed checks (CancellationToken::cancelAfterChecks) repeats the cut exactly.
   UpdateStats finalize(const CancellationToken* cancel = nullptr);
+  /// finalize() ran to its end (not cancelled), was the last update, and nothing was added
+  /// since: the online GNC's classification is its final one (a robust batch then starts from
+  /// it, tools/refine/gnc_from_online.h).
+  bool finalized() const { return finalized_update_ == stats_.updates && queued_.empty(); }
   /// SmootherOptions::solve_budget_mb: solves the cliques the budget deferred, all of them or
   /// about `budget_mb` of them (IncrementalSmoother::solveDeferred); adds nothing queued.
   UpdateStats solveDeferred(double budget_mb = 0) { return smoother_.solveDeferred(budget_mb); }
@@ -237,7 +243,8 @@ class OnlineSmoother {
   PoseGraph<G> snapshot() const;
   /// As snapshot(), and per snapshot edge how the online GNC holds it (*judgement; without
   /// robust smoothing nothing is judged): the edges a robust batch weights and their kernels, so
-  /// that it weights each edge as the online GNC does, and the closures it rejects now.
+  /// that it weights each edge as the online GNC does, and the closures it does not hold as settled
+  /// inliers now.
   PoseGraph<G> snapshot(SnapshotJudgement* judgement) const;
   /// The robust cost Σρ at the estimate over every factor not disabled: ρ of a judged closure
   /// at its kernel (TLS: min(s, c²)), s = eᵀΩe of everything else (= objective() without robust
@@ -369,6 +376,7 @@ class OnlineSmoother {
   std::vector<Component> components_;
   std::vector<Factor<G>> queued_;  ///< handed to the smoother since the last update
   int poses_at_update_ = 0;        ///< poses known at the last update
+  int finalized_update_ = -1;      ///< stats_.updates after the last finalize() (finalized())
   std::map<std::pair<Key, Key>, std::vector<Measurement>> seen_;  ///< accepted edges
   OnlineStats stats_;
   std::set<IdPair> disabled_pairs_;                  ///< pairs taken back by disableEdge

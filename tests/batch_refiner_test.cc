@@ -223,14 +223,16 @@ TEST(BatchRefiner, TheSnapshotNamesTheClosuresTheSmootherRejects) {
       if (k == b) s.addEdge(a, b, SE2(4, -3, 1.2), omega);
     s.update();
   }
+  EXPECT_FALSE(s.finalized());
   s.finalize();
+  EXPECT_TRUE(s.finalized());  // a robust batch now starts from this classification
   SnapshotJudgement judgement;
   const PoseGraph<SE2> snapshot = s.snapshot(&judgement);
-  ASSERT_EQ(judgement.rejected.size(), snapshot.edges.size());
+  ASSERT_EQ(judgement.held_out.size(), snapshot.edges.size());
   ASSERT_EQ(judgement.judged.size(), snapshot.edges.size());
   std::vector<std::pair<Key, Key>> rejected;
   for (size_t e = 0; e < snapshot.edges.size(); ++e) {
-    if (!judgement.rejected[e]) continue;
+    if (!judgement.held_out[e]) continue;
     EXPECT_TRUE(judgement.judged[e]) << "edge " << e;
     const auto& edge = snapshot.edges[e];
     rejected.emplace_back(snapshot.ids[static_cast<size_t>(edge.i)],
@@ -239,6 +241,10 @@ TEST(BatchRefiner, TheSnapshotNamesTheClosuresTheSmootherRejects) {
   std::sort(rejected.begin(), rejected.end());
   EXPECT_EQ(rejected, planted);
   EXPECT_EQ(static_cast<int>(rejected.size()), s.stats().closures_outlier);
+  s.addEdge(79, 80, z(79, 0), omega);  // anything added: the classification is provisional
+  EXPECT_FALSE(s.finalized());
+  s.update();
+  EXPECT_FALSE(s.finalized());
 }
 
 TEST(BatchRefiner, RefusesBadOptionsAndTinySnapshots) {

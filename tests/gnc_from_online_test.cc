@@ -52,8 +52,8 @@ Ring makeRing() {
 
 OnlineClassification marks(const Ring& r, std::vector<int> rejected, double take_back) {
   OnlineClassification c;
-  c.rejected.assign(r.graph.edges.size(), 0);
-  for (int k : rejected) c.rejected[static_cast<size_t>(k)] = 1;
+  c.held_out.assign(r.graph.edges.size(), 0);
+  for (int k : rejected) c.held_out[static_cast<size_t>(k)] = 1;
   c.c2 = 2 * chiSquareThreshold(0.99, 3);
   c.c2_take_back = take_back;
   return c;
@@ -108,7 +108,7 @@ TEST(GncFromOnline, RefusesMarksOfTheWrongSizeAndGivesTheBounds) {
   const Ring r = makeRing();
   std::vector<SE2> poses = r.graph.poses;
   OnlineClassification bad;
-  bad.rejected.assign(3, 0);
+  bad.held_out.assign(3, 0);
   EXPECT_THROW(solveGncFromOnline(r.graph, GncOptions{}, bad, &poses), std::invalid_argument);
   // Before a finalize() the take-back bound is the c² in use; after it, the end's, capped by it.
   OnlineClassification b = onlineBounds(10, 0, 2);

@@ -48,8 +48,8 @@ OnlineBatch solveGncFromReplay(const PoseGraph<G>& graph, GncOptions options,
   OnlineBatch out;
   out.online = onlineThreshold(graph, options.kernel, choices, poses);
   refine::OnlineClassification from;
-  from.rejected.resize(out.online.kept.size());
-  for (size_t k = 0; k < from.rejected.size(); ++k) from.rejected[k] = !out.online.kept[k];
+  from.held_out.resize(out.online.kept.size());
+  for (size_t k = 0; k < from.held_out.size(); ++k) from.held_out[k] = !out.online.kept[k];
   if (online_threshold) {
     from.c2 = out.online.c2;
     from.c2_take_back = out.online.c2_take_back;

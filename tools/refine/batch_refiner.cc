@@ -140,10 +140,10 @@ GncOptions gncOptionsOf(const OnlineGnc<G>& online, std::vector<KernelKind> kern
 
 template <class G>
 OnlineClassification onlineClassificationOf(const OnlineGnc<G>& online,
-                                            std::vector<char> rejected) {
+                                            std::vector<char> held_out) {
   OnlineClassification c =
       onlineBounds(online.threshold(), online.thresholdAtEnd(), online.options().recheck_margin);
-  c.rejected = std::move(rejected);
+  c.held_out = std::move(held_out);
   return c;
 }
 
@@ -336,7 +336,11 @@ bool BatchRefiner<G>::start(OnlineSmoother<G>& smoother, std::int64_t update) {
   flight_->snapshot = std::move(snapshot);
   if (const OnlineGnc<G>* online = smoother.gnc()) {  // robust: GNC as the online one judges
     flight_->gnc = gncOptionsOf(*online, std::move(judgement.kernels));
-    flight_->online = onlineClassificationOf(*online, std::move(judgement.rejected));
+    // After finalize() its classification is final and the batch starts from it; before, the
+    // periodic batch is a correction: every judged closure graduates afresh at the c² in use
+    // (header comment).
+    if (smoother.finalized())
+      flight_->online = onlineClassificationOf(*online, std::move(judgement.held_out));
     flight_->judged = std::move(judgement.judged);
   }
   flight_->update = update;

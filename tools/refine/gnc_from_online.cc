@@ -17,8 +17,8 @@ template <class G>
 GncFromOnline solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
                                  const OnlineClassification& online, std::vector<G>* poses) {
   const int m = graph.numEdges();
-  if (!online.rejected.empty() && online.rejected.size() != static_cast<size_t>(m)) {
-    throw std::invalid_argument("solveGncFromOnline: " + std::to_string(online.rejected.size()) +
+  if (!online.held_out.empty() && online.held_out.size() != static_cast<size_t>(m)) {
+    throw std::invalid_argument("solveGncFromOnline: " + std::to_string(online.held_out.size()) +
                                 " marks for " + std::to_string(m) + " edges");
   }
   GncFromOnline out;
@@ -28,12 +28,12 @@ GncFromOnline solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
   std::vector<char> backed(static_cast<size_t>(m), 0);
   for (int k = 0; k < m; ++k) {
     if (trustedEdge(graph, options, k)) continue;
-    const bool rejected = !online.rejected.empty() && online.rejected[static_cast<size_t>(k)];
-    options.known_outliers[k] = rejected;
-    out.known_outliers += rejected;
+    const bool held_out = !online.held_out.empty() && online.held_out[static_cast<size_t>(k)];
+    options.known_outliers[k] = held_out;
+    out.known_outliers += held_out;
     const auto& e = graph.edges[static_cast<size_t>(k)];
     backed[k] =
-        at_bound && !rejected &&
+        at_bound && !held_out &&
         e.cost((*poses)[static_cast<size_t>(e.i)], (*poses)[static_cast<size_t>(e.j)]) > online.c2;
     out.kept_beyond += backed[k];
   }

@@ -23,9 +23,10 @@ namespace arbor::refine {
 
 /// How an online smoother holds a graph's edges (per edge, in the graph's order).
 struct OnlineClassification {
-  /// A loop closure the smoother rejects: a known outlier for GNC (GncOptions::known_outliers).
-  /// Empty: none.
-  std::vector<char> rejected;
+  /// A loop closure the smoother does not hold as a settled inlier (rejected; mid-stream also
+  /// one still graduating or held in the warm-up): a known outlier for GNC
+  /// (GncOptions::known_outliers), which readmitFitting may take back. Empty: none.
+  std::vector<char> held_out;
   /// GNC's c²: recheck_margin × the smoother's c² in use. ≤ 0: GncOptions::threshold as given,
   /// and no closure is held at weight 1.
   double c2 = 0;
@@ -48,7 +49,7 @@ struct GncFromOnline {
 
 /// GNC from *poses (the smoother's estimate) as the header comment says; `options` as for
 /// solveGnc (its trusted edges are never held out); the estimate is written to *poses. Throws
-/// std::invalid_argument when `online.rejected` is neither empty nor one mark per edge.
+/// std::invalid_argument when `online.held_out` is neither empty nor one mark per edge.
 template <class G>
 GncFromOnline solveGncFromOnline(const PoseGraph<G>& graph, GncOptions options,
                                  const OnlineClassification& online, std::vector<G>* poses);
