@@ -263,10 +263,11 @@ void defineSmootherOf(py::module_& m, const char* name) {
           py::arg("solver") = "lm", py::arg("reseed") = false,
           "A batch refinement of everything updated so far, on request (as `arbor replay "
           "--batch`): lm, or rtr (the certifiable solver, keep-best with LM); with robust options "
-          "GNC from the smoother's classification (its rejected closures held out, taken back "
-          "within its end's bound), for rtr certifying the inlier problem. reseed: the winner's "
-          "estimate becomes the linearisation point when it lowers the cost. Returns the run's "
-          "figures (F_* are Σρ when robust), ids and the batch estimate.")
+          "GNC, before finalize() with every closure free at the c² in use, after it from the "
+          "smoother's classification (what it does not hold as settled inliers held out, taken "
+          "back within its end's bound), for rtr certifying the inlier problem. reseed: the "
+          "winner's estimate becomes the linearisation point when it lowers the cost. Returns "
+          "the run's figures (F_* are Σρ when robust), ids and the batch estimate.")
       .def(
           "solve_deferred",
           [](Smoother& s, double budget_mb) {

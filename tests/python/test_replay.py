@@ -185,3 +185,23 @@ def test_refine_refuses_what_it_cannot_run():
     smoother.update()
     with pytest.raises(ValueError, match="lm"):
         smoother.refine(solver="gn")  # not a refining solver
+
+
+def test_refine_starts_from_the_classification_only_once_finalized(data_dir):
+    """Before finalize() the robust batch is a correction at the c² in use; after it, GNC runs at
+    the bound the smoother keeps a settled inlier within (recheck_margin, 2, times that c²)."""
+    graph = arbor.read(os.path.join(data_dir, "manhattan_2d_group_0.1.g2o"))
+    smoother = arbor.OnlineSmoother2(robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    index = {int(i): k for k, i in enumerate(graph.ids)}
+    order = sorted(range(graph.num_edges),
+                   key=lambda e: max(index[int(graph.edges[e, 0])], index[int(graph.edges[e, 1])]))
+    for e in order:
+        smoother.add_edge(int(graph.edges[e, 0]), int(graph.edges[e, 1]), graph.measurements[e],
+                          graph.information[e])
+        smoother.update()
+    before = smoother.refine()
+    assert before["inlier_threshold"] == pytest.approx(smoother.stats()["closure_threshold"])
+    smoother.finalize()
+    after = smoother.refine()
+    assert after["inlier_threshold"] == pytest.approx(2 * smoother.stats()["closure_threshold"])
+    assert after["rejected"] >= smoother.stats()["closures_outlier"]
