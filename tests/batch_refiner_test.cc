@@ -201,8 +201,9 @@ TEST(BatchRefiner, RobustBatchWeightsEachClosureByItsOwnKernel) {
             1e-6 * s.robustObjective());
 }
 
-// OnlineSmoother::snapshot's judgement names the closures the online GNC rejects now (what a
-// robust batch holds out, tools/refine/gnc_from_online.h): here the three planted false ones.
+// OnlineSmoother::snapshot's judgement names the closures the online GNC does not hold as
+// settled inliers (what a robust batch from a finalized smoother holds out,
+// tools/refine/gnc_from_online.h): after finalize(), the rejected ones, here the three planted.
 TEST(BatchRefiner, TheSnapshotNamesTheClosuresTheSmootherRejects) {
   OnlineSmootherOptions<SE2> options;
   options.robust = RobustOptions{};
