@@ -123,15 +123,12 @@ LoopResult<G> runReplayWithBatches(const PoseGraph<G>& graph, const ReplaySettin
   const PoseGraph<G> snapshot = smoother.snapshot(&judgement);
   if (loop.final_run && snapshot.numPoses() > 1 && snapshot.numEdges() > 0) {
     // Robust: from the finalized smoother's classification, as `arbor batch --robust` starts
-    // from the replay's (tools/refine/gnc_from_online.h); with --no-finalize as the periodic
-    // batches, every judged closure free (tools/refine/batch_refiner.h).
+    // from the replay's; with --no-finalize as the periodic batches (refine::robustStartOf).
     const OnlineGnc<G>* gnc = smoother.gnc();
-    const refine::OnlineClassification from =
-        gnc && smoother.finalized() ? refine::onlineClassificationOf(*gnc, judgement.held_out)
-                                    : refine::OnlineClassification{};
     refine::BatchOutcome<G> last =
         gnc ? refine::solveRobustSnapshot(loop.solver, snapshot, judgement.judged,
-                                          refine::gncOptionsOf(*gnc, judgement.kernels), from)
+                                          refine::gncOptionsOf(*gnc, judgement.kernels),
+                                          refine::robustStartOf(smoother, judgement.held_out))
             : refine::solveSnapshot(loop.solver, snapshot);
     last.run.update = static_cast<std::int64_t>(r.rows.size());
     last.run.final_run = true;

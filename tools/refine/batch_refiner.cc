@@ -139,10 +139,13 @@ GncOptions gncOptionsOf(const OnlineGnc<G>& online, std::vector<KernelKind> kern
 }
 
 template <class G>
-OnlineClassification onlineClassificationOf(const OnlineGnc<G>& online,
-                                            std::vector<char> held_out) {
+OnlineClassification robustStartOf(const OnlineSmoother<G>& smoother, std::vector<char> held_out) {
+  const OnlineGnc<G>* online = smoother.gnc();
+  if (online == nullptr)
+    throw std::invalid_argument("robustStartOf: the smoother has no robust smoothing");
+  if (!smoother.finalized()) return {};
   OnlineClassification c =
-      onlineBounds(online.threshold(), online.thresholdAtEnd(), online.options().recheck_margin);
+      onlineBounds(online->threshold(), online->thresholdAtEnd(), online->options().recheck_margin);
   c.held_out = std::move(held_out);
   return c;
 }
@@ -336,11 +339,7 @@ bool BatchRefiner<G>::start(OnlineSmoother<G>& smoother, std::int64_t update) {
   flight_->snapshot = std::move(snapshot);
   if (const OnlineGnc<G>* online = smoother.gnc()) {  // robust: GNC as the online one judges
     flight_->gnc = gncOptionsOf(*online, std::move(judgement.kernels));
-    // After finalize() its classification is final and the batch starts from it; before, the
-    // periodic batch is a correction: every judged closure graduates afresh at the c² in use
-    // (header comment).
-    if (smoother.finalized())
-      flight_->online = onlineClassificationOf(*online, std::move(judgement.held_out));
+    flight_->online = robustStartOf(smoother, std::move(judgement.held_out));
     flight_->judged = std::move(judgement.judged);
   }
   flight_->update = update;
@@ -428,8 +427,8 @@ template BatchOutcome<SE3> solveRobustSnapshot(BatchSolver, const PoseGraph<SE3>
                                                const OnlineClassification&);
 template GncOptions gncOptionsOf(const OnlineGnc<SE2>&, std::vector<KernelKind>);
 template GncOptions gncOptionsOf(const OnlineGnc<SE3>&, std::vector<KernelKind>);
-template OnlineClassification onlineClassificationOf(const OnlineGnc<SE2>&, std::vector<char>);
-template OnlineClassification onlineClassificationOf(const OnlineGnc<SE3>&, std::vector<char>);
+template OnlineClassification robustStartOf(const OnlineSmoother<SE2>&, std::vector<char>);
+template OnlineClassification robustStartOf(const OnlineSmoother<SE3>&, std::vector<char>);
 template double robustCost(const PoseGraph<SE2>&, const std::vector<SE2>&, const std::vector<char>&,
                            const GncOptions&);
 template double robustCost(const PoseGraph<SE3>&, const std::vector<SE3>&, const std::vector<char>&,

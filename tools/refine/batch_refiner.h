@@ -156,11 +156,14 @@ BatchOutcome<G> solveRobustSnapshot(BatchSolver solver, const PoseGraph<G>& snap
 template <class G>
 GncOptions gncOptionsOf(const OnlineGnc<G>& online, std::vector<KernelKind> kernels = {});
 
-/// The classification of a snapshot by `online`: `held_out` (SnapshotJudgement::held_out) and
-/// its bounds (onlineBounds: recheck_margin × the c² in use; the take-back bound of its last
-/// finalize(), capped by the c² in use, or the c² in use before one).
+/// What a robust batch of `smoother`'s snapshot starts from (header comment): once the smoother
+/// is finalized (OnlineSmoother::finalized), its classification, `held_out`
+/// (SnapshotJudgement::held_out) and its bounds (onlineBounds: recheck_margin × the c² in use;
+/// the take-back bound of its finalize(), capped by the c² in use); before, nothing held out and
+/// GNC at the c² in use (an empty OnlineClassification). Throws std::invalid_argument without
+/// robust smoothing.
 template <class G>
-OnlineClassification onlineClassificationOf(const OnlineGnc<G>& online, std::vector<char> held_out);
+OnlineClassification robustStartOf(const OnlineSmoother<G>& smoother, std::vector<char> held_out);
 
 /// Σρ of `poses` on `graph`: for the edges marked in `judged` ρ(s) of the edge's kernel
 /// (gnc.kernels[e], or gnc.kernel where that is empty or kNone) at c² = gnc.threshold (TLS:
