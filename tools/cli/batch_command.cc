@@ -215,13 +215,15 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   // rtr: the certifiable path on the inlier set (core/gnc_solver.h certifyInliers), which may
   // take rejected edges back; the counts below are after it.
   GncResult gnc = gncFirst;
+  // The bound a rejected closure comes back within: from the online replay at its bound, the
+  // one the replay's end took closures back within (as readmitFitting, online_threshold.h);
+  // else GNC's c².
+  const double take_back =
+      run.online_threshold && online ? online->c2_take_back : gncFirst.threshold;
   std::optional<CertifiedInliers> certified;
   if (run.solver == BatchSolver::kRtr) {
     RtrOptions rtr = run.settings.rtr;
     rtr.verbose = run.settings.verbose;
-    // From the online replay at its bound, a held-out closure comes back only within the bound
-    // the replay's end took closures back within, as in readmitFitting (online_threshold.h).
-    const double take_back = run.online_threshold && online ? online->c2_take_back : 0.0;
     certified = certifyInliers(graph, &gnc, &poses, rtr, /*max_passes=*/5, take_back);
   }
   const double F_all = gnc.F_all, F_inliers = gnc.F_inliers;
@@ -333,8 +335,7 @@ int solveRobustAndReport(const BatchRun& run, PoseGraph<G>& graph, const ReadRep
   if (init_online)
     std::cout << "online       " << known_outliers
               << " closure(s) the replay rejected held out of GNC, " << readmitted_online
-              << " taken back (fit within c² "
-              << (run.online_threshold && online ? online->c2_take_back : gnc.threshold)
+              << " taken back (fit within c² " << take_back
               << (run.online_threshold ? ", the replay's end's bound), " : ", GNC's), ")
               << kept_beyond << " it kept beyond GNC's c² held\n";
   if (certified) {

@@ -5,7 +5,6 @@
 #include <utility>
 
 #include "arbor/tools/cli/replay_runner.h"
-#include "arbor/tools/refine/gnc_from_online.h"
 
 namespace arbor::cli {
 
@@ -54,11 +53,8 @@ OnlineBatch solveGncFromReplay(const PoseGraph<G>& graph, GncOptions options,
     from.c2 = out.online.c2;
     from.c2_take_back = out.online.c2_take_back;
   }
-  refine::GncFromOnline g = refine::solveGncFromOnline(graph, std::move(options), from, poses);
-  out.gnc = std::move(g.gnc);
-  out.known_outliers = g.known_outliers;
-  out.readmitted = g.readmitted;
-  out.kept_beyond = g.kept_beyond;
+  static_cast<refine::GncFromOnline&>(out) =
+      refine::solveGncFromOnline(graph, std::move(options), from, poses);
   return out;
 }
 

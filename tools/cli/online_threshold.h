@@ -17,6 +17,7 @@
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/robust_kernel.h"
 #include "arbor/io/edge_choice_file.h"
+#include "arbor/tools/refine/gnc_from_online.h"
 
 namespace arbor::cli {
 
@@ -45,15 +46,10 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
 /// (onlineThreshold, its estimate the start), then refine::solveGncFromOnline
 /// (tools/refine/gnc_from_online.h) from its classification: with `online_threshold` at the
 /// replay's bounds (OnlineThreshold::c2, c2_take_back), without it at GNC's c² (`options`). The
-/// estimate is written to *poses.
-struct OnlineBatch {
+/// estimate is written to *poses. The GNC's figures are refine::GncFromOnline's (kept_beyond:
+/// the closures the replay's end backed beyond OnlineThreshold::c2, with `online_threshold`).
+struct OnlineBatch : refine::GncFromOnline {
   OnlineThreshold online;
-  GncResult gnc;
-  int known_outliers = 0;  ///< closures the replay rejected, held out of GNC
-  int readmitted = 0;      ///< of them, taken back by readmitFitting
-  /// With `online_threshold`: closures the replay kept with s above OnlineThreshold::c2 at its
-  /// estimate (backed at the end, RobustOptions::end_backed_margin), held as trusted edges.
-  int kept_beyond = 0;
 };
 template <class G>
 OnlineBatch solveGncFromReplay(const PoseGraph<G>& graph, GncOptions options,
