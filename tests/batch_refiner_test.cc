@@ -19,6 +19,21 @@ namespace {
 
 const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+// n poses going round circles of `per_circle` one metre a step, and relative measurements
+// between them with N(0, σ²) noise on each tangent component.
+struct NoisyCircles {
+  NoisyCircles(int n, int per_circle, double sigma, unsigned seed)
+      : rng(seed), noise(0, sigma), truth(static_cast<size_t>(n)) {
+    for (int k = 1; k < n; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / per_circle));
+  }
+  SE2 z(int a, int b) {
+    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
+  }
+  std::mt19937 rng;
+  std::normal_distribution<double> noise;
+  std::vector<SE2> truth;
+};
+
 TEST(PickWinner, LowestFWinsAndTheMarginIsToTheRunnerUp) {
   Verdict v = pickWinner(10.0, 9.0, 8.5);
   EXPECT_EQ(v.winner, "rtr");
@@ -45,13 +60,8 @@ TEST(PickWinner, LowestFWinsAndTheMarginIsToTheRunnerUp) {
 
 // A noisy 2D loop with closures, fed edge by edge.
 OnlineSmoother<SE2> noisySmoother(int n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> noise(0, 0.1);
-  std::vector<SE2> truth(n);
-  for (int k = 1; k < n; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / 25));
-  auto z = [&](int a, int b) {
-    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
-  };
+  NoisyCircles circles(n, 25, 0.1, seed);
+  auto z = [&](int a, int b) { return circles.z(a, b); };
   OnlineSmoother<SE2> s;
   for (int k = 1; k < n; ++k) {
     s.addEdge(k - 1, k, z(k - 1, k), Eigen::Matrix3d::Identity());
@@ -144,13 +154,8 @@ TEST(BatchRefiner, RobustBatchWeightsEachClosureByItsOwnKernel) {
   OnlineSmootherOptions<SE2> options;
   options.robust = RobustOptions{};
   OnlineSmoother<SE2> s(options);
-  std::mt19937 rng(5);
-  std::normal_distribution<double> noise(0, 0.05);
-  std::vector<SE2> truth(80);
-  for (int k = 1; k < 80; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / 20));
-  auto z = [&](int a, int b) {
-    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
-  };
+  NoisyCircles circles(80, 20, 0.05, 5);
+  auto z = [&](int a, int b) { return circles.z(a, b); };
   const KernelKind cycle[] = {KernelKind::kCauchy, KernelKind::kGemanMcClure,
                               KernelKind::kTruncatedLeastSquares};
   std::vector<KernelKind> given;  // per loop closure, in the order added
@@ -208,13 +213,8 @@ TEST(BatchRefiner, TheSnapshotNamesTheClosuresTheSmootherRejects) {
   OnlineSmootherOptions<SE2> options;
   options.robust = RobustOptions{};
   OnlineSmoother<SE2> s(options);
-  std::mt19937 rng(7);
-  std::normal_distribution<double> noise(0, 0.05);
-  std::vector<SE2> truth(80);
-  for (int k = 1; k < 80; ++k) truth[k] = truth[k - 1].compose(SE2(1, 0, 2 * M_PI / 20));
-  auto z = [&](int a, int b) {
-    return truth[a].between(truth[b]).compose(SE2(noise(rng), noise(rng), noise(rng)));
-  };
+  NoisyCircles circles(80, 20, 0.05, 7);
+  auto z = [&](int a, int b) { return circles.z(a, b); };
   const Eigen::Matrix3d omega = Eigen::Matrix3d::Identity() * 400;
   const std::vector<std::pair<Key, Key>> planted = {{30, 55}, {41, 66}, {52, 77}};
   for (int k = 1; k < 80; ++k) {
