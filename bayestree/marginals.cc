@@ -330,45 +330,75 @@ void TreeMarginals<D>::all(const BayesTree<D>& tree, std::vector<Block>* out) {
 template <int D>
 Eigen::MatrixXd TreeMarginals<D>::predicted(const BayesTree<D>& tree, const std::vector<int>& vars,
                                             const std::vector<Eigen::MatrixXd>& blocks) {
+  using Rows = Eigen::Map<Eigen::MatrixXd>;
   const int m = blocks.empty() ? 0 : static_cast<int>(blocks.front().rows());
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(m, m);
-  // The cliques on the paths, each once, deepest first.
-  std::vector<std::pair<int, int>> order;        // (−depth, clique)
-  std::unordered_map<int, Eigen::MatrixXd> rhs;  // variable → its rows of Aᵀ − pushed terms
+  // The cliques on the paths, each once, deepest first (a clique pushes onto its ancestors
+  // only, which are shallower); each with its rows of Aᵀ − the terms pushed onto it, F×m
+  // column-major at y[offset·m …], zero above row `first`.
+  struct OnPath {
+    int clique, depth, offset, first;
+  };
+  std::vector<OnPath> on;
+  std::vector<int> up;
+  for (const int v : vars) {
+    if (v < 0 || v >= static_cast<int>(tree.clique_of.size()) || tree.clique_of[v] < 0) continue;
+    up.clear();
+    for (int c = tree.clique_of[v]; c >= 0; c = tree.cliques[c].parent) up.push_back(c);
+    for (size_t q = 0; q < up.size(); ++q) {
+      const bool known =
+          std::any_of(on.begin(), on.end(), [&](const OnPath& o) { return o.clique == up[q]; });
+      if (known) break;  // and so are its ancestors
+      on.push_back({up[q], static_cast<int>(up.size() - 1 - q), 0, tree.cliques[up[q]].F});
+    }
+  }
+  std::sort(on.begin(), on.end(), [](const OnPath& x, const OnPath& y) {
+    return x.depth != y.depth ? x.depth > y.depth : x.clique < y.clique;
+  });
+  int rows = 0, max_sn = 0;
+  for (OnPath& o : on) {
+    o.offset = rows;
+    rows += tree.cliques[o.clique].F;
+    max_sn = std::max(max_sn, tree.cliques[o.clique].Sn);
+  }
+  std::vector<double> y(static_cast<size_t>(rows) * m, 0.0);
+  std::vector<double> by(static_cast<size_t>(max_sn) * m);
+  auto rowsOf = [&](const OnPath& o) {
+    return Rows(y.data() + static_cast<size_t>(o.offset) * m, tree.cliques[o.clique].F, m);
+  };
+  auto find = [&](size_t from, int clique) {
+    while (from < on.size() && on[from].clique != clique) ++from;
+    return from;
+  };
   for (size_t k = 0; k < vars.size(); ++k) {
     const int v = vars[k];
     if (v < 0 || v >= static_cast<int>(tree.clique_of.size()) || tree.clique_of[v] < 0) continue;
-    auto [it, fresh] = rhs.try_emplace(v, Eigen::MatrixXd::Zero(D, m));
-    it->second += blocks[k].transpose();
-    std::vector<int> path;
-    for (int c = tree.clique_of[v]; c >= 0; c = tree.cliques[c].parent) path.push_back(c);
-    for (size_t q = 0; q < path.size(); ++q)
-      order.emplace_back(-static_cast<int>(path.size() - 1 - q), path[q]);
+    OnPath& o = on[find(0, tree.clique_of[v])];
+    const int row = position(tree.cliques[o.clique], v) * D;
+    rowsOf(o).middleRows(row, D) += blocks[k].transpose();
+    o.first = std::min(o.first, row);
   }
-  std::sort(order.begin(), order.end());
-  order.erase(std::unique(order.begin(), order.end()), order.end());
-  Eigen::MatrixXd Y, pushed;
-  for (const auto& [depth, c] : order) {
-    const Clique<D>& k = tree.cliques[c];
-    const int nf = static_cast<int>(k.frontals.size());
-    // Y is zero above the first frontal its right-hand side reaches (L lower triangular): the
-    // solve, the product and the push start there.
-    int first = nf;
-    for (int f = 0; f < nf && first == nf; ++f)
-      if (rhs.count(k.frontals[f])) first = f;
-    if (first == nf) continue;
-    const int r0 = first * D, rows = k.F - r0;
-    Y = Eigen::MatrixXd::Zero(rows, m);
-    for (int f = first; f < nf; ++f)
-      if (auto it = rhs.find(k.frontals[f]); it != rhs.end())
-        Y.middleRows(f * D - r0, D) = it->second;
-    k.LS().block(r0, r0, rows, rows).template triangularView<Eigen::Lower>().solveInPlace(Y);
+  for (size_t k = 0; k < on.size(); ++k) {
+    const Clique<D>& q = tree.cliques[on[k].clique];
+    const int f = on[k].first, n = q.F - f;
+    if (n <= 0) continue;  // nothing reached this clique: Y_c = 0
+    const auto LS = q.LS();
+    auto Y = rowsOf(on[k]).bottomRows(n);
+    LS.block(f, f, n, n).template triangularView<Eigen::Lower>().solveInPlace(Y);
     out.noalias() += Y.transpose() * Y;
-    if (k.Sn == 0) continue;
-    pushed.noalias() = k.LS().block(k.F, r0, k.Sn, rows) * Y;
-    for (size_t b = 0; b < k.separator.size(); ++b) {
-      auto [it, fresh] = rhs.try_emplace(k.separator[b], Eigen::MatrixXd::Zero(D, m));
-      it->second -= pushed.middleRows(static_cast<int>(b) * D, D);
+    if (q.Sn == 0) continue;
+    Rows pushed(by.data(), q.Sn, m);
+    pushed.noalias() = LS.block(q.F, f, q.Sn, n) * Y;
+    size_t j = k + 1;
+    for (size_t b = 0; b < q.separator.size(); ++b) {
+      const int s = q.separator[b], cs = tree.clique_of[s];
+      if (j >= on.size() || on[j].clique != cs) j = find(k + 1, cs);
+      if (j == on.size())
+        throw std::logic_error("TreeMarginals: separator variable " + std::to_string(s) +
+                               " is not frontal on the path");
+      const int row = position(tree.cliques[cs], s) * D;
+      rowsOf(on[j]).middleRows(row, D) -= pushed.middleRows(static_cast<int>(b) * D, D);
+      on[j].first = std::min(on[j].first, row);
     }
   }
   return out;
