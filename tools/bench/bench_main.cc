@@ -14,7 +14,8 @@
 //     (2D) the agreement with ceres::Covariance.
 //   arbor-bench robust [--shared DIR] [--only NAME,...] [--no-generated] [--generate-from NAMES]
 //                      [--fractions F,...] [--policies P,...] [--seed S] [--kernel K]
-//                      [--inlier-threshold X] [--solver lm|rtr] [--keep-generated DIR]
+//                      [--inlier-threshold X] [--solver lm|rtr] [--repeat N]
+//                      [--keep-generated DIR]
 //     the robust batch (GNC over LM, as `arbor batch --robust`) on the shared files with false
 //     loop closures and on its own, generated from shared clean sets (tools/bench/robust_bench.h).
 //   arbor-bench tree [--shared DIR] [--only NAME,...] [--ratios R,...]
@@ -623,6 +624,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   bool no_generated = false;
   std::string generate_from, fractions, policies, kernel = "tls", threshold = "chi2", solver,
                                                   keep_dir, batch_start;
+  int repeat = 3;
   bench::GenerationPlan plan;
   po::options_description options =
       datasetOptions("arbor bench robust [options]", &data, default_shared);
@@ -644,6 +646,9 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       "online: the robust batch from the robust online replay, its rejected closures held out "
       "and its threshold (arbor batch --robust's defaults); file: from the file's vertices at "
       "--inlier-threshold (arbor batch --robust --init file, GTSAM's GncOptimizer)")(
+      "repeat", po::value(&repeat)->default_value(repeat),
+      "run each replay (robust and clean) this many times and report the fastest run's time "
+      "and latency (the runs are deterministic: the same estimate and classification)")(
       "keep-generated", po::value(&keep_dir),
       "write the generated files (NAME.g2o, NAME.labels) here and keep them (default: a "
       "temporary directory, removed at the end)");
@@ -653,6 +658,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   if (solver != "lm" && solver != "rtr")
     throw cli::UsageError("--solver must be lm or rtr, not '" + solver + "'");
   settings.certify = solver == "rtr";
+  if (repeat < 1) throw cli::UsageError("--repeat must be >= 1, not " + std::to_string(repeat));
   if (batch_start != "file" && batch_start != "online")
     throw cli::UsageError("--batch-start must be file or online, not '" + batch_start + "'");
   settings.start = batch_start == "online" ? bench::BatchStart::kOnline : bench::BatchStart::kFile;
@@ -714,7 +720,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   const std::string load_before = loadAverage();
   // The replay rows: the robust replay as `arbor replay --robust` runs it, and the clean replay
   // of each base (tools/bench/robust_replay_hooks.h).
-  const bench::RobustReplayHooks hooks = bench::robustReplayHooks(settings.gnc.kernel);
+  const bench::RobustReplayHooks hooks = bench::robustReplayHooks(settings.gnc.kernel, repeat);
   const auto rows = bench::runRobustBench(cases, optimum, anchors, settings, hooks, &std::cerr);
   std::cout
       << "Robust batch: GNC-" << toString(settings.gnc.kernel) << " over LM"
@@ -775,7 +781,7 @@ int main(int argc, char** argv) {
            "[--no-ceres] [smoother flags]\n"
            "       arbor bench robust [--shared DIR] [--only NAMES] [--no-generated] "
            "[--generate-from NAMES] [--fractions F,...] [--policies P,...] [--seed S] [--kernel K] "
-           "[--inlier-threshold X] [--solver lm|rtr] [--keep-generated DIR]\n"
+           "[--inlier-threshold X] [--solver lm|rtr] [--repeat N] [--keep-generated DIR]\n"
            "       arbor bench tree [--shared DIR] [--only NAMES] [--ratios R,...]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;

@@ -2,7 +2,8 @@
 // exactly as `arbor replay --robust` runs it (one update per edge, the online GNC's defaults:
 // innovation entry test, estimated noise scale, warm-up held; the final relinearise-all pass,
 // no batch LM), its rejected edges the closures it ends as outliers; and the clean replay of
-// the base file (`arbor replay BASE.g2o` without its batch LM), the cost goals' denominator.
+// the base file (`arbor replay BASE.g2o` without its batch LM), the cost goals' denominator;
+// each the fastest of a few runs where the bench asks for more than one (--repeat).
 #pragma once
 
 #include "arbor/core/robust_kernel.h"
@@ -10,7 +11,8 @@
 
 namespace arbor::bench {
 
-/// Hooks for both dimensions, the closures graduating towards `kernel`.
-RobustReplayHooks robustReplayHooks(KernelKind kernel);
+/// Hooks for both dimensions, the closures graduating towards `kernel`; each replay is run
+/// `repeats` times (≥ 1) and the fastest run's figures kept (the runs differ only in time).
+RobustReplayHooks robustReplayHooks(KernelKind kernel, int repeats = 1);
 
 }  // namespace arbor::bench
