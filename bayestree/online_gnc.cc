@@ -46,23 +46,33 @@ double quantileOfSorted(const std::vector<double>& sorted, size_t j, double q) {
 
 }  // namespace
 
-// The m ≤ t·σ² ("kept") are a prefix of the sorted m, so each step of the two fixed points is a
-// binary search and an index, not a pass over m: O(n log n) in all, once.
-NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
-                                      const RobustOptions& o, bool from_median) {
-  const double t = o.tail_factor * c2;
+NoiseScaleCuts::NoiseScaleCuts(int dof, double c2, const RobustOptions& o) : t(o.tail_factor * c2) {
   const boost::math::chi_squared_distribution<double> chi2(dof);
   const double Ft = boost::math::cdf(chi2, t);
-  const double q_median = boost::math::quantile(chi2, 0.5 * Ft);         // F⁻¹(F(t)/2)
-  const double q_tail = boost::math::quantile(chi2, o.confidence * Ft);  // F⁻¹(q F(t))
-  std::sort(m.begin(), m.end());                                         // m is ours
-  auto within = [&](double bound) {                                      // how many m ≤ bound
+  q_median = boost::math::quantile(chi2, 0.5 * Ft);         // F⁻¹(F(t)/2)
+  q_tail = boost::math::quantile(chi2, o.confidence * Ft);  // F⁻¹(q F(t))
+  median = chiSquareMedian(dof);
+}
+
+NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
+                                      const RobustOptions& o, bool from_median) {
+  std::sort(m.begin(), m.end());  // m is ours
+  return estimateNoiseScaleSorted(m, NoiseScaleCuts(dof, c2, o), o, from_median);
+}
+
+// The m ≤ t·σ² ("kept") are a prefix of the sorted m, so each step of the two fixed points is a
+// binary search and an index, not a pass over m.
+NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
+                                            const NoiseScaleCuts& cuts, const RobustOptions& o,
+                                            bool from_median) {
+  const double t = cuts.t, q_median = cuts.q_median, q_tail = cuts.q_tail;
+  auto within = [&](double bound) {  // how many m ≤ bound
     return static_cast<size_t>(std::upper_bound(m.begin(), m.end(), bound) - m.begin());
   };
   NoiseScaleEstimate out;
   double sigma2 = 1.0;
   if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
-    const double start = quantileOfSorted(m, m.size(), 0.5) / chiSquareMedian(dof);
+    const double start = quantileOfSorted(m, m.size(), 0.5) / cuts.median;
     if (start > 0 && std::isfinite(start)) sigma2 = start;
   }
   size_t kept = 0;  // the m ≤ t·σ²: m[0, kept)
@@ -109,6 +119,9 @@ const char* toString(EntryTest entry) {
   return entry == EntryTest::kInnovation ? "innovation" : "residual";
 }
 const char* toString(WarmUp warm_up) { return warm_up == WarmUp::kHold ? "hold" : "given"; }
+const char* toString(FirstRecheck first) {
+  return first == FirstRecheck::kReplayEstimate ? "replay" : "relinearized";
+}
 const char* toString(NoiseScale scale) {
   return scale == NoiseScale::kEstimated ? "estimated" : "given";
 }
@@ -186,6 +199,7 @@ OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
   c2_given_ = options_.threshold > 0 ? options_.threshold
                                      : chiSquareThreshold(options_.confidence, G::kDoF);
   c2_ = c2_given_;
+  cuts_ = NoiseScaleCuts(G::kDoF, c2_given_, options_);
 }
 
 // σ̂² from the innovations so far (scaleSource), once scale_min_samples of them are in;
@@ -200,10 +214,11 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
     // (P) against the judged closures whose low end is within K of this one's: ends paired
     // within K (either way round) put the low ends within K of each other.
     const Key low = std::min(c.from, c.to);
+    const G xa = smoother.estimate(c.i), xb = smoother.estimate(c.j);
     for (auto it = by_low_end_.lower_bound(low - K); it != by_low_end_.end(); ++it) {
       if (it->first > low + K) break;
       Closure& other = closures_[static_cast<size_t>(it->second)];
-      if (other.state == State::kExcluded || !agree(smoother, c, other)) continue;
+      if (other.state == State::kExcluded || !agree(smoother, c, other, xa, xb)) continue;
       if (!other.corroborated) {
         other.corroborated = true;
         corroborated_.push_back(other.m);
@@ -228,8 +243,10 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   last_source_ = source;
   samples_used_ = static_cast<int>(n);
   const bool had_estimate = estimate_.estimated;
-  estimate_ = estimateNoiseScale(*source, G::kDoF, c2_given_, options_,
-                                 /*from_median=*/source == &corroborated_);
+  std::vector<double> sorted = *source;
+  std::sort(sorted.begin(), sorted.end());
+  estimate_ = estimateNoiseScaleSorted(sorted, cuts_, options_,
+                                       /*from_median=*/source == &corroborated_);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   const double c2_before = c2_;
@@ -267,6 +284,12 @@ const std::vector<double>* OnlineGnc<G>::scaleSource() const {
 template <class G>
 double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure& a,
                            const Closure& b) const {
+  return pairS(smoother, a, b, smoother.estimate(a.i), smoother.estimate(a.j));
+}
+
+template <class G>
+double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure& a,
+                           const Closure& b, const G& xa, const G& xb) const {
   const Key K = options_.corroboration_window;
   auto near = [K](Key x, Key y) { return x - y <= K && y - x <= K; };
   G z2 = b.z;
@@ -276,8 +299,6 @@ double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure
     z2 = z2.inverse();  // b reversed: d→c read as c→d (Ω₂ kept, the ends being close)
     std::swap(c, d);
   }
-  const G& xa = smoother.estimate(a.i);
-  const G& xb = smoother.estimate(a.j);
   const G z_hat = xa.inverse()
                       .compose(smoother.estimate(c))
                       .compose(z2)
@@ -302,9 +323,9 @@ double OnlineGnc<G>::pairSBothWays(const IncrementalSmoother<G>& smoother, const
 
 // (P): b agrees with a.
 template <class G>
-bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a,
-                         const Closure& b) {
-  const double s = pairS(smoother, a, b);
+bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b,
+                         const G& xa, const G& xb) {
+  const double s = pairS(smoother, a, b, xa, xb);
   if (!std::isfinite(s)) return false;
   // On the pairs' own scale: estimateNoiseScale of every neighbouring pair's s so far, from
   // their untruncated median (true pairs, which come in runs, are most of them over a run),
@@ -313,8 +334,13 @@ bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& 
   // let them all agree.
   pair_s_.push_back(s);
   if (pair_s_.size() >= 10 && pair_s_.size() >= next_pair_estimate_) {
-    pair_scale_ =
-        estimateNoiseScale(pair_s_, G::kDoF, c2_given_, options_, /*from_median=*/true).sigma2;
+    // Sorted up to pair_s_sorted_: the new ones sorted and merged in (the estimate reads only
+    // the sorted values, not their order of arrival).
+    const auto sorted_end = pair_s_.begin() + static_cast<std::ptrdiff_t>(pair_s_sorted_);
+    std::sort(sorted_end, pair_s_.end());
+    std::inplace_merge(pair_s_.begin(), sorted_end, pair_s_.end());
+    pair_s_sorted_ = pair_s_.size();
+    pair_scale_ = estimateNoiseScaleSorted(pair_s_, cuts_, options_, /*from_median=*/true).sigma2;
     next_pair_estimate_ = nextEstimateAt(pair_s_.size());
   }
   return s <= c2_given_ * pair_scale_;
@@ -521,11 +547,13 @@ double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const 
     }
     return m;
   };
-  const std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
+  std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
   const size_t enough = static_cast<size_t>(options_.scale_min_samples);
   if (m_in.size() < enough || m_tr.size() < enough) return c2_;
-  const NoiseScaleEstimate in = estimateNoiseScale(m_in, G::kDoF, c2_given_, options_, true);
-  const NoiseScaleEstimate tr = estimateNoiseScale(m_tr, G::kDoF, c2_given_, options_, true);
+  std::sort(m_in.begin(), m_in.end());
+  std::sort(m_tr.begin(), m_tr.end());
+  const NoiseScaleEstimate in = estimateNoiseScaleSorted(m_in, cuts_, options_, true);
+  const NoiseScaleEstimate tr = estimateNoiseScaleSorted(m_tr, cuts_, options_, true);
   if (!in.estimated || !tr.estimated) return c2_;
   const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
   const double c2 = options_.tail_factor * c2_given_ * sigma2;

@@ -391,8 +391,9 @@ void OnlineSmoother<G>::graduateFully(int max_updates, UpdateStats* total,
 }
 
 // Robust: each round graduates every closure to the end, re-checks every settled one at the
-// kernel (a change graduates it again) and relinearises all; another round only while the
-// re-check changed a weight.
+// kernel (a change graduates it again), and another round runs only while the re-check changed
+// a weight; every round after the first relinearises all before its re-check, and the last one
+// ends relinearised.
 template <class G>
 UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
   if (!gnc_) {
@@ -404,6 +405,9 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
   // Closures still held in the warm-up (σ̂² never came: too few corroborated, too few judged)
   // are judged one at a time in arrival order, each at the estimate the ones before it made:
   // all at once, every one would be judged on the odometry chain alone.
+  // Those updates take one Gauss–Newton step each towards the closures they let in: the first
+  // re-check then reads a relinearised estimate too (MIT_random_0.1: all 22 held to here).
+  const bool judged_here = gnc_->held() > 0;
   for (size_t k = gnc_->held(); k > 0; --k) {
     if (gnc_->judgeHeld(smoother_, 1) == 0) continue;
     addStats(&total, smoother_.update());
@@ -411,13 +415,29 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
   }
   const int bound = gnc_->options().max_steps_per_closure + 1;
   gnc_->beginFinalize();
+  // The first round's re-check reads the replay's own estimate (FirstRecheck::kReplayEstimate;
+  // not after judging held closures above); a round after one that changed a weight relinearises
+  // everything first and reads the converged estimate, and the last round, whichever it is, ends
+  // relinearised (design.md, "The first re-check").
+  bool relinearized = false;
+  auto relinearizeAll = [&] {
+    addStats(&total, smoother_.relinearizeAll(cancel));
+    gnc_->resolve(smoother_);
+    relinearized = true;
+  };
   for (int round = 0;; ++round) {
     graduateFully(bound, &total, cancel);
     if (total.cancelled) break;
-    addStats(&total, smoother_.relinearizeAll(cancel));
-    gnc_->resolve(smoother_);
-    if (total.cancelled || round + 1 >= gnc_->options().finalize_rounds) break;
-    if (gnc_->step(smoother_, StepScope::kFinalize) == 0 && !gnc_->graduating()) break;
+    relinearized = false;
+    const bool last = round + 1 >= gnc_->options().finalize_rounds;
+    if (round > 0 || last || judged_here ||
+        gnc_->options().first_recheck == FirstRecheck::kRelinearized)
+      relinearizeAll();
+    if (total.cancelled || last) break;
+    if (gnc_->step(smoother_, StepScope::kFinalize) == 0 && !gnc_->graduating()) {
+      if (!relinearized) relinearizeAll();
+      break;
+    }
   }
   const UpdateStats s = recordUpdate(total);
   if (!total.cancelled) finalized_update_ = stats_.updates;

@@ -243,14 +243,42 @@ TEST(LeaveOneOut, FinalizeDropsPastTheEndsScaleItself) {
   if (!testing::datasetPresent("smallGrid3D"))
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
   const PlantedGrid g = plantSmallGrid3D(0.1, sim::OutlierPolicy::kLocal, 3);
-  RobustOptions roomier;
+  // finalize()'s first re-check relinearised first: at the replay's own estimate (the default)
+  // (4, 23) is past 1.25·c²_end too (FirstRecheckAtTheReplaysEstimate below).
+  RobustOptions converged;
+  converged.first_recheck = FirstRecheck::kRelinearized;
+  RobustOptions roomier = converged;
   roomier.end_confirm_margin = roomier.final_confirm_margin;
-  const auto [before, now] = replayBoth(g, roomier, RobustOptions{});
+  const auto [before, now] = replayBoth(g, roomier, converged);
   EXPECT_TRUE(before.rejected.count({4, 45})) << "not this test's case";
   EXPECT_FALSE(before.rejected.count({4, 23})) << "not this test's case";
   EXPECT_LT(now.c2_end, now.c2);  // the end's scale stands
   EXPECT_EQ(now.rejected, g.is_false);
   EXPECT_LT(now.F_clean, before.F_clean / 1.2);
+}
+
+// finalize()'s first re-check at the replay's own estimate (FirstRecheck::kReplayEstimate,
+// the default) rejects what the re-check after relinearising everything rejects, and saves that
+// relinearisation where a later round follows: smallGrid3D with 50% random false closures
+// (seed 1) drops a closure in the first round; the case above (10% local, seed 3) ends at the
+// labels at either end margin.
+TEST(LeaveOneOut, FirstRecheckAtTheReplaysEstimate) {
+  if (!testing::datasetPresent("smallGrid3D"))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
+  RobustOptions converged;
+  converged.first_recheck = FirstRecheck::kRelinearized;
+  const PlantedGrid g = plantSmallGrid3D(0.5, sim::OutlierPolicy::kRandom, 1);
+  const auto [relinearized, replay] = replayBoth(g, converged, RobustOptions{});
+  EXPECT_EQ(replay.rejected, g.is_false);
+  EXPECT_EQ(replay.rejected, relinearized.rejected);
+  EXPECT_NEAR(replay.F_clean, relinearized.F_clean, 1e-6 * relinearized.F_clean);
+  EXPECT_LT(replay.finalize_iterations, relinearized.finalize_iterations);
+  const PlantedGrid local = plantSmallGrid3D(0.1, sim::OutlierPolicy::kLocal, 3);
+  RobustOptions roomier;
+  roomier.end_confirm_margin = roomier.final_confirm_margin;
+  const auto [at_one, at_roomier] = replayBoth(local, RobustOptions{}, roomier);
+  EXPECT_EQ(at_one.rejected, local.is_false);
+  EXPECT_EQ(at_roomier.rejected, local.is_false);
 }
 
 // finalize() reaches a fixed point: a closure (E) keeps taking back at weight 0 and (L) keeps

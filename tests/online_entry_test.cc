@@ -379,6 +379,7 @@ NoiseScaleEstimate noiseScaleBySelection(std::vector<double> m, int dof, double 
   return out;
 }
 
+// estimateNoiseScaleSorted, on the samples sorted by merging, gives the same numbers too.
 TEST(OnlineEntry, EstimateNoiseScaleIsTheSelectionsFixedPoint) {
   std::mt19937 rng(77);
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -400,14 +401,33 @@ TEST(OnlineEntry, EstimateNoiseScaleIsTheSelectionsFixedPoint) {
         x *= 40.0;  // past max_tail_scale's reach for some
       m.push_back(k % 17 == 0 && k > 0 ? m[static_cast<size_t>(k) / 2] : x);  // ties
     }
+    // Sorted as OnlineGnc keeps the pairs' s: each arrival's tail sorted and merged in.
+    std::vector<double> merged;
+    for (size_t at = 0; at < m.size();) {
+      const size_t next = std::min(m.size(), at + 1 + static_cast<size_t>(40 * u(rng)));
+      merged.insert(merged.end(), m.begin() + static_cast<long>(at),
+                    m.begin() + static_cast<long>(next));
+      const auto mid = merged.end() - static_cast<long>(next - at);
+      std::sort(mid, merged.end());
+      std::inplace_merge(merged.begin(), mid, merged.end());
+      at = next;
+    }
+    ASSERT_TRUE(std::is_sorted(merged.begin(), merged.end()));
+    const NoiseScaleCuts cuts(dof, c2, RobustOptions{});
     for (bool from_median : {false, true}) {
       const NoiseScaleEstimate a = estimateNoiseScale(m, dof, c2, RobustOptions{}, from_median);
       const NoiseScaleEstimate b = noiseScaleBySelection(m, dof, c2, RobustOptions{}, from_median);
+      const NoiseScaleEstimate c =
+          estimateNoiseScaleSorted(merged, cuts, RobustOptions{}, from_median);
       ASSERT_EQ(a.estimated, b.estimated) << trial;
       ASSERT_EQ(a.tail_cut, b.tail_cut) << trial;
       ASSERT_EQ(a.sigma2, b.sigma2) << trial;
       ASSERT_EQ(a.median_sigma2, b.median_sigma2) << trial;
       ASSERT_EQ(a.share_at_word, b.share_at_word) << trial;
+      ASSERT_EQ(c.estimated, b.estimated) << trial;
+      ASSERT_EQ(c.sigma2, b.sigma2) << trial;
+      ASSERT_EQ(c.median_sigma2, b.median_sigma2) << trial;
+      ASSERT_EQ(c.share_at_word, b.share_at_word) << trial;
       estimated += a.estimated;
       tail_cut += a.tail_cut;
     }

@@ -17,7 +17,8 @@ struct RobustOutcome {
   int unconfirmed = 0;                     ///< OnlineStats::closures_unconfirmed
   int rechecks_bounded = 0;                ///< OnlineStats::rechecks_bounded
   double F_clean = 0;                      ///< F over `clean`'s edges at the estimate
-  double c2 = 0, c2_end = 0;  ///< OnlineStats::closure_threshold and closure_threshold_at_end
+  double c2 = 0, c2_end = 0;    ///< OnlineStats::closure_threshold and closure_threshold_at_end
+  int finalize_iterations = 0;  ///< ReplayResult::finalize_iterations
 };
 
 /// `graph` replayed with `robust` (no batch); F_clean over `clean` (same poses, same order).
@@ -37,6 +38,7 @@ RobustOutcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
   out.F_clean = objective(clean, r.poses);
   out.c2 = r.online.closure_threshold;
   out.c2_end = r.online.closure_threshold_at_end;
+  out.finalize_iterations = r.finalize_iterations;
   return out;
 }
 

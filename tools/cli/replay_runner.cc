@@ -103,6 +103,7 @@ ReplayResult<G> replayInto(const PoseGraph<G>& graph, const ReplaySettings& sett
     const UpdateStats s = smoother.finalize();
     result.relinearized += s.variables_relinearized;
     result.indeterminate += s.indeterminate_cliques;
+    result.finalize_iterations = s.refine_iterations;
   }
   result.finalize_s = finalize_clock.seconds();
   result.pending = smoother.stats().edges_pending;

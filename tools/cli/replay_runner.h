@@ -67,7 +67,10 @@ struct ReplayResult {
   double update_s = 0;        ///< sum of update latencies
   double first_update_s = 0;  ///< with ReplaySettings::first_update_edges: that update's time
   double finalize_s = 0;      ///< the final relinearise-all pass
-  double F_incremental = 0;   ///< before the final pass
+  /// The final pass's Gauss–Newton iterations over everything (each relinearises all and
+  /// re-eliminates the whole tree; with --robust, summed over finalize()'s rounds).
+  int finalize_iterations = 0;
+  double F_incremental = 0;  ///< before the final pass
   /// --solve-budget-mb: the cliques still deferred after the last update, and F once they are
   /// solved (before the final pass; F_incremental when none is)
   int deferred_at_end = 0;

@@ -106,8 +106,13 @@ void addOnlineRobustFlags(po::options_description& options) {
       "use (docs/design.md, \"The end's scale\"); > 0")(
       "finalize-rounds", po::value<int>()->default_value(RobustOptions{}.finalize_rounds),
       "with --robust, at most this many rounds of the final pass (each graduates every closure "
-      "to the end, relinearises everything and re-checks every closure; another round only "
-      "while a re-check changed a weight)")(
+      "to the end and re-checks every closure; another round only while a re-check changed a "
+      "weight; every round after the first relinearises everything before its re-check, and "
+      "the last one ends relinearised)")(
+      "first-recheck", po::value<std::string>()->default_value("replay"),
+      "with --robust, where the final pass's first re-check reads the closures: replay (the "
+      "replay's own estimate) or relinearized (after relinearising everything, as the later "
+      "rounds do; docs/design.md, \"The first re-check\")")(
       "rehold-growth", po::value<double>()->default_value(RobustOptions{}.rehold_growth),
       "with --robust, X > 1: when the noise scale is first estimated and that raises the "
       "threshold X times or more, the loop closures rejected before it are judged again as the "
@@ -131,6 +136,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const std::string entry = vm["entry"].as<std::string>();
   const std::string noise_scale = vm["noise-scale"].as<std::string>();
   const std::string warm_up = vm["warm-up"].as<std::string>();
+  const std::string first_recheck = vm["first-recheck"].as<std::string>();
   const int window = vm["corroboration-window"].as<int>();
   const double margin = vm["final-confirm-margin"].as<double>();
   const double end_margin = vm["end-confirm-margin"].as<double>();
@@ -144,11 +150,12 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
        !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
        !vm["end-confirm-margin"].defaulted() || !vm["finalize-rounds"].defaulted() ||
        !vm["end-scale-samples"].defaulted() || !vm["rehold-growth"].defaulted() ||
-       !vm["end-backed-margin"].defaulted() || !vm["end-scale-growth"].defaulted()))
+       !vm["end-backed-margin"].defaulted() || !vm["end-scale-growth"].defaulted() ||
+       !vm["first-recheck"].defaulted()))
     throw UsageError(
         "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
-        "--end-confirm-margin, --finalize-rounds, --end-scale-samples, --end-scale-growth, "
-        "--rehold-growth and "
+        "--end-confirm-margin, --finalize-rounds, --first-recheck, --end-scale-samples, "
+        "--end-scale-growth, --rehold-growth and "
         "--end-backed-margin need --robust");
   if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
   if (end_samples < 0)
@@ -172,9 +179,13 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
     throw UsageError("--noise-scale must be estimated or given, not '" + noise_scale + "'");
   if (warm_up != "hold" && warm_up != "given")
     throw UsageError("--warm-up must be hold or given, not '" + warm_up + "'");
+  if (first_recheck != "replay" && first_recheck != "relinearized")
+    throw UsageError("--first-recheck must be replay or relinearized, not '" + first_recheck + "'");
   robust->entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
   robust->scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
   robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
+  robust->first_recheck =
+      first_recheck == "replay" ? FirstRecheck::kReplayEstimate : FirstRecheck::kRelinearized;
   robust->corroboration_window = window;
   robust->final_confirm_margin = margin;
   robust->end_confirm_margin = end_margin;
