@@ -289,23 +289,24 @@ TEST(HeapFlag, ReachesReplayAndServe) {
 }
 
 // --entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin,
-// --finalize-rounds, --end-scale-samples, --rehold-growth and --end-backed-margin
-// (tools/cli/robust_flags.h)
+// --finalize-rounds, --first-recheck, --end-scale-samples, --rehold-growth and
+// --end-backed-margin (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
-  const std::vector<std::string> args = {"--robust", "--entry",
-                                         "residual", "--noise-scale",
-                                         "given",    "--warm-up",
-                                         "given",    "--corroboration-window",
-                                         "7",        "--final-confirm-margin",
-                                         "1.5",      "--finalize-rounds",
-                                         "4",        "--end-scale-samples",
-                                         "0",        "--rehold-growth",
-                                         "4",        "--end-backed-margin",
-                                         "0",        "--end-scale-growth",
-                                         "2",        "--end-confirm-margin",
-                                         "1.5"};
+  const std::vector<std::string> args = {"--robust",    "--entry",
+                                         "residual",    "--noise-scale",
+                                         "given",       "--warm-up",
+                                         "given",       "--corroboration-window",
+                                         "7",           "--final-confirm-margin",
+                                         "1.5",         "--finalize-rounds",
+                                         "4",           "--end-scale-samples",
+                                         "0",           "--rehold-growth",
+                                         "4",           "--end-backed-margin",
+                                         "0",           "--end-scale-growth",
+                                         "2",           "--end-confirm-margin",
+                                         "1.5",         "--first-recheck",
+                                         "relinearized"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -321,6 +322,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.end_backed_margin, 0.0);
   EXPECT_EQ(replay->online.end_scale_growth, 2.0);
   EXPECT_EQ(replay->online.end_confirm_margin, 1.5);
+  EXPECT_EQ(replay->online.first_recheck, FirstRecheck::kRelinearized);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -335,6 +337,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->end_backed_margin, 0.0);
   EXPECT_EQ(serve->options.robust->end_scale_growth, 2.0);
   EXPECT_EQ(serve->options.robust->end_confirm_margin, 1.5);
+  EXPECT_EQ(serve->options.robust->first_recheck, FirstRecheck::kRelinearized);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -349,6 +352,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->end_backed_margin, RobustOptions{}.end_backed_margin);
   EXPECT_EQ(plain->options.robust->end_scale_growth, RobustOptions{}.end_scale_growth);
   EXPECT_EQ(plain->options.robust->end_confirm_margin, RobustOptions{}.end_confirm_margin);
+  EXPECT_EQ(plain->options.robust->first_recheck, FirstRecheck::kReplayEstimate);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);
@@ -394,8 +398,10 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
     EXPECT_NE(message.find("--corroboration-window"), std::string::npos) << message;
     EXPECT_NE(message.find("-4"), std::string::npos) << message;
   }
-  for (const std::string flag : {"--entry", "--noise-scale", "--warm-up"}) {
-    const std::string value = flag == "--entry" ? "residual" : "given";
+  for (const std::string flag : {"--entry", "--noise-scale", "--warm-up", "--first-recheck"}) {
+    const std::string value = flag == "--entry"           ? "residual"
+                              : flag == "--first-recheck" ? "relinearized"
+                                                          : "given";
     EXPECT_THROW(parseServeCommandLine({flag, value}), UsageError) << flag;
     EXPECT_THROW(parseReplayCommandLine({"graph.g2o", flag, value}), UsageError) << flag;
     try {
