@@ -674,8 +674,10 @@ class OnlineGnc {
   size_t next_estimate_ = 0;  ///< the source's size at which σ̂² is estimated next
   int samples_used_ = 0;
   std::multimap<Key, int> by_low_end_;  ///< judged closures by min(from, to)
-  std::vector<double> pair_s_;          ///< (P)'s s of every neighbouring pair so far, sorted up to
-  size_t pair_s_sorted_ = 0;       ///< this many (at the last estimate), in arrival order after
+  /// (P)'s s of every neighbouring pair so far: [0, pair_s_sorted_) sorted at the last estimate
+  /// of their scale, the rest in arrival order.
+  std::vector<double> pair_s_;
+  size_t pair_s_sorted_ = 0;
   NoiseScaleCuts cuts_;            ///< estimateNoiseScale's χ² points at kDoF and c2_given_
   double pair_scale_ = 1.0;        ///< their σ̂² (1 before 10 of them)
   size_t next_pair_estimate_ = 0;  ///< pair_s_.size() at which it is estimated next
