@@ -339,10 +339,13 @@ Eigen::MatrixXd TreeMarginals<D>::predicted(const BayesTree<D>& tree, const std:
   struct OnPath {
     int clique, depth, offset, first;
   };
+  auto inTree = [&](int v) {
+    return v >= 0 && v < static_cast<int>(tree.clique_of.size()) && tree.clique_of[v] >= 0;
+  };
   std::vector<OnPath> on;
   std::vector<int> up;
   for (const int v : vars) {
-    if (v < 0 || v >= static_cast<int>(tree.clique_of.size()) || tree.clique_of[v] < 0) continue;
+    if (!inTree(v)) continue;
     up.clear();
     for (int c = tree.clique_of[v]; c >= 0; c = tree.cliques[c].parent) up.push_back(c);
     for (size_t q = 0; q < up.size(); ++q) {
@@ -372,7 +375,7 @@ Eigen::MatrixXd TreeMarginals<D>::predicted(const BayesTree<D>& tree, const std:
   };
   for (size_t k = 0; k < vars.size(); ++k) {
     const int v = vars[k];
-    if (v < 0 || v >= static_cast<int>(tree.clique_of.size()) || tree.clique_of[v] < 0) continue;
+    if (!inTree(v)) continue;
     OnPath& o = on[find(0, tree.clique_of[v])];
     const int row = position(tree.cliques[o.clique], v) * D;
     rowsOf(o).middleRows(row, D) += blocks[k].transpose();

@@ -6,6 +6,7 @@
 #include <map>
 #include <optional>
 #include <stdexcept>
+#include <utility>
 
 #include <boost/math/distributions/chi_squared.hpp>
 
@@ -56,8 +57,13 @@ NoiseScaleCuts::NoiseScaleCuts(int dof, double c2, const RobustOptions& o) : t(o
 
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
                                       const RobustOptions& o, bool from_median) {
+  return estimateNoiseScale(std::move(m), NoiseScaleCuts(dof, c2, o), o, from_median);
+}
+
+NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, const NoiseScaleCuts& cuts,
+                                      const RobustOptions& o, bool from_median) {
   std::sort(m.begin(), m.end());  // m is ours
-  return estimateNoiseScaleSorted(m, NoiseScaleCuts(dof, c2, o), o, from_median);
+  return estimateNoiseScaleSorted(m, cuts, o, from_median);
 }
 
 // The m ≤ t·σ² ("kept") are a prefix of the sorted m, so each step of the two fixed points is a
@@ -243,10 +249,8 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   last_source_ = source;
   samples_used_ = static_cast<int>(n);
   const bool had_estimate = estimate_.estimated;
-  std::vector<double> sorted = *source;
-  std::sort(sorted.begin(), sorted.end());
-  estimate_ = estimateNoiseScaleSorted(sorted, cuts_, options_,
-                                       /*from_median=*/source == &corroborated_);
+  estimate_ =
+      estimateNoiseScale(*source, cuts_, options_, /*from_median=*/source == &corroborated_);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   const double c2_before = c2_;
@@ -550,10 +554,8 @@ double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const 
   std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
   const size_t enough = static_cast<size_t>(options_.scale_min_samples);
   if (m_in.size() < enough || m_tr.size() < enough) return c2_;
-  std::sort(m_in.begin(), m_in.end());
-  std::sort(m_tr.begin(), m_tr.end());
-  const NoiseScaleEstimate in = estimateNoiseScaleSorted(m_in, cuts_, options_, true);
-  const NoiseScaleEstimate tr = estimateNoiseScaleSorted(m_tr, cuts_, options_, true);
+  const NoiseScaleEstimate in = estimateNoiseScale(std::move(m_in), cuts_, options_, true);
+  const NoiseScaleEstimate tr = estimateNoiseScale(std::move(m_tr), cuts_, options_, true);
   if (!in.estimated || !tr.estimated) return c2_;
   const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
   const double c2 = options_.tail_factor * c2_given_ * sigma2;

@@ -200,7 +200,8 @@
 //                 replay's estimate is within thousandths of the converged one in F, the 62
 //                 robust files, the clean ones and sphere_bignoise end with the same closures
 //                 rejected, and the passes saved were the part of finalize() that changed
-//                 nothing (smallGrid3D, 50% random: 1.8 of 8–9 ms). After judging closures held
+//                 nothing (smallGrid3D, 50% random: finalize() 6.2 against 7.8 ms; design.md,
+//                 "The first re-check"). After judging closures held
 //                 since the warm-up (MIT_random_0.1) the first round relinearises first.
 //   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
 //                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
@@ -419,7 +420,10 @@ struct NoiseScaleCuts {
   NoiseScaleCuts(int dof, double c2, const RobustOptions& o);
   double t = 0, q_median = 0, q_tail = 0, median = 0;
 };
-/// estimateNoiseScale of m sorted ascending, at the cuts of its dof and c².
+/// estimateNoiseScale at the cuts of its dof and c².
+NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, const NoiseScaleCuts& cuts,
+                                      const RobustOptions& o, bool from_median = false);
+/// The same of m sorted ascending.
 NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
                                             const NoiseScaleCuts& cuts, const RobustOptions& o,
                                             bool from_median = false);

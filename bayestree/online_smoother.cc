@@ -419,20 +419,18 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
   // not after judging held closures above); a round after one that changed a weight relinearises
   // everything first and reads the converged estimate, and the last round, whichever it is, ends
   // relinearised (design.md, "The first re-check").
-  bool relinearized = false;
+  const bool relinearize_first =
+      judged_here || gnc_->options().first_recheck == FirstRecheck::kRelinearized;
   auto relinearizeAll = [&] {
     addStats(&total, smoother_.relinearizeAll(cancel));
     gnc_->resolve(smoother_);
-    relinearized = true;
   };
   for (int round = 0;; ++round) {
     graduateFully(bound, &total, cancel);
     if (total.cancelled) break;
-    relinearized = false;
     const bool last = round + 1 >= gnc_->options().finalize_rounds;
-    if (round > 0 || last || judged_here ||
-        gnc_->options().first_recheck == FirstRecheck::kRelinearized)
-      relinearizeAll();
+    const bool relinearized = round > 0 || last || relinearize_first;
+    if (relinearized) relinearizeAll();
     if (total.cancelled || last) break;
     if (gnc_->step(smoother_, StepScope::kFinalize) == 0 && !gnc_->graduating()) {
       if (!relinearized) relinearizeAll();
