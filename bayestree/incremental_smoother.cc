@@ -1072,6 +1072,12 @@ struct IncrementalSmoother<G>::Impl {
     // insert the orphans back.
     const bool constrain =
         !relinearize_all && static_cast<int>(touched.size()) <= opt.batch.constrain_last_max;
+    // SmootherOptions::newest_last: the newest pose joins the last group (marked for the
+    // ordering only: it is not touched, so its clique is not re-eliminated for it).
+    const int newest = numPoses() - 1;
+    const bool newest_marked =
+        constrain && opt.newest_last && newest >= 0 && !fixed[newest] && !mark[newest];
+    if (newest_marked) mark[newest] = 1;
     const typename bayestree::TopElimination<G>::Input in{
         top.variables, top.orphans, constrain ? &mark : nullptr, to_linearize,
         theta,         fixed,       nestedDissectionMin(),       nestedDissectionTryFlops()};
@@ -1081,6 +1087,7 @@ struct IncrementalSmoother<G>::Impl {
     st->cliques_reeliminated += out.cliques;
     st->variables_reeliminated += out.variables;
     st->reelimination_flops += out.flops;
+    if (newest_marked) mark[newest] = 0;
     tree.releaseFreeStorage();       // cliques not recycled hold no memory
     if (relinearize_all || batch) {  // a fresh ordering
       flops_reference = tree.flops;

@@ -169,6 +169,15 @@ struct SmootherOptions {
   /// relinearised) into the Bayes tree by rank updates along their paths to the root, instead
   /// of re-eliminating those paths (false: always re-eliminate, as GTSAM's iSAM2).
   bool rank_updates = true;
+  /// The newest pose (the last one added) is ordered with the touched variables, last, in
+  /// every re-eliminated top that holds it (docs/design.md, "The newest pose stays last").
+  /// iSAM2 constrains only the variables of the update's own factors; an update that adds
+  /// none (a relinearisation, or a reweighting, alone: robust smoothing's closures rejected on
+  /// entry, its graduation steps) then orders the newest pose anywhere in its top, and the next
+  /// pose's odometry re-eliminates the path from its clique to the root. false: iSAM2's
+  /// constraint alone. Where every update touches the newest pose (a file replayed in order
+  /// of max(i, j)) it changes nothing.
+  bool newest_last = true;
   /// Powell's dogleg instead of Gauss–Newton (as GTSAM's ISAM2DoglegParams). Each dogleg update
   /// evaluates F and the gradient over the whole graph (O(n), as in GTSAM).
   bool dogleg = false;

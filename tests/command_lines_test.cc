@@ -48,6 +48,7 @@ const std::vector<Field>& fields() {
       {"wildfire_threshold", [](const SmootherOptions& o) { return o.wildfire_threshold; }},
       {"full_backsubstitution", [](const SmootherOptions& o) { return o.full_backsubstitution; }},
       {"rank_updates", [](const SmootherOptions& o) { return o.rank_updates; }},
+      {"newest_last", [](const SmootherOptions& o) { return o.newest_last; }},
       {"dogleg", [](const SmootherOptions& o) { return o.dogleg; }},
       {"dogleg_initial_radius", [](const SmootherOptions& o) { return o.dogleg_initial_radius; }},
       {"dogleg_min_radius", [](const SmootherOptions& o) { return o.dogleg_min_radius; }},
@@ -86,6 +87,7 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
                                          "0.01",
                                          "--full-backsubstitution",
                                          "--no-rank-updates",
+                                         "--no-newest-last",
                                          "--dogleg",
                                          "--dogleg-radius",
                                          "2",
@@ -114,6 +116,7 @@ TEST(SmootherFlags, EveryFlagReachesItsFieldInReplayAndServeAlike) {
   expected.wildfire_threshold = 0.01;
   expected.full_backsubstitution = true;
   expected.rank_updates = false;
+  expected.newest_last = false;
   expected.dogleg = true;
   expected.dogleg_initial_radius = 2;
   expected.dogleg_min_radius = 1e-4;

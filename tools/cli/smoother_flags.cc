@@ -76,7 +76,10 @@ void addSmootherFlags(po::options_description& options, const SmootherOptions& d
       "re-eliminated (0: no bound; the rest is deferred to later updates)")(
       "no-rank-updates", po::bool_switch(),
       "re-eliminate the path of every loop closure (as GTSAM's iSAM2) instead of folding it in "
-      "by rank updates")("dogleg", po::bool_switch(), "Powell's dogleg instead of Gauss-Newton")(
+      "by rank updates")("no-newest-last", po::bool_switch(),
+                         "order only the touched variables last in a re-eliminated top (iSAM2's "
+                         "constraint), not the newest pose with them")(
+      "dogleg", po::bool_switch(), "Powell's dogleg instead of Gauss-Newton")(
       "dogleg-radius",
       po::value<double>()->default_value(d.dogleg_initial_radius, text(d.dogleg_initial_radius)),
       "dogleg: initial trust-region radius")(
@@ -165,6 +168,7 @@ SmootherOptions readSmootherFlags(const po::variables_map& vm, const SmootherOpt
   require(o.solve_budget_mb >= 0 && std::isfinite(o.solve_budget_mb), "solve-budget-mb",
           "finite and >= 0", o.solve_budget_mb);
   o.rank_updates = o.rank_updates && !valueOf(vm, "no-rank-updates", false);
+  o.newest_last = o.newest_last && !valueOf(vm, "no-newest-last", false);
   o.dogleg = o.dogleg || valueOf(vm, "dogleg", false);
   o.dogleg_initial_radius = valueOf(vm, "dogleg-radius", o.dogleg_initial_radius);
   require(o.dogleg_initial_radius > 0, "dogleg-radius", "> 0", o.dogleg_initial_radius);
@@ -236,6 +240,7 @@ std::string describeSmoother(const SmootherOptions& o) {
   if (o.full_backsubstitution) out << ", full back-substitution";
   if (o.solve_budget_mb > 0) out << ", solve budget " << o.solve_budget_mb << " MB";
   if (!o.rank_updates) out << ", no rank updates";
+  if (!o.newest_last) out << ", no newest-last";
   if (o.nested_dissection_min != d.nested_dissection_min)
     out << ", nested dissection from " << o.nested_dissection_min << " variables";
   if (o.threads != d.threads) out << ", " << o.threads << " thread(s)";
