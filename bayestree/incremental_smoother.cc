@@ -1500,8 +1500,10 @@ auto IncrementalSmoother<G>::predictionCovarianceBound(
 template <class G>
 int IncrementalSmoother<G>::keepSharedCliqueJoints(
     const std::vector<std::pair<int, int>>& pose_pairs) const {
-  const Impl& m = *impl_;
-  return m.marginals.keepSharedCliqueJoints(m.tree, pose_pairs);
+  // The smoother's lanes are idle between updates, and no other const call uses them; two
+  // calls of this one are serialised on the marginals' mutex.
+  Impl& m = *impl_;
+  return m.marginals.keepSharedCliqueJoints(m.tree, pose_pairs, &m.threads.workers);
 }
 
 template <class G>

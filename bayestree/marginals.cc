@@ -1,7 +1,9 @@
 #include "arbor/bayestree/marginals.h"
 
 #include <algorithm>
+#include <atomic>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -13,6 +15,10 @@
 #include "arbor/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
+
+// keepSharedCliqueJoints' walk shares its cliques among the lanes from this many cliques on
+// (a clique's joint is tens of µs on smallGrid3D, a helper's wake-up tens of µs too).
+constexpr int kMinSharedWalk = 16;
 
 template <int D>
 int TreeMarginals<D>::position(const Clique<D>& c, int v) {
@@ -255,13 +261,58 @@ void TreeMarginals<D>::walkJoints(const BayesTree<D>& tree, const std::vector<ch
   }
 }
 
+template <int D>
+template <class Visit>
+void TreeMarginals<D>::walkJointsOnLanes(const BayesTree<D>& tree, const std::vector<char>& needed,
+                                         WorkLanes* lanes, Visit&& visit) {
+  const int nc = static_cast<int>(tree.cliques.size());
+  std::vector<Eigen::MatrixXd> joint(static_cast<size_t>(nc));
+  // Per clique: its marked children that have not read its joint yet.
+  std::unique_ptr<std::atomic<int>[]> waiting(new std::atomic<int>[static_cast<size_t>(nc)]);
+  std::vector<int> roots;
+  int marked = 0;
+  for (int c = 0; c < nc; ++c) {
+    waiting[c].store(0, std::memory_order_relaxed);
+    if (!needed[c]) continue;
+    ++marked;
+    const int p = tree.cliques[c].parent;
+    if (p < 0) roots.push_back(c);
+  }
+  for (int c = 0; c < nc; ++c)
+    if (needed[c] && tree.cliques[c].parent >= 0)
+      waiting[tree.cliques[c].parent].fetch_add(1, std::memory_order_relaxed);
+  std::vector<Eigen::MatrixXd> X(static_cast<size_t>(lanes->lanes()));
+  lanes->run(
+      roots,
+      [&](int lane, int c) {
+        const Clique<D>& k = tree.cliques[c];
+        jointOf(tree, c, k.parent >= 0 ? &joint[k.parent] : nullptr, &joint[c], &X[lane]);
+        if (k.parent >= 0 && waiting[k.parent].fetch_sub(1, std::memory_order_acq_rel) == 1)
+          joint[k.parent].resize(0, 0);  // its last marked child has read it
+        visit(c, joint[c]);
+        int next = -1;  // the first marked child on this lane, the others to any lane
+        for (int ch : k.children) {
+          if (!needed[ch]) continue;
+          if (next < 0) {
+            next = ch;
+          } else {
+            lanes->push(ch);
+          }
+        }
+        if (next < 0) joint[c].resize(0, 0);  // no marked child reads it
+        return next;
+      },
+      /*share=*/marked >= kMinSharedWalk);
+}
+
 // The walk of all(), restricted to the cliques the pairs are read at and their ancestors: each
 // pair at the clique of whichever of its variables holds the other among its [frontals;
 // separator] (a factor's two variables: the one eliminated first, whose clique's separator
 // or frontals hold the other).
 template <int D>
 int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
-                                             const std::vector<std::pair<int, int>>& pairs) {
+                                             const std::vector<std::pair<int, int>>& pairs,
+                                             WorkLanes* lanes) {
   std::lock_guard<std::mutex> lock(mutex_);
   const int nc = static_cast<int>(tree.cliques.size());
   const int nv = static_cast<int>(tree.clique_of.size());
@@ -288,23 +339,46 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
   std::vector<char> needed(nc, 0);
   for (const auto& entry : at)
     for (int c = entry.first; c >= 0 && !needed[c]; c = tree.cliques[c].parent) needed[c] = 1;
-  int count = 0;
-  walkJoints(tree, &needed, [&](int c, const Eigen::MatrixXd& joint) {
+  // What the walk reads off each clique goes to slots of that clique's own (its frontals'
+  // marginals, its pairs' joints), so that the cliques may be visited on any lane; the kept
+  // maps are filled from them after the walk.
+  std::vector<std::vector<Block>> marginals(static_cast<size_t>(nc));  // by clique, its frontals'
+  std::unordered_map<int, std::vector<JointBlock>> joints;  // clique → its pairs' joints
+  for (const auto& entry : at) joints[entry.first].resize(entry.second.size());
+  auto visit = [&](int c, const Eigen::MatrixXd& joint) {
     const Clique<D>& k = tree.cliques[c];
+    std::vector<Block>& frontal = marginals[c];
+    frontal.resize(k.frontals.size());
     for (size_t f = 0; f < k.frontals.size(); ++f) {
       const int at_f = static_cast<int>(f) * D;
-      kept_marginals_[k.frontals[f]] = joint.template block<D, D>(at_f, at_f);
+      frontal[f] = joint.template block<D, D>(at_f, at_f);
     }
     const auto it = at.find(c);
     if (it == at.end()) return;
-    for (const auto& [a, b] : it->second) {
+    std::vector<JointBlock>& out = joints.find(c)->second;
+    for (size_t q = 0; q < it->second.size(); ++q) {
+      const auto& [a, b] = it->second[q];
       const int pa = position(k, a) * D, pb = position(k, b) * D;
-      kept_pairs_[pairKey(a, b)] << joint.template block<D, D>(pa, pa),
-          joint.template block<D, D>(pa, pb), joint.template block<D, D>(pb, pa),
-          joint.template block<D, D>(pb, pb);
+      out[q] << joint.template block<D, D>(pa, pa), joint.template block<D, D>(pa, pb),
+          joint.template block<D, D>(pb, pa), joint.template block<D, D>(pb, pb);
+    }
+  };
+  if (lanes != nullptr && lanes->lanes() > 1) {
+    walkJointsOnLanes(tree, needed, lanes, visit);
+  } else {
+    walkJoints(tree, &needed, visit);
+  }
+  for (int c = 0; c < nc; ++c)
+    for (size_t f = 0; f < marginals[c].size(); ++f)
+      kept_marginals_[tree.cliques[c].frontals[f]] = marginals[c][f];
+  int count = 0;
+  for (const auto& [c, list] : at) {
+    const std::vector<JointBlock>& out = joints.find(c)->second;
+    for (size_t q = 0; q < list.size(); ++q) {
+      kept_pairs_[pairKey(list[q].first, list[q].second)] = out[q];
       ++count;
     }
-  });
+  }
   return count;
 }
 

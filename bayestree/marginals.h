@@ -39,6 +39,7 @@
 #include <Eigen/Core>
 
 #include "arbor/bayestree/bayes_tree.h"
+#include "arbor/bayestree/work_lanes.h"
 
 namespace arbor::bayestree {
 
@@ -78,8 +79,14 @@ class TreeMarginals {
   /// many pairs, where a path solve per pose costs its path's cliques each. The walk keeps the
   /// marginal of every frontal of the cliques it visits too (marginalKept). Returns how many
   /// of the pairs were kept.
+  ///
+  /// With `lanes` (the tree owner's threads, idle meanwhile: WorkLanes is not reentrant), the
+  /// walk goes down independent subtrees side by side, a clique's joint from its parent's as
+  /// soon as the parent's is done; each clique's joint is the same computation either way, so
+  /// the kept values are the same bit for bit.
   int keepSharedCliqueJoints(const BayesTree<D>& tree,
-                             const std::vector<std::pair<int, int>>& pairs);
+                             const std::vector<std::pair<int, int>>& pairs,
+                             WorkLanes* lanes = nullptr);
   /// Σ_vv from what is kept until forget(): keepSharedCliqueJoints' walk (the marginal of
   /// every frontal of the cliques it visited) or jointKept's path solve of v, else v's path
   /// solve, then kept (v frontal in some clique).
@@ -117,6 +124,12 @@ class TreeMarginals {
   /// held is that of the cliques on the current path and their waiting siblings' parents.
   template <class Visit>
   static void walkJoints(const BayesTree<D>& tree, const std::vector<char>* needed, Visit&& visit);
+  /// walkJoints over `lanes`: visit(c, joint) runs on any lane, once per marked clique, after
+  /// its parent's; it must only write what belongs to c. A joint is freed once its last marked
+  /// child has read it.
+  template <class Visit>
+  static void walkJointsOnLanes(const BayesTree<D>& tree, const std::vector<char>& needed,
+                                WorkLanes* lanes, Visit&& visit);
   /// Position of v (block index) among clique c's frontals then separator.
   static int position(const Clique<D>& c, int v);
 

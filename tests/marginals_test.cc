@@ -129,6 +129,37 @@ TEST(TreeMarginals, SharedCliqueJointsMatchTheDenseInverse) {
   }
 }
 
+// With lanes, keepSharedCliqueJoints walks independent subtrees side by side; each clique's
+// joint is the same computation from its parent's, so what it keeps is the serial walk's bit
+// for bit (a tree of enough cliques that the walk is shared among the lanes).
+TEST(TreeMarginals, SharedCliqueJointsOnLanesEqualTheSerialWalk) {
+  constexpr int D = 3;
+  for (unsigned seed = 1; seed <= 3; ++seed) {
+    testing::SmallProblem p(300, 40, seed);
+    p.linearizeAll();
+    bayestree::TopElimination<SE2> elimination;
+    p.eliminateAll(&elimination);
+    int cliques = 0;
+    for (const auto& c : p.tree.cliques) cliques += c.in_use ? 1 : 0;
+    ASSERT_GE(cliques, 64) << "seed " << seed;  // enough for the walk to be shared
+    std::vector<std::pair<int, int>> pairs;
+    for (int f = 0; f < p.factors.numFactors(); ++f)
+      if (const auto* e = p.factors.factors[f].relativePose(); e && !p.fixed[e->i])
+        pairs.emplace_back(e->i, e->j);
+    bayestree::TreeMarginals<D> serial, on_lanes;
+    bayestree::WorkLanes lanes(2);
+    const int kept = serial.keepSharedCliqueJoints(p.tree, pairs);
+    EXPECT_EQ(on_lanes.keepSharedCliqueJoints(p.tree, pairs, &lanes), kept);
+    EXPECT_GT(kept, static_cast<int>(pairs.size()) / 2);
+    for (const auto& [a, b] : pairs)
+      EXPECT_EQ(on_lanes.jointKept(p.tree, a, b), serial.jointKept(p.tree, a, b))
+          << "seed " << seed << " poses " << a << ", " << b;
+    for (int v : p.variables())
+      EXPECT_EQ(on_lanes.marginalKept(p.tree, v), serial.marginalKept(p.tree, v))
+          << "seed " << seed << " pose " << v;
+  }
+}
+
 // ---- The smoother, fed incrementally --------------------------------------------------------
 
 /// A random graph of `n` poses per component: a chain with random loop closures, optionally a
