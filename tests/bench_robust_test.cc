@@ -304,6 +304,57 @@ TEST(RobustBench, AnchorsFillTheirColumnsAndAnAbsentToolIsSaid) {
   fs::remove_all(shared);
 }
 
+// Where the rows stand against issue 14's goals: quality on the rows it covers (10%, 50%, 90%
+// random in 2D; a 3D 90% row is not counted), for the replay and the batch, and cost on every
+// row with both replays, each naming the rows that miss it.
+TEST(RobustBench, GoalsCountTheRowsThatMeetThemAndNameTheOthers) {
+  auto figures = [](double F_ratio, double precision, double recall, double total_s, double p99) {
+    bench::RobustFigures f;
+    f.ok = true;
+    f.F_ratio = F_ratio;
+    f.score.precision = precision;
+    f.score.recall = recall;
+    f.total_s = total_s;
+    f.latency = cli::LatencySummary{};
+    f.latency->p99 = p99;
+    return f;
+  };
+  auto row = [&](const std::string& name, int dim, const std::string& policy, double fraction,
+                 const bench::RobustFigures& replay, const bench::RobustFigures& batch) {
+    bench::RobustRow r;
+    r.c.name = name;
+    r.c.policy = policy;
+    r.c.fraction = fraction;
+    r.dim = dim;
+    r.replay = replay;
+    r.batch = batch;
+    bench::CleanReplayFigures clean;
+    clean.total_s = 0.1;
+    clean.latency.p99 = 1.0;
+    r.clean_replay = clean;
+    return r;
+  };
+  const bench::RobustFigures good = figures(1.0, 1.0, 1.0, 0.15, 1.0);
+  const std::vector<bench::RobustRow> rows = {
+      row("a_random_0.9", 2, "random", 0.9, good, good),
+      row("b_local_0.5", 3, "local", 0.5, figures(1.087, 1.0, 0.977, 0.18, 1.2), good),
+      row("c_local_0.9", 3, "local", 0.9, figures(46.0, 0.0, 0.0, 0.25, 1.0),
+          figures(46.0, 0.0, 0.0, 0.1, 1.0)),
+      row("d_group_0.1", 3, "group", 0.1, figures(1.0, 1.0, 1.0, 0.19, 3.5), good)};
+  const std::string goals = bench::robustGoals(rows);
+  EXPECT_NE(goals.find("the replay: 2 of 3 rows; misses: b_local_0.5 (F/F* 1.087, P 1.000, "
+                       "R 0.977)\n"),
+            std::string::npos)
+      << goals;
+  EXPECT_NE(goals.find("the batch: 3 of 3 rows\n"), std::string::npos) << goals;
+  EXPECT_NE(goals.find("clean replay's): 2 of 4 rows; misses: c_local_0.9 (2.50×, p99 1.00×), "
+                       "d_group_0.1 (1.90×, p99 3.50×)\n"),
+            std::string::npos)
+      << goals;
+  EXPECT_NE(bench::robustMarkdown(rows).find(goals), std::string::npos);
+  EXPECT_EQ(bench::robustGoals({}), "");
+}
+
 TEST(RobustBench, GeneratedRowsGoThroughBatchAndTheReplayHooks) {
   const fs::path shared = scratch("generate");
   fs::create_directories(shared / "datasets");

@@ -198,8 +198,15 @@ std::vector<RobustRow> runRobustBench(
     const std::map<std::pair<std::string, std::string>, RobustAnchor>& anchors,
     const RobustBatchSettings& settings, const RobustReplayHooks& hooks, std::ostream* progress);
 
+/// Where the rows stand against issue 14's goals, one Markdown bullet each: quality (F_clean
+/// within 1% of F*, precision and recall ≥ 0.95) for the replay and for the batch, on the rows
+/// the goal covers (10% and 50% false closures, every policy; 90% random in 2D), and cost (the
+/// replay's total ≤ 2× and p99 ≤ 3× the clean replay's) on every row with both replays; each
+/// with the rows that miss it and their figures. Empty when no row has figures.
+std::string robustGoals(const std::vector<RobustRow>& rows);
+
 /// The rows as one Markdown table (replay columns when any row has them), then notes: each
-/// base's clean optimum and each failure.
+/// base's clean optimum, each failure, and robustGoals.
 std::string robustMarkdown(const std::vector<RobustRow>& rows);
 
 }  // namespace arbor::bench
