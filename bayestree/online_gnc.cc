@@ -5,6 +5,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <stdexcept>
 #include <utility>
 
@@ -424,18 +425,25 @@ bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) c
 }
 
 template <class G>
-bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
-                               bool at_the_end) {
+std::optional<double> OnlineGnc<G>::unconfirmedBy(const IncrementalSmoother<G>& smoother,
+                                                  Closure* c, double bound, bool at_the_end) {
   if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
       c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
       backed(*c, at_the_end && options_.end_partners_agree ? &smoother : nullptr))
-    return false;
+    return std::nullopt;
   c->judged_c2 = c2_;
   const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
   // In the tree at weight 1 (checked above): (L); without Σ it is kept.
   const std::optional<double> m =
       leaveOneOutInnovation(smoother, edge, at_the_end ? Paths::kKept : Paths::kOnce);
-  if (!m || *m <= bound) return false;
+  if (!m || *m <= bound) return std::nullopt;
+  return m;
+}
+
+template <class G>
+bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
+                               bool at_the_end) {
+  if (!unconfirmedBy(smoother, c, bound, at_the_end)) return false;
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
   return true;
@@ -474,9 +482,25 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   c2_end_ = endThreshold(smoother);
   const double bound =
       c2_end_ < c2_ ? options_.end_confirm_margin * c2_end_ : options_.final_confirm_margin * c2_;
-  for (size_t id = 0; id < closures_.size(); ++id) {
-    if (!unconfirmed(smoother, &closures_[id], bound, /*at_the_end=*/true)) continue;
-    (*dropped)[id] = 1;
+  std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound
+  for (size_t id = 0; id < closures_.size(); ++id)
+    if (const auto m = unconfirmedBy(smoother, &closures_[id], bound, /*at_the_end=*/true))
+      over.emplace_back(*m, static_cast<int>(id));
+  // The largest first; one drop per pose this round (smallGrid3D with 90% local false
+  // closures: the false (1, 27) and the true (1, 8) both past the bound, both dropped, and
+  // (1, 8) taken back a round later).
+  std::sort(over.begin(), over.end(), [](const auto& a, const auto& b) {
+    return a.first > b.first || (a.first == b.first && a.second < b.second);
+  });
+  std::set<int> poses;  // the ends of this round's drops
+  for (const auto& [m, id] : over) {
+    Closure& c = closures_[static_cast<size_t>(id)];
+    if (poses.count(c.i) > 0 || poses.count(c.j) > 0) continue;
+    poses.insert(c.i);
+    poses.insert(c.j);
+    setWeight(smoother, &c, 0.0);
+    ++totals_.unconfirmed;
+    (*dropped)[static_cast<size_t>(id)] = 1;
     ++changed;
   }
   return changed;

@@ -125,7 +125,9 @@
 //                 false; with the agreeing runs exempt, the end's margin does (below).
 //   confirmed at the end (RobustOptions::final_confirm_margin, 1.25 by default; 0: off) the
 //                 same judgement in finalize(), for every settled TLS inlier no inlier agrees
-//                 with, each round, at the estimate of the whole replay: m₋ > margin·c² drops it.
+//                 with, each round, at the estimate of the whole replay: m₋ > margin·c² drops it,
+//                 at most one closure per pose a round, the largest m₋ first (the other is judged
+//                 again next round, at the estimate without the first).
 //                 A partner recorded on arrival agreed through the estimate of that moment,
 //                 which false closures may have bent; with end_partners_agree (default) it backs
 //                 the closure only while the two still agree (P) at the end's estimate
@@ -230,6 +232,7 @@
 
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <utility>
@@ -609,10 +612,13 @@ class OnlineGnc {
                        const Closure& b) const;
   /// Whether c's ends are more than 2·corroboration_window poses apart (a partner's must be).
   bool spansLoop(const Closure& c) const;
-  /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with: sets
-  /// weight 0 and returns true when it exceeds `bound`. `at_the_end` (finalize()): kept path
-  /// solves, and with end_partners_agree a partner backs it only while it still agrees (P) at
-  /// the estimate.
+  /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with, when
+  /// it exceeds `bound` (nullopt otherwise, and for every other closure). `at_the_end`
+  /// (finalize()): kept path solves, and with end_partners_agree a partner backs it only while
+  /// it still agrees (P) at the estimate.
+  std::optional<double> unconfirmedBy(const IncrementalSmoother<G>& smoother, Closure* c,
+                                      double bound, bool at_the_end);
+  /// unconfirmedBy, and then weight 0; returns whether it dropped c.
   bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
                    bool at_the_end = false);
   /// The c² finalize() judges by: the end's where there is one, else the c² in use.
@@ -627,10 +633,12 @@ class OnlineGnc {
   /// (L) for the closures graduation settled at weight 1 in the last step. Returns the
   /// weights changed.
   int confirm(IncrementalSmoother<G>& smoother);
-  /// finalize()'s (L) over every settled inlier at final_confirm_margin·c²_end (endThreshold);
-  /// marks the closures
-  /// it drops in `dropped` (by id), which the same step's re-checks leave alone (the tree still
-  /// holds them at 1 until the next update). Returns the weights changed.
+  /// finalize()'s (L) over every settled inlier at final_confirm_margin·c²_end (endThreshold),
+  /// the largest m₋ first and at most one drop per pose in a round: (L) reads one closure with
+  /// the others held, so of two past the bound that share a pose the second is judged again
+  /// next round, at the estimate without the first. Marks the closures it drops in `dropped`
+  /// (by id), which the same step's re-checks leave alone (the tree still holds them at 1 until
+  /// the next update). Returns the weights changed.
   int confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped);
   /// Before many (L) on one tree: the joints of every factor the tree holds, from one walk
   /// (IncrementalSmoother::keepSharedCliqueJoints).

@@ -281,6 +281,22 @@ TEST(LeaveOneOut, FirstRecheckAtTheReplaysEstimate) {
   EXPECT_EQ(at_roomier.rejected, local.is_false);
 }
 
+// finalize()'s (L) drops at most one closure per pose a round, the largest m₋ first: on
+// smallGrid3D with 90% local false closures (seed 1) the false (1, 27) and the true (1, 8) are
+// both past the bound in the first round. Dropping both took (1, 8) back a round later (three
+// rounds, 8 Gauss–Newton passes); now (1, 27) goes alone and the next round keeps (1, 8).
+TEST(LeaveOneOut, FinalizeDropsOneClosurePerPoseARound) {
+  if (!testing::datasetPresent("smallGrid3D"))
+    GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
+  const PlantedGrid g = plantSmallGrid3D(0.9, sim::OutlierPolicy::kLocal, 1);
+  ASSERT_TRUE(g.is_false.count({1, 27}));
+  ASSERT_FALSE(g.is_false.count({1, 8}));
+  const Outcome out = replayRobust(g.clean, g.planted.graph, RobustOptions{});
+  EXPECT_EQ(out.rejected, g.is_false);
+  EXPECT_EQ(out.unconfirmed, 1);  // (1, 27) only: (1, 8) was never dropped
+  EXPECT_LT(out.finalize_iterations, 8);
+}
+
 // finalize() reaches a fixed point: a closure (E) keeps taking back at weight 0 and (L) keeps
 // dropping at weight 1 stays out after its second take-back (OnlineGnc::beginFinalize), so
 // allowing more rounds changes nothing. A narrow end margin (0.3·c²_end against (E)'s c²_end)
