@@ -321,7 +321,13 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
     return std::find(k.frontals.begin(), k.frontals.end(), v) != k.frontals.end() ||
            std::find(k.separator.begin(), k.separator.end(), v) != k.separator.end();
   };
-  std::unordered_map<int, std::vector<std::pair<int, int>>> at;  // clique → its pairs
+  // Per clique, the pairs read off its joint and, after the walk, their joints (written by the
+  // lane that visits the clique).
+  struct ReadAt {
+    std::vector<std::pair<int, int>> pairs;
+    std::vector<JointBlock> joints;
+  };
+  std::unordered_map<int, ReadAt> at;
   std::unordered_set<std::uint64_t> seen;
   for (const auto& [a, b] : pairs) {
     if (a < 0 || b < 0 || a >= nv || b >= nv || a == b) continue;
@@ -329,9 +335,9 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
     if (ca < 0 || cb < 0 || kept_pairs_.count(pairKey(a, b)) || !seen.insert(pairKey(a, b)).second)
       continue;
     if (holds(ca, b)) {
-      at[ca].emplace_back(a, b);
+      at[ca].pairs.emplace_back(a, b);
     } else if (holds(cb, a)) {
-      at[cb].emplace_back(a, b);
+      at[cb].pairs.emplace_back(a, b);
     }
   }
   if (at.empty()) return 0;
@@ -343,8 +349,7 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
   // marginals, its pairs' joints), so that the cliques may be visited on any lane; the kept
   // maps are filled from them after the walk.
   std::vector<std::vector<Block>> marginals(static_cast<size_t>(nc));  // by clique, its frontals'
-  std::unordered_map<int, std::vector<JointBlock>> joints;  // clique → its pairs' joints
-  for (const auto& entry : at) joints[entry.first].resize(entry.second.size());
+  for (auto& entry : at) entry.second.joints.resize(entry.second.pairs.size());
   auto visit = [&](int c, const Eigen::MatrixXd& joint) {
     const Clique<D>& k = tree.cliques[c];
     std::vector<Block>& frontal = marginals[c];
@@ -355,11 +360,11 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
     }
     const auto it = at.find(c);
     if (it == at.end()) return;
-    std::vector<JointBlock>& out = joints.find(c)->second;
-    for (size_t q = 0; q < it->second.size(); ++q) {
-      const auto& [a, b] = it->second[q];
+    ReadAt& read = it->second;
+    for (size_t q = 0; q < read.pairs.size(); ++q) {
+      const auto& [a, b] = read.pairs[q];
       const int pa = position(k, a) * D, pb = position(k, b) * D;
-      out[q] << joint.template block<D, D>(pa, pa), joint.template block<D, D>(pa, pb),
+      read.joints[q] << joint.template block<D, D>(pa, pa), joint.template block<D, D>(pa, pb),
           joint.template block<D, D>(pb, pa), joint.template block<D, D>(pb, pb);
     }
   };
@@ -372,10 +377,10 @@ int TreeMarginals<D>::keepSharedCliqueJoints(const BayesTree<D>& tree,
     for (size_t f = 0; f < marginals[c].size(); ++f)
       kept_marginals_[tree.cliques[c].frontals[f]] = marginals[c][f];
   int count = 0;
-  for (const auto& [c, list] : at) {
-    const std::vector<JointBlock>& out = joints.find(c)->second;
-    for (size_t q = 0; q < list.size(); ++q) {
-      kept_pairs_[pairKey(list[q].first, list[q].second)] = out[q];
+  for (const auto& entry : at) {
+    const ReadAt& read = entry.second;
+    for (size_t q = 0; q < read.pairs.size(); ++q) {
+      kept_pairs_[pairKey(read.pairs[q].first, read.pairs[q].second)] = read.joints[q];
       ++count;
     }
   }

@@ -444,9 +444,14 @@ template <class G>
 bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
                                bool at_the_end) {
   if (!unconfirmedBy(smoother, c, bound, at_the_end)) return false;
+  dropUnconfirmed(smoother, c);
+  return true;
+}
+
+template <class G>
+void OnlineGnc<G>::dropUnconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
   setWeight(smoother, c, 0.0);
   ++totals_.unconfirmed;
-  return true;
 }
 
 template <class G>
@@ -498,8 +503,7 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
     if (poses.count(c.i) > 0 || poses.count(c.j) > 0) continue;
     poses.insert(c.i);
     poses.insert(c.j);
-    setWeight(smoother, &c, 0.0);
-    ++totals_.unconfirmed;
+    dropUnconfirmed(smoother, &c);
     (*dropped)[static_cast<size_t>(id)] = 1;
     ++changed;
   }

@@ -618,9 +618,11 @@ class OnlineGnc {
   /// it still agrees (P) at the estimate.
   std::optional<double> unconfirmedBy(const IncrementalSmoother<G>& smoother, Closure* c,
                                       double bound, bool at_the_end);
-  /// unconfirmedBy, and then weight 0; returns whether it dropped c.
+  /// unconfirmedBy, and then dropUnconfirmed; returns whether it dropped c.
   bool unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
                    bool at_the_end = false);
+  /// A closure (L) judged past its bound: weight 0, counted in ClosureCounts::unconfirmed.
+  void dropUnconfirmed(IncrementalSmoother<G>& smoother, Closure* c);
   /// The c² finalize() judges by: the end's where there is one, else the c² in use.
   double endBound() const;
   /// In finalize(): whether c, a TLS closure with s or innovation `value`, is within
