@@ -491,23 +491,33 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   for (size_t id = 0; id < closures_.size(); ++id)
     if (const auto m = unconfirmedBy(smoother, &closures_[id], bound, /*at_the_end=*/true))
       over.emplace_back(*m, static_cast<int>(id));
-  // The largest first; one drop per pose this round (smallGrid3D with 90% local false
-  // closures: the false (1, 27) and the true (1, 8) both past the bound, both dropped, and
-  // (1, 8) taken back a round later).
+  for (int id : dropLargestPerPose(smoother, std::move(over))) {
+    (*dropped)[static_cast<size_t>(id)] = 1;
+    ++changed;
+  }
+  return changed;
+}
+
+// The largest first; one drop per pose (smallGrid3D with 90% local false closures: the false
+// (1, 27) and the true (1, 8) both past the bound, both dropped, and (1, 8) taken back a round
+// later).
+template <class G>
+std::vector<int> OnlineGnc<G>::dropLargestPerPose(IncrementalSmoother<G>& smoother,
+                                                  std::vector<std::pair<double, int>> over) {
   std::sort(over.begin(), over.end(), [](const auto& a, const auto& b) {
     return a.first > b.first || (a.first == b.first && a.second < b.second);
   });
-  std::set<int> poses;  // the ends of this round's drops
+  std::set<int> poses;  // the ends of these drops
+  std::vector<int> ids;
   for (const auto& [m, id] : over) {
     Closure& c = closures_[static_cast<size_t>(id)];
     if (poses.count(c.i) > 0 || poses.count(c.j) > 0) continue;
     poses.insert(c.i);
     poses.insert(c.j);
     dropUnconfirmed(smoother, &c);
-    (*dropped)[static_cast<size_t>(id)] = 1;
-    ++changed;
+    ids.push_back(id);
   }
-  return changed;
+  return ids;
 }
 
 // The (L) of finalize() and of the end's scale are of factors the tree holds: their joints
@@ -537,14 +547,14 @@ int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double 
   c2_end_ = endThreshold(smoother);
   if (c2_end_ >= c2_) return 0;
   const double bound = options_.final_confirm_margin * c2_end_;
-  int changed = 0;
-  for (Closure& c : closures_)
-    if (unconfirmed(smoother, &c, bound, true)) {
-      c.dropped_on_the_way = true;
-      ++changed;
-    }
-  if (changed > 0) dropped_on_the_way_ = true;
-  return changed;
+  std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound
+  for (size_t id = 0; id < closures_.size(); ++id)
+    if (const auto m = unconfirmedBy(smoother, &closures_[id], bound, /*at_the_end=*/true))
+      over.emplace_back(*m, static_cast<int>(id));
+  const std::vector<int> ids = dropLargestPerPose(smoother, std::move(over));
+  for (int id : ids) closures_[static_cast<size_t>(id)].dropped_on_the_way = true;
+  if (!ids.empty()) dropped_on_the_way_ = true;
+  return static_cast<int>(ids.size());
 }
 
 // The end's scale: σ²_med of the settled inliers' (L) (a minority of false closures sits in

@@ -642,6 +642,11 @@ class OnlineGnc {
   /// (by id), which the same step's re-checks leave alone (the tree still holds them at 1 until
   /// the next update). Returns the weights changed.
   int confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped);
+  /// Drops the closures `over` names ((m₋, id), each past its bound), the largest m₋ first and
+  /// at most one per pose: (L) reads one closure with the others held, so of two that share a
+  /// pose the second is judged again at the estimate without the first. Returns the ids dropped.
+  std::vector<int> dropLargestPerPose(IncrementalSmoother<G>& smoother,
+                                      std::vector<std::pair<double, int>> over);
   /// Before many (L) on one tree: the joints of every factor the tree holds, from one walk
   /// (IncrementalSmoother::keepSharedCliqueJoints).
   void keepHeldJoints(const IncrementalSmoother<G>& smoother) const;
