@@ -153,6 +153,9 @@ std::string RobustOptions::problem() const {
     return bad("recheck_margin", recheck_margin, "finite and >= 1");
   if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
   if (end_scale_samples < 0) return bad("end_scale_samples", end_scale_samples, ">= 0");
+  if (!(left_out_backing_margin == 0 || left_out_backing_margin >= 1) ||
+      !std::isfinite(left_out_backing_margin))
+    return bad("left_out_backing_margin", left_out_backing_margin, "0 (off) or finite and >= 1");
   if (!(rehold_growth == 0 || rehold_growth > 1) || !std::isfinite(rehold_growth))
     return bad("rehold_growth", rehold_growth, "0 (off) or finite and > 1");
   if (!(end_scale_gap >= 1) || !std::isfinite(end_scale_gap))
@@ -480,7 +483,8 @@ int OnlineGnc<G>::confirm(IncrementalSmoother<G>& smoother) {
 }
 
 template <class G>
-int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped) {
+int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped,
+                             const std::function<void()>& update) {
   int changed = 0;
   dropped->assign(closures_.size(), 0);
   keepHeldJoints(smoother);
@@ -488,14 +492,61 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   const double bound =
       c2_end_ < c2_ ? options_.end_confirm_margin * c2_end_ : options_.final_confirm_margin * c2_;
   std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound
-  for (size_t id = 0; id < closures_.size(); ++id)
-    if (const auto m = unconfirmedBy(smoother, &closures_[id], bound, /*at_the_end=*/true))
+  std::vector<int> backed_over;              // past it, but backed
+  for (size_t id = 0; id < closures_.size(); ++id) {
+    Closure& c = closures_[id];
+    if (const auto m = unconfirmedBy(smoother, &c, bound, /*at_the_end=*/true)) {
       over.emplace_back(*m, static_cast<int>(id));
+    } else if (update && options_.left_out_backing_margin > 0 &&
+               backedPastTheBound(smoother, c, bound)) {
+      backed_over.push_back(static_cast<int>(id));
+    }
+  }
+  // Each backed one left out in turn, at the estimate the ones before it made (header comment,
+  // "backing left out"); the (L) drops follow.
+  for (int id : backed_over)
+    if (leftOut(smoother, id, update)) {
+      (*dropped)[static_cast<size_t>(id)] = 1;
+      ++changed;
+    }
   for (int id : dropLargestPerPose(smoother, std::move(over))) {
     (*dropped)[static_cast<size_t>(id)] = 1;
     ++changed;
   }
   return changed;
+}
+
+// Backing left out: a settled TLS inlier at weight 1 that a partner backs (so unconfirmedBy
+// passed it over) with m₋ past the bound.
+template <class G>
+bool OnlineGnc<G>::backedPastTheBound(const IncrementalSmoother<G>& smoother, const Closure& c,
+                                      double bound) const {
+  if (c.state != State::kSettled || c.weight != 1.0 || c.held || c.factor < 0 ||
+      c.factor >= smoother.numFactors() || c.kernel != KernelKind::kTruncatedLeastSquares ||
+      !backed(c, options_.end_partners_agree ? &smoother : nullptr))
+    return false;
+  const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
+  const std::optional<double> m = leaveOneOutInnovation(smoother, edge, Paths::kKept);
+  return m && *m > bound;
+}
+
+// A false closure bends the chains between its ends, and the true closures beside it, read
+// through those chains, then agree with it; without it the chains relax and they no longer do.
+template <class G>
+bool OnlineGnc<G>::leftOut(IncrementalSmoother<G>& smoother, int id,
+                           const std::function<void()>& update) {
+  Closure& c = closures_[static_cast<size_t>(id)];
+  setWeight(smoother, &c, 0.0);
+  update();
+  const double pair_bound = std::min(c2_given_ * pair_scale_, c2_);  // backed()'s at an estimate
+  if (agreedBy(c, &smoother, options_.left_out_backing_margin * pair_bound, 1)) {
+    setWeight(smoother, &c, 1.0);
+    update();
+    return false;
+  }
+  ++totals_.unconfirmed;
+  ++totals_.left_out;
+  return true;
 }
 
 // The largest first; one drop per pose (smallGrid3D with 90% local false closures: the false
@@ -808,6 +859,18 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
 
 template <class G>
 int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
+  return step(smoother, scope, {});
+}
+
+template <class G>
+int OnlineGnc<G>::stepFinalize(IncrementalSmoother<G>& smoother,
+                               const std::function<void()>& update) {
+  return step(smoother, StepScope::kFinalize, update);
+}
+
+template <class G>
+int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
+                       const std::function<void()>& update) {
   const bool recheck_all = scope != StepScope::kRoundRobin;
   int changed = 0;
   // The warm-up's closures, once σ̂² is there (in finalize() whether or not it is).
@@ -817,7 +880,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
   // In finalize(): every inlier no inlier agrees with, (L) at final_confirm_margin·c².
   std::vector<char> dropped;
   if (scope == StepScope::kFinalize && confirmsAtTheEnd())
-    changed += confirmAll(smoother, &dropped);
+    changed += confirmAll(smoother, &dropped, update);
   // The graduating closures: one step each (those not in the smoother yet keep w₀).
   std::vector<int> still;
   for (int id : graduating_) {

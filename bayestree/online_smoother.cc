@@ -432,7 +432,12 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
     const bool relinearized = round > 0 || last || relinearize_first;
     if (relinearized) relinearizeAll();
     if (total.cancelled || last) break;
-    if (gnc_->step(smoother_, StepScope::kFinalize) == 0 && !gnc_->graduating()) {
+    // The re-check's own updates (backing left out) count in this finalize()'s statistics.
+    const int changed = gnc_->stepFinalize(smoother_, [&] {
+      addStats(&total, smoother_.update());
+      gnc_->resolve(smoother_);
+    });
+    if (changed == 0 && !gnc_->graduating()) {
       if (!relinearized) relinearizeAll();
       break;
     }
@@ -661,6 +666,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.closures_graduating = c.graduating;
     s.graduation_steps = c.graduation_steps;
     s.closures_unconfirmed = c.unconfirmed;
+    s.closures_left_out = c.left_out;
     s.rechecks_bounded = c.rechecks_bounded;
     s.closure_threshold = gnc_->threshold();
     s.closure_threshold_at_end = gnc_->thresholdAtEnd();

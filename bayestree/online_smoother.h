@@ -135,6 +135,9 @@ struct OnlineStats {
   int graduation_updates = 0;
   /// Inliers dropped by their leave-one-out innovation (ClosureCounts::unconfirmed).
   int closures_unconfirmed = 0;
+  /// Of those, the backed closures whose backing did not hold without them in finalize()
+  /// (ClosureCounts::left_out; RobustOptions::left_out_backing_margin).
+  int closures_left_out = 0;
   /// Re-checks of rejected closures that (E)'s lower bound settled without a path solve
   /// (ClosureCounts::rechecks_bounded).
   int rechecks_bounded = 0;

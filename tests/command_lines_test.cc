@@ -293,23 +293,37 @@ TEST(HeapFlag, ReachesReplayAndServe) {
 
 // --entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin,
 // --finalize-rounds, --first-recheck, --end-scale-samples, --rehold-growth and
-// --end-backed-margin (tools/cli/robust_flags.h)
+// --end-backed-margin, --left-out-backing-margin (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
-  const std::vector<std::string> args = {"--robust",    "--entry",
-                                         "residual",    "--noise-scale",
-                                         "given",       "--warm-up",
-                                         "given",       "--corroboration-window",
-                                         "7",           "--final-confirm-margin",
-                                         "1.5",         "--finalize-rounds",
-                                         "4",           "--end-scale-samples",
-                                         "0",           "--rehold-growth",
-                                         "4",           "--end-backed-margin",
-                                         "0",           "--end-scale-growth",
-                                         "2",           "--end-confirm-margin",
-                                         "1.5",         "--first-recheck",
-                                         "relinearized"};
+  const std::vector<std::string> args = {"--robust",
+                                         "--entry",
+                                         "residual",
+                                         "--noise-scale",
+                                         "given",
+                                         "--warm-up",
+                                         "given",
+                                         "--corroboration-window",
+                                         "7",
+                                         "--final-confirm-margin",
+                                         "1.5",
+                                         "--finalize-rounds",
+                                         "4",
+                                         "--end-scale-samples",
+                                         "0",
+                                         "--rehold-growth",
+                                         "4",
+                                         "--end-backed-margin",
+                                         "0",
+                                         "--end-scale-growth",
+                                         "2",
+                                         "--end-confirm-margin",
+                                         "1.5",
+                                         "--first-recheck",
+                                         "relinearized",
+                                         "--left-out-backing-margin",
+                                         "2"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -326,6 +340,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.end_scale_growth, 2.0);
   EXPECT_EQ(replay->online.end_confirm_margin, 1.5);
   EXPECT_EQ(replay->online.first_recheck, FirstRecheck::kRelinearized);
+  EXPECT_EQ(replay->online.left_out_backing_margin, 2.0);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -341,6 +356,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->end_scale_growth, 2.0);
   EXPECT_EQ(serve->options.robust->end_confirm_margin, 1.5);
   EXPECT_EQ(serve->options.robust->first_recheck, FirstRecheck::kRelinearized);
+  EXPECT_EQ(serve->options.robust->left_out_backing_margin, 2.0);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -356,10 +372,13 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->end_scale_growth, RobustOptions{}.end_scale_growth);
   EXPECT_EQ(plain->options.robust->end_confirm_margin, RobustOptions{}.end_confirm_margin);
   EXPECT_EQ(plain->options.robust->first_recheck, FirstRecheck::kReplayEstimate);
+  EXPECT_EQ(plain->options.robust->left_out_backing_margin,
+            RobustOptions{}.left_out_backing_margin);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-backed-margin", "2"}), UsageError);
+  EXPECT_THROW(parseServeCommandLine({"--left-out-backing-margin", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-growth", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-confirm-margin", "2"}), UsageError);
   for (const auto& [flag, bad] :
@@ -368,6 +387,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                                         {"--rehold-growth", "0.5"},
                                                         {"--rehold-growth", "nan"},
                                                         {"--end-backed-margin", "0.5"},
+                                                        {"--left-out-backing-margin", "0.9"},
                                                         {"--end-backed-margin", "inf"},
                                                         {"--end-scale-growth", "1"},
                                                         {"--end-scale-growth", "nan"},

@@ -149,6 +149,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"graduation_steps", online.graduation_steps},
           {"graduation_updates", online.graduation_updates},
           {"closures_unconfirmed", online.closures_unconfirmed},
+          {"closures_left_out", online.closures_left_out},
           {"rechecks_bounded", online.rechecks_bounded},
           {"warm_up_relinearizations", online.warm_up_relinearizations},
       };

@@ -129,7 +129,12 @@ void addOnlineRobustFlags(po::options_description& options) {
       "end-backed-margin", po::value<double>()->default_value(RobustOptions{}.end_backed_margin),
       "with --robust, the final pass keeps, or takes back, a loop closure within this many "
       "times the threshold when enough inliers agree with it at the end (docs/design.md, "
-      "\"Backed at the end\"); 0: off");
+      "\"Backed at the end\"); 0: off")(
+      "left-out-backing-margin",
+      po::value<double>()->default_value(RobustOptions{}.left_out_backing_margin),
+      "with --robust, the final pass leaves out each loop closure past its threshold that other "
+      "inliers back, and keeps it out unless one still agrees with it, within X times the pair "
+      "threshold, at the estimate without it (docs/design.md, \"Backing left out\"); 0: off");
 }
 
 void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
@@ -145,18 +150,19 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const double rehold = vm["rehold-growth"].as<double>();
   const double backed = vm["end-backed-margin"].as<double>();
   const double growth = vm["end-scale-growth"].as<double>();
+  const double left_out = vm["left-out-backing-margin"].as<double>();
   if (!robust_on &&
       (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
        !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
        !vm["end-confirm-margin"].defaulted() || !vm["finalize-rounds"].defaulted() ||
        !vm["end-scale-samples"].defaulted() || !vm["rehold-growth"].defaulted() ||
        !vm["end-backed-margin"].defaulted() || !vm["end-scale-growth"].defaulted() ||
-       !vm["first-recheck"].defaulted()))
+       !vm["first-recheck"].defaulted() || !vm["left-out-backing-margin"].defaulted()))
     throw UsageError(
         "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
         "--end-confirm-margin, --finalize-rounds, --first-recheck, --end-scale-samples, "
-        "--end-scale-growth, --rehold-growth and "
-        "--end-backed-margin need --robust");
+        "--end-scale-growth, --rehold-growth, --end-backed-margin and "
+        "--left-out-backing-margin need --robust");
   if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
   if (end_samples < 0)
     throw UsageError("--end-scale-samples must be >= 0, not " + std::to_string(end_samples));
@@ -166,6 +172,9 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
     throw UsageError("--end-scale-growth must be 0 (off) or > 1, not " + std::to_string(growth));
   if (!(backed == 0 || backed >= 1) || !std::isfinite(backed))
     throw UsageError("--end-backed-margin must be 0 (off) or >= 1, not " + std::to_string(backed));
+  if (!(left_out == 0 || left_out >= 1) || !std::isfinite(left_out))
+    throw UsageError("--left-out-backing-margin must be 0 (off) or >= 1, not " +
+                     std::to_string(left_out));
   if (window < 0)
     throw UsageError("--corroboration-window must be >= 0, not " + std::to_string(window));
   if (!(margin == 0 || margin >= 1) || !std::isfinite(margin))
@@ -193,6 +202,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->end_scale_samples = end_samples;
   robust->rehold_growth = rehold;
   robust->end_backed_margin = backed;
+  robust->left_out_backing_margin = left_out;
   robust->end_scale_growth = growth;
 }
 
