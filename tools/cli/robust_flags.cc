@@ -1,6 +1,7 @@
 #include "arbor/tools/cli/robust_flags.h"
 
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 #include "arbor/tools/cli/cli_common.h"
@@ -31,6 +32,13 @@ void addRobustFlags(po::options_description& options, const std::string& robust_
 }
 
 namespace {
+
+// A default as --help prints it: "1.1", not boost's round-trip "1.1000000000000001".
+std::string shortText(double x) {
+  std::ostringstream os;
+  os << x;
+  return os.str();
+}
 
 /// The checks of --kernel and --inlier-threshold, into flags.
 void parseKernelAndThreshold(const std::string& kernel, const std::string& threshold,
@@ -131,7 +139,8 @@ void addOnlineRobustFlags(po::options_description& options) {
       "times the threshold when enough inliers agree with it at the end (docs/design.md, "
       "\"Backed at the end\"); 0: off")(
       "left-out-backing-margin",
-      po::value<double>()->default_value(RobustOptions{}.left_out_backing_margin),
+      po::value<double>()->default_value(RobustOptions{}.left_out_backing_margin,
+                                         shortText(RobustOptions{}.left_out_backing_margin)),
       "with --robust, the final pass leaves out each loop closure past its threshold that other "
       "inliers back, and keeps it out unless one still agrees with it, within X times the pair "
       "threshold, at the estimate without it (docs/design.md, \"Backing left out\"); 0: off");
