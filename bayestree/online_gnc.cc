@@ -428,19 +428,31 @@ bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) c
 }
 
 template <class G>
-std::optional<double> OnlineGnc<G>::unconfirmedBy(const IncrementalSmoother<G>& smoother,
-                                                  Closure* c, double bound, bool at_the_end) {
-  if (c->state != State::kSettled || c->weight != 1.0 || c->held || c->factor < 0 ||
-      c->factor >= smoother.numFactors() || c->kernel != KernelKind::kTruncatedLeastSquares ||
-      backed(*c, at_the_end && options_.end_partners_agree ? &smoother : nullptr))
-    return std::nullopt;
-  c->judged_c2 = c2_;
-  const Edge& edge = *smoother.factors()[static_cast<size_t>(c->factor)].relativePose();
-  // In the tree at weight 1 (checked above): (L); without Σ it is kept.
+bool OnlineGnc<G>::judgedByL(const IncrementalSmoother<G>& smoother, const Closure& c) const {
+  return c.state == State::kSettled && c.weight == 1.0 && !c.held && c.factor >= 0 &&
+         c.factor < smoother.numFactors() && c.kernel == KernelKind::kTruncatedLeastSquares;
+}
+
+template <class G>
+std::optional<double> OnlineGnc<G>::innovationPast(const IncrementalSmoother<G>& smoother,
+                                                   const Closure& c, double bound,
+                                                   bool at_the_end) const {
+  const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
+  // In the tree at weight 1 (judgedByL): (L); without Σ it is kept.
   const std::optional<double> m =
       leaveOneOutInnovation(smoother, edge, at_the_end ? Paths::kKept : Paths::kOnce);
   if (!m || *m <= bound) return std::nullopt;
   return m;
+}
+
+template <class G>
+std::optional<double> OnlineGnc<G>::unconfirmedBy(const IncrementalSmoother<G>& smoother,
+                                                  Closure* c, double bound, bool at_the_end) {
+  if (!judgedByL(smoother, *c) ||
+      backed(*c, at_the_end && options_.end_partners_agree ? &smoother : nullptr))
+    return std::nullopt;
+  c->judged_c2 = c2_;
+  return innovationPast(smoother, *c, bound, at_the_end);
 }
 
 template <class G>
@@ -491,15 +503,21 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
   c2_end_ = endThreshold(smoother);
   const double bound =
       c2_end_ < c2_ ? options_.end_confirm_margin * c2_end_ : options_.final_confirm_margin * c2_;
-  std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound
+  std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound, unbacked
   std::vector<int> backed_over;              // past it, but backed
+  const bool leave_out = update && options_.left_out_backing_margin > 0;
   for (size_t id = 0; id < closures_.size(); ++id) {
     Closure& c = closures_[id];
-    if (const auto m = unconfirmedBy(smoother, &c, bound, /*at_the_end=*/true)) {
-      over.emplace_back(*m, static_cast<int>(id));
-    } else if (update && options_.left_out_backing_margin > 0 &&
-               backedPastTheBound(smoother, c, bound)) {
+    if (!judgedByL(smoother, c)) continue;
+    const bool is_backed = backed(c, options_.end_partners_agree ? &smoother : nullptr);
+    if (is_backed && !leave_out) continue;
+    if (!is_backed) c.judged_c2 = c2_;  // as unconfirmedBy
+    const std::optional<double> m = innovationPast(smoother, c, bound, /*at_the_end=*/true);
+    if (!m) continue;
+    if (is_backed) {
       backed_over.push_back(static_cast<int>(id));
+    } else {
+      over.emplace_back(*m, static_cast<int>(id));
     }
   }
   // Each backed one left out in turn, at the estimate the ones before it made (header comment,
@@ -514,20 +532,6 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
     ++changed;
   }
   return changed;
-}
-
-// Backing left out: a settled TLS inlier at weight 1 that a partner backs (so unconfirmedBy
-// passed it over) with m₋ past the bound.
-template <class G>
-bool OnlineGnc<G>::backedPastTheBound(const IncrementalSmoother<G>& smoother, const Closure& c,
-                                      double bound) const {
-  if (c.state != State::kSettled || c.weight != 1.0 || c.held || c.factor < 0 ||
-      c.factor >= smoother.numFactors() || c.kernel != KernelKind::kTruncatedLeastSquares ||
-      !backed(c, options_.end_partners_agree ? &smoother : nullptr))
-    return false;
-  const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
-  const std::optional<double> m = leaveOneOutInnovation(smoother, edge, Paths::kKept);
-  return m && *m > bound;
 }
 
 // A false closure bends the chains between its ends, and the true closures beside it, read
@@ -855,17 +859,6 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
   }
   held_.swap(still);
   return changed;
-}
-
-template <class G>
-int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
-  return step(smoother, scope, {});
-}
-
-template <class G>
-int OnlineGnc<G>::stepFinalize(IncrementalSmoother<G>& smoother,
-                               const std::function<void()>& update) {
-  return step(smoother, StepScope::kFinalize, update);
 }
 
 template <class G>

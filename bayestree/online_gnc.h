@@ -198,8 +198,8 @@
 //                 4 (seed 1, 90% local).
 //   backing left out (RobustOptions::left_out_backing_margin, 1.1 by default; 0: off) in
 //                 each of finalize()'s (L) passes, a settled TLS inlier past the bound that a
-//                 partner backs is left out for an update (stepFinalize's) and stays out unless
-//                 a partner still agrees with it, within the margin times the pair bound, at
+//                 partner backs is left out for an update (step's, in finalize()) and stays out
+//                 unless a partner still agrees with it, within the margin times the pair bound, at
 //                 the estimate without it: a local false closure bends the chains its partners
 //                 are read through, and without it they relax (smallGrid3D with 50% local false
 //                 closures, seed 3: 1.087 → 1 F*; sphere_bignoise with 10% random false
@@ -505,11 +505,11 @@ class OnlineGnc {
                bool structural, const Edge& edge, KernelKind kernel = KernelKind::kNone);
   /// Before a smoother update: one graduation step of every graduating closure and the round
   /// robin of re-checks (StepScope). Returns the weights changed.
-  int step(IncrementalSmoother<G>& smoother, StepScope scope = StepScope::kRoundRobin);
-  /// step(kFinalize) with `update`, which runs one update of the smoother (the owner's: its
-  /// statistics count it): finalize()'s backed closures past the bound are each left out for
-  /// an update and judged at the estimate without them (RobustOptions::left_out_backing_margin).
-  int stepFinalize(IncrementalSmoother<G>& smoother, const std::function<void()>& update);
+  /// In kFinalize, `update` runs one update of the smoother (the owner's: its statistics count
+  /// it): the backed closures past the bound are each left out for an update and judged at the
+  /// estimate without them (RobustOptions::left_out_backing_margin; without `update`, not).
+  int step(IncrementalSmoother<G>& smoother, StepScope scope = StepScope::kRoundRobin,
+           const std::function<void()>& update = {});
   /// After a smoother update, during the replay: the end's scale read again once the poses
   /// have grown by end_scale_growth since the last reading (header comment, "the end's scale
   /// on the way"); where it is at least end_scale_gap times below the c² in use, the settled
@@ -674,11 +674,11 @@ class OnlineGnc {
   /// bound at the estimate without it; else back at weight 1, and another update. Returns
   /// whether it stays out.
   bool leftOut(IncrementalSmoother<G>& smoother, int id, const std::function<void()>& update);
-  /// step() with the owner's update for finalize()'s backing left out (stepFinalize).
-  int step(IncrementalSmoother<G>& smoother, StepScope scope, const std::function<void()>& update);
-  /// Whether c (a settled TLS inlier at weight 1 that a partner backs) has m₋ past `bound`.
-  bool backedPastTheBound(const IncrementalSmoother<G>& smoother, const Closure& c,
-                          double bound) const;
+  /// Whether (L) judges c: a settled TLS closure the tree holds at weight 1.
+  bool judgedByL(const IncrementalSmoother<G>& smoother, const Closure& c) const;
+  /// c's (L) m₋ when past `bound` (c judgedByL), else nullopt; `at_the_end`: kept path solves.
+  std::optional<double> innovationPast(const IncrementalSmoother<G>& smoother, const Closure& c,
+                                       double bound, bool at_the_end) const;
   /// Before many (L) on one tree: the joints of every factor the tree holds, from one walk
   /// (IncrementalSmoother::keepSharedCliqueJoints).
   void keepHeldJoints(const IncrementalSmoother<G>& smoother) const;

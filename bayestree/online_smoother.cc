@@ -433,7 +433,7 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
     if (relinearized) relinearizeAll();
     if (total.cancelled || last) break;
     // The re-check's own updates (backing left out) count in this finalize()'s statistics.
-    const int changed = gnc_->stepFinalize(smoother_, [&] {
+    const int changed = gnc_->step(smoother_, StepScope::kFinalize, [&] {
       addStats(&total, smoother_.update());
       gnc_->resolve(smoother_);
     });
