@@ -84,6 +84,37 @@ TEST(TreeMarginals, EveryMarginalAndJointMatchTheDenseInverse) {
   EXPECT_GT(same_clique, 0);
 }
 
+// predicted(): A Σ Aᵀ by the forward substitution equals the dense one for a map A of D rows
+// (a closure's: the unrolled kernels) and of 1, 2 and 5 rows (the general ones), on two, three
+// and one variables, in one clique or on different branches.
+TEST(TreeMarginals, PredictedMatchesTheDenseProductForEveryRowCount) {
+  constexpr int D = 3;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal;
+  for (unsigned seed = 1; seed <= 4; ++seed) {
+    testing::SmallProblem p(18, 5, seed);
+    const Eigen::MatrixXd Sigma = eliminateAndInvert(&p);
+    const std::vector<int> vars = p.variables();
+    ASSERT_GE(vars.size(), 3u);
+    const std::vector<std::vector<int>> on = {
+        {vars.front(), vars.back()}, {vars[1], vars[vars.size() / 2], vars.back()}, {vars[2]}};
+    for (const int m : {D, 1, 2, 5})
+      for (const std::vector<int>& which : on) {
+        std::vector<Eigen::MatrixXd> blocks;
+        Eigen::MatrixXd A = Eigen::MatrixXd::Zero(m, Sigma.cols());
+        for (const int v : which) {
+          blocks.push_back(Eigen::MatrixXd::NullaryExpr(m, D, [&] { return normal(rng); }));
+          A.middleCols(v * D, D) += blocks.back();
+        }
+        const Eigen::MatrixXd want = A * Sigma * A.transpose();
+        const Eigen::MatrixXd got = bayestree::TreeMarginals<D>::predicted(p.tree, which, blocks);
+        ASSERT_EQ(got.rows(), m);
+        EXPECT_LT(relativeError(got, want), 1e-8)
+            << "seed " << seed << ", " << m << " rows, " << which.size() << " variables";
+      }
+  }
+}
+
 // keepSharedCliqueJoints: every pair whose variables share a clique (the two poses of every
 // factor among them) is read off one walk down the tree, jointKept then returns it (in either
 // order) equal to the dense inverse, and every other pair still gets its path solves.
