@@ -104,9 +104,14 @@ NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
       m.size() < static_cast<size_t>(o.loosen_min_samples))
     return out;
   out.estimated = true;
-  // The tail's fixed point, within max_tail_scale of the median's.
+  // The tail's fixed point, within max_tail_scale of the median's, once enough are kept for its
+  // quantile to be more than their largest.
   const double median_sigma2 = sigma2;
   out.median_sigma2 = median_sigma2;
+  if (kept < static_cast<size_t>(o.tail_min_samples)) {
+    out.sigma2 = sigma2;
+    return out;
+  }
   for (int round = 0; round < 50 && keep(); ++round) {
     const double next = std::max(sigma2, quantileOfSorted(m, kept, o.confidence) / q_tail);
     if (next > o.max_tail_scale * median_sigma2) {
@@ -181,6 +186,7 @@ std::string RobustOptions::problem() const {
     return bad("tail_factor", tail_factor, "finite and > 1");
   if (!(max_tail_scale >= 1) || !std::isfinite(max_tail_scale))
     return bad("max_tail_scale", max_tail_scale, "finite and >= 1");
+  if (tail_min_samples < 0) return bad("tail_min_samples", tail_min_samples, ">= 0");
   if (!(min_kept_share >= 0 && min_kept_share < 1))
     return bad("min_kept_share", min_kept_share, "in [0, 1)");
   if (loosen_min_samples < 0) return bad("loosen_min_samples", loosen_min_samples, ">= 0");

@@ -39,14 +39,15 @@
 // (d = kDoF), with Ω too confident by a factor σ², σ²χ²_d. NoiseScale::kEstimated estimates σ̂²
 // from the innovations of every judged closure so far (estimateNoiseScale: a median, truncated
 // at tail_factor·c² to leave the false closures out and corrected for that truncation, then the
-// same from the `confidence` quantile for heavy tails, within max_tail_scale of the median's)
-// once scale_min_samples of them are in; before that, and with NoiseScale::kGiven, σ̂² = 1 and c²
-// is the given one. After it the threshold in use is the estimator's own truncation,
-// tail_factor · c² · σ̂²: what it counts as a false closure is what is rejected (on correctly
-// modelled data σ̂² ≈ 1; on the shared 2D files about 0.02, on the garage 2·10⁻⁴, Ω being too
-// weak there). With fewer than 3 innovations within the truncation, or a σ̂² above 1 that fewer
-// than a quarter of them support at Ω's word while there are fewer than loosen_min_samples, there
-// is no estimate and Ω is taken at its word (the given c², not tail_factor times it).
+// same from the `confidence` quantile for heavy tails, within max_tail_scale of the median's,
+// once tail_min_samples are kept) once scale_min_samples of them are in; before that, and with
+// NoiseScale::kGiven, σ̂² = 1 and c² is the given one. After it the threshold in use is the
+// estimator's own truncation, tail_factor · c² · σ̂²: what it counts as a false closure is what is
+// rejected (on correctly modelled data σ̂² ≈ 1; on the shared 2D files about 0.02, on the garage
+// 2·10⁻⁴, Ω being too weak there). With fewer than 3 innovations within the truncation, or a σ̂²
+// above 1 that fewer than a quarter of them support at Ω's word while there are fewer than
+// loosen_min_samples, there is no estimate and Ω is taken at its word (the given c², not
+// tail_factor times it).
 //   corroboration with RobustOptions::corroboration_window K > 0 (default 10; 0: off), σ̂² is
 //                 estimated from the innovations of corroborated closures: two closures a→b
 //                 (z₁, Ω₁) and c→d (z₂, Ω₂) with |a − c| ≤ K and |b − d| ≤ K (or reversed)
@@ -381,6 +382,12 @@ struct RobustOptions {
   double tail_factor = 3.0;
   /// estimateNoiseScale: the tail's σ̂² at most this many times the median's (≥ 1).
   double max_tail_scale = 30.0;
+  /// estimateNoiseScale: the tail's fixed point runs only once at least this many innovations
+  /// are within the truncation at the median's σ² (≥ 0; 0: always); with fewer, σ̂² is the
+  /// median's. Below 1/(1 − confidence) of them (100 at 0.99) their confidence quantile is
+  /// their largest, so one heavy-tailed true closure, or one false closure just inside the
+  /// truncation, would raise σ̂² by up to max_tail_scale (header comment, "noise scale").
+  int tail_min_samples = 100;
   /// estimateNoiseScale: σ̂² > 1 (Ω loosened) only when at least this share of the
   /// innovations is within the truncation at Ω's word, σ² = 1 (in [0, 1)).
   double min_kept_share = 0.25;
@@ -412,13 +419,18 @@ struct RobustOptions {
 /// Past o.max_tail_scale·σ²_med the tail holds false closures just inside the truncation, which
 /// raise it by about tail_factor a round until every one is in (σ̂² ran to 10²–10³ on the
 /// shared files with 10% local or 50% random false closures when the two were iterated
-/// together): σ²_med stands (tail_cut). The median breaks down at half the kept innovations
-/// false. With fewer than 3 kept there is no estimate and Ω is taken at its word; and so when
-/// σ²_med > 1 with fewer than o.min_kept_share (a quarter) of all the m_k within t at σ² = 1 and
-/// fewer than o.loosen_min_samples of them: a median that climbed from a few, false closures
-/// drawing it up (intel's first 44 closures with 50% local false ones: 3 of them within t, σ̂² 148,
-/// c² 5042, and the replay diverged). sphere_bignoise's Ω is ~200× too confident: none of its true
-/// closures is within t at σ² = 1, and it is loosened from its 200th closure on.
+/// together): σ²_med stands (tail_cut). With fewer than o.tail_min_samples kept (100:
+/// 1/(1 − q) at q = 0.99) the q-quantile is the largest kept one and σ²_med stands too: on
+/// smallGrid3D with 50% local false closures (seed 2) the first 20 corroborated innovations,
+/// 5 of them false, put σ²_med at 1.42, two false ones just inside the truncation (60, 91)
+/// the tail at 5.4, and four innovations later it is 36, 25 times σ²_med. The median breaks
+/// down at half the kept innovations false. With fewer than 3 kept there is no estimate and Ω is
+/// taken at its word; and so when σ²_med > 1 with fewer than o.min_kept_share (a quarter) of all
+/// the m_k within t at σ² = 1 and fewer than o.loosen_min_samples of them: a median that climbed
+/// from a few, false closures drawing it up (intel's first 44 closures with 50% local false ones: 3
+/// of them within t, σ̂² 148, c² 5042, and the replay diverged). sphere_bignoise's Ω is ~200× too
+/// confident: none of its true closures is within t at σ² = 1, and it is loosened from its 200th
+/// closure on.
 struct NoiseScaleEstimate {
   double sigma2 = 1.0;         ///< σ̂² (1 without an estimate)
   bool estimated = false;      ///< false: Ω at its word (σ̂² = 1 and the given c²)

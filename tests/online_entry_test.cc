@@ -364,6 +364,10 @@ NoiseScaleEstimate noiseScaleBySelection(std::vector<double> m, int dof, double 
     return out;
   out.estimated = true;
   out.median_sigma2 = sigma2;
+  if (kept.size() < static_cast<size_t>(o.tail_min_samples)) {
+    out.sigma2 = sigma2;
+    return out;
+  }
   for (int round = 0; round < 50 && keep(); ++round) {
     const double next = std::max(sigma2, quantile(kept, o.confidence) / q_tail);
     if (next > o.max_tail_scale * out.median_sigma2) {
@@ -413,12 +417,13 @@ TEST(OnlineEntry, EstimateNoiseScaleIsTheSelectionsFixedPoint) {
       at = next;
     }
     ASSERT_TRUE(std::is_sorted(merged.begin(), merged.end()));
-    const NoiseScaleCuts cuts(dof, c2, RobustOptions{});
+    RobustOptions o;  // half the trials read the tail of however few are kept
+    if (trial % 4 >= 2) o.tail_min_samples = 0;
+    const NoiseScaleCuts cuts(dof, c2, o);
     for (bool from_median : {false, true}) {
-      const NoiseScaleEstimate a = estimateNoiseScale(m, dof, c2, RobustOptions{}, from_median);
-      const NoiseScaleEstimate b = noiseScaleBySelection(m, dof, c2, RobustOptions{}, from_median);
-      const NoiseScaleEstimate c =
-          estimateNoiseScaleSorted(merged, cuts, RobustOptions{}, from_median);
+      const NoiseScaleEstimate a = estimateNoiseScale(m, dof, c2, o, from_median);
+      const NoiseScaleEstimate b = noiseScaleBySelection(m, dof, c2, o, from_median);
+      const NoiseScaleEstimate c = estimateNoiseScaleSorted(merged, cuts, o, from_median);
       ASSERT_EQ(a.estimated, b.estimated) << trial;
       ASSERT_EQ(a.tail_cut, b.tail_cut) << trial;
       ASSERT_EQ(a.sigma2, b.sigma2) << trial;
@@ -436,6 +441,42 @@ TEST(OnlineEntry, EstimateNoiseScaleIsTheSelectionsFixedPoint) {
   EXPECT_GT(estimated, 20);
   EXPECT_LT(estimated, 400);
   EXPECT_GT(tail_cut, 0);
+}
+
+// The tail's fixed point needs tail_min_samples kept innovations (100): with fewer, the 0.99
+// quantile of them is their largest. 20 χ²₆ innovations at σ² = 1.4 and two false closures just
+// inside the truncation (smallGrid3D, 50% local false closures, seed 2: 60 and 91 among its
+// first 20 corroborated): σ²_med stands, where reading the tail takes σ̂² to 3–4 times it. With
+// 200 such innovations and the same two, the tail is read (and moves σ̂² by less than 10%).
+TEST(OnlineEntry, EstimateNoiseScaleReadsTheTailOnlyWithEnoughKept) {
+  const int dof = 6;
+  const double c2 = chiSquareThreshold(0.99, dof), sigma2 = 1.4;
+  const boost::math::chi_squared_distribution<double> chi2(dof);
+  auto sample = [&](int n) {  // χ²₆ quantiles at (k + ½)/n, times σ², and the two false ones
+    std::vector<double> m;
+    for (int k = 0; k < n; ++k)
+      m.push_back(sigma2 * boost::math::quantile(chi2, (k + 0.5) / static_cast<double>(n)));
+    m.push_back(60.0);
+    m.push_back(91.0);
+    return m;
+  };
+  RobustOptions always;
+  always.tail_min_samples = 0;
+  const NoiseScaleEstimate few = estimateNoiseScale(sample(20), dof, c2, RobustOptions{}, true);
+  const NoiseScaleEstimate few_read = estimateNoiseScale(sample(20), dof, c2, always, true);
+  ASSERT_TRUE(few.estimated);
+  EXPECT_EQ(few.sigma2, few.median_sigma2);
+  EXPECT_NEAR(few.sigma2, sigma2, 0.25 * sigma2);
+  EXPECT_EQ(few_read.median_sigma2, few.median_sigma2);
+  EXPECT_GT(few_read.sigma2, 3 * few.median_sigma2);
+  const NoiseScaleEstimate many = estimateNoiseScale(sample(200), dof, c2, RobustOptions{}, true);
+  const NoiseScaleEstimate many_read = estimateNoiseScale(sample(200), dof, c2, always, true);
+  EXPECT_EQ(many.sigma2, many_read.sigma2);
+  EXPECT_GT(many.sigma2, many.median_sigma2);
+  EXPECT_LT(many.sigma2, 1.1 * many.median_sigma2);
+  RobustOptions negative;
+  negative.tail_min_samples = -1;
+  EXPECT_NE(negative.problem().find("tail_min_samples"), std::string::npos);
 }
 
 // Clean samples with Ω 200 times too confident (sphere_bignoise's true closures; the
