@@ -279,6 +279,13 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
       held_.push_back(static_cast<int>(k));
     }
   }
+  // c² shrinking by recheck_margin since every inlier was last checked against it: the next
+  // step checks them all at once (header comment, "a shrinking c²").
+  if (c2_ > c2_swept_) c2_swept_ = c2_;
+  if (options_.recheck_margin * c2_ < c2_swept_) {
+    sweep_due_ = true;
+    c2_swept_ = c2_;
+  }
   next_estimate_ = nextEstimateAt(n);
 }
 
@@ -829,6 +836,27 @@ void OnlineGnc<G>::remap(const IncrementalSmoother<G>& smoother) {
   resolved_factors_ = smoother.numFactors();
 }
 
+template <class G>
+int OnlineGnc<G>::sweepInliers(IncrementalSmoother<G>& smoother) {
+  sweep_due_ = false;
+  int changed = 0;
+  for (size_t k = 0; k < closures_.size(); ++k) {
+    Closure& c = closures_[k];
+    if (c.state != State::kSettled || c.factor < 0 || c.held || !isInlier(c)) continue;
+    const double s = residual(smoother, c);
+    c.s = s;
+    if (s <= options_.recheck_margin * c2_) continue;
+    enter(&c, s, s, /*may_reject=*/false);
+    if (c.state == State::kGraduating) graduating_.push_back(static_cast<int>(k));
+    ++totals_.regraduated;
+    if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() != c.weight) {
+      setWeight(smoother, &c, c.weight);
+      ++changed;
+    }
+  }
+  return changed;
+}
+
 // Held closures are at weight 0, out of Σ: (E) is their innovation against the estimate without
 // them, as for any closure on entry. Their innovations were recorded when they arrived.
 template <class G>
@@ -902,6 +930,8 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
     }
   }
   graduating_.swap(still);
+  // c² shrunk by recheck_margin: every settled inlier at once, not in the round robin's turn.
+  if (sweep_due_) changed += sweepInliers(smoother);
   // The settled closures, at the kernel: an outlier the estimate now agrees with comes back, an
   // inlier beyond recheck_margin·c² graduates again (the "affected" closures, header comment).
   const size_t n = closures_.size();

@@ -313,7 +313,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "--end-scale-samples",
                                          "0",
                                          "--rehold-growth",
-                                         "4",
+                                         "0",
                                          "--end-backed-margin",
                                          "0",
                                          "--end-scale-growth",
@@ -335,7 +335,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.final_confirm_margin, 1.5);
   EXPECT_EQ(replay->online.finalize_rounds, 4);
   EXPECT_EQ(replay->online.end_scale_samples, 0);
-  EXPECT_EQ(replay->online.rehold_growth, 4.0);
+  EXPECT_EQ(replay->online.rehold_growth, 0.0);
   EXPECT_EQ(replay->online.end_backed_margin, 0.0);
   EXPECT_EQ(replay->online.end_scale_growth, 2.0);
   EXPECT_EQ(replay->online.end_confirm_margin, 1.5);
@@ -351,7 +351,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->final_confirm_margin, 1.5);
   EXPECT_EQ(serve->options.robust->finalize_rounds, 4);
   EXPECT_EQ(serve->options.robust->end_scale_samples, 0);
-  EXPECT_EQ(serve->options.robust->rehold_growth, 4.0);
+  EXPECT_EQ(serve->options.robust->rehold_growth, 0.0);
   EXPECT_EQ(serve->options.robust->end_backed_margin, 0.0);
   EXPECT_EQ(serve->options.robust->end_scale_growth, 2.0);
   EXPECT_EQ(serve->options.robust->end_confirm_margin, 1.5);
