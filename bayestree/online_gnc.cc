@@ -6,6 +6,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <utility>
 
@@ -140,7 +141,9 @@ const char* toString(NoiseScale scale) {
 
 std::string RobustOptions::problem() const {
   auto bad = [](const std::string& field, double value, const std::string& want) {
-    return "RobustOptions::" + field + " must be " + want + ", not " + std::to_string(value);
+    std::ostringstream out;
+    out << "RobustOptions::" << field << " must be " << want << ", not " << value;
+    return out.str();
   };
   if (kernel == KernelKind::kNone)
     return "RobustOptions::kernel must be tls, gm, cauchy or huber, not none";

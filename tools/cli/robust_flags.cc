@@ -1,5 +1,6 @@
 #include "arbor/tools/cli/robust_flags.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -172,25 +173,6 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
         "--end-confirm-margin, --finalize-rounds, --first-recheck, --end-scale-samples, "
         "--end-scale-growth, --rehold-growth, --end-backed-margin and "
         "--left-out-backing-margin need --robust");
-  if (rounds < 1) throw UsageError("--finalize-rounds must be >= 1, not " + std::to_string(rounds));
-  if (end_samples < 0)
-    throw UsageError("--end-scale-samples must be >= 0, not " + std::to_string(end_samples));
-  if (!(rehold == 0 || rehold > 1) || !std::isfinite(rehold))
-    throw UsageError("--rehold-growth must be 0 (off) or > 1, not " + std::to_string(rehold));
-  if (!(growth == 0 || growth > 1) || !std::isfinite(growth))
-    throw UsageError("--end-scale-growth must be 0 (off) or > 1, not " + std::to_string(growth));
-  if (!(backed == 0 || backed >= 1) || !std::isfinite(backed))
-    throw UsageError("--end-backed-margin must be 0 (off) or >= 1, not " + std::to_string(backed));
-  if (!(left_out == 0 || left_out >= 1) || !std::isfinite(left_out))
-    throw UsageError("--left-out-backing-margin must be 0 (off) or >= 1, not " +
-                     std::to_string(left_out));
-  if (window < 0)
-    throw UsageError("--corroboration-window must be >= 0, not " + std::to_string(window));
-  if (!(margin == 0 || margin >= 1) || !std::isfinite(margin))
-    throw UsageError("--final-confirm-margin must be 0 (off) or >= 1, not " +
-                     std::to_string(margin));
-  if (!(end_margin > 0) || !std::isfinite(end_margin))
-    throw UsageError("--end-confirm-margin must be > 0, not " + std::to_string(end_margin));
   if (entry != "innovation" && entry != "residual")
     throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
   if (noise_scale != "estimated" && noise_scale != "given")
@@ -213,6 +195,15 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->end_backed_margin = backed;
   robust->left_out_backing_margin = left_out;
   robust->end_scale_growth = growth;
+  // The numbers are checked by the options' own rule (RobustOptions::problem), which names the
+  // field; each flag here is its field's name with '-' for '_'.
+  const std::string problem = robust->problem();
+  if (problem.empty()) return;
+  const std::string prefix = "RobustOptions::";
+  if (problem.rfind(prefix, 0) != 0) throw UsageError(problem);
+  std::string flag = problem.substr(prefix.size(), problem.find(' ') - prefix.size());
+  std::replace(flag.begin(), flag.end(), '_', '-');
+  throw UsageError("--" + flag + problem.substr(problem.find(' ')));
 }
 
 void readRobustFlags(const std::string& kernel, const std::string& threshold, GncOptions* gnc) {
