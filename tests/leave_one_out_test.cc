@@ -23,6 +23,7 @@
 #include "arbor/tests/random_graphs.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
+#include "planted_false_closures.h"
 #include "random_walks.h"
 #include "robust_replay_outcome.h"
 #include "shared_data.h"
@@ -91,33 +92,22 @@ TEST(LeaveOneOut, IsTheInnovationWithoutTheClosure3D) { leaveOneOutIsTheInnovati
 
 // smallGrid3D (shared data) with false closures planted as `arbor generate outliers --seed 1`
 // does, and their (from, to) pairs, low id first as Outcome::rejected has them.
-struct PlantedGrid {
-  PoseGraph3 clean;
-  sim::FalseClosures<SE3> planted;
-  std::set<std::pair<Key, Key>> is_false;
-};
+using PlantedGrid = testing::PlantedGraph<SE3>;
 
 PlantedGrid plantSmallGrid3D(double fraction, sim::OutlierPolicy policy, std::uint64_t seed = 1) {
-  PlantedGrid g{
-      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D"))), {}, {}};
   sim::OutlierOptions o;
   o.fraction = fraction;
   o.policy = policy;
   o.seed = seed;
-  g.planted = sim::addFalseClosures(g.clean, o);
-  for (const auto& [i, j] : g.planted.pairs) {
-    const Key a = g.planted.graph.ids[static_cast<size_t>(i)];
-    const Key b = g.planted.graph.ids[static_cast<size_t>(j)];
-    g.is_false.insert({std::min(a, b), std::max(a, b)});
-  }
-  return g;
+  return testing::plantFalseClosures(
+      std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath("smallGrid3D"))), o);
 }
 
 // The replay of `g` with `off` and with `on`, printed side by side.
 std::pair<Outcome, Outcome> replayBoth(const PlantedGrid& g, const RobustOptions& off,
                                        const RobustOptions& on) {
-  std::pair<Outcome, Outcome> r{replayRobust(g.clean, g.planted.graph, off),
-                                replayRobust(g.clean, g.planted.graph, on)};
+  std::pair<Outcome, Outcome> r{replayRobust(g.clean, g.graph, off),
+                                replayRobust(g.clean, g.graph, on)};
   std::cout << "rejected " << r.first.rejected.size() << " -> " << r.second.rejected.size()
             << " of " << g.is_false.size() << " false, F_clean " << r.first.F_clean << " -> "
             << r.second.F_clean << "\n";
@@ -214,7 +204,7 @@ TEST(LeaveOneOut, FinalizeReadsAgreementInBothFrames) {
   cli::ReplaySettings plain;
   plain.batch = false;
   const double F_plain = objective(g.clean, cli::runReplay(g.clean, plain).poses);
-  const Outcome r = replayRobust(g.clean, g.planted.graph, RobustOptions{});
+  const Outcome r = replayRobust(g.clean, g.graph, RobustOptions{});
   std::cout << "rejected " << r.rejected.size() << " of " << g.is_false.size() << " false, F_clean "
             << r.F_clean << " against the clean replay's " << F_plain << "\n";
   EXPECT_TRUE(r.rejected.count({1, 33}));
@@ -299,7 +289,7 @@ TEST(LeaveOneOut, FinalizeDropsOneClosurePerPoseARound) {
   const PlantedGrid g = plantSmallGrid3D(0.9, sim::OutlierPolicy::kLocal, 1);
   ASSERT_TRUE(g.is_false.count({1, 27}));
   ASSERT_FALSE(g.is_false.count({1, 8}));
-  const Outcome out = replayRobust(g.clean, g.planted.graph, RobustOptions{});
+  const Outcome out = replayRobust(g.clean, g.graph, RobustOptions{});
   EXPECT_EQ(out.rejected, g.is_false);
   EXPECT_EQ(out.unconfirmed, 1);  // (1, 27) only: (1, 8) was never dropped
   EXPECT_LT(out.finalize_iterations, 8);

@@ -17,16 +17,13 @@
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
+#include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 
 namespace arbor {
 namespace {
 
-struct Planted {
-  PoseGraph3 clean;
-  PoseGraph3 graph;
-  std::set<std::pair<Key, Key>> is_false;  ///< (from, to) ids, low first
-};
+using Planted = testing::PlantedGraph<SE3>;
 
 // 10 rings of 30 poses, rotation noise 0.1 rad, every Ω's rotation block 100 times the truth's.
 Planted overconfidentSphere(std::uint64_t seed) {
@@ -35,18 +32,11 @@ Planted overconfidentSphere(std::uint64_t seed) {
   o.poses_per_ring = 30;
   o.noise = {0.05, 0.1};
   o.seed = seed;
-  Planted p;
-  p.clean = sim::sphereWorld(o).graph;
-  for (auto& e : p.clean.edges) e.information.bottomRightCorner<3, 3>() *= 100.0;
+  PoseGraph3 clean = sim::sphereWorld(o).graph;
+  for (auto& e : clean.edges) e.information.bottomRightCorner<3, 3>() *= 100.0;
   sim::OutlierOptions outliers;
   outliers.seed = seed;
-  const sim::FalseClosures<SE3> planted = sim::addFalseClosures(p.clean, outliers);
-  p.graph = planted.graph;
-  for (const auto& [i, j] : planted.pairs) {
-    const Key a = p.graph.ids[static_cast<size_t>(i)], b = p.graph.ids[static_cast<size_t>(j)];
-    p.is_false.insert({std::min(a, b), std::max(a, b)});
-  }
-  return p;
+  return testing::plantFalseClosures(std::move(clean), outliers);
 }
 
 using Outcome = testing::RobustOutcome;

@@ -22,33 +22,23 @@
 #include "arbor/tools/cli/replay_order.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
+#include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 #include "shared_data.h"
 
 namespace arbor {
 namespace {
 
-struct Planted {
-  PoseGraph2 clean;
-  PoseGraph2 graph;
-  std::set<std::pair<Key, Key>> is_false;  ///< (from, to) ids, low first
-};
+using Planted = testing::PlantedGraph<SE2>;
 
 // `arbor generate intel.g2o --outliers 0.9 --outlier-policy group --seed 1`.
 Planted intelWithGroups() {
-  Planted p;
-  p.clean = std::get<PoseGraph2>(readPoseGraphFile(testing::datasetPath("intel")));
   sim::OutlierOptions o;
   o.fraction = 0.9;
   o.policy = sim::OutlierPolicy::kGroup;
   o.seed = 1;
-  const sim::FalseClosures<SE2> planted = sim::addFalseClosures(p.clean, o);
-  p.graph = planted.graph;
-  for (const auto& [i, j] : planted.pairs) {
-    const Key a = p.graph.ids[static_cast<size_t>(i)], b = p.graph.ids[static_cast<size_t>(j)];
-    p.is_false.insert({std::min(a, b), std::max(a, b)});
-  }
-  return p;
+  return testing::plantFalseClosures(
+      std::get<PoseGraph2>(readPoseGraphFile(testing::datasetPath("intel"))), o);
 }
 
 double optimum(const PoseGraph2& clean) {
