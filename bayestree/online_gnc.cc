@@ -282,10 +282,11 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
       held_.push_back(static_cast<int>(k));
     }
   }
-  // c² shrinking by recheck_margin since every inlier was last checked against it: the next
-  // step checks them all at once (header comment, "a shrinking c²").
+  // An estimate taking c² below 1/recheck_margin of what every inlier was last checked against:
+  // the next step checks them all at once (header comment, "a shrinking c²"). Not on losing the
+  // estimate: Ω's word then stands in for want of one and says nothing of the inliers.
   if (c2_ > c2_swept_) c2_swept_ = c2_;
-  if (options_.recheck_margin * c2_ < c2_swept_) {
+  if (estimate_.estimated && options_.recheck_margin * c2_ < c2_swept_) {
     sweep_due_ = true;
     c2_swept_ = c2_;
   }

@@ -93,9 +93,10 @@
 //                 group false closures (seed 1), which diverges without it. On the other robust
 //                 files and the clean ones it changes no rejected set (sphere_bignoise, where it
 //                 fires, ends at the plain replay's F instead of 12.5% below it).
-//   a shrinking c²  when σ̂² takes c² below 1/recheck_margin of the c² every settled inlier was
-//                 last checked against (raised with c² as it grows), the next step checks them
-//                 all at once, not in the round robin's turn: each whose s is past
+//   a shrinking c²  when an estimate of σ̂² takes c² below 1/recheck_margin of the c² every
+//                 settled inlier was last checked against (raised with c² as it grows; not when
+//                 the estimate is lost and Ω's word stands in), the next step checks them all
+//                 at once, not in the round robin's turn: each whose s is past
 //                 recheck_margin·c² graduates again from μ₀ at s (sweepInliers; residuals only,
 //                 no Σ). Where the first closures are mostly false, the first σ̂² lets groups of
 //                 them in; when the true closures take σ̂² down (intel, 90% group false closures:
