@@ -851,12 +851,7 @@ int OnlineGnc<G>::sweepInliers(IncrementalSmoother<G>& smoother) {
     c.s = s;
     if (s <= options_.recheck_margin * c2_) continue;
     enter(&c, s, s, /*may_reject=*/false);
-    if (c.state == State::kGraduating) graduating_.push_back(static_cast<int>(k));
-    ++totals_.regraduated;
-    if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() != c.weight) {
-      setWeight(smoother, &c, c.weight);
-      ++changed;
-    }
+    changed += takeRecheck(smoother, static_cast<int>(k));
   }
   return changed;
 }
@@ -993,14 +988,20 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
       c.state = State::kSettled;
       c.weight = 1.0;
     }
-    if (c.state == State::kGraduating) graduating_.push_back(id);
-    ++totals_.regraduated;
-    if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() != c.weight) {
-      setWeight(smoother, &c, c.weight);
-      ++changed;
-    }
+    changed += takeRecheck(smoother, id);
   }
   return changed;
+}
+
+// A re-check's new state, taken in: graduating again, or its weight set in the smoother.
+template <class G>
+int OnlineGnc<G>::takeRecheck(IncrementalSmoother<G>& smoother, int id) {
+  Closure& c = closures_[static_cast<size_t>(id)];
+  if (c.state == State::kGraduating) graduating_.push_back(id);
+  ++totals_.regraduated;
+  if (smoother.factors()[static_cast<size_t>(c.factor)].inlierWeight() == c.weight) return 0;
+  setWeight(smoother, &c, c.weight);
+  return 1;
 }
 
 template <class G>

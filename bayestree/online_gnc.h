@@ -578,6 +578,9 @@ class OnlineGnc {
   /// Every settled inlier whose residual is past recheck_margin·c² graduates again from μ₀ at
   /// it, all in this step (header comment, "a shrinking c²"); returns the weights set.
   int sweepInliers(IncrementalSmoother<G>& smoother);
+  /// A re-checked closure's new state taken in (step's round robin, sweepInliers): listed as
+  /// graduating, or its weight set in the smoother; returns the weights set (0 or 1).
+  int takeRecheck(IncrementalSmoother<G>& smoother, int id);
   /// The first `at_most` held closures, in arrival order, judged by their innovations against
   /// the c² in use (those not in the smoother yet stay held); returns the weights set.
   int judgeHeld(IncrementalSmoother<G>& smoother,

@@ -325,9 +325,7 @@ TEST(LeaveOneOut, TheScalesTailWaitsForEnoughInnovations) {
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
   const PlantedGrid g = plantSmallGrid3D(0.5, sim::OutlierPolicy::kLocal, 2);
   ASSERT_TRUE(g.is_false.count({81, 96}));
-  RobustOptions always;
-  always.tail_min_samples = 0;
-  const auto [read, waited] = replayBoth(g, always, RobustOptions{});
+  const auto [read, waited] = replayBoth(g, tailAlwaysRead(), RobustOptions{});
   EXPECT_FALSE(read.rejected.count({81, 96}));
   EXPECT_EQ(waited.rejected, g.is_false);
   EXPECT_LT(waited.F_clean, read.F_clean);

@@ -9,8 +9,6 @@
 #include <algorithm>
 #include <cstdint>
 #include <iostream>
-#include <set>
-#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
