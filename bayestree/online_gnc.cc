@@ -63,16 +63,16 @@ NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
 }
 
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, const NoiseScaleCuts& cuts,
-                                      const RobustOptions& o, bool from_median) {
+                                      const RobustOptions& o, bool from_median, double start_cap) {
   std::sort(m.begin(), m.end());  // m is ours
-  return estimateNoiseScaleSorted(m, cuts, o, from_median);
+  return estimateNoiseScaleSorted(m, cuts, o, from_median, start_cap);
 }
 
 // The m ≤ t·σ² ("kept") are a prefix of the sorted m, so each step of the two fixed points is a
 // binary search and an index, not a pass over m.
 NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
                                             const NoiseScaleCuts& cuts, const RobustOptions& o,
-                                            bool from_median) {
+                                            bool from_median, double start_cap) {
   const double t = cuts.t, q_median = cuts.q_median, q_tail = cuts.q_tail;
   auto within = [&](double bound) {  // how many m ≤ bound
     return static_cast<size_t>(std::upper_bound(m.begin(), m.end(), bound) - m.begin());
@@ -81,7 +81,7 @@ NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
   double sigma2 = 1.0;
   if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
     const double start = quantileOfSorted(m, m.size(), 0.5) / cuts.median;
-    if (start > 0 && std::isfinite(start)) sigma2 = start;
+    if (start > 0 && std::isfinite(start)) sigma2 = std::min(start, start_cap);
   }
   size_t kept = 0;  // the m ≤ t·σ²: m[0, kept)
   auto keep = [&] {
@@ -132,6 +132,9 @@ const char* toString(EntryTest entry) {
   return entry == EntryTest::kInnovation ? "innovation" : "residual";
 }
 const char* toString(WarmUp warm_up) { return warm_up == WarmUp::kHold ? "hold" : "given"; }
+const char* toString(ScaleStart start) {
+  return start == ScaleStart::kAtMostLast ? "at-most-last" : "median";
+}
 const char* toString(FirstRecheck first) {
   return first == FirstRecheck::kReplayEstimate ? "replay" : "relinearized";
 }
@@ -262,8 +265,13 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   last_source_ = source;
   samples_used_ = static_cast<int>(n);
   const bool had_estimate = estimate_.estimated;
-  estimate_ =
-      estimateNoiseScale(*source, cuts_, options_, /*from_median=*/source == &corroborated_);
+  // The fixed point starts from the untruncated median, and with ScaleStart::kAtMostLast at
+  // most from the last σ̂² (header comment, "the noise scale").
+  const double start_cap = had_estimate && options_.scale_start == ScaleStart::kAtMostLast
+                               ? scale_
+                               : std::numeric_limits<double>::infinity();
+  estimate_ = estimateNoiseScale(*source, cuts_, options_,
+                                 /*from_median=*/source == &corroborated_, start_cap);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   const double c2_before = c2_;

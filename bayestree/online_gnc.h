@@ -288,6 +288,13 @@ enum class WarmUp {
 };
 const char* toString(WarmUp warm_up);  ///< "hold", "given"
 
+/// Where σ̂²'s fixed points start once there is an estimate (header comment, "the noise scale").
+enum class ScaleStart {
+  kAtMostLast,  ///< the source's untruncated median, or the last σ̂² where that is lower
+  kMedian,      ///< the source's untruncated median every time
+};
+const char* toString(ScaleStart start);  ///< "at-most-last", "median"
+
 /// Where finalize()'s first re-check reads the closures (header comment, "the first re-check").
 enum class FirstRecheck {
   kReplayEstimate,  ///< at the replay's own estimate; later rounds relinearise all first
@@ -385,6 +392,10 @@ struct RobustOptions {
   int scale_min_samples = 20;
   /// The closures that arrive before that (header comment, "warm-up").
   WarmUp warm_up = WarmUp::kHold;
+  /// Where each re-estimate of σ̂² from the corroborated innovations starts its fixed point
+  /// (header comment, "the noise scale"): at most at the last σ̂², so that false groups that
+  /// become most of the corroborated set do not move it by their median alone.
+  ScaleStart scale_start = ScaleStart::kAtMostLast;
   /// finalize()'s first round: its re-check at the replay's estimate, or after relinearising
   /// everything (header comment, "the first re-check").
   FirstRecheck first_recheck = FirstRecheck::kReplayEstimate;
@@ -461,13 +472,16 @@ struct NoiseScaleCuts {
   NoiseScaleCuts(int dof, double c2, const RobustOptions& o);
   double t = 0, q_median = 0, q_tail = 0, median = 0;
 };
-/// estimateNoiseScale at the cuts of its dof and c².
+/// estimateNoiseScale at the cuts of its dof and c². `start_cap`: with `from_median`, the fixed
+/// points start from the lower of the median's σ² and it (ScaleStart::kAtMostLast passes the
+/// last σ̂²).
 NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, const NoiseScaleCuts& cuts,
-                                      const RobustOptions& o, bool from_median = false);
+                                      const RobustOptions& o, bool from_median = false,
+                                      double start_cap = std::numeric_limits<double>::infinity());
 /// The same of m sorted ascending.
-NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
-                                            const NoiseScaleCuts& cuts, const RobustOptions& o,
-                                            bool from_median = false);
+NoiseScaleEstimate estimateNoiseScaleSorted(
+    const std::vector<double>& m, const NoiseScaleCuts& cuts, const RobustOptions& o,
+    bool from_median = false, double start_cap = std::numeric_limits<double>::infinity());
 
 /// What one OnlineGnc::step re-checks among the settled closures.
 enum class StepScope {

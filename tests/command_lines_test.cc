@@ -293,7 +293,7 @@ TEST(HeapFlag, ReachesReplayAndServe) {
 
 // --entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin,
 // --finalize-rounds, --first-recheck, --end-scale-samples, --rehold-growth and
-// --end-backed-margin, --left-out-backing-margin (tools/cli/robust_flags.h)
+// --end-backed-margin, --left-out-backing-margin, --scale-start (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
@@ -323,7 +323,9 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "--first-recheck",
                                          "relinearized",
                                          "--left-out-backing-margin",
-                                         "2"};
+                                         "2",
+                                         "--scale-start",
+                                         "median"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -341,6 +343,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.end_confirm_margin, 1.5);
   EXPECT_EQ(replay->online.first_recheck, FirstRecheck::kRelinearized);
   EXPECT_EQ(replay->online.left_out_backing_margin, 2.0);
+  EXPECT_EQ(replay->online.scale_start, ScaleStart::kMedian);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -357,6 +360,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->end_confirm_margin, 1.5);
   EXPECT_EQ(serve->options.robust->first_recheck, FirstRecheck::kRelinearized);
   EXPECT_EQ(serve->options.robust->left_out_backing_margin, 2.0);
+  EXPECT_EQ(serve->options.robust->scale_start, ScaleStart::kMedian);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -374,6 +378,10 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->first_recheck, FirstRecheck::kReplayEstimate);
   EXPECT_EQ(plain->options.robust->left_out_backing_margin,
             RobustOptions{}.left_out_backing_margin);
+  EXPECT_EQ(plain->options.robust->scale_start, ScaleStart::kAtMostLast);
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--scale-start", "median"}), UsageError);
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--robust", "--scale-start", "last"}),
+               UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--final-confirm-margin", "0"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-samples", "64"}), UsageError);

@@ -132,6 +132,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"entry", toString(run.online.entry)},
           {"noise_scale_mode", toString(run.online.scale)},
           {"warm_up", toString(run.online.warm_up)},
+          {"scale_start", toString(run.online.scale_start)},
           {"first_recheck", toString(run.online.first_recheck)},
           {"corroboration_window", run.online.corroboration_window},
           {"final_confirm_margin", run.online.final_confirm_margin},

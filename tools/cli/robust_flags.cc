@@ -101,6 +101,10 @@ void addOnlineRobustFlags(po::options_description& options) {
       "with --robust and --noise-scale estimated, the loop closures that arrive before the "
       "scale is estimated: hold (at weight 0, judged once it is) or given (judged at once, Ω at "
       "its word)")(
+      "scale-start", po::value<std::string>()->default_value("at-most-last"),
+      "with --robust and --noise-scale estimated, where each re-estimate of the noise scale "
+      "starts: at-most-last (the corroborated innovations' median, or the last scale where that "
+      "is lower) or median (their median every time; docs/design.md, \"The noise scale\")")(
       "corroboration-window", po::value<int>()->default_value(RobustOptions{}.corroboration_window),
       "with --robust and --noise-scale estimated, K > 0: the scale is estimated from the loop "
       "closures that another closure within K poses of both ends agrees with (docs/design.md, "
@@ -152,6 +156,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const std::string noise_scale = vm["noise-scale"].as<std::string>();
   const std::string warm_up = vm["warm-up"].as<std::string>();
   const std::string first_recheck = vm["first-recheck"].as<std::string>();
+  const std::string scale_start = vm["scale-start"].as<std::string>();
   const int window = vm["corroboration-window"].as<int>();
   const double margin = vm["final-confirm-margin"].as<double>();
   const double end_margin = vm["end-confirm-margin"].as<double>();
@@ -167,12 +172,13 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
        !vm["end-confirm-margin"].defaulted() || !vm["finalize-rounds"].defaulted() ||
        !vm["end-scale-samples"].defaulted() || !vm["rehold-growth"].defaulted() ||
        !vm["end-backed-margin"].defaulted() || !vm["end-scale-growth"].defaulted() ||
-       !vm["first-recheck"].defaulted() || !vm["left-out-backing-margin"].defaulted()))
+       !vm["first-recheck"].defaulted() || !vm["left-out-backing-margin"].defaulted() ||
+       !vm["scale-start"].defaulted()))
     throw UsageError(
         "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
         "--end-confirm-margin, --finalize-rounds, --first-recheck, --end-scale-samples, "
-        "--end-scale-growth, --rehold-growth, --end-backed-margin and "
-        "--left-out-backing-margin need --robust");
+        "--end-scale-growth, --rehold-growth, --end-backed-margin, --left-out-backing-margin "
+        "and --scale-start need --robust");
   if (entry != "innovation" && entry != "residual")
     throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
   if (noise_scale != "estimated" && noise_scale != "given")
@@ -181,11 +187,15 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
     throw UsageError("--warm-up must be hold or given, not '" + warm_up + "'");
   if (first_recheck != "replay" && first_recheck != "relinearized")
     throw UsageError("--first-recheck must be replay or relinearized, not '" + first_recheck + "'");
+  if (scale_start != "at-most-last" && scale_start != "median")
+    throw UsageError("--scale-start must be at-most-last or median, not '" + scale_start + "'");
   robust->entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
   robust->scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
   robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
   robust->first_recheck =
       first_recheck == "replay" ? FirstRecheck::kReplayEstimate : FirstRecheck::kRelinearized;
+  robust->scale_start =
+      scale_start == "at-most-last" ? ScaleStart::kAtMostLast : ScaleStart::kMedian;
   robust->corroboration_window = window;
   robust->final_confirm_margin = margin;
   robust->end_confirm_margin = end_margin;

@@ -37,13 +37,13 @@ void addRobustFlags(boost::program_options::options_description& options,
 RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, bool allow_auto);
 
 /// The online smoother's own robust flags (`arbor replay`, `arbor serve`): --entry
-/// innovation|residual, --noise-scale estimated|given, --warm-up hold|given,
-/// --corroboration-window K, --final-confirm-margin X (bayestree/online_gnc.h: EntryTest,
-/// NoiseScale, WarmUp, RobustOptions::corroboration_window and final_confirm_margin).
+/// innovation|residual, --noise-scale estimated|given, --warm-up hold|given, --scale-start
+/// at-most-last|median, --first-recheck replay|relinearized, and the numbers of
+/// RobustOptions each flag names (--corroboration-window K, --final-confirm-margin X, ...;
+/// bayestree/online_gnc.h).
 void addOnlineRobustFlags(boost::program_options::options_description& options);
-/// Those flags into `robust` (entry, scale, warm_up, corroboration_window, final_confirm_margin).
-/// Throws UsageError on a
-/// bad value, and when one is given without --robust (`robust_on` false).
+/// Those flags into `robust`. Throws UsageError on a bad value, and when one is given without
+/// --robust (`robust_on` false).
 void readOnlineRobustFlags(const boost::program_options::variables_map& vm, bool robust_on,
                            RobustOptions* robust);
 

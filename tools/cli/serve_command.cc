@@ -369,6 +369,7 @@ int serveCommand(const std::vector<std::string>& args) {
           {"kernel", toString(options.robust->kernel)},
           {"noise_scale_mode", toString(options.robust->scale)},
           {"warm_up", toString(options.robust->warm_up)},
+          {"scale_start", toString(options.robust->scale_start)},
           {"first_recheck", toString(options.robust->first_recheck)},
           {"inlier_threshold", s.inlier_threshold},
           {"closures_inlier", counts[static_cast<int>(ClosureStatus::kInlier)]},
