@@ -69,6 +69,14 @@
 //                 corroborated the warm-up goes on; with loosen_min_samples judged and still
 //                 too few corroborated (isolated closures) σ̂² is estimated from every
 //                 innovation, as with K = 0.
+//   the start     (RobustOptions::scale_start) each later estimate from the corroborated
+//                 innovations starts at their untruncated median or at the last σ̂², whichever
+//                 is lower: false groups agree with each other (P) and may come to outnumber the
+//                 true runs in the corroborated set, and a fixed point started at their median
+//                 stays among them (a generated Manhattan world, 1000 poses, 50% group false
+//                 closures, seed 3: σ̂² 1.25 → 2683 at the 200th, every closure accepted). From
+//                 the last σ̂² the fixed point reads what lies within the truncation there: it
+//                 still grows step by step, and comes down from a false start as before.
 //   warm-up       a closure that arrives before the first estimate cannot be judged on the scale
 //                 yet: RobustOptions::warm_up kHold (default) keeps it at weight 0 (out of the
 //                 tree, its innovation recorded) and judges it by its innovation as on entry
