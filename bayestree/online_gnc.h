@@ -76,7 +76,8 @@
 //                 stays among them (a generated Manhattan world, 1000 poses, 50% group false
 //                 closures, seed 3: σ̂² 1.25 → 2683 at the 200th, every closure accepted). From
 //                 the last σ̂² the fixed point reads what lies within the truncation there: it
-//                 still grows step by step, and comes down from a false start as before.
+//                 still grows step by step, and comes down from a false start as before. The
+//                 first estimate, and the first after one is lost, start from the median.
 //   warm-up       a closure that arrives before the first estimate cannot be judged on the scale
 //                 yet: RobustOptions::warm_up kHold (default) keeps it at weight 0 (out of the
 //                 tree, its innovation recorded) and judges it by its innovation as on entry
