@@ -3,6 +3,7 @@
 // (P), so their innovations join the corroborated set as true runs do; where they become most
 // of it, the set's untruncated median lies among them, and a fixed point started there stays
 // there. Started at most at the last σ̂², it stays with the true closures that put it there.
+#include <cmath>
 #include <iostream>
 #include <random>
 #include <vector>
