@@ -201,9 +201,7 @@ TEST(LeaveOneOut, FinalizeReadsAgreementInBothFrames) {
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("smallGrid3D");
   const PlantedGrid g = plantSmallGrid3D(0.5, sim::OutlierPolicy::kLocal, 2);
   ASSERT_TRUE(g.is_false.count({1, 33}));
-  cli::ReplaySettings plain;
-  plain.batch = false;
-  const double F_plain = objective(g.clean, cli::runReplay(g.clean, plain).poses);
+  const double F_plain = testing::plainReplayF(g.clean);
   const Outcome r = replayRobust(g.clean, g.graph, RobustOptions{});
   std::cout << "rejected " << r.rejected.size() << " of " << g.is_false.size() << " false, F_clean "
             << r.F_clean << " against the clean replay's " << F_plain << "\n";

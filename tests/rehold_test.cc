@@ -14,7 +14,6 @@
 
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
 #include "planted_false_closures.h"
@@ -59,9 +58,7 @@ TEST(Rehold, RejectedAtOmegasWordAreJudgedAgain) {
     const Outcome without = replayRobust(p, off);
     const Outcome with = replayRobust(p, on);
     // The clean graph's optimum from the plain replay of it.
-    cli::ReplaySettings plain;
-    plain.batch = false;
-    const double F_star = objective(p.clean, cli::runReplay(p.clean, plain).poses);
+    const double F_star = testing::plainReplayF(p.clean);
     std::cout << "seed " << seed << ": rejected " << without.rejected.size() << " -> "
               << with.rejected.size() << " of " << p.is_false.size() << " false, F_clean / F* "
               << without.F_clean / F_star << " -> " << with.F_clean / F_star << "\n";

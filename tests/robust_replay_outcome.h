@@ -22,6 +22,15 @@ struct RobustOutcome {
   int finalize_iterations = 0;  ///< ReplayResult::finalize_iterations
 };
 
+/// F over `graph`'s edges at its plain replay's estimate (`arbor replay` without --robust and
+/// without its batch LM): the clean optimum the robust replays are compared with.
+template <class G>
+double plainReplayF(const PoseGraph<G>& graph) {
+  cli::ReplaySettings plain;
+  plain.batch = false;
+  return objective(graph, cli::runReplay(graph, plain).poses);
+}
+
 /// `graph` replayed with `robust` (no batch); F_clean over `clean` (same poses, same order).
 template <class G>
 RobustOutcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,

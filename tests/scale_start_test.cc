@@ -13,7 +13,6 @@
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/robust_kernel.h"
-#include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
 #include "planted_false_closures.h"
@@ -62,9 +61,7 @@ TEST(ScaleStart, ManhattanWithFiftyPercentGroupFalseClosures) {
   o.seed = 3;
   const testing::PlantedGraph<SE2> p =
       testing::plantFalseClosures(sim::manhattanWorld(world).graph, o);
-  cli::ReplaySettings plain;
-  plain.batch = false;
-  const double F_star = objective(p.clean, cli::runReplay(p.clean, plain).poses);
+  const double F_star = testing::plainReplayF(p.clean);
   const testing::RobustOutcome at_defaults = testing::replayRobust(p.clean, p.graph, {});
   RobustOptions from_median;
   from_median.scale_start = ScaleStart::kMedian;

@@ -18,7 +18,6 @@
 #include "arbor/core/pose_graph.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/cli/replay_order.h"
-#include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
@@ -39,18 +38,12 @@ Planted intelWithGroups() {
       std::get<PoseGraph2>(readPoseGraphFile(testing::datasetPath("intel"))), o);
 }
 
-double optimum(const PoseGraph2& clean) {
-  cli::ReplaySettings plain;
-  plain.batch = false;
-  return objective(clean, cli::runReplay(clean, plain).poses);
-}
-
 TEST(ShrinkingThreshold, IntelWithNinetyPercentGroupFalseClosures) {
   if (!testing::datasetPresent("intel"))
     GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath("intel");
   const Planted p = intelWithGroups();
   ASSERT_EQ(p.is_false.size(), 706U);
-  const double F_star = optimum(p.clean);
+  const double F_star = testing::plainReplayF(p.clean);
   const testing::RobustOutcome at_defaults = testing::replayRobust(p.clean, p.graph, {});
   RobustOptions no_rehold;
   no_rehold.rehold_growth = 0;
