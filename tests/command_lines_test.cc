@@ -429,12 +429,20 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
     EXPECT_NE(message.find("--corroboration-window"), std::string::npos) << message;
     EXPECT_NE(message.find("-4"), std::string::npos) << message;
   }
-  for (const std::string flag : {"--entry", "--noise-scale", "--warm-up", "--first-recheck"}) {
-    const std::string value = flag == "--entry"           ? "residual"
-                              : flag == "--first-recheck" ? "relinearized"
-                                                          : "given";
+  for (const auto& [flag, value] :
+       std::vector<std::pair<std::string, std::string>>{{"--entry", "residual"},
+                                                        {"--noise-scale", "given"},
+                                                        {"--warm-up", "given"},
+                                                        {"--first-recheck", "relinearized"},
+                                                        {"--scale-start", "median"}}) {
     EXPECT_THROW(parseServeCommandLine({flag, value}), UsageError) << flag;
-    EXPECT_THROW(parseReplayCommandLine({"graph.g2o", flag, value}), UsageError) << flag;
+    try {
+      parseReplayCommandLine({"graph.g2o", flag, value});
+      ADD_FAILURE() << flag << " accepted without --robust";
+    } catch (const UsageError& e) {
+      const std::string message = e.what();
+      EXPECT_NE(message.find(flag + " needs --robust"), std::string::npos) << message;
+    }
     try {
       parseServeCommandLine({"--robust", flag, "sometimes"});
       ADD_FAILURE() << flag << " sometimes accepted";

@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <sstream>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "arbor/tools/cli/cli_common.h"
 
@@ -70,6 +73,44 @@ void parseKernelAndThreshold(const std::string& kernel, const std::string& thres
                        " or a number > 0, not '" + threshold + "'");
     flags->threshold = value;
   }
+}
+
+// "a", "a or b", "a, b or c" (`last` = "or").
+std::string listed(const std::vector<std::string>& items, const std::string& last) {
+  std::string out;
+  for (size_t k = 0; k < items.size(); ++k)
+    out += (k == 0 ? "" : k + 1 == items.size() ? " " + last + " " : ", ") + items[k];
+  return out;
+}
+
+// The flags of addOnlineRobustFlags, all of which need --robust.
+constexpr const char* kOnlineFlags[] = {"entry",
+                                        "noise-scale",
+                                        "warm-up",
+                                        "scale-start",
+                                        "corroboration-window",
+                                        "final-confirm-margin",
+                                        "end-confirm-margin",
+                                        "finalize-rounds",
+                                        "first-recheck",
+                                        "rehold-growth",
+                                        "end-scale-samples",
+                                        "end-scale-growth",
+                                        "end-backed-margin",
+                                        "left-out-backing-margin"};
+
+// The value of a flag that names one of `choices`, each spelt as its toString() spells it;
+// anything else is refused naming the flag, the choices and the value.
+template <class Enum>
+Enum choiceOf(const po::variables_map& vm, const std::string& flag,
+              std::initializer_list<Enum> choices) {
+  const std::string text = vm[flag].as<std::string>();
+  std::vector<std::string> names;
+  for (const Enum choice : choices) {
+    if (text == toString(choice)) return choice;
+    names.emplace_back(toString(choice));
+  }
+  throw UsageError("--" + flag + " must be " + listed(names, "or") + ", not '" + text + "'");
 }
 
 }  // namespace
@@ -152,11 +193,14 @@ void addOnlineRobustFlags(po::options_description& options) {
 }
 
 void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
-  const std::string entry = vm["entry"].as<std::string>();
-  const std::string noise_scale = vm["noise-scale"].as<std::string>();
-  const std::string warm_up = vm["warm-up"].as<std::string>();
-  const std::string first_recheck = vm["first-recheck"].as<std::string>();
-  const std::string scale_start = vm["scale-start"].as<std::string>();
+  if (!robust_on) {
+    std::vector<std::string> given;
+    for (const char* flag : kOnlineFlags)
+      if (!vm[flag].defaulted()) given.push_back(std::string("--") + flag);
+    if (!given.empty())
+      throw UsageError(listed(given, "and") + (given.size() == 1 ? " needs" : " need") +
+                       " --robust");
+  }
   const int window = vm["corroboration-window"].as<int>();
   const double margin = vm["final-confirm-margin"].as<double>();
   const double end_margin = vm["end-confirm-margin"].as<double>();
@@ -166,36 +210,12 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const double backed = vm["end-backed-margin"].as<double>();
   const double growth = vm["end-scale-growth"].as<double>();
   const double left_out = vm["left-out-backing-margin"].as<double>();
-  if (!robust_on &&
-      (!vm["entry"].defaulted() || !vm["noise-scale"].defaulted() || !vm["warm-up"].defaulted() ||
-       !vm["corroboration-window"].defaulted() || !vm["final-confirm-margin"].defaulted() ||
-       !vm["end-confirm-margin"].defaulted() || !vm["finalize-rounds"].defaulted() ||
-       !vm["end-scale-samples"].defaulted() || !vm["rehold-growth"].defaulted() ||
-       !vm["end-backed-margin"].defaulted() || !vm["end-scale-growth"].defaulted() ||
-       !vm["first-recheck"].defaulted() || !vm["left-out-backing-margin"].defaulted() ||
-       !vm["scale-start"].defaulted()))
-    throw UsageError(
-        "--entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin, "
-        "--end-confirm-margin, --finalize-rounds, --first-recheck, --end-scale-samples, "
-        "--end-scale-growth, --rehold-growth, --end-backed-margin, --left-out-backing-margin "
-        "and --scale-start need --robust");
-  if (entry != "innovation" && entry != "residual")
-    throw UsageError("--entry must be innovation or residual, not '" + entry + "'");
-  if (noise_scale != "estimated" && noise_scale != "given")
-    throw UsageError("--noise-scale must be estimated or given, not '" + noise_scale + "'");
-  if (warm_up != "hold" && warm_up != "given")
-    throw UsageError("--warm-up must be hold or given, not '" + warm_up + "'");
-  if (first_recheck != "replay" && first_recheck != "relinearized")
-    throw UsageError("--first-recheck must be replay or relinearized, not '" + first_recheck + "'");
-  if (scale_start != "at-most-last" && scale_start != "median")
-    throw UsageError("--scale-start must be at-most-last or median, not '" + scale_start + "'");
-  robust->entry = entry == "innovation" ? EntryTest::kInnovation : EntryTest::kResidual;
-  robust->scale = noise_scale == "estimated" ? NoiseScale::kEstimated : NoiseScale::kGiven;
-  robust->warm_up = warm_up == "hold" ? WarmUp::kHold : WarmUp::kGiven;
+  robust->entry = choiceOf(vm, "entry", {EntryTest::kInnovation, EntryTest::kResidual});
+  robust->scale = choiceOf(vm, "noise-scale", {NoiseScale::kEstimated, NoiseScale::kGiven});
+  robust->warm_up = choiceOf(vm, "warm-up", {WarmUp::kHold, WarmUp::kGiven});
   robust->first_recheck =
-      first_recheck == "replay" ? FirstRecheck::kReplayEstimate : FirstRecheck::kRelinearized;
-  robust->scale_start =
-      scale_start == "at-most-last" ? ScaleStart::kAtMostLast : ScaleStart::kMedian;
+      choiceOf(vm, "first-recheck", {FirstRecheck::kReplayEstimate, FirstRecheck::kRelinearized});
+  robust->scale_start = choiceOf(vm, "scale-start", {ScaleStart::kAtMostLast, ScaleStart::kMedian});
   robust->corroboration_window = window;
   robust->final_confirm_margin = margin;
   robust->end_confirm_margin = end_margin;
