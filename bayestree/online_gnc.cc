@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 #include <map>
 #include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include <boost/math/distributions/chi_squared.hpp>
@@ -140,6 +142,39 @@ const char* toString(FirstRecheck first) {
 }
 const char* toString(NoiseScale scale) {
   return scale == NoiseScale::kEstimated ? "estimated" : "given";
+}
+
+namespace {
+
+// The choice whose toString() is `text`.
+template <class Enum>
+Enum parseChoice(const std::string& text, std::initializer_list<Enum> choices) {
+  std::string names;
+  size_t k = 0;
+  for (const Enum choice : choices) {
+    if (text == toString(choice)) return choice;
+    names += std::string(k == 0 ? "" : k + 1 == choices.size() ? " or " : ", ") + toString(choice);
+    ++k;
+  }
+  throw std::invalid_argument("must be " + names + ", not '" + text + "'");
+}
+
+}  // namespace
+
+EntryTest parseEntryTest(const std::string& text) {
+  return parseChoice(text, {EntryTest::kInnovation, EntryTest::kResidual});
+}
+NoiseScale parseNoiseScale(const std::string& text) {
+  return parseChoice(text, {NoiseScale::kEstimated, NoiseScale::kGiven});
+}
+WarmUp parseWarmUp(const std::string& text) {
+  return parseChoice(text, {WarmUp::kHold, WarmUp::kGiven});
+}
+ScaleStart parseScaleStart(const std::string& text) {
+  return parseChoice(text, {ScaleStart::kAtMostLast, ScaleStart::kMedian});
+}
+FirstRecheck parseFirstRecheck(const std::string& text) {
+  return parseChoice(text, {FirstRecheck::kReplayEstimate, FirstRecheck::kRelinearized});
 }
 
 std::string RobustOptions::problem() const {

@@ -311,6 +311,14 @@ enum class FirstRecheck {
 };
 const char* toString(FirstRecheck first);  ///< "replay", "relinearized"
 
+/// The inverses of the toString()s above: the value named `text`, else std::invalid_argument
+/// "must be a or b, not 'text'" (the caller puts its flag's or field's name before it).
+EntryTest parseEntryTest(const std::string& text);
+NoiseScale parseNoiseScale(const std::string& text);
+WarmUp parseWarmUp(const std::string& text);
+ScaleStart parseScaleStart(const std::string& text);
+FirstRecheck parseFirstRecheck(const std::string& text);
+
 struct RobustOptions {
   /// The kernel the closures graduate towards: tls (default) or gm graduate (GNC); huber and
   /// cauchy are reweighted without graduation (IRLS). Not none.

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <initializer_list>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -99,18 +98,16 @@ constexpr const char* kOnlineFlags[] = {"entry",
                                         "end-backed-margin",
                                         "left-out-backing-margin"};
 
-// The value of a flag that names one of `choices`, each spelt as its toString() spells it;
+// The value of a flag that names an enum's value (`parse`: the enum's inverse of toString);
 // anything else is refused naming the flag, the choices and the value.
 template <class Enum>
 Enum choiceOf(const po::variables_map& vm, const std::string& flag,
-              std::initializer_list<Enum> choices) {
-  const std::string text = vm[flag].as<std::string>();
-  std::vector<std::string> names;
-  for (const Enum choice : choices) {
-    if (text == toString(choice)) return choice;
-    names.emplace_back(toString(choice));
+              Enum (*parse)(const std::string&)) {
+  try {
+    return parse(vm[flag].as<std::string>());
+  } catch (const std::invalid_argument& e) {
+    throw UsageError("--" + flag + " " + e.what());
   }
-  throw UsageError("--" + flag + " must be " + listed(names, "or") + ", not '" + text + "'");
 }
 
 }  // namespace
@@ -210,12 +207,11 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const double backed = vm["end-backed-margin"].as<double>();
   const double growth = vm["end-scale-growth"].as<double>();
   const double left_out = vm["left-out-backing-margin"].as<double>();
-  robust->entry = choiceOf(vm, "entry", {EntryTest::kInnovation, EntryTest::kResidual});
-  robust->scale = choiceOf(vm, "noise-scale", {NoiseScale::kEstimated, NoiseScale::kGiven});
-  robust->warm_up = choiceOf(vm, "warm-up", {WarmUp::kHold, WarmUp::kGiven});
-  robust->first_recheck =
-      choiceOf(vm, "first-recheck", {FirstRecheck::kReplayEstimate, FirstRecheck::kRelinearized});
-  robust->scale_start = choiceOf(vm, "scale-start", {ScaleStart::kAtMostLast, ScaleStart::kMedian});
+  robust->entry = choiceOf(vm, "entry", parseEntryTest);
+  robust->scale = choiceOf(vm, "noise-scale", parseNoiseScale);
+  robust->warm_up = choiceOf(vm, "warm-up", parseWarmUp);
+  robust->first_recheck = choiceOf(vm, "first-recheck", parseFirstRecheck);
+  robust->scale_start = choiceOf(vm, "scale-start", parseScaleStart);
   robust->corroboration_window = window;
   robust->final_confirm_margin = margin;
   robust->end_confirm_margin = end_margin;
