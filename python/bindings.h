@@ -6,12 +6,14 @@
 
 #include <pybind11/pybind11.h>
 
+#include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/robust_kernel.h"
 
 namespace arbor::python {
 
 /// The robust options of `solve` and the online smoother (docs/python.md, "Robust"): the
-/// command line's robust flags (--kernel, --inlier-threshold with chi2/auto) as one object.
+/// command line's robust flags (--kernel, --inlier-threshold with chi2/auto, and replay's online
+/// flags) as one object.
 struct RobustSettings {
   KernelKind kernel = KernelKind::kTruncatedLeastSquares;
   /// c² on eᵀΩe when > 0; ≤ 0: the χ² quantile of the edge's dimension at `confidence`.
@@ -19,6 +21,11 @@ struct RobustSettings {
   double confidence = 0.99;
   /// Batch only: scale the χ² quantile by the estimated variance factor ("auto").
   bool estimate_scale = false;
+  /// The online smoother only: its own options, as `arbor replay`'s online robust flags set
+  /// them (kernel, threshold and confidence above are copied over these).
+  RobustOptions online;
+  /// Whether any of `online`'s differs from RobustOptions' default (solve() refuses them).
+  bool online_set = false;
 };
 
 void defineGraphs(pybind11::module_& m);    ///< Graph2, Graph3, read()

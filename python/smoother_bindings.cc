@@ -134,7 +134,7 @@ OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, 
       throw std::invalid_argument(
           "RobustOptions.estimate_scale is for batch solves only (the online smoother's "
           "threshold is given or the chi2 quantile)");
-    RobustOptions r;
+    RobustOptions r = robust->online;
     r.kernel = robust->kernel;
     r.threshold = robust->threshold;
     r.confidence = robust->confidence;

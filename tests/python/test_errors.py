@@ -38,6 +38,23 @@ def test_bad_options(data_dir):
         arbor.RobustOptions(kernel="none")
     with pytest.raises(ValueError, match="estimate_scale"):
         arbor.OnlineSmoother2(robust=arbor.RobustOptions(estimate_scale=True))
+    # The online keywords: a bad name, type or value is refused naming it, and solve() refuses
+    # them all (they are the online smoother's).
+    with pytest.raises(ValueError, match="noise_scale must be estimated or given, not 'sometimes'"):
+        arbor.RobustOptions(noise_scale="sometimes")
+    with pytest.raises(ValueError, match="scale_start must be at-most-last or median, not 'last'"):
+        arbor.RobustOptions(scale_start="last")
+    with pytest.raises(TypeError, match="unexpected keyword 'noise'"):
+        arbor.RobustOptions(noise="given")
+    with pytest.raises(TypeError, match="finalize_rounds must be an int, not float"):
+        arbor.RobustOptions(finalize_rounds=2.5)
+    with pytest.raises(ValueError, match="final_confirm_margin"):
+        arbor.RobustOptions(final_confirm_margin=0.5)
+    with pytest.raises(ValueError, match="corroboration_window"):
+        arbor.RobustOptions(corroboration_window=-4)
+    with pytest.raises(ValueError, match="online options"):
+        arbor.solve(graph, robust=arbor.RobustOptions(noise_scale="given"))
+    arbor.solve(graph, robust=arbor.RobustOptions(noise_scale="estimated"))  # the default: taken
 
 
 def test_bad_edges_and_ids():

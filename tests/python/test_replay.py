@@ -61,6 +61,29 @@ def test_robust_stats_match_the_cli(data_dir, arbor_cli):
                                                               rel=1e-12)
 
 
+def test_online_robust_options_match_the_cli(data_dir, arbor_cli):
+    """RobustOptions' online keywords reach the smoother as `arbor replay`'s flags of the same
+    names do: Ω at its word (noise_scale="given"), no corroboration, another final margin."""
+    path = os.path.join(data_dir, "manhattan_2d_group_0.1.g2o")
+    options = arbor.RobustOptions(noise_scale="given", corroboration_window=0,
+                                  final_confirm_margin=1.5, scale_start="median")
+    assert (options.noise_scale, options.corroboration_window) == ("given", 0)
+    assert (options.final_confirm_margin, options.scale_start) == (1.5, "median")
+    assert arbor.RobustOptions().noise_scale == "estimated"
+    smoother, F = replay(arbor.read(path), robust=options)
+    expected = arbor_cli("replay", path, "--robust", "--noise-scale", "given",
+                         "--corroboration-window", "0", "--final-confirm-margin", "1.5",
+                         "--scale-start", "median")
+    assert F == pytest.approx(expected["F_final"], rel=1e-9)
+    stats = smoother.stats()
+    for key in ["closures_inlier", "closures_outlier", "noise_scale_estimated"]:
+        assert stats[key] == expected["robust"][key], key
+    # Ω at its word: no scale is estimated, where the default estimates one.
+    assert not stats["noise_scale_estimated"] and stats["noise_scale"] == 1.0
+    default, _ = replay(arbor.read(path), robust=arbor.RobustOptions())
+    assert default.stats()["noise_scale_estimated"]
+
+
 @pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
 def test_replay_covariances_and_tum_output(name, data_dir, arbor_cli, tmp_path):
     """`arbor replay --covariances OUT -o OUT --format tum` writes what the module computes."""
