@@ -220,6 +220,8 @@ std::string RobustOptions::problem() const {
     return bad("final_confirm_margin", final_confirm_margin, "0 (off) or finite and >= 1");
   if (!(end_confirm_margin > 0) || !std::isfinite(end_confirm_margin))
     return bad("end_confirm_margin", end_confirm_margin, "finite and > 0");
+  if (end_rejected_partners < 0)
+    return bad("end_rejected_partners", end_rejected_partners, "0 (off) or >= 1");
   if (!(entry_band >= 1) || !std::isfinite(entry_band))
     return bad("entry_band", entry_band, "finite and >= 1");
   if (scale_min_samples < 1) return bad("scale_min_samples", scale_min_samples, ">= 1");
@@ -565,6 +567,7 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
       c2_end_ < c2_ ? options_.end_confirm_margin * c2_end_ : options_.final_confirm_margin * c2_;
   std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound, unbacked
   std::vector<int> backed_over;              // past it, but backed
+  std::set<int> disowned_within;             // of `over`, the disowned ones within `bound`
   const bool leave_out = update && options_.left_out_backing_margin > 0;
   for (size_t id = 0; id < closures_.size(); ++id) {
     Closure& c = closures_[id];
@@ -572,12 +575,16 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
     const bool is_backed = backed(c, options_.end_partners_agree ? &smoother : nullptr);
     if (is_backed && !leave_out) continue;
     if (!is_backed) c.judged_c2 = c2_;  // as unconfirmedBy
-    const std::optional<double> m = innovationPast(smoother, c, bound, /*at_the_end=*/true);
+    // Disowned: past the c² in use itself, no margin (header comment, "disowned at the end").
+    const bool is_disowned = !is_backed && disowned(c);
+    const std::optional<double> m = innovationPast(
+        smoother, c, is_disowned ? std::min(bound, endBound()) : bound, /*at_the_end=*/true);
     if (!m) continue;
     if (is_backed) {
       backed_over.push_back(static_cast<int>(id));
     } else {
       over.emplace_back(*m, static_cast<int>(id));
+      if (is_disowned && *m <= bound) disowned_within.insert(static_cast<int>(id));
     }
   }
   // Each backed one left out in turn, at the estimate the ones before it made (header comment,
@@ -589,9 +596,20 @@ int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>
     }
   for (int id : dropLargestPerPose(smoother, std::move(over))) {
     (*dropped)[static_cast<size_t>(id)] = 1;
+    totals_.disowned += static_cast<int>(disowned_within.count(id));
     ++changed;
   }
   return changed;
+}
+
+template <class G>
+bool OnlineGnc<G>::disowned(const Closure& c) const {
+  const size_t needed = static_cast<size_t>(options_.end_rejected_partners);
+  if (needed == 0 || c.partners.size() < needed) return false;
+  return std::all_of(c.partners.begin(), c.partners.end(), [&](int id) {
+    const Closure& p = closures_[static_cast<size_t>(id)];
+    return p.state == State::kSettled && !p.held && p.weight == 0.0;
+  });
 }
 
 // A false closure bends the chains between its ends, and the true closures beside it, read

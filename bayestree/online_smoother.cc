@@ -667,6 +667,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.graduation_steps = c.graduation_steps;
     s.closures_unconfirmed = c.unconfirmed;
     s.closures_left_out = c.left_out;
+    s.closures_disowned = c.disowned;
     s.rechecks_bounded = c.rechecks_bounded;
     s.closure_threshold = gnc_->threshold();
     s.closure_threshold_at_end = gnc_->thresholdAtEnd();

@@ -138,6 +138,9 @@ struct OnlineStats {
   /// Of those, the backed closures whose backing did not hold without them in finalize()
   /// (ClosureCounts::left_out; RobustOptions::left_out_backing_margin).
   int closures_left_out = 0;
+  /// Of those, the closures dropped within the margin because every partner had been rejected
+  /// (ClosureCounts::disowned; RobustOptions::end_rejected_partners).
+  int closures_disowned = 0;
   /// Re-checks of rejected closures that (E)'s lower bound settled without a path solve
   /// (ClosureCounts::rechecks_bounded).
   int rechecks_bounded = 0;

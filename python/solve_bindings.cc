@@ -188,6 +188,7 @@ constexpr std::pair<const char*, double RobustOptions::*> kOnlineReals[] = {
 constexpr std::pair<const char*, int RobustOptions::*> kOnlineInts[] = {
     {"corroboration_window", &RobustOptions::corroboration_window},
     {"finalize_rounds", &RobustOptions::finalize_rounds},
+    {"end_rejected_partners", &RobustOptions::end_rejected_partners},
     {"end_scale_samples", &RobustOptions::end_scale_samples}};
 
 // A value of the keyword `name`, as T, or a TypeError naming it.
@@ -294,6 +295,7 @@ void defineSolve(py::module_& m) {
                "('_' for '-'): noise_scale (estimated | given), entry (innovation | residual), "
                "warm_up (hold | given), scale_start (at-most-last | median), first_recheck "
                "(replay | relinearized), corroboration_window, finalize_rounds, "
+               "end_rejected_partners, "
                "end_scale_samples (ints), final_confirm_margin, end_confirm_margin, "
                "rehold_growth, end_scale_growth, end_backed_margin, left_out_backing_margin "
                "(numbers); OnlineSmoother only (solve() refuses them).")

@@ -293,7 +293,8 @@ TEST(HeapFlag, ReachesReplayAndServe) {
 
 // --entry, --noise-scale, --warm-up, --corroboration-window, --final-confirm-margin,
 // --finalize-rounds, --first-recheck, --end-scale-samples, --rehold-growth and
-// --end-backed-margin, --left-out-backing-margin, --scale-start (tools/cli/robust_flags.h)
+// --end-backed-margin, --left-out-backing-margin, --scale-start, --end-rejected-partners
+// (tools/cli/robust_flags.h)
 // reach the online robust options in replay and serve alike, are refused without --robust,
 // and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
@@ -325,7 +326,9 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "--left-out-backing-margin",
                                          "2",
                                          "--scale-start",
-                                         "median"};
+                                         "median",
+                                         "--end-rejected-partners",
+                                         "3"};
   std::vector<std::string> replay_args = args;
   replay_args.insert(replay_args.begin(), "graph.g2o");
   const auto replay = parseReplayCommandLine(replay_args);
@@ -344,6 +347,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(replay->online.first_recheck, FirstRecheck::kRelinearized);
   EXPECT_EQ(replay->online.left_out_backing_margin, 2.0);
   EXPECT_EQ(replay->online.scale_start, ScaleStart::kMedian);
+  EXPECT_EQ(replay->online.end_rejected_partners, 3);
   const auto serve = parseServeCommandLine(args);
   ASSERT_TRUE(serve.has_value());
   ASSERT_TRUE(serve->options.robust.has_value());
@@ -361,6 +365,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(serve->options.robust->first_recheck, FirstRecheck::kRelinearized);
   EXPECT_EQ(serve->options.robust->left_out_backing_margin, 2.0);
   EXPECT_EQ(serve->options.robust->scale_start, ScaleStart::kMedian);
+  EXPECT_EQ(serve->options.robust->end_rejected_partners, 3);
   // The defaults are the robust options' own.
   const auto plain = parseServeCommandLine({"--robust"});
   ASSERT_TRUE(plain.has_value() && plain->options.robust.has_value());
@@ -379,6 +384,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->left_out_backing_margin,
             RobustOptions{}.left_out_backing_margin);
   EXPECT_EQ(plain->options.robust->scale_start, ScaleStart::kAtMostLast);
+  EXPECT_EQ(plain->options.robust->end_rejected_partners, RobustOptions{}.end_rejected_partners);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--scale-start", "median"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--robust", "--scale-start", "last"}),
                UsageError);
@@ -389,6 +395,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_THROW(parseServeCommandLine({"--left-out-backing-margin", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-scale-growth", "2"}), UsageError);
   EXPECT_THROW(parseServeCommandLine({"--end-confirm-margin", "2"}), UsageError);
+  EXPECT_THROW(parseServeCommandLine({"--end-rejected-partners", "3"}), UsageError);
   for (const auto& [flag, bad] :
        std::vector<std::pair<std::string, std::string>>{{"--finalize-rounds", "0"},
                                                         {"--end-scale-samples", "-1"},
@@ -400,7 +407,8 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                                         {"--end-scale-growth", "1"},
                                                         {"--end-scale-growth", "nan"},
                                                         {"--end-confirm-margin", "0"},
-                                                        {"--end-confirm-margin", "inf"}}) {
+                                                        {"--end-confirm-margin", "inf"},
+                                                        {"--end-rejected-partners", "-1"}}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
       ADD_FAILURE() << flag << " " << bad << " accepted";

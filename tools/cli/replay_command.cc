@@ -136,6 +136,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"first_recheck", toString(run.online.first_recheck)},
           {"corroboration_window", run.online.corroboration_window},
           {"final_confirm_margin", run.online.final_confirm_margin},
+          {"end_rejected_partners", run.online.end_rejected_partners},
           {"end_confirm_margin", run.online.end_confirm_margin},
           {"threshold_in_use", online.closure_threshold},
           {"threshold_at_end", online.closure_threshold_at_end},
@@ -151,6 +152,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
           {"graduation_updates", online.graduation_updates},
           {"closures_unconfirmed", online.closures_unconfirmed},
           {"closures_left_out", online.closures_left_out},
+          {"closures_disowned", online.closures_disowned},
           {"rechecks_bounded", online.rechecks_bounded},
           {"warm_up_relinearizations", online.warm_up_relinearizations},
       };

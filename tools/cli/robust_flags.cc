@@ -90,6 +90,7 @@ constexpr const char* kOnlineFlags[] = {"entry",
                                         "corroboration-window",
                                         "final-confirm-margin",
                                         "end-confirm-margin",
+                                        "end-rejected-partners",
                                         "finalize-rounds",
                                         "first-recheck",
                                         "rehold-growth",
@@ -155,6 +156,12 @@ void addOnlineRobustFlags(po::options_description& options) {
       "end-confirm-margin", po::value<double>()->default_value(RobustOptions{}.end_confirm_margin),
       "with --robust, the same margin over the end's own threshold where that is the one in "
       "use (docs/design.md, \"The end's scale\"); > 0")(
+      "end-rejected-partners",
+      po::value<int>()->default_value(RobustOptions{}.end_rejected_partners),
+      "with --robust, the final pass drops an inlier no other inlier agrees with past the "
+      "threshold itself, not the margin over it, when at least this many closures agreed with "
+      "it on arrival and every one of them has been rejected since (docs/design.md, \"Disowned "
+      "at the end\"); 0: off")(
       "finalize-rounds", po::value<int>()->default_value(RobustOptions{}.finalize_rounds),
       "with --robust, at most this many rounds of the final pass (each graduates every closure "
       "to the end and re-checks every closure; another round only while a re-check changed a "
@@ -202,6 +209,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   const double margin = vm["final-confirm-margin"].as<double>();
   const double end_margin = vm["end-confirm-margin"].as<double>();
   const int rounds = vm["finalize-rounds"].as<int>();
+  const int rejected_partners = vm["end-rejected-partners"].as<int>();
   const int end_samples = vm["end-scale-samples"].as<int>();
   const double rehold = vm["rehold-growth"].as<double>();
   const double backed = vm["end-backed-margin"].as<double>();
@@ -216,6 +224,7 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
   robust->final_confirm_margin = margin;
   robust->end_confirm_margin = end_margin;
   robust->finalize_rounds = rounds;
+  robust->end_rejected_partners = rejected_partners;
   robust->end_scale_samples = end_samples;
   robust->rehold_growth = rehold;
   robust->end_backed_margin = backed;
