@@ -50,7 +50,8 @@ def test_robust_stats_match_the_cli(data_dir, arbor_cli):
     smoother, _ = replay(arbor.read(path), robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
     expected = arbor_cli("replay", path, "--robust", "--inlier-threshold", "2")["robust"]
     stats = smoother.stats()
-    for key in ["closures_inlier", "closures_outlier", "closures_unconfirmed", "graduation_steps",
+    for key in ["closures_inlier", "closures_outlier", "closures_unconfirmed", "closures_left_out",
+                "closures_disowned", "graduation_steps",
                 "graduation_updates", "warm_up_relinearizations", "noise_samples",
                 "noise_scale_estimated"]:
         assert stats[key] == expected[key], key
