@@ -9,8 +9,6 @@
 
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/pose_graph.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 
@@ -23,15 +21,7 @@ namespace {
 // inside the end's margin (1.25). The nine others of its group are rejected, and they are all
 // the closures that agreed with it on arrival.
 TEST(Disowned, TheLastOfAFalseGroupIsDroppedPastTheThresholdItself) {
-  sim::ManhattanOptions world;
-  world.poses = 3000;
-  world.seed = 7;
-  sim::OutlierOptions o;
-  o.fraction = 0.5;
-  o.policy = sim::OutlierPolicy::kGroup;
-  o.seed = 7;
-  const testing::PlantedGraph<SE2> p =
-      testing::plantFalseClosures(sim::manhattanWorld(world).graph, o);
+  const testing::PlantedGraph<SE2> p = testing::manhattanWithFalseGroups(3000, 7, 0.5);
   ASSERT_EQ(p.is_false.count({12, 1306}), 1U);
   const double F_star = testing::plainReplayF(p.clean);
   const testing::RobustOutcome at_defaults = testing::replayRobust(p.clean, p.graph, {});

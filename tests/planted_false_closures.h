@@ -4,11 +4,14 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <set>
 #include <utility>
 
 #include "arbor/core/pose_graph.h"
+#include "arbor/core/se2.h"
 #include "arbor/tools/generator/false_closures.h"
+#include "arbor/tools/generator/graph_generator.h"
 
 namespace arbor::testing {
 
@@ -30,6 +33,19 @@ PlantedGraph<G> plantFalseClosures(PoseGraph<G> clean, const sim::OutlierOptions
     p.is_false.insert({std::min(a, b), std::max(a, b)});
   }
   return p;
+}
+
+/// `arbor generate manhattan --poses N --seed S`, then `arbor generate outliers --outliers F
+/// --outlier-policy group --seed S`.
+inline PlantedGraph<SE2> manhattanWithFalseGroups(int poses, std::uint64_t seed, double fraction) {
+  sim::ManhattanOptions world;
+  world.poses = poses;
+  world.seed = seed;
+  sim::OutlierOptions o;
+  o.fraction = fraction;
+  o.policy = sim::OutlierPolicy::kGroup;
+  o.seed = seed;
+  return plantFalseClosures(sim::manhattanWorld(world).graph, o);
 }
 
 }  // namespace arbor::testing

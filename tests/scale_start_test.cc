@@ -13,8 +13,6 @@
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/robust_kernel.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 
@@ -52,15 +50,7 @@ TEST(ScaleStart, StartCapKeepsTheFixedPointBelowAFalseMajority) {
 // closure is accepted; started at most at the last σ̂², the replay ends at F* with exactly the
 // false closures rejected.
 TEST(ScaleStart, ManhattanWithFiftyPercentGroupFalseClosures) {
-  sim::ManhattanOptions world;
-  world.poses = 1000;
-  world.seed = 3;
-  sim::OutlierOptions o;
-  o.fraction = 0.5;
-  o.policy = sim::OutlierPolicy::kGroup;
-  o.seed = 3;
-  const testing::PlantedGraph<SE2> p =
-      testing::plantFalseClosures(sim::manhattanWorld(world).graph, o);
+  const testing::PlantedGraph<SE2> p = testing::manhattanWithFalseGroups(1000, 3, 0.5);
   const double F_star = testing::plainReplayF(p.clean);
   const testing::RobustOutcome at_defaults = testing::replayRobust(p.clean, p.graph, {});
   RobustOptions from_median;
