@@ -205,31 +205,21 @@ void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOp
       throw UsageError(listed(given, "and") + (given.size() == 1 ? " needs" : " need") +
                        " --robust");
   }
-  const int window = vm["corroboration-window"].as<int>();
-  const double margin = vm["final-confirm-margin"].as<double>();
-  const double end_margin = vm["end-confirm-margin"].as<double>();
-  const int rounds = vm["finalize-rounds"].as<int>();
-  const int rejected_partners = vm["end-rejected-partners"].as<int>();
-  const int end_samples = vm["end-scale-samples"].as<int>();
-  const double rehold = vm["rehold-growth"].as<double>();
-  const double backed = vm["end-backed-margin"].as<double>();
-  const double growth = vm["end-scale-growth"].as<double>();
-  const double left_out = vm["left-out-backing-margin"].as<double>();
   robust->entry = choiceOf(vm, "entry", parseEntryTest);
   robust->scale = choiceOf(vm, "noise-scale", parseNoiseScale);
   robust->warm_up = choiceOf(vm, "warm-up", parseWarmUp);
   robust->first_recheck = choiceOf(vm, "first-recheck", parseFirstRecheck);
   robust->scale_start = choiceOf(vm, "scale-start", parseScaleStart);
-  robust->corroboration_window = window;
-  robust->final_confirm_margin = margin;
-  robust->end_confirm_margin = end_margin;
-  robust->finalize_rounds = rounds;
-  robust->end_rejected_partners = rejected_partners;
-  robust->end_scale_samples = end_samples;
-  robust->rehold_growth = rehold;
-  robust->end_backed_margin = backed;
-  robust->left_out_backing_margin = left_out;
-  robust->end_scale_growth = growth;
+  robust->corroboration_window = vm["corroboration-window"].as<int>();
+  robust->final_confirm_margin = vm["final-confirm-margin"].as<double>();
+  robust->end_confirm_margin = vm["end-confirm-margin"].as<double>();
+  robust->end_rejected_partners = vm["end-rejected-partners"].as<int>();
+  robust->finalize_rounds = vm["finalize-rounds"].as<int>();
+  robust->end_scale_samples = vm["end-scale-samples"].as<int>();
+  robust->end_scale_growth = vm["end-scale-growth"].as<double>();
+  robust->rehold_growth = vm["rehold-growth"].as<double>();
+  robust->end_backed_margin = vm["end-backed-margin"].as<double>();
+  robust->left_out_backing_margin = vm["left-out-backing-margin"].as<double>();
   // The numbers are checked by the options' own rule (RobustOptions::problem), which names the
   // field; each flag here is its field's name with '-' for '_'.
   const std::string problem = robust->problem();
