@@ -22,10 +22,9 @@ struct RobustSettings {
   /// Batch only: scale the χ² quantile by the estimated variance factor ("auto").
   bool estimate_scale = false;
   /// The online smoother only: its own options, as `arbor replay`'s online robust flags set
-  /// them (kernel, threshold and confidence above are copied over these).
+  /// them (kernel, threshold and confidence above are copied over these; solve() refuses any
+  /// that differs from RobustOptions' default).
   RobustOptions online;
-  /// Whether any of `online`'s differs from RobustOptions' default (solve() refuses them).
-  bool online_set = false;
 };
 
 void defineGraphs(pybind11::module_& m);    ///< Graph2, Graph3, read()

@@ -59,13 +59,96 @@ void fillRtr(const RtrSummary& s, SolveOutcome* out) {
   out->message = s.message;
 }
 
+// The online smoother's options that `arbor replay`'s online robust flags set, by the flags'
+// names with '_' for '-' (noise_scale is RobustOptions::scale).
+constexpr std::pair<const char*, double RobustOptions::*> kOnlineReals[] = {
+    {"final_confirm_margin", &RobustOptions::final_confirm_margin},
+    {"end_confirm_margin", &RobustOptions::end_confirm_margin},
+    {"rehold_growth", &RobustOptions::rehold_growth},
+    {"end_scale_growth", &RobustOptions::end_scale_growth},
+    {"end_backed_margin", &RobustOptions::end_backed_margin},
+    {"left_out_backing_margin", &RobustOptions::left_out_backing_margin}};
+constexpr std::pair<const char*, int RobustOptions::*> kOnlineInts[] = {
+    {"corroboration_window", &RobustOptions::corroboration_window},
+    {"finalize_rounds", &RobustOptions::finalize_rounds},
+    {"end_rejected_partners", &RobustOptions::end_rejected_partners},
+    {"end_scale_samples", &RobustOptions::end_scale_samples}};
+
+// A value of the keyword `name`, as T, or a TypeError naming it.
+template <class T>
+T keywordValue(const std::string& name, const py::handle& value, const char* type) {
+  try {
+    return value.cast<T>();
+  } catch (const py::cast_error&) {
+    throw py::type_error("RobustOptions: " + name + " must be " + type + ", not " +
+                         std::string(py::str(value.get_type().attr("__name__"))));
+  }
+}
+
+// The enum named by the keyword `name` (parse: the enum's inverse of toString).
+template <class Enum>
+Enum keywordChoice(const std::string& name, const py::handle& value,
+                   Enum (*parse)(const std::string&)) {
+  try {
+    return parse(keywordValue<std::string>(name, value, "a str"));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument("RobustOptions: " + name + " " + e.what());
+  }
+}
+
+// The online options from the keywords; anything else is a TypeError.
+RobustOptions onlineOptions(const py::kwargs& keywords) {
+  RobustOptions o;
+  for (const auto& [key, value] : keywords) {
+    const std::string name = py::str(key);
+    if (name == "noise_scale") {
+      o.scale = keywordChoice(name, value, parseNoiseScale);
+    } else if (name == "entry") {
+      o.entry = keywordChoice(name, value, parseEntryTest);
+    } else if (name == "warm_up") {
+      o.warm_up = keywordChoice(name, value, parseWarmUp);
+    } else if (name == "scale_start") {
+      o.scale_start = keywordChoice(name, value, parseScaleStart);
+    } else if (name == "first_recheck") {
+      o.first_recheck = keywordChoice(name, value, parseFirstRecheck);
+    } else {
+      bool known = false;
+      for (const auto& [field, member] : kOnlineReals)
+        if (name == field) {
+          o.*member = keywordValue<double>(name, value, "a number");
+          known = true;
+        }
+      for (const auto& [field, member] : kOnlineInts)
+        if (name == field) {
+          o.*member = keywordValue<int>(name, value, "an int");
+          known = true;
+        }
+      if (!known) throw py::type_error("RobustOptions: unexpected keyword '" + name + "'");
+    }
+  }
+  // The numbers by the options' own rule, which names the field (RobustOptions::problem).
+  const std::string problem = o.problem();
+  if (!problem.empty()) throw std::invalid_argument(problem);
+  return o;
+}
+
+// Whether any online option differs from RobustOptions' default (solve() refuses them).
+bool differsFromDefault(const RobustOptions& o) {
+  const RobustOptions d;
+  bool differs = o.scale != d.scale || o.entry != d.entry || o.warm_up != d.warm_up ||
+                 o.scale_start != d.scale_start || o.first_recheck != d.first_recheck;
+  for (const auto& [field, member] : kOnlineReals) differs = differs || o.*member != d.*member;
+  for (const auto& [field, member] : kOnlineInts) differs = differs || o.*member != d.*member;
+  return differs;
+}
+
 // As `arbor batch --robust`: GNC from the initialisation; with rtr, the certifiable solver on
 // the inlier problem.
 template <class G>
 void solveRobust(const PoseGraph<G>& graph, const SolveRequest& q, BatchSolver solver,
                  const refine::BatchSolveSettings& settings, std::vector<G>* poses,
                  SolveOutcome* out) {
-  if (q.robust->online_set)
+  if (differsFromDefault(q.robust->online))
     throw std::invalid_argument(
         "solve(): RobustOptions' online options (noise_scale, entry, warm_up, scale_start, "
         "first_recheck, corroboration_window, the margins, rounds and end-scale settings) are "
@@ -176,88 +259,6 @@ void defineSolveOf(py::module_& m) {
       "(GNC as `arbor batch --robust`). Returns an arbor.SolveResult.");
 }
 
-// The online smoother's options that `arbor replay`'s online robust flags set, by the flags'
-// names with '_' for '-' (noise_scale is RobustOptions::scale).
-constexpr std::pair<const char*, double RobustOptions::*> kOnlineReals[] = {
-    {"final_confirm_margin", &RobustOptions::final_confirm_margin},
-    {"end_confirm_margin", &RobustOptions::end_confirm_margin},
-    {"rehold_growth", &RobustOptions::rehold_growth},
-    {"end_scale_growth", &RobustOptions::end_scale_growth},
-    {"end_backed_margin", &RobustOptions::end_backed_margin},
-    {"left_out_backing_margin", &RobustOptions::left_out_backing_margin}};
-constexpr std::pair<const char*, int RobustOptions::*> kOnlineInts[] = {
-    {"corroboration_window", &RobustOptions::corroboration_window},
-    {"finalize_rounds", &RobustOptions::finalize_rounds},
-    {"end_rejected_partners", &RobustOptions::end_rejected_partners},
-    {"end_scale_samples", &RobustOptions::end_scale_samples}};
-
-// A value of the keyword `name`, as T, or a TypeError naming it.
-template <class T>
-T keywordValue(const std::string& name, const py::handle& value, const char* type) {
-  try {
-    return value.cast<T>();
-  } catch (const py::cast_error&) {
-    throw py::type_error("RobustOptions: " + name + " must be " + type + ", not " +
-                         std::string(py::str(value.get_type().attr("__name__"))));
-  }
-}
-
-// The enum named by the keyword `name` (parse: the enum's inverse of toString).
-template <class Enum>
-Enum keywordChoice(const std::string& name, const py::handle& value,
-                   Enum (*parse)(const std::string&)) {
-  try {
-    return parse(keywordValue<std::string>(name, value, "a str"));
-  } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument("RobustOptions: " + name + " " + e.what());
-  }
-}
-
-// The online options from the keywords; anything else is a TypeError.
-RobustOptions onlineOptions(const py::kwargs& keywords) {
-  RobustOptions o;
-  for (const auto& [key, value] : keywords) {
-    const std::string name = py::str(key);
-    if (name == "noise_scale") {
-      o.scale = keywordChoice(name, value, parseNoiseScale);
-    } else if (name == "entry") {
-      o.entry = keywordChoice(name, value, parseEntryTest);
-    } else if (name == "warm_up") {
-      o.warm_up = keywordChoice(name, value, parseWarmUp);
-    } else if (name == "scale_start") {
-      o.scale_start = keywordChoice(name, value, parseScaleStart);
-    } else if (name == "first_recheck") {
-      o.first_recheck = keywordChoice(name, value, parseFirstRecheck);
-    } else {
-      bool known = false;
-      for (const auto& [field, member] : kOnlineReals)
-        if (name == field) {
-          o.*member = keywordValue<double>(name, value, "a number");
-          known = true;
-        }
-      for (const auto& [field, member] : kOnlineInts)
-        if (name == field) {
-          o.*member = keywordValue<int>(name, value, "an int");
-          known = true;
-        }
-      if (!known) throw py::type_error("RobustOptions: unexpected keyword '" + name + "'");
-    }
-  }
-  // The numbers by the options' own rule, which names the field (RobustOptions::problem).
-  const std::string problem = o.problem();
-  if (!problem.empty()) throw std::invalid_argument(problem);
-  return o;
-}
-
-bool differsFromDefault(const RobustOptions& o) {
-  const RobustOptions d;
-  bool differs = o.scale != d.scale || o.entry != d.entry || o.warm_up != d.warm_up ||
-                 o.scale_start != d.scale_start || o.first_recheck != d.first_recheck;
-  for (const auto& [field, member] : kOnlineReals) differs = differs || o.*member != d.*member;
-  for (const auto& [field, member] : kOnlineInts) differs = differs || o.*member != d.*member;
-  return differs;
-}
-
 }  // namespace
 
 void defineSolve(py::module_& m) {
@@ -283,7 +284,6 @@ void defineSolve(py::module_& m) {
                  s.confidence = confidence;
                  s.estimate_scale = estimate_scale;
                  s.online = onlineOptions(online);
-                 s.online_set = differsFromDefault(s.online);
                  return s;
                }),
                py::arg("kernel") = "tls", py::arg("threshold") = 0.0, py::arg("confidence") = 0.99,
