@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake pkg-config git clang-format
+  build-essential cmake pkg-config git clang-format ccache jq
   libeigen3-dev libsuitesparse-dev libboost-program-options-dev
   liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless
   default-jdk-headless libjchart2d-java
