@@ -579,5 +579,35 @@ TEST(ServeCommandLine, RecvBufSizesTheUdpmReceiveBuffer) {
   EXPECT_EQ(serve::udpmPort("memq://"), -1);
 }
 
+// Only whole flag names are taken: a prefix (`--thread` for `--threads`, `--out` for
+// `--output`) is refused naming what was typed, in replay, serve and any other command, while the
+// whole names and their `--flag=value` form still parse.
+TEST(CommandLine, APrefixOfAFlagIsRefused) {
+  const std::vector<std::vector<std::string>> prefixes = {
+      {"--thread", "2"}, {"--out", "x.g2o"}, {"--relinearize-thresh", "0.1"}, {"--robus"}};
+  for (const auto& prefix : prefixes) {
+    std::vector<std::string> replay = {"graph.g2o"};
+    replay.insert(replay.end(), prefix.begin(), prefix.end());
+    for (const bool serve : {false, true}) {
+      try {
+        if (serve) {
+          parseServeCommandLine(prefix);
+        } else {
+          parseReplayCommandLine(replay);
+        }
+        ADD_FAILURE() << (serve ? "serve " : "replay ") << prefix.front() << " accepted";
+      } catch (const UsageError& e) {
+        EXPECT_NE(std::string(e.what()).find(prefix.front()), std::string::npos) << e.what();
+      }
+    }
+  }
+  EXPECT_EQ(replaySmoother({"--threads", "2"}).threads, 2);
+  EXPECT_EQ(serveSmoother({"--threads=2"}).threads, 2);
+  boost::program_options::options_description any;
+  any.add_options()("output", boost::program_options::value<std::string>(), "a file");
+  EXPECT_THROW(parseArguments({"--out", "x"}, any, {}), UsageError);
+  EXPECT_EQ(parseArguments({"--output", "x"}, any, {})["output"].as<std::string>(), "x");
+}
+
 }  // namespace
 }  // namespace arbor::cli

@@ -35,9 +35,16 @@ bool helpRequested(const std::vector<std::string>& args, const po::options_descr
 po::variables_map parseArguments(const std::vector<std::string>& args,
                                  const po::options_description& options,
                                  const po::positional_options_description& positional) {
+  // No prefix guessing (Boost's unix_style allows it): `--thread 2` would be taken as
+  // `--threads 2` today and refused as ambiguous once a flag with that prefix is added, so a
+  // script that relies on a prefix breaks on a later release. Only whole names are taken.
+  constexpr int kStyle =
+      po::command_line_style::unix_style ^ po::command_line_style::allow_guessing;
   po::variables_map vm;
   try {
-    po::store(po::command_line_parser(args).options(options).positional(positional).run(), vm);
+    po::store(
+        po::command_line_parser(args).options(options).positional(positional).style(kStyle).run(),
+        vm);
     po::notify(vm);
   } catch (const po::error& e) {
     throw UsageError(e.what());
