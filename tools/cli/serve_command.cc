@@ -2,6 +2,7 @@
 // smoother and publish the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
 #include "arbor/tools/cli/serve_command.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <csignal>
@@ -267,11 +268,16 @@ int serveCommand(const std::vector<std::string>& args) {
     publisher = std::make_unique<serve::LinkWatch>(*memq, publish_options);
   } else if (serve::isUdpmUrl(url)) {
     const serve::Channels channels = serve::Channels::withPrefix(options.channel_prefix);
+    // Nothing larger than the largest message a channel accepts is reassembled.
+    const serve::MessageLimits& m = options.message_limits;
+    serve::DatagramLimits limits;
+    limits.max_message_bytes =
+        static_cast<std::uint32_t>(std::max({m.edge, m.prior, m.edge_command, m.command}));
     datagrams = std::make_unique<serve::UdpmReceiver>(
         url,
         std::set<std::string>{channels.edges, channels.priors, channels.edge_commands,
                               channels.command},
-        log);
+        log, limits);
     memq = std::make_unique<lcm::LCM>("memq://");
     if (!memq->good()) throw std::runtime_error("cannot open LCM at 'memq://'");
     receive = std::make_unique<serve::LinkWatch>(*memq, receive_options);
