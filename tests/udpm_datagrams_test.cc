@@ -13,8 +13,11 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <map>
+#include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -238,6 +241,32 @@ TEST(UdpmUrl, GroupPortAndReceiveBufferAreRead) {
 
 // ---- across processes, in a private network namespace ----
 
+// The UDP sockets of process `pid` bound to `port` (its /proc/PID/fd against /proc/PID/net/udp):
+// liblcm's udpm receive parts, once started, bind one of their own to the group's port.
+int udpSocketsOnPort(pid_t pid, int port) {
+  std::set<std::string> inodes;
+  const fs::path fds = "/proc/" + std::to_string(pid) + "/fd";
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(fds, ec)) {
+    const std::string target = fs::read_symlink(e.path(), ec).string();
+    if (target.rfind("socket:[", 0) == 0) inodes.insert(target.substr(8, target.size() - 9));
+  }
+  std::ifstream udp("/proc/" + std::to_string(pid) + "/net/udp");
+  std::string line;
+  std::getline(udp, line);  // the header
+  int n = 0;
+  while (std::getline(udp, line)) {
+    std::istringstream fields(line);
+    std::string slot, local, remote, state, queues, timer, retransmits, uid, timeout, inode;
+    fields >> slot >> local >> remote >> state >> queues >> timer >> retransmits >> uid >>
+        timeout >> inode;
+    const std::size_t colon = local.find(':');
+    if (colon == std::string::npos) continue;
+    if (std::stoi(local.substr(colon + 1), nullptr, 16) == port && inodes.count(inode)) ++n;
+  }
+  return n;
+}
+
 constexpr int kPort = 7667;  // in the test's own namespace
 
 class UdpmForgedDatagrams : public ::testing::Test {
@@ -299,6 +328,10 @@ TEST_F(UdpmForgedDatagrams, ServeSurvivesThemAndAppliesARealStreamAfter) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   ASSERT_NE(serve.err().find("listening on"), std::string::npos) << serve.err();
+  // One socket on the group's port, serve's own: liblcm's receive parts never started (its
+  // publishing instance is publish-only). Before, the receive and the publish instance had one
+  // each.
+  EXPECT_EQ(udpSocketsOnPort(serve.pid(), kPort), 1);
 
   const std::vector<std::string> channels = {prefix + "ARBOR_EDGES", prefix + "ARBOR_PRIORS",
                                              prefix + "ARBOR_EDGE_COMMANDS",
