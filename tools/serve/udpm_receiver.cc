@@ -66,7 +66,7 @@ UdpmEndpoint parseUdpmUrl(const std::string& url) {
                                 "' is not a multicast IPv4 address");
   }
   const std::string buf = option(query, "recv_buf_size");
-  if (!buf.empty()) e.recv_buf_bytes = positive(buf, "recv_buf_size", url, 1ll << 31);
+  if (!buf.empty()) e.recv_buf_bytes = positive(buf, "recv_buf_size", url, 2147483647);
   return e;
 }
 
@@ -91,11 +91,17 @@ UdpmReceiver::UdpmReceiver(const std::string& url, std::set<std::string> channel
     const int bytes = static_cast<int>(endpoint_.recv_buf_bytes);
     if (::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes) != 0) fail("SO_RCVBUF");
   }
+  // Bound to the group, not INADDR_ANY as liblcm's: no unicast datagram to the port (from
+  // anywhere that routes to this host) and no other group's traffic reaches this socket.
   sockaddr_in addr{};
   addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_ANY);
+  addr.sin_addr = endpoint_.group;
   addr.sin_port = htons(static_cast<std::uint16_t>(endpoint_.port));
   if (::bind(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) fail("bind");
+  const int off = 0;
+  if (::setsockopt(fd_, IPPROTO_IP, IP_MULTICAST_ALL, &off, sizeof off) != 0) {
+    fail("IP_MULTICAST_ALL");
+  }
   ip_mreq join{};
   join.imr_multiaddr = endpoint_.group;
   join.imr_interface.s_addr = htonl(INADDR_ANY);

@@ -1,12 +1,13 @@
 // `arbor serve`'s receive path for udpm:// URLs, in place of liblcm's (whose fragment reassembly
 // writes out of bounds on a forged LC03 fragment: one datagram ended the service, issue 56). A
-// UDP socket bound to the URL's port and joined to its group, with the URL's recv_buf_size as
-// SO_RCVBUF, as liblcm's receive socket is; every datagram goes through LcmDatagramAssembler
-// (tools/serve/lcm_datagram.h: the wire format checked, fragments reassembled in a bounded
-// table) and only a complete message on one of the channels asked for is handed on. A refused
-// datagram is counted by reason and logged, at most one line per reason a second (LogLimiter).
-// liblcm then sees only messages, never a datagram: serve hands them to its subscriptions
-// through an in-process memq:// instance (tools/serve/serve_service.h).
+// UDP socket joined to the URL's group with the URL's recv_buf_size as SO_RCVBUF, as liblcm's
+// receive socket is, but bound to the group's address and port (liblcm binds INADDR_ANY, which
+// also takes unicast datagrams to the port and other groups' on it); every datagram goes through
+// LcmDatagramAssembler (tools/serve/lcm_datagram.h: the wire format checked, fragments reassembled
+// in a bounded table) and only a complete message on one of the channels asked for is handed on. A
+// refused datagram is counted by reason and logged, at most one line per reason a second
+// (LogLimiter). liblcm then sees only messages, never a datagram: serve hands them to its
+// subscriptions through an in-process memq:// instance (tools/serve/serve_service.h).
 #pragma once
 
 #include <netinet/in.h>
