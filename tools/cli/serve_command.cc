@@ -2,12 +2,14 @@
 // smoother and publish the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
 #include "arbor/tools/cli/serve_command.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <csignal>
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -241,7 +243,10 @@ int serveCommand(const std::vector<std::string>& args) {
 
   // Two links, one to receive and one to publish (see serve::Service), each re-created after a
   // transport fault (serve::LinkWatch); memq:// is private to an instance, so there one serves
-  // both and is never re-created.
+  // both and is never re-created. udpm://: serve reads the datagrams itself (serve::UdpmReceiver:
+  // checked, reassembled in bounded memory) and hands complete messages to its subscriptions
+  // through a memq:// inbox; the publishing instance is never asked to receive, so liblcm's
+  // udpm receive thread never starts in this process.
   const auto log = [](const std::string& text) {
     std::cerr << "arbor serve: " << text << std::endl;
   };
@@ -255,16 +260,34 @@ int serveCommand(const std::vector<std::string>& args) {
   publish_options.probe_channel.clear();
   std::unique_ptr<lcm::LCM> memq;
   std::unique_ptr<serve::LinkWatch> receive, publisher;
+  std::unique_ptr<serve::UdpmReceiver> datagrams;
   if (url.rfind("memq://", 0) == 0) {
     memq = std::make_unique<lcm::LCM>(url);
     if (!memq->good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
     receive = std::make_unique<serve::LinkWatch>(*memq, receive_options);
     publisher = std::make_unique<serve::LinkWatch>(*memq, publish_options);
+  } else if (serve::isUdpmUrl(url)) {
+    const serve::Channels channels = serve::Channels::withPrefix(options.channel_prefix);
+    // Nothing larger than the largest message a channel accepts is reassembled.
+    const serve::MessageLimits& m = options.message_limits;
+    serve::DatagramLimits limits;
+    limits.max_message_bytes =
+        static_cast<std::uint32_t>(std::max({m.edge, m.prior, m.edge_command, m.command}));
+    datagrams = std::make_unique<serve::UdpmReceiver>(
+        url,
+        std::set<std::string>{channels.edges, channels.priors, channels.edge_commands,
+                              channels.command},
+        log, limits);
+    memq = std::make_unique<lcm::LCM>("memq://");
+    if (!memq->good()) throw std::runtime_error("cannot open LCM at 'memq://'");
+    receive = std::make_unique<serve::LinkWatch>(*memq, receive_options);
+    publish_options.publish_only = true;
+    publisher = std::make_unique<serve::LinkWatch>(publish_options);
   } else {
     receive = std::make_unique<serve::LinkWatch>(receive_options);
     publisher = std::make_unique<serve::LinkWatch>(publish_options);
   }
-  serve::Service service(*receive, *publisher, options);
+  serve::Service service(*receive, *publisher, options, datagrams.get());
   service.start();
   std::cerr << "arbor serve: listening on " << service.channels().edges << std::endl;
   int signal = 0;
@@ -354,6 +377,8 @@ int serveCommand(const std::vector<std::string>& args) {
         {"held_at_stop", s.held_at_stop},
         {"link_outages", s.link_outages},
         {"control_refused", control},
+        {"datagrams_refused", s.datagrams_refused},
+        {"datagram_partials_dropped", s.datagram_partials_dropped},
     };
     j["edges_disabled"] = s.edges_disabled;
     j["pairs_disabled"] = s.pairs_disabled;

@@ -176,6 +176,12 @@ status_t toMessage(const CoreStatus& k) {
     const auto it = counts.rejected_by_reason.find(reason);
     return it == counts.rejected_by_reason.end() ? std::int64_t{0} : it->second;
   };
+  s.datagrams_refused = 0;
+  for (const auto& [reason, count] : k.transport.datagrams_refused) {
+    s.reason.push_back("datagram " + reason);
+    s.reason_count.push_back(count);
+    s.datagrams_refused += count;
+  }
   s.refused_senders = by(c, "sender limit") + by(p, "sender limit") + by(c2, "sender limit");
   s.refused_oversize = by(c, "oversize") + by(p, "oversize") + by(c2, "oversize");
   if (const auto it = k.control_refused.find("oversize"); it != k.control_refused.end()) {

@@ -47,7 +47,9 @@ LinkWatch::LinkWatch(LinkWatchOptions options) : options_(std::move(options)) {
                              "' (liblcm refused the URL)");
   }
   ++counts_.creations;
-  if (owned_->getFileno() < 0) {
+  if (options_.publish_only) {
+    markConnected();
+  } else if (owned_->getFileno() < 0) {
     markDown("cannot connect to " + describe(options_.url));
   } else {
     tuneLcmTransport(*owned_, options_.url);
@@ -98,6 +100,7 @@ void LinkWatch::subscribeOn(lcm::LCM& lcm, Subscription& s) {
 }
 
 void LinkWatch::subscribe(const std::string& channel, Handler handler) {
+  if (options_.publish_only) throw std::logic_error("LinkWatch: subscribe on a publish-only link");
   subscriptions_.push_back(
       std::make_unique<Subscription>(Subscription{channel, std::move(handler)}));
   if (lcm::LCM* lcm = instance(); lcm != nullptr && lcm->good()) {
@@ -208,6 +211,10 @@ bool LinkWatch::create() {
     std::lock_guard<std::mutex> lock(counts_mutex_);
     ++counts_.creations;
   }
+  if (options_.publish_only) {
+    markConnected();
+    return true;
+  }
   if (owned_->getFileno() < 0) return false;
   tuneLcmTransport(*owned_, options_.url);
   for (auto& s : subscriptions_) subscribeOn(*owned_, *s);
@@ -233,6 +240,7 @@ bool LinkWatch::retryIfDue() {
 }
 
 int LinkWatch::handle(int timeout_ms) {
+  if (options_.publish_only) throw std::logic_error("LinkWatch: handle on a publish-only link");
   const auto start = Clock::now();
   lcm::LCM* lcm = instance();
   int fd = lcm != nullptr && lcm->good() ? lcm->getFileno() : -1;
@@ -280,7 +288,8 @@ int LinkWatch::handle(int timeout_ms) {
 
 bool LinkWatch::publish(const std::string& channel, const void* data, unsigned size) {
   lcm::LCM* lcm = instance();
-  if (!connected() || lcm == nullptr || !lcm->good() || lcm->getFileno() < 0) {
+  if (!connected() || lcm == nullptr || !lcm->good() ||
+      (!options_.publish_only && lcm->getFileno() < 0)) {
     markDown("the connection closed");
     if (!retryIfDue()) {
       std::lock_guard<std::mutex> lock(counts_mutex_);

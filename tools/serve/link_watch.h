@@ -52,6 +52,11 @@ struct LinkWatchOptions {
   std::function<void(const std::string&)> log;  ///< state changes; nullptr: silent
   /// tcpq://: how long the hub may take to answer the handshake check before each creation.
   int handshake_timeout_ms = 2000;
+  /// Only publish(): the instance is never asked for its descriptor, never subscribed or
+  /// handled. For udpm://, whose liblcm instance starts its receive thread (and its fragment
+  /// reassembly) on the first of those: a sending instance then parses no datagram. Up once
+  /// created; a failed publish re-creates it. subscribe() and handle() throw std::logic_error.
+  bool publish_only = false;
 };
 
 struct LinkCounts {

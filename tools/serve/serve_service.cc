@@ -13,7 +13,7 @@ LcmService::LcmService(lcm::LCM& lcm, ServeOptions options)
     : LcmService(lcm, lcm, std::move(options)) {}
 
 LcmService::LcmService(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options)
-    : LcmService(nullptr, nullptr, std::move(options)) {
+    : LcmService(nullptr, nullptr, std::move(options), nullptr) {
   LinkWatchOptions r;
   r.name = "receive link";
   r.probe_channel = channels_.link_probe;
@@ -27,12 +27,15 @@ LcmService::LcmService(lcm::LCM& receive, lcm::LCM& publish, ServeOptions option
   publish_ = owned_publish_.get();
 }
 
-LcmService::LcmService(LinkWatch& receive, LinkWatch& publish, ServeOptions options)
-    : LcmService(&receive, &publish, std::move(options)) {}
+LcmService::LcmService(LinkWatch& receive, LinkWatch& publish, ServeOptions options,
+                       UdpmReceiver* datagrams)
+    : LcmService(&receive, &publish, std::move(options), datagrams) {}
 
-LcmService::LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions options)
+LcmService::LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions options,
+                       UdpmReceiver* datagrams)
     : receive_(receive),
       publish_(publish),
+      datagrams_(datagrams),
       options_(std::move(options)),
       channels_(Channels::withPrefix(options_.channel_prefix)) {
   std::unique_ptr<JournalSink> journal;
@@ -98,7 +101,24 @@ status_t LcmService::status() const { return toMessage(core_->status()); }
 
 void LcmService::receiveLoop() {
   // A dead link is noticed, logged and re-created inside handle(); the core is untouched.
-  while (!receive_stop_) receive_->handle(50);
+  if (datagrams_ == nullptr) {
+    while (!receive_stop_) receive_->handle(50);
+    return;
+  }
+  // udpm: each complete message goes onto the memq link and is dispatched at once, so that
+  // instance's queue holds one message at most; the kernel's socket buffer is the only backlog.
+  const auto dispatch = [this] {
+    while (receive_->handle(0) == 1) {
+    }
+  };
+  while (!receive_stop_) {
+    datagrams_->receive(
+        50, [&](const std::string& channel, const std::uint8_t* data, std::size_t size) {
+          receive_->publish(channel, data, static_cast<unsigned>(size));
+          dispatch();
+        });
+    dispatch();  // the link's probe
+  }
 }
 
 void LcmService::onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
@@ -171,6 +191,10 @@ TransportState LcmService::transportState() const {
   t.publish_failures = p.failed_publishes;
   // Read live: the link may have re-created the socket since start() (0 while it is down).
   t.recv_buf_bytes = options_.udpm_port > 0 ? udpReceiveBufferBytes(options_.udpm_port) : 0;
+  if (datagrams_ != nullptr) {
+    t.datagrams_refused = datagrams_->refusedByReason();
+    t.datagram_partials_dropped = datagrams_->droppedPartials();
+  }
   return t;
 }
 

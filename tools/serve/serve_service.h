@@ -3,10 +3,11 @@
 // the smoother thread, batches, status counting, the commands' semantics, the journal's
 // write-ahead rules. This adapter holds what is: the two LinkWatch links (one receives, one
 // publishes; tools/serve/link_watch.h: a dead hub is noticed and the instance re-created with
-// backoff, the core's state untouched), the subscriptions and the receive thread that decodes
-// edge_t, prior_t, edge_command_t and command_t (size limits first, then io/lcm_messages.h's
-// checked decoders) and hands them to the core, the publishing of estimate_t, status_t and
-// covariance_t, and the journal as an LCM event log (tools/serve/lcm_event_journal.h).
+// backoff, the core's state untouched), over udpm:// its own datagram receiver
+// (tools/serve/udpm_receiver.h) in place of liblcm's, the subscriptions and the receive thread that
+// decodes edge_t, prior_t, edge_command_t and command_t (size limits first, then
+// io/lcm_messages.h's checked decoders) and hands them to the core, the publishing of estimate_t,
+// status_t and covariance_t, and the journal as an LCM event log (tools/serve/lcm_event_journal.h).
 // docs/lcm.md is the user's view; docs/design.md, "Adding a transport", the structure.
 #pragma once
 
@@ -23,6 +24,7 @@
 #include "arbor/tools/serve/lcm_channels.h"
 #include "arbor/tools/serve/link_watch.h"
 #include "arbor/tools/serve/streaming_core.h"
+#include "arbor/tools/serve/udpm_receiver.h"
 
 namespace arbor::serve {
 
@@ -62,7 +64,11 @@ class LcmService final : public Publisher {
   LcmService(lcm::LCM& receive, lcm::LCM& publish, ServeOptions options);
   /// Receives and publishes through links that re-create their instances after a fault; both
   /// must outlive the service. `receive` should have a probe channel (channels().link_probe).
-  LcmService(LinkWatch& receive, LinkWatch& publish, ServeOptions options);
+  /// With `datagrams` (udpm://; must outlive the service) the receive thread reads the datagrams
+  /// itself, and publishes each complete message onto `receive`, a memq:// link, whose
+  /// subscriptions dispatch it: liblcm never parses a datagram (tools/serve/udpm_receiver.h).
+  LcmService(LinkWatch& receive, LinkWatch& publish, ServeOptions options,
+             UdpmReceiver* datagrams = nullptr);
   ~LcmService() override;
   LcmService(const LcmService&) = delete;
   LcmService& operator=(const LcmService&) = delete;
@@ -94,7 +100,7 @@ class LcmService final : public Publisher {
   TransportState transportState() const override;
 
  private:
-  LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions options);
+  LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions options, UdpmReceiver* datagrams);
   void onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
                      MeasurementKind kind, int limit);
   void onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
@@ -104,6 +110,7 @@ class LcmService final : public Publisher {
   std::unique_ptr<LinkWatch> owned_receive_, owned_publish_;  ///< over borrowed instances
   LinkWatch* receive_;                                        ///< receive (subscriptions, handle)
   LinkWatch* publish_;                                        ///< estimates and status
+  UdpmReceiver* datagrams_;  ///< udpm: what `receive_` gets its messages from (else null)
   ServeOptions options_;
   Channels channels_;
   std::unique_ptr<StreamingCore> core_;

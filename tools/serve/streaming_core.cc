@@ -129,6 +129,8 @@ void StreamingCore::stop() {
   const TransportState transport = publisher_.transportState();
   summary_.link_outages = transport.link_outages;
   summary_.recv_buf_bytes = transport.recv_buf_bytes;
+  summary_.datagrams_refused = transport.datagrams_refused;
+  summary_.datagram_partials_dropped = transport.datagram_partials_dropped;
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     summary_.held_at_stop = static_cast<std::int64_t>(queue_.size());

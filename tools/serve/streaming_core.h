@@ -48,6 +48,10 @@ struct TransportState {
   std::int64_t link_outages = 0;      ///< receive and publish links, so far
   std::int64_t publish_failures = 0;  ///< publishes lost to a link down
   std::int64_t recv_buf_bytes = 0;    ///< the receive socket's buffer (0: none to report)
+  /// Datagrams the transport's own receive path refused before any parsing, by reason
+  /// (udpm: tools/serve/lcm_datagram.h), and the fragmented messages it dropped unfinished.
+  std::map<std::string, std::int64_t> datagrams_refused;
+  std::int64_t datagram_partials_dropped = 0;
 };
 
 /// The core's counters and figures at one moment (status()); a transport maps them onto its
@@ -174,6 +178,8 @@ struct ServeSummary {
   std::int64_t link_outages = 0;     ///< receive and publish links
   std::map<std::string, std::int64_t> control_refused;  ///< operator command refusals by reason
   std::int64_t recv_buf_bytes = 0;  ///< the transport's receive buffer (TransportState)
+  std::map<std::string, std::int64_t> datagrams_refused;  ///< by reason (TransportState)
+  std::int64_t datagram_partials_dropped = 0;             ///< (TransportState)
 };
 
 class StreamingCore {
