@@ -1,8 +1,10 @@
 #include "arbor/tools/generator/graph_generator.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <stdexcept>
+#include <string>
 
 #include "arbor/tools/generator/random.h"
 
@@ -25,7 +27,7 @@ Eigen::Matrix<double, Group::kDoF, Group::kDoF> information(const NoiseModel& no
   omega.setZero();
   for (int k = 0; k < Group::kDoF; ++k) {
     const double s = k < Group::kDim ? noise.sigma_translation : noise.sigma_rotation;
-    omega(k, k) = 1.0 / (s * s);
+    omega(k, k) = noise.information_scale / (s * s);
   }
   return omega;
 }
@@ -52,6 +54,14 @@ template <class Group>
 Simulation<Group> simulate(const std::vector<Group>& truth,
                            const std::vector<std::pair<int, int>>& pairs, const NoiseModel& noise,
                            std::uint64_t seed) {
+  for (const double v : {noise.sigma_translation, noise.sigma_rotation, noise.information_scale}) {
+    if (!(v > 0) || !std::isfinite(v)) {
+      throw std::invalid_argument(
+          "simulate: noise sigmas and information_scale must be finite "
+          "and positive, not " +
+          std::to_string(v));
+    }
+  }
   Random rng(seed);
   Simulation<Group> sim;
   sim.truth = truth;
