@@ -106,11 +106,7 @@ void expectChi2MatchesScale(const sim::Simulation<G>& s, double X, bool closures
   int m = 0;
   for (const auto& e : s.graph.edges) {
     if (closures_only && std::abs(e.i - e.j) <= 1) continue;
-    PoseGraph<G> one;
-    one.ids = s.graph.ids;
-    one.index = s.graph.index;
-    one.edges = {e};
-    sum += objective(one, s.truth);
+    sum += e.cost(s.truth[e.i], s.truth[e.j]);
     ++m;
   }
   ASSERT_GT(m, 50);
@@ -149,6 +145,24 @@ TEST(RoadWorld, InformationScaleWritesOmegaXTimesTheNoiseDrawn) {
   expectChi2MatchesScale(sim::manhattanWorld(m), 0.05, false);
 }
 
+// The presets draw closures 10× less precise than a step and write their Ω from that noise.
+TEST(RoadWorld, ClosuresAreDrawnWithTheirOwnSigma) {
+  sim::RoadOptions o = sim::smallLoopOptions();
+  ASSERT_EQ(o.noise.closure_sigma_factor, 10.0);
+  const auto s = sim::roadWorld2(o);
+  const double f2 = o.noise.closure_sigma_factor * o.noise.closure_sigma_factor;
+  int checked = 0;
+  for (const auto& e : s.graph.edges) {
+    const double t = 1.0 / (o.noise.sigma_translation * o.noise.sigma_translation);
+    const double expected = std::abs(e.i - e.j) > 1 ? t / f2 : t;
+    ASSERT_NEAR(e.information(0, 0), expected, 1e-9 * expected);
+    ++checked;
+  }
+  EXPECT_EQ(checked, s.graph.numEdges());
+  // Each kind of edge scores like its own noise at the truth (χ² ≈ dof on average).
+  expectChi2MatchesScale(s, 1.0, true);
+}
+
 TEST(RoadWorld, BadOptionsAreRefusedNamingTheField) {
   auto message = [](auto make) -> std::string {
     try {
@@ -164,6 +178,10 @@ TEST(RoadWorld, BadOptionsAreRefusedNamingTheField) {
     EXPECT_NE(message([&] { sim::roadWorld2(o); }).find("information_scale"), std::string::npos)
         << X;
   }
+  sim::RoadOptions bad_factor = sim::smallLoopOptions();
+  bad_factor.noise.closure_sigma_factor = 0;
+  EXPECT_NE(message([&] { sim::roadWorld2(bad_factor); }).find("closure_sigma_factor"),
+            std::string::npos);
   sim::RoadOptions o = sim::vehicleOptions();
   o.closure_gap = 0;
   EXPECT_NE(message([&] { sim::roadWorld3(o); }).find("closure_gap"), std::string::npos);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -54,14 +55,18 @@ template <class Group>
 Simulation<Group> simulate(const std::vector<Group>& truth,
                            const std::vector<std::pair<int, int>>& pairs, const NoiseModel& noise,
                            std::uint64_t seed) {
-  for (const double v : {noise.sigma_translation, noise.sigma_rotation, noise.information_scale}) {
+  for (const double v : {noise.sigma_translation, noise.sigma_rotation, noise.information_scale,
+                         noise.closure_sigma_factor}) {
     if (!(v > 0) || !std::isfinite(v)) {
       throw std::invalid_argument(
-          "simulate: noise sigmas and information_scale must be finite "
+          "simulate: noise sigmas, information_scale and closure_sigma_factor must be finite "
           "and positive, not " +
           std::to_string(v));
     }
   }
+  NoiseModel closure_noise = noise;  // the loop closures' (|i − j| > 1)
+  closure_noise.sigma_translation *= noise.closure_sigma_factor;
+  closure_noise.sigma_rotation *= noise.closure_sigma_factor;
   Random rng(seed);
   Simulation<Group> sim;
   sim.truth = truth;
@@ -72,13 +77,16 @@ Simulation<Group> simulate(const std::vector<Group>& truth,
     g.index[k] = k;
   }
   const auto omega = information<Group>(noise);
+  const auto closure_omega = information<Group>(closure_noise);
   std::vector<const Group*> odometry(n, nullptr);
   for (const auto& [i, j] : pairs) {
     if (i < 0 || j < 0 || i >= n || j >= n || i == j) {
       throw std::invalid_argument("simulate: bad edge pair");
     }
-    const Group z = truth[i].between(truth[j]).compose(Group::Exp(drawNoise<Group>(rng, noise)));
-    g.edges.push_back(RelativePoseEdge<Group>::make(i, j, z, omega));
+    const bool closure = std::abs(i - j) > 1;
+    const Group z = truth[i].between(truth[j]).compose(
+        Group::Exp(drawNoise<Group>(rng, closure ? closure_noise : noise)));
+    g.edges.push_back(RelativePoseEdge<Group>::make(i, j, z, closure ? closure_omega : omega));
   }
   for (const auto& e : g.edges) {
     if (e.j == e.i + 1 && !odometry[e.j]) odometry[e.j] = &e.measurement;

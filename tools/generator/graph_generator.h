@@ -25,6 +25,10 @@ struct NoiseModel {
   double sigma_rotation = 0.01;     ///< radians, per axis
   /// Ω written = information_scale · Σ⁻¹, every edge; finite and > 0 (header comment).
   double information_scale = 1.0;
+  /// Loop closures (|i − j| > 1) are drawn with both sigmas times this (their Ω written from
+  /// their own Σ): > 1 for closures less precise than a step of odometry, as a scan match at a
+  /// revisit is, so that a closure is not nearly all absorbed by its loop at the optimum.
+  double closure_sigma_factor = 1.0;
 };
 
 struct ManhattanOptions {

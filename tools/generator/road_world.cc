@@ -125,7 +125,7 @@ double groundHeight(const RoadOptions& o, double x, double y) {
 
 }  // namespace
 
-RoadOptions vehicleOptions() { return RoadOptions{}; }
+RoadOptions vehicleOptions() { return RoadOptions{}; }  // the defaults: road_world.h
 
 RoadOptions smallLoopOptions() {
   RoadOptions o;
