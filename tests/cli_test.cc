@@ -735,6 +735,10 @@ TEST(Cli, GenerateRoadWorldsWithAnInformationScale) {
       {"generate manhattan -o " + out + " --dim 3", "--dim applies to vehicle and small-loop"},
       {"generate vehicle -o " + out + " --closure-sigma-factor 0",
        "--closure-sigma-factor must be finite and > 0, not '0'"},
+      {"generate vehicle -o " + out + " --closure-tail-fraction 2",
+       "--closure-tail-fraction must be in [0, 1], not '2'"},
+      {"generate vehicle -o " + out + " --closure-tail-factor 0.5",
+       "--closure-tail-factor must be finite and >= 1, not '0.5'"},
       {"generate bicycle -o " + out, "unknown kind 'bicycle'"},
   };
   for (const Case& c : cases) {

@@ -120,6 +120,7 @@ void expectChi2MatchesScale(const sim::Simulation<G>& s, double X, bool closures
 TEST(RoadWorld, InformationScaleWritesOmegaXTimesTheNoiseDrawn) {
   for (const double X : {0.02, 1.0, 30.0}) {
     sim::RoadOptions o = sim::smallLoopOptions();
+    o.noise.closure_tail_fraction = 0;  // Gaussian: the mean is X · dof (the tail: below)
     o.noise.information_scale = X;
     const auto s2 = sim::roadWorld2(o);
     const auto s3 = sim::roadWorld3(o);
@@ -149,6 +150,7 @@ TEST(RoadWorld, InformationScaleWritesOmegaXTimesTheNoiseDrawn) {
 TEST(RoadWorld, ClosuresAreDrawnWithTheirOwnSigma) {
   sim::RoadOptions o = sim::smallLoopOptions();
   ASSERT_EQ(o.noise.closure_sigma_factor, 10.0);
+  o.noise.closure_tail_fraction = 0;
   const auto s = sim::roadWorld2(o);
   const double f2 = o.noise.closure_sigma_factor * o.noise.closure_sigma_factor;
   int checked = 0;
@@ -161,6 +163,41 @@ TEST(RoadWorld, ClosuresAreDrawnWithTheirOwnSigma) {
   EXPECT_EQ(checked, s.graph.numEdges());
   // Each kind of edge scores like its own noise at the truth (χ² ≈ dof on average).
   expectChi2MatchesScale(s, 1.0, true);
+}
+
+// The tail (3D, 6 dof): a closure drawn 6× wider with the same Ω scores above χ²₆(0.999) = 22.46
+// when its standard χ²₆ exceeds 22.46 / 36 = 0.62, with probability 0.996; so about a share p
+// of the closures do, against 0.1% without the tail.
+TEST(RoadWorld, ClosureTailScoresAFewClosuresFarAboveTheRest) {
+  for (const double p : {0.0, 0.1}) {
+    sim::RoadOptions o = sim::smallLoopOptions();
+    o.poses = 3000;  // about 300 closures
+    o.noise.closure_tail_fraction = p;
+    o.noise.closure_tail_factor = 6;
+    const auto s = sim::roadWorld3(o);
+    int closures = 0, far = 0;
+    for (const auto& e : s.graph.edges) {
+      if (std::abs(e.i - e.j) <= 1) continue;
+      ++closures;
+      far += e.cost(s.truth[e.i], s.truth[e.j]) > 22.46;  // χ²₆(0.999)
+    }
+    ASSERT_GT(closures, 200);
+    const double share = static_cast<double>(far) / closures;
+    if (p == 0) {
+      EXPECT_LT(share, 0.02);
+    } else {
+      EXPECT_GT(share, 0.04);
+      EXPECT_LT(share, 0.16);
+    }
+  }
+  // No draw is spent on the tail when there is none: the committed data's bytes stay
+  // (generator_test.cc); a fraction out of [0, 1] or a factor below 1 is refused.
+  sim::RoadOptions bad = sim::smallLoopOptions();
+  bad.noise.closure_tail_fraction = 1.5;
+  EXPECT_THROW(sim::roadWorld2(bad), std::invalid_argument);
+  bad = sim::smallLoopOptions();
+  bad.noise.closure_tail_factor = 0.5;
+  EXPECT_THROW(sim::roadWorld2(bad), std::invalid_argument);
 }
 
 TEST(RoadWorld, BadOptionsAreRefusedNamingTheField) {

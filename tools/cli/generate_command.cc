@@ -66,7 +66,7 @@ int generateCommand(const std::vector<std::string>& args) {
   int poses = 0, rings = 0, per_ring = 0, size = 0, grid = 0, dim = 2;
   std::uint64_t seed = 1;
   double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1, fraction = 0,
-         information_scale = 1, closure_sigma_factor = 1;
+         information_scale = 1, closure_sigma_factor = 1, tail_fraction = 0, tail_factor = 1;
   po::options_description options(
       "arbor generate manhattan|sphere|grid|vehicle|small-loop [options]\n"
       "arbor generate outliers --input FILE -o OUT.g2o --outliers FRACTION [options]");
@@ -94,6 +94,11 @@ int generateCommand(const std::vector<std::string>& args) {
       "closure-sigma-factor", po::value(&closure_sigma_factor),
       "draw the loop closures (|i - j| > 1) with both sigmas times F, their Ω from that noise "
       "(1; vehicle, small-loop: 10)")(
+      "closure-tail-fraction", po::value(&tail_fraction),
+      "draw this share of the loop closures wider (--closure-tail-factor), their Ω as the "
+      "others' (0; vehicle, small-loop: 0.05)")(
+      "closure-tail-factor", po::value(&tail_factor),
+      "how much wider those closures' sigmas are, >= 1 (vehicle, small-loop: 6)")(
       "information-scale", po::value(&information_scale)->default_value(1),
       "write Ω = X × the information of the noise drawn, on every edge (odometry and loop "
       "closures): < 1 a cautious front end (e.g. 0.02: χ² at the truth averages 0.02 × dof), "
@@ -128,11 +133,23 @@ int generateCommand(const std::vector<std::string>& args) {
     os << "--closure-sigma-factor must be finite and > 0, not '" << closure_sigma_factor << "'";
     throw UsageError(os.str());
   }
+  if (vm.count("closure-tail-fraction") && !(tail_fraction >= 0 && tail_fraction <= 1)) {
+    std::ostringstream os;
+    os << "--closure-tail-fraction must be in [0, 1], not '" << tail_fraction << "'";
+    throw UsageError(os.str());
+  }
+  if (vm.count("closure-tail-factor") && !(tail_factor >= 1 && std::isfinite(tail_factor))) {
+    std::ostringstream os;
+    os << "--closure-tail-factor must be finite and >= 1, not '" << tail_factor << "'";
+    throw UsageError(os.str());
+  }
   // The noise of a kind: its preset's, with the flags given on top.
   auto noiseOf = [&](sim::NoiseModel preset) {
     if (!vm["sigma-t"].defaulted()) preset.sigma_translation = sigma_t;
     if (!vm["sigma-r"].defaulted()) preset.sigma_rotation = sigma_r;
     if (vm.count("closure-sigma-factor")) preset.closure_sigma_factor = closure_sigma_factor;
+    if (vm.count("closure-tail-fraction")) preset.closure_tail_fraction = tail_fraction;
+    if (vm.count("closure-tail-factor")) preset.closure_tail_factor = tail_factor;
     preset.information_scale = information_scale;
     return preset;
   };
@@ -176,8 +193,9 @@ int generateCommand(const std::vector<std::string>& args) {
   if (kind == "outliers") {
     if (input.empty()) throw UsageError("generate outliers needs --input FILE");
     if (!request.on) throw UsageError("generate outliers needs --outliers FRACTION");
-    for (const char* flag : {"truth", "poses", "grid", "size", "rings", "per-ring",
-                             "closure-probability", "closure-sigma-factor"}) {
+    for (const char* flag :
+         {"truth", "poses", "grid", "size", "rings", "per-ring", "closure-probability",
+          "closure-sigma-factor", "closure-tail-fraction", "closure-tail-factor"}) {
       if (vm.count(flag))
         throw UsageError(std::string("--") + flag + " does not apply to outliers");
     }

@@ -64,9 +64,20 @@ Simulation<Group> simulate(const std::vector<Group>& truth,
           std::to_string(v));
     }
   }
+  if (!(noise.closure_tail_fraction >= 0 && noise.closure_tail_fraction <= 1) ||
+      !(noise.closure_tail_factor >= 1) || !std::isfinite(noise.closure_tail_factor)) {
+    throw std::invalid_argument(
+        "simulate: closure_tail_fraction must be in [0, 1] and closure_tail_factor finite and "
+        ">= 1, not " +
+        std::to_string(noise.closure_tail_fraction) + " and " +
+        std::to_string(noise.closure_tail_factor));
+  }
   NoiseModel closure_noise = noise;  // the loop closures' (|i − j| > 1)
   closure_noise.sigma_translation *= noise.closure_sigma_factor;
   closure_noise.sigma_rotation *= noise.closure_sigma_factor;
+  NoiseModel tail_noise = closure_noise;  // a closure of the tail: drawn wider, Ω as the others
+  tail_noise.sigma_translation *= noise.closure_tail_factor;
+  tail_noise.sigma_rotation *= noise.closure_tail_factor;
   Random rng(seed);
   Simulation<Group> sim;
   sim.truth = truth;
@@ -84,8 +95,12 @@ Simulation<Group> simulate(const std::vector<Group>& truth,
       throw std::invalid_argument("simulate: bad edge pair");
     }
     const bool closure = std::abs(i - j) > 1;
+    const bool tail =
+        closure && noise.closure_tail_fraction > 0 && rng.uniform() < noise.closure_tail_fraction;
     const Group z = truth[i].between(truth[j]).compose(
-        Group::Exp(drawNoise<Group>(rng, closure ? closure_noise : noise)));
+        Group::Exp(drawNoise<Group>(rng, tail      ? tail_noise
+                                         : closure ? closure_noise
+                                                   : noise)));
     g.edges.push_back(RelativePoseEdge<Group>::make(i, j, z, closure ? closure_omega : omega));
   }
   for (const auto& e : g.edges) {

@@ -29,6 +29,11 @@ struct NoiseModel {
   /// their own Σ): > 1 for closures less precise than a step of odometry, as a scan match at a
   /// revisit is, so that a closure is not nearly all absorbed by its loop at the optimum.
   double closure_sigma_factor = 1.0;
+  /// A heavy tail of the closures' noise: each loop closure is drawn, with this probability,
+  /// with its sigmas times closure_tail_factor, its Ω written as for the others (a front end
+  /// that cannot tell its worse matches). 0: none (no draw is spent on it).
+  double closure_tail_fraction = 0.0;
+  double closure_tail_factor = 1.0;  ///< ≥ 1
 };
 
 struct ManhattanOptions {
