@@ -130,6 +130,7 @@ TEST(FamilyBench, CasesAreTheWorldsWithTheirPlantedFilesAndFStarTheirCleanOptimu
   EXPECT_TRUE(std::isfinite(rows[0].F_star));
   EXPECT_EQ(rows[0].F_star, rows[0].F_reference);
   EXPECT_TRUE(std::isfinite(rows[0].closure_chi2_median));
+  EXPECT_GE(rows[0].closure_chi2_max, rows[0].closure_chi2_median);
   ASSERT_TRUE(rows[0].replay.has_value());
   EXPECT_TRUE(bench::solved(*rows[0].replay));
   EXPECT_NEAR(rows[0].replay->F_ratio, 1.0, 1e-3);

@@ -206,6 +206,7 @@ struct RobustRow {
   double F_reference = std::numeric_limits<double>::quiet_NaN();  ///< the clean optimum's F
   /// the median χ² (eᵀΩe) of the base's loop closures at the clean optimum; NaN without any
   double closure_chi2_median = std::numeric_limits<double>::quiet_NaN();
+  double closure_chi2_max = std::numeric_limits<double>::quiet_NaN();  ///< and the largest
   std::string reference_method;
   std::string error;  ///< the file, its labels or its base could not be used
   RobustFigures batch;
