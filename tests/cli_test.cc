@@ -523,6 +523,11 @@ TEST(Cli, BadSmootherOrBatchValueExitsTwoNamingTheFlagAndValue) {
   if (std::filesystem::exists(bench)) {
     cases.push_back({"bench growth --relinearize-skip 0", "--relinearize-skip", "'0'"});
     cases.push_back({"bench replay --dogleg-radius 0", "--dogleg-radius", "'0'"});
+    cases.push_back({"bench robust --family bicycle", "--family: unknown family", "'bicycle'"});
+    cases.push_back({"bench robust --family vehicle --seeds 3-1", "--seeds", "'3-1'"});
+    cases.push_back({"bench robust --family vehicle --seeds 0", "--seeds", "'0'"});
+    cases.push_back({"bench robust --family vehicle --dims 4", "--dims", "'4'"});
+    cases.push_back({"bench robust --seeds 4-10", "--seeds needs --family", "NAMES"});
   }
   for (const Case& c : cases) {
     const Result r = run(c.args);
