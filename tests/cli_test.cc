@@ -528,6 +528,8 @@ TEST(Cli, BadSmootherOrBatchValueExitsTwoNamingTheFlagAndValue) {
     cases.push_back({"bench robust --family vehicle --seeds 0", "--seeds", "'0'"});
     cases.push_back({"bench robust --family vehicle --dims 4", "--dims", "'4'"});
     cases.push_back({"bench robust --seeds 4-10", "--seeds needs --family", "NAMES"});
+    cases.push_back(
+        {"bench robust --family vehicle --seed 2", "do not apply with --family", "--seeds"});
   }
   for (const Case& c : cases) {
     const Result r = run(c.args);

@@ -694,6 +694,9 @@ int robustFamilies(const DatasetOptions& data, const std::string& families, std:
   return 0;
 }
 
+// --generate-from's default: a 2D and a 3D shared clean set.
+const char* const kGenerateFrom = "intel,smallGrid3D";
+
 // `arbor bench robust`: tools/bench/robust_bench.h.
 int robust(const std::vector<std::string>& args, const std::string& default_shared) {
   DatasetOptions data;
@@ -706,7 +709,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       datasetOptions("arbor bench robust [options]", &data, default_shared);
   options.add_options()("no-generated", po::bool_switch(&no_generated),
                         "only the shared files of DIR/datasets/robust")(
-      "generate-from", po::value(&generate_from)->default_value("intel,smallGrid3D"),
+      "generate-from", po::value(&generate_from)->default_value(kGenerateFrom),
       "shared clean sets (names in DIR/datasets) to plant false closures in")(
       "fractions", po::value(&fractions)->default_value("0.1,0.5,0.9"),
       "false closures per loop closure of the base, one generated file each")(
@@ -758,6 +761,10 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
     plan.policies.push_back(*policy);
   }
 
+  if (!families.empty() && (no_generated || generate_from != kGenerateFrom || plan.seed != 1))
+    throw cli::UsageError(
+        "--no-generated, --generate-from and --seed do not apply with --family (its worlds' "
+        "seeds are --seeds)");
   if (!families.empty())
     return robustFamilies(data, families, seeds, dims, fractions, policies, plan, settings, repeat,
                           keep_dir);

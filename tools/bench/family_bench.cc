@@ -90,13 +90,13 @@ std::string familyMarkdown(const std::vector<RobustRow>& rows) {
       md << "| " << r.c.name << " | failed: " << r.error << " | | | | | | | | | |\n";
       continue;
     }
-    const std::optional<RobustFigures> batch = r.batch;
+    const std::optional<RobustFigures> batch = r.batch;  // as the replay's, for figures()
     md << "| " << r.c.name << " | " << fmt("%.3g", r.c.information_scale) << " | "
        << r.loop_closures << " | " << r.false_edges << " | " << fmt("%.6g", r.F_star) << " | "
        << figures(r.replay) << " | " << mark(r.replay) << " | "
        << (r.replay && r.replay->ok ? fmt("%.2f", r.replay->total_s) : "—") << " | "
        << figures(batch) << " | " << mark(batch) << " | "
-       << (batch->ok ? fmt("%.2f", batch->total_s) : "—") << " |\n";
+       << (r.batch.ok ? fmt("%.2f", r.batch.total_s) : "—") << " |\n";
     auto& [n, replay, batch_solved] = cells[{r.c.family, r.dim, r.c.fraction}];
     ++n;
     replay += r.replay && solved(*r.replay);
