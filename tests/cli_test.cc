@@ -523,6 +523,13 @@ TEST(Cli, BadSmootherOrBatchValueExitsTwoNamingTheFlagAndValue) {
   if (std::filesystem::exists(bench)) {
     cases.push_back({"bench growth --relinearize-skip 0", "--relinearize-skip", "'0'"});
     cases.push_back({"bench replay --dogleg-radius 0", "--dogleg-radius", "'0'"});
+    cases.push_back({"bench robust --family bicycle", "--family: unknown family", "'bicycle'"});
+    cases.push_back({"bench robust --family vehicle --seeds 3-1", "--seeds", "'3-1'"});
+    cases.push_back({"bench robust --family vehicle --seeds 0", "--seeds", "'0'"});
+    cases.push_back({"bench robust --family vehicle --dims 4", "--dims", "'4'"});
+    cases.push_back({"bench robust --seeds 4-10", "--seeds needs --family", "NAMES"});
+    cases.push_back(
+        {"bench robust --family vehicle --seed 2", "do not apply with --family", "--seeds"});
   }
   for (const Case& c : cases) {
     const Result r = run(c.args);
@@ -700,6 +707,54 @@ TEST(Cli, GenerateOutliersWritesTheGraphAndItsLabels) {
     EXPECT_NE(bad.out.find(c.words), std::string::npos) << c.args << ": " << bad.out;
   }
   for (const auto& path : {out, labels, gen, gen_labels}) std::filesystem::remove(path);
+}
+
+// `arbor generate vehicle|small-loop` and --information-scale: the graph of the kind and
+// dimension asked for, its Ω X times the noise's (odometry: 1 / 0.02² in translation, closures
+// 10× the sigmas), and bad values refused naming the flag and the value.
+TEST(Cli, GenerateRoadWorldsWithAnInformationScale) {
+  const std::string out = tempPath("road.g2o");
+  const Result r =
+      run("generate small-loop --poses 300 --dim 3 --seed 2 --information-scale 0.05 -o " + out);
+  ASSERT_EQ(r.status, 0) << r.out;
+  const auto g = std::get<arbor::PoseGraph3>(arbor::readPoseGraphFile(out));
+  EXPECT_EQ(g.numPoses(), 300);
+  int closures = 0;
+  for (const auto& e : g.edges) {
+    const bool closure = std::abs(e.i - e.j) > 1;
+    closures += closure;
+    const double expected = 0.05 / (0.02 * 0.02) / (closure ? 100.0 : 1.0);
+    EXPECT_NEAR(e.information(0, 0), expected, 1e-6 * expected) << e.i << " " << e.j;
+  }
+  EXPECT_GT(closures, 0);
+  ASSERT_EQ(run("generate vehicle --poses 200 -o " + out).status, 0);
+  EXPECT_NO_THROW(std::get<arbor::PoseGraph2>(arbor::readPoseGraphFile(out)));
+
+  struct Case {
+    std::string args, words;
+  };
+  const std::vector<Case> cases = {
+      {"generate small-loop -o " + out + " --information-scale 0",
+       "--information-scale must be finite and > 0, not '0'"},
+      {"generate manhattan -o " + out + " --information-scale=-2",
+       "--information-scale must be finite and > 0, not '-2'"},
+      {"generate vehicle -o " + out + " --dim 4", "--dim must be 2 or 3, not 4"},
+      {"generate manhattan -o " + out + " --dim 3", "--dim applies to vehicle and small-loop"},
+      {"generate vehicle -o " + out + " --closure-sigma-factor 0",
+       "--closure-sigma-factor must be finite and > 0, not '0'"},
+      {"generate vehicle -o " + out + " --closure-tail-fraction 2",
+       "--closure-tail-fraction must be in [0, 1], not '2'"},
+      {"generate vehicle -o " + out + " --closure-tail-factor 0.5",
+       "--closure-tail-factor must be finite and >= 1, not '0.5'"},
+      {"generate bicycle -o " + out, "unknown kind 'bicycle'"},
+  };
+  for (const Case& c : cases) {
+    const Result bad = run(c.args);
+    EXPECT_EQ(bad.status, 2) << c.args << ": " << bad.out;
+    EXPECT_EQ(std::count(bad.out.begin(), bad.out.end(), '\n'), 1) << c.args << ": " << bad.out;
+    EXPECT_NE(bad.out.find(c.words), std::string::npos) << c.args << ": " << bad.out;
+  }
+  std::filesystem::remove(out);
 }
 
 // `arbor bench replay` on a shared folder of its own: one generated dataset and an anchors table

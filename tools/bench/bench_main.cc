@@ -18,6 +18,10 @@
 //                      [--keep-generated DIR]
 //     the robust batch (GNC over LM, as `arbor batch --robust`) on the shared files with false
 //     loop closures and on its own, generated from shared clean sets (tools/bench/robust_bench.h).
+//   arbor-bench robust --family NAMES [--seeds A-B] [--dims 2,3] [--fractions F,...]
+//                      [--policies P,...] [...]
+//     issue 52's held-out protocol: the generated families' worlds instead
+//     (tools/bench/family_bench.h).
 //   arbor-bench tree [--shared DIR] [--only NAME,...] [--ratios R,...]
 //     the Bayes tree's cliques, flops and memory on each whole graph in a fresh ordering,
 //     symbolic only, for cached-factor ratios, and what the last tenth's loop closures cost in
@@ -46,6 +50,7 @@
 #include "arbor/core/initialization.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/bench/ceres_pose_graph.h"
+#include "arbor/tools/bench/family_bench.h"
 #include "arbor/tools/bench/format.h"
 #include "arbor/tools/bench/growth.h"
 #include "arbor/tools/bench/paper_runner.h"
@@ -53,6 +58,7 @@
 #include "arbor/tools/bench/robust_replay_hooks.h"
 #include "arbor/tools/bench/shared_data.h"
 #include "arbor/tools/bench/tree_size.h"
+#include "arbor/tools/bench/world_families.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/cli/robust_flags.h"
@@ -618,19 +624,92 @@ struct TemporaryDirectory {
   }
 };
 
+// The directory the generated files go to: `keep_dir` (made if absent), else a fresh temporary
+// one that `temporary` removes at the end.
+std::string generatedDirectory(const std::string& keep_dir, TemporaryDirectory* temporary) {
+  if (!keep_dir.empty()) {
+    std::filesystem::create_directories(keep_dir);
+    return keep_dir;
+  }
+  std::string pattern =
+      (std::filesystem::temp_directory_path() / "arbor-bench-robust-XXXXXX").string();
+  if (!mkdtemp(pattern.data()))
+    throw std::runtime_error("cannot make a temporary directory " + pattern + ": " +
+                             std::strerror(errno));
+  return temporary->path = pattern;
+}
+
+// `arbor bench robust --family NAMES`: issue 52's held-out protocol (tools/bench/family_bench.h).
+int robustFamilies(const DatasetOptions& data, const std::string& families, std::string seeds,
+                   std::string dims, const std::string& fractions, const std::string& policies,
+                   const bench::GenerationPlan& lists, const bench::RobustBatchSettings& settings,
+                   int repeat, const std::string& keep_dir) {
+  if (seeds.empty()) seeds = "1-3";
+  if (dims.empty()) dims = "2,3";
+  bench::FamilyPlan plan;
+  plan.families = splitList(families);
+  try {
+    plan.seeds = bench::parseSeedRange(seeds);
+  } catch (const std::invalid_argument& e) {
+    throw cli::UsageError(e.what());
+  }
+  plan.dims.clear();
+  for (const std::string& d : splitList(dims)) {
+    if (d != "2" && d != "3") throw cli::UsageError("--dims: '" + d + "' is not 2 or 3");
+    plan.dims.push_back(d == "2" ? 2 : 3);
+  }
+  plan.fractions = lists.fractions;
+  plan.policies = lists.policies;
+  for (const std::string& f : plan.families) {
+    if (!bench::worldFamily(f)) {
+      std::string known;
+      for (const std::string& n : bench::worldFamilyNames())
+        known += (known.empty() ? "" : ", ") + n;
+      throw cli::UsageError("--family: unknown family '" + f + "' (" + known + ")");
+    }
+  }
+  if (plan.families.empty() || plan.dims.empty() || plan.fractions.empty() || plan.policies.empty())
+    throw cli::UsageError("--family, --dims, --fractions and --policies must name at least one");
+  TemporaryDirectory temporary;
+  const std::string out_dir = generatedDirectory(keep_dir, &temporary);
+  std::vector<bench::RobustCase> cases = bench::generateFamilyCases(plan, out_dir);
+  cases = bench::selectCases(cases, data.only);
+  if (cases.empty()) throw std::runtime_error("no family case is named in --only " + data.only);
+  const std::string load_before = loadAverage();
+  const bench::RobustReplayHooks hooks = bench::robustReplayHooks(settings.gnc.kernel, repeat);
+  const auto rows = bench::runRobustBench(cases, {}, {}, settings, hooks, &std::cerr);
+  std::cout << "Held-out protocol (issue 52): families " << families << ", dims " << dims
+            << ", seeds " << seeds << ", fractions " << fractions << ", policies " << policies
+            << ". Each world generated in memory and written to "
+            << (keep_dir.empty() ? "a temporary directory" : keep_dir)
+            << "; its false closures planted with its seed; F* its clean optimum (LM from the "
+               "odometry chain, or the certifiable solver where lower). Replay: `arbor replay "
+               "--robust` with the defaults; batch: `arbor batch --robust` with the defaults"
+            << (settings.start == bench::BatchStart::kOnline ? "" : " but --init file")
+            << ". Solved: F over the world's edges within 1% of F*, precision and recall of "
+               "the rejected edges >= 0.95. X: Ω written = X · the drawn noise's information. "
+               "Load average "
+            << load_before << " at the start, " << loadAverage() << " at the end.\n\n";
+  std::cout << bench::familyMarkdown(rows);
+  return 0;
+}
+
+// --generate-from's default: a 2D and a 3D shared clean set.
+const char* const kGenerateFrom = "intel,smallGrid3D";
+
 // `arbor bench robust`: tools/bench/robust_bench.h.
 int robust(const std::vector<std::string>& args, const std::string& default_shared) {
   DatasetOptions data;
   bool no_generated = false;
   std::string generate_from, fractions, policies, kernel = "tls", threshold = "chi2", solver,
-                                                  keep_dir, batch_start;
+                                                  keep_dir, batch_start, families, seeds, dims;
   int repeat = 3;
   bench::GenerationPlan plan;
   po::options_description options =
       datasetOptions("arbor bench robust [options]", &data, default_shared);
   options.add_options()("no-generated", po::bool_switch(&no_generated),
                         "only the shared files of DIR/datasets/robust")(
-      "generate-from", po::value(&generate_from)->default_value("intel,smallGrid3D"),
+      "generate-from", po::value(&generate_from)->default_value(kGenerateFrom),
       "shared clean sets (names in DIR/datasets) to plant false closures in")(
       "fractions", po::value(&fractions)->default_value("0.1,0.5,0.9"),
       "false closures per loop closure of the base, one generated file each")(
@@ -651,8 +730,17 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       "and latency (the runs are deterministic: the same estimate and classification)")(
       "keep-generated", po::value(&keep_dir),
       "write the generated files (NAME.g2o, NAME.labels) here and keep them (default: a "
-      "temporary directory, removed at the end)");
+      "temporary directory, removed at the end)")(
+      "family", po::value(&families),
+      "issue 52's held-out protocol instead of the shared and generate-from files: the "
+      "generated worlds of these families (vehicle, small-loop, over-confident), each × "
+      "--dims × --seeds × --fractions × --policies, F* each world's clean optimum")(
+      "seeds", po::value(&seeds),
+      "with --family: the worlds' seeds, A-B or A (default 1-3, the tuning seeds; 4-10 are held "
+      "out)")("dims", po::value(&dims), "with --family: 2, 3 or 2,3 (default 2,3)");
   if (!parseOptions(args, options)) return 0;
+  if (families.empty() && !seeds.empty()) throw cli::UsageError("--seeds needs --family NAMES");
+  if (families.empty() && !dims.empty()) throw cli::UsageError("--dims needs --family NAMES");
   bench::RobustBatchSettings settings;
   cli::readRobustFlags(kernel, threshold, &settings.gnc);
   if (solver != "lm" && solver != "rtr")
@@ -673,6 +761,13 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
     plan.policies.push_back(*policy);
   }
 
+  if (!families.empty() && (no_generated || generate_from != kGenerateFrom || plan.seed != 1))
+    throw cli::UsageError(
+        "--no-generated, --generate-from and --seed do not apply with --family (its worlds' "
+        "seeds are --seeds)");
+  if (!families.empty())
+    return robustFamilies(data, families, seeds, dims, fractions, policies, plan, settings, repeat,
+                          keep_dir);
   const std::string robust_dir = data.shared + "/datasets/robust";
   std::vector<bench::RobustCase> cases = bench::sharedRobustCases(data.shared);
   std::vector<std::string> notes;
@@ -681,17 +776,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
                     robust_dir + ")");
   TemporaryDirectory temporary;
   if (!no_generated && !plan.bases.empty()) {
-    std::string out_dir = keep_dir;
-    if (out_dir.empty()) {
-      std::string pattern =
-          (std::filesystem::temp_directory_path() / "arbor-bench-robust-XXXXXX").string();
-      if (!mkdtemp(pattern.data()))
-        throw std::runtime_error("cannot make a temporary directory " + pattern + ": " +
-                                 std::strerror(errno));
-      out_dir = temporary.path = pattern;
-    } else {
-      std::filesystem::create_directories(out_dir);
-    }
+    const std::string out_dir = generatedDirectory(keep_dir, &temporary);
     std::vector<std::string> missing;
     const auto generated = bench::generateRobustCases(data.shared, plan, out_dir, &missing);
     cases.insert(cases.end(), generated.begin(), generated.end());
@@ -782,6 +867,8 @@ int main(int argc, char** argv) {
            "       arbor bench robust [--shared DIR] [--only NAMES] [--no-generated] "
            "[--generate-from NAMES] [--fractions F,...] [--policies P,...] [--seed S] [--kernel K] "
            "[--inlier-threshold X] [--solver lm|rtr] [--repeat N] [--keep-generated DIR]\n"
+           "       arbor bench robust --family vehicle|small-loop|over-confident [--seeds A-B] "
+           "[--dims 2,3] [--fractions F,...] [--policies P,...] [...]\n"
            "       arbor bench tree [--shared DIR] [--only NAMES] [--ratios R,...]\n"
            "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
     return args.empty() ? 2 : 0;

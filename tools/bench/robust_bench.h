@@ -9,6 +9,12 @@
 // generate outliers --input DIR/datasets/BASE.g2o --outliers F --outlier-policy P --seed S`
 // does (tools/generator/false_closures.h), named BASE_P_F_seedS.
 //
+// The families of generated worlds (issue 52's held-out protocol, tools/bench/world_families.h):
+// each world of a family × dimension × seed is generated into the same temporary directory
+// (NAME.g2o, NAME = "vehicle-2d-s1"), its false closures planted with the world's seed
+// (NAME_P_F.g2o and .labels); the world is the base, and its F* is the clean optimum the bench
+// computes (below), there being no optimum.tsv row for it.
+//
 // The clean optimum (the ATE's reference) is computed once per base: LM from the base file's
 // vertices (the odometry chain without them); when that ends more than 0.1% above F* (or F* is
 // unknown) the certifiable solver (rtr: SE-Sync's staircase, then an LM polish) runs as well
@@ -51,6 +57,9 @@ struct RobustCase {
   std::string policy;     ///< random | local | group
   double fraction = std::numeric_limits<double>::quiet_NaN();  ///< of the base's loop closures
   bool generated = false;
+  std::string family;  ///< a generated world's family ("vehicle"); empty for the others
+  /// a family world's X (Ω written = X · the drawn noise's information); NaN for the others
+  double information_scale = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// The shared robust files (header comment), smallest first; empty when DIR/datasets/robust
@@ -73,6 +82,19 @@ struct GenerationPlan {
 std::vector<RobustCase> generateRobustCases(const std::string& shared_dir,
                                             const GenerationPlan& plan, const std::string& out_dir,
                                             std::vector<std::string>* missing);
+
+/// Plants round(f · L) false closures with `seed` into `graph` for each fraction f × policy,
+/// writes each as OUT_DIR/NAME.g2o and NAME.labels, NAME = `like.base` + "_" + policy + "_" + f +
+/// `suffix`, and returns the cases, each a copy of `like` (base, base_file, family, ...) with
+/// its name, files, policy and fraction. A graph without vertices is written with its odometry
+/// chain (as `arbor generate outliers`). Throws std::invalid_argument (from the generator) when
+/// a case cannot be planted, FileError when a file cannot be written.
+template <class G>
+std::vector<RobustCase> plantRobustCases(PoseGraph<G> graph, const RobustCase& like,
+                                         const std::vector<double>& fractions,
+                                         const std::vector<sim::OutlierPolicy>& policies,
+                                         std::uint64_t seed, const std::string& out_dir,
+                                         const std::string& suffix);
 
 /// The cases named in the comma-separated `only` (a case's name, or a base's name for all of
 /// its cases); all of them when `only` is empty.
@@ -182,6 +204,9 @@ struct RobustRow {
   int false_edges = 0;    ///< labels
   double F_star = std::numeric_limits<double>::quiet_NaN();
   double F_reference = std::numeric_limits<double>::quiet_NaN();  ///< the clean optimum's F
+  /// the median χ² (eᵀΩe) of the base's loop closures at the clean optimum; NaN without any
+  double closure_chi2_median = std::numeric_limits<double>::quiet_NaN();
+  double closure_chi2_max = std::numeric_limits<double>::quiet_NaN();  ///< and the largest
   std::string reference_method;
   std::string error;  ///< the file, its labels or its base could not be used
   RobustFigures batch;
@@ -208,5 +233,9 @@ std::string robustGoals(const std::vector<RobustRow>& rows);
 /// The rows as one Markdown table (replay columns when any row has them), then notes: each
 /// base's clean optimum, each failure, and robustGoals.
 std::string robustMarkdown(const std::vector<RobustRow>& rows);
+
+/// Solved (issue 52): F over the base's edges within 1% of F* and precision and recall of the
+/// rejected edges ≥ 0.95.
+bool solved(const RobustFigures& f);
 
 }  // namespace arbor::bench

@@ -1,4 +1,5 @@
-// arbor generate KIND: write a synthetic pose graph (deterministic by seed) as g2o, optionally
+// arbor generate KIND: write a synthetic pose graph (deterministic by seed) as g2o (manhattan,
+// sphere, grid: graph_generator.h; vehicle, small-loop: road_world.h), optionally
 // with false loop closures appended (tools/generator/false_closures.h) and their labels;
 // `arbor generate outliers --input FILE` appends them to an existing graph.
 #include <cmath>
@@ -14,6 +15,7 @@
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/generator/false_closures.h"
 #include "arbor/tools/generator/graph_generator.h"
+#include "arbor/tools/generator/road_world.h"
 
 namespace arbor::cli {
 namespace {
@@ -61,27 +63,46 @@ void printWritten(const std::string& output, const PoseGraph<G>& graph, const st
 
 int generateCommand(const std::vector<std::string>& args) {
   std::string kind, output, truth_output, input, policy = "random", labels, information = "refuse";
-  int poses = 0, rings = 0, per_ring = 0, size = 0, grid = 0;
+  int poses = 0, rings = 0, per_ring = 0, size = 0, grid = 0, dim = 2;
   std::uint64_t seed = 1;
-  double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1, fraction = 0;
+  double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1, fraction = 0,
+         information_scale = 1, closure_sigma_factor = 1, tail_fraction = 0, tail_factor = 1;
   po::options_description options(
-      "arbor generate manhattan|sphere|grid [options]\n"
+      "arbor generate manhattan|sphere|grid|vehicle|small-loop [options]\n"
       "arbor generate outliers --input FILE -o OUT.g2o --outliers FRACTION [options]");
-  options.add_options()("help,h", "show this help")("kind", po::value(&kind)->required(),
-                                                    "manhattan | sphere | grid | outliers")(
+  options.add_options()("help,h", "show this help")(
+      "kind", po::value(&kind)->required(),
+      "manhattan | sphere | grid | vehicle | small-loop | outliers")(
       "output,o", po::value(&output)->required(), "g2o file to write")(
       "truth", po::value(&truth_output), "also write the ground truth poses as g2o")(
       "seed", po::value(&seed)->default_value(1),
       "random seed (of the graph and of its false loop closures)")(
-      "poses", po::value(&poses), "number of poses (manhattan: 3500, grid: 1000)")(
-      "grid", po::value(&grid), "manhattan: world size in cells (10)")(
+      "poses", po::value(&poses),
+      "number of poses (manhattan: 3500, grid: 1000, vehicle: 3000, small-loop: 1000)")(
+      "dim", po::value(&dim)->default_value(2),
+      "vehicle, small-loop: 2 (SE2) or 3 (SE3, the road over gentle hills: height and pitch "
+      "change)")("grid", po::value(&grid), "manhattan: world size in cells (10)")(
       "size", po::value(&size), "grid: lattice size per axis (6)")(
       "rings", po::value(&rings), "sphere: number of rings (20)")("per-ring", po::value(&per_ring),
                                                                   "sphere: poses per ring (50)")(
       "closure-probability", po::value(&closure_probability),
-      "manhattan, grid: chance of a loop closure on a revisit (0.3 / 0.5)")(
-      "sigma-t", po::value(&sigma_t)->default_value(0.05), "translation noise (m)")(
-      "sigma-r", po::value(&sigma_r)->default_value(0.01), "rotation noise (rad)")(
+      "manhattan, grid, vehicle, small-loop: chance of a loop closure on a revisit (0.3 / 0.5 / "
+      "0.8 / 0.6)")("sigma-t", po::value(&sigma_t)->default_value(0.05),
+                    "translation noise (m; vehicle, small-loop: 0.02)")(
+      "sigma-r", po::value(&sigma_r)->default_value(0.01),
+      "rotation noise (rad; vehicle, small-loop: 0.002)")(
+      "closure-sigma-factor", po::value(&closure_sigma_factor),
+      "draw the loop closures (|i - j| > 1) with both sigmas times F, their Ω from that noise "
+      "(1; vehicle, small-loop: 10)")(
+      "closure-tail-fraction", po::value(&tail_fraction),
+      "draw this share of the loop closures wider (--closure-tail-factor), their Ω as the "
+      "others' (0; vehicle, small-loop: 0.05)")(
+      "closure-tail-factor", po::value(&tail_factor),
+      "how much wider those closures' sigmas are, >= 1 (vehicle, small-loop: 6)")(
+      "information-scale", po::value(&information_scale)->default_value(1),
+      "write Ω = X × the information of the noise drawn, on every edge (odometry and loop "
+      "closures): < 1 a cautious front end (e.g. 0.02: χ² at the truth averages 0.02 × dof), "
+      "> 1 an over-confident one (e.g. 30)")(
       "input", po::value(&input), "outliers: the g2o or TORO graph to add false loop closures to")(
       "outliers", po::value(&fraction),
       "append round(FRACTION × loop closures) false loop closures (|i − j| > 1; half to even), "
@@ -99,9 +120,40 @@ int generateCommand(const std::vector<std::string>& args) {
   if (helpRequested(args, options)) return 0;
   const po::variables_map vm = parseArguments(args, options, positional);
   if (!(sigma_t > 0) || !(sigma_r > 0)) throw UsageError("noise sigmas must be positive");
+  if (!(information_scale > 0) || !std::isfinite(information_scale)) {
+    std::ostringstream os;
+    os << "--information-scale must be finite and > 0, not '" << information_scale << "'";
+    throw UsageError(os.str());
+  }
   if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1))
     throw UsageError("--closure-probability must be in [0, 1]");
-  const sim::NoiseModel noise{sigma_t, sigma_r};
+  if (vm.count("closure-sigma-factor") &&
+      (!(closure_sigma_factor > 0) || !std::isfinite(closure_sigma_factor))) {
+    std::ostringstream os;
+    os << "--closure-sigma-factor must be finite and > 0, not '" << closure_sigma_factor << "'";
+    throw UsageError(os.str());
+  }
+  if (vm.count("closure-tail-fraction") && !(tail_fraction >= 0 && tail_fraction <= 1)) {
+    std::ostringstream os;
+    os << "--closure-tail-fraction must be in [0, 1], not '" << tail_fraction << "'";
+    throw UsageError(os.str());
+  }
+  if (vm.count("closure-tail-factor") && !(tail_factor >= 1 && std::isfinite(tail_factor))) {
+    std::ostringstream os;
+    os << "--closure-tail-factor must be finite and >= 1, not '" << tail_factor << "'";
+    throw UsageError(os.str());
+  }
+  // The noise of a kind: its preset's, with the flags given on top.
+  auto noiseOf = [&](sim::NoiseModel preset) {
+    if (!vm["sigma-t"].defaulted()) preset.sigma_translation = sigma_t;
+    if (!vm["sigma-r"].defaulted()) preset.sigma_rotation = sigma_r;
+    if (vm.count("closure-sigma-factor")) preset.closure_sigma_factor = closure_sigma_factor;
+    if (vm.count("closure-tail-fraction")) preset.closure_tail_fraction = tail_fraction;
+    if (vm.count("closure-tail-factor")) preset.closure_tail_factor = tail_factor;
+    preset.information_scale = information_scale;
+    return preset;
+  };
+  const sim::NoiseModel noise = noiseOf(sim::NoiseModel{sigma_t, sigma_r});
 
   OutlierRequest request;
   request.on = vm.count("outliers") > 0;
@@ -142,8 +194,13 @@ int generateCommand(const std::vector<std::string>& args) {
     if (input.empty()) throw UsageError("generate outliers needs --input FILE");
     if (!request.on) throw UsageError("generate outliers needs --outliers FRACTION");
     for (const char* flag :
-         {"truth", "poses", "grid", "size", "rings", "per-ring", "closure-probability"}) {
+         {"truth", "poses", "grid", "size", "rings", "per-ring", "closure-probability",
+          "closure-sigma-factor", "closure-tail-fraction", "closure-tail-factor"}) {
       if (vm.count(flag))
+        throw UsageError(std::string("--") + flag + " does not apply to outliers");
+    }
+    for (const char* flag : {"information-scale", "dim"}) {
+      if (!vm[flag].defaulted())
         throw UsageError(std::string("--") + flag + " does not apply to outliers");
     }
     ReadOptions read;
@@ -163,6 +220,9 @@ int generateCommand(const std::vector<std::string>& args) {
     return 0;
   }
   if (vm.count("input")) throw UsageError("--input applies to generate outliers only");
+  const bool road = kind == "vehicle" || kind == "small-loop";
+  if (!road && !vm["dim"].defaulted())
+    throw UsageError("--dim applies to vehicle and small-loop only");
   if (kind == "manhattan") {
     sim::ManhattanOptions o;
     o.seed = seed;
@@ -189,8 +249,25 @@ int generateCommand(const std::vector<std::string>& args) {
     if (closure_probability >= 0) o.closure_probability = closure_probability;
     if (o.poses < 2 || o.size < 2) throw UsageError("--poses and --size must be at least 2");
     write(sim::gridWorld(o));
+  } else if (road) {
+    sim::RoadOptions o = kind == "vehicle" ? sim::vehicleOptions() : sim::smallLoopOptions();
+    o.seed = seed;
+    o.noise = noiseOf(o.noise);
+    if (vm.count("poses")) o.poses = poses;
+    if (closure_probability >= 0) o.closure_probability = closure_probability;
+    if (o.poses < 2) throw UsageError("--poses must be at least 2, not " + std::to_string(poses));
+    if (dim != 2 && dim != 3) throw UsageError("--dim must be 2 or 3, not " + std::to_string(dim));
+    for (const char* flag : {"grid", "size", "rings", "per-ring"}) {
+      if (vm.count(flag)) throw UsageError(std::string("--") + flag + " does not apply to " + kind);
+    }
+    if (dim == 2) {
+      write(sim::roadWorld2(o));
+    } else {
+      write(sim::roadWorld3(o));
+    }
   } else {
-    throw UsageError("unknown kind '" + kind + "' (manhattan, sphere, grid or outliers)");
+    throw UsageError("unknown kind '" + kind +
+                     "' (manhattan, sphere, grid, vehicle, small-loop or outliers)");
   }
   return 0;
 }

@@ -1,8 +1,11 @@
 #include "arbor/tools/generator/graph_generator.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <map>
 #include <stdexcept>
+#include <string>
 
 #include "arbor/tools/generator/random.h"
 
@@ -25,7 +28,7 @@ Eigen::Matrix<double, Group::kDoF, Group::kDoF> information(const NoiseModel& no
   omega.setZero();
   for (int k = 0; k < Group::kDoF; ++k) {
     const double s = k < Group::kDim ? noise.sigma_translation : noise.sigma_rotation;
-    omega(k, k) = 1.0 / (s * s);
+    omega(k, k) = noise.information_scale / (s * s);
   }
   return omega;
 }
@@ -52,6 +55,29 @@ template <class Group>
 Simulation<Group> simulate(const std::vector<Group>& truth,
                            const std::vector<std::pair<int, int>>& pairs, const NoiseModel& noise,
                            std::uint64_t seed) {
+  for (const double v : {noise.sigma_translation, noise.sigma_rotation, noise.information_scale,
+                         noise.closure_sigma_factor}) {
+    if (!(v > 0) || !std::isfinite(v)) {
+      throw std::invalid_argument(
+          "simulate: noise sigmas, information_scale and closure_sigma_factor must be finite "
+          "and positive, not " +
+          std::to_string(v));
+    }
+  }
+  if (!(noise.closure_tail_fraction >= 0 && noise.closure_tail_fraction <= 1) ||
+      !(noise.closure_tail_factor >= 1) || !std::isfinite(noise.closure_tail_factor)) {
+    throw std::invalid_argument(
+        "simulate: closure_tail_fraction must be in [0, 1] and closure_tail_factor finite and "
+        ">= 1, not " +
+        std::to_string(noise.closure_tail_fraction) + " and " +
+        std::to_string(noise.closure_tail_factor));
+  }
+  NoiseModel closure_noise = noise;  // the loop closures' (|i − j| > 1)
+  closure_noise.sigma_translation *= noise.closure_sigma_factor;
+  closure_noise.sigma_rotation *= noise.closure_sigma_factor;
+  NoiseModel tail_noise = closure_noise;  // a closure of the tail: drawn wider, Ω as the others
+  tail_noise.sigma_translation *= noise.closure_tail_factor;
+  tail_noise.sigma_rotation *= noise.closure_tail_factor;
   Random rng(seed);
   Simulation<Group> sim;
   sim.truth = truth;
@@ -62,13 +88,20 @@ Simulation<Group> simulate(const std::vector<Group>& truth,
     g.index[k] = k;
   }
   const auto omega = information<Group>(noise);
+  const auto closure_omega = information<Group>(closure_noise);
   std::vector<const Group*> odometry(n, nullptr);
   for (const auto& [i, j] : pairs) {
     if (i < 0 || j < 0 || i >= n || j >= n || i == j) {
       throw std::invalid_argument("simulate: bad edge pair");
     }
-    const Group z = truth[i].between(truth[j]).compose(Group::Exp(drawNoise<Group>(rng, noise)));
-    g.edges.push_back(RelativePoseEdge<Group>::make(i, j, z, omega));
+    const bool closure = std::abs(i - j) > 1;
+    const bool tail =
+        closure && noise.closure_tail_fraction > 0 && rng.uniform() < noise.closure_tail_fraction;
+    const Group z = truth[i].between(truth[j]).compose(
+        Group::Exp(drawNoise<Group>(rng, tail      ? tail_noise
+                                         : closure ? closure_noise
+                                                   : noise)));
+    g.edges.push_back(RelativePoseEdge<Group>::make(i, j, z, closure ? closure_omega : omega));
   }
   for (const auto& e : g.edges) {
     if (e.j == e.i + 1 && !odometry[e.j]) odometry[e.j] = &e.measurement;
