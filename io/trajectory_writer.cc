@@ -1,6 +1,7 @@
 #include "arbor/io/trajectory_writer.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -56,9 +57,21 @@ TrajectoryFormat parseTrajectoryFormat(const std::string& name) {
   throw std::invalid_argument("unknown trajectory format '" + name + "' (g2o, tum or kitti)");
 }
 
+std::optional<TrajectoryFormat> trajectoryFormatOfPath(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  const size_t dot = path.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return std::nullopt;
+  std::string extension = path.substr(dot + 1);
+  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (TrajectoryFormat f :
+       {TrajectoryFormat::kG2o, TrajectoryFormat::kTum, TrajectoryFormat::kKitti})
+    if (extension == toString(f)) return f;
+  return std::nullopt;
+}
+
 template <class G>
 void writeTrajectory(std::ostream& out, TrajectoryFormat format, const std::vector<Key>& ids,
-                     const std::vector<G>& poses) {
+                     const std::vector<G>& poses, const PoseStamps* stamps) {
   if (format == TrajectoryFormat::kG2o)
     throw std::invalid_argument("writeTrajectory: g2o needs the graph (writeEstimateFile)");
   if (ids.size() != poses.size())
@@ -79,7 +92,15 @@ void writeTrajectory(std::ostream& out, TrajectoryFormat format, const std::vect
       throw std::invalid_argument("writeTrajectory: pose id " + std::to_string(id) +
                                   " is not finite");
     if (format == TrajectoryFormat::kTum) {
-      text += std::to_string(id);
+      if (stamps == nullptr) {
+        text += std::to_string(id);
+      } else {
+        const auto stamp = stamps->find(id);
+        if (stamp == stamps->end())
+          throw std::invalid_argument("writeTrajectory: pose id " + std::to_string(id) +
+                                      " has no stamp");
+        appendNumber(&text, stamp->second);
+      }
       for (int r = 0; r < 3; ++r) appendNumber(&text, t(r));
       for (double c : {q.x(), q.y(), q.z(), q.w()}) appendNumber(&text, c);
     } else {
@@ -96,22 +117,22 @@ void writeTrajectory(std::ostream& out, TrajectoryFormat format, const std::vect
 
 template <class G>
 void writeEstimateFile(const std::string& path, TrajectoryFormat format, const PoseGraph<G>& graph,
-                       const std::vector<G>& poses) {
+                       const std::vector<G>& poses, const PoseStamps* stamps) {
   if (format == TrajectoryFormat::kG2o) return writeG2oFile(path, graph, poses);
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) throw FileError(path + ": cannot open for writing: " + std::strerror(errno));
-  writeTrajectory(out, format, graph.ids, poses);
+  writeTrajectory(out, format, graph.ids, poses, stamps);
   out.close();
   if (!out) throw FileError(path + ": write failed");
 }
 
 template void writeTrajectory<SE2>(std::ostream&, TrajectoryFormat, const std::vector<Key>&,
-                                   const std::vector<SE2>&);
+                                   const std::vector<SE2>&, const PoseStamps*);
 template void writeTrajectory<SE3>(std::ostream&, TrajectoryFormat, const std::vector<Key>&,
-                                   const std::vector<SE3>&);
+                                   const std::vector<SE3>&, const PoseStamps*);
 template void writeEstimateFile<SE2>(const std::string&, TrajectoryFormat, const PoseGraph2&,
-                                     const std::vector<SE2>&);
+                                     const std::vector<SE2>&, const PoseStamps*);
 template void writeEstimateFile<SE3>(const std::string&, TrajectoryFormat, const PoseGraph3&,
-                                     const std::vector<SE3>&);
+                                     const std::vector<SE3>&, const PoseStamps*);
 
 }  // namespace arbor

@@ -2,7 +2,8 @@
 // RGB-D and KITTI benchmark scripts), beside g2o (io/pose_graph_file.h). docs/files.md gives the
 // formats:
 //
-//   TUM    one line per pose, `timestamp tx ty tz qx qy qz qw`, the timestamp being the pose id;
+//   TUM    one line per pose, `timestamp tx ty tz qx qy qz qw`, the timestamp being the pose's
+//          time in seconds when stamps are given (io/stamps_file.h), else the pose id;
 //   KITTI  one line per pose, the 3×4 matrix [R t] row-major (r11 r12 r13 tx r21 … r33 tz).
 //
 // Poses are written in ascending id order. A 2D pose (x, y, θ) is the 3D pose with z = 0 and
@@ -11,10 +12,12 @@
 #pragma once
 
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "arbor/core/pose_graph.h"
+#include "arbor/io/stamps_file.h"
 
 namespace arbor {
 
@@ -25,12 +28,17 @@ const char* toString(TrajectoryFormat format);
 /// The format named `name` (as toString); throws std::invalid_argument naming it otherwise.
 TrajectoryFormat parseTrajectoryFormat(const std::string& name);
 
-/// Writes poses[k] of id ids[k] (any order; written by ascending id) as TUM or KITTI. Throws
-/// std::invalid_argument if the sizes differ, an id repeats, a pose is not finite, or `format`
-/// is g2o (which needs the graph: writeEstimateFile).
+/// The format a path's extension names: .g2o, .tum or .kitti (any case); nullopt for any other
+/// extension (.txt is TUM's and KITTI's both) or none.
+std::optional<TrajectoryFormat> trajectoryFormatOfPath(const std::string& path);
+
+/// Writes poses[k] of id ids[k] (any order; written by ascending id) as TUM or KITTI; TUM's
+/// timestamp is (*stamps)[id] when `stamps` is given, else the id (KITTI has no time). Throws
+/// std::invalid_argument if the sizes differ, an id repeats or has no stamp, a pose is not
+/// finite, or `format` is g2o (which needs the graph: writeEstimateFile).
 template <class G>
 void writeTrajectory(std::ostream& out, TrajectoryFormat format, const std::vector<Key>& ids,
-                     const std::vector<G>& poses);
+                     const std::vector<G>& poses, const PoseStamps* stamps = nullptr);
 
 /// An estimate of `graph` (poses in its dense order) to `path` in `format`: g2o as writeG2oFile
 /// (the graph's edges and priors with the poses), TUM or KITTI as writeTrajectory over the
@@ -38,6 +46,6 @@ void writeTrajectory(std::ostream& out, TrajectoryFormat format, const std::vect
 /// writeTrajectory.
 template <class G>
 void writeEstimateFile(const std::string& path, TrajectoryFormat format, const PoseGraph<G>& graph,
-                       const std::vector<G>& poses);
+                       const std::vector<G>& poses, const PoseStamps* stamps = nullptr);
 
 }  // namespace arbor

@@ -812,4 +812,138 @@ TEST(Cli, BenchReplayComparesWithTheGtsamRowOfItsFeeding) {
   std::filesystem::remove_all(shared);
 }
 
+// Every field of every line of a text file.
+std::vector<std::vector<std::string>> fieldsOf(const std::string& path) {
+  std::vector<std::vector<std::string>> rows;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    rows.emplace_back();
+    for (std::string f; fields >> f;) rows.back().push_back(f);
+  }
+  return rows;
+}
+
+// -o's extension chooses the format when --format is absent (.g2o, .tum, .kitti; .txt is TUM's
+// and KITTI's both, so it needs --format); a --format the extension contradicts is refused
+// naming both, in batch, replay and serve.
+TEST(Cli, OutputFormatFollowsTheExtensionOrIsRefused) {
+  const std::string file = tempPath("fmt.g2o");
+  ASSERT_EQ(run("generate manhattan --poses 50 --grid 5 --seed 3 -o " + file).status, 0);
+  const std::string tum = tempPath("fmt_out.tum"), kitti = tempPath("fmt_out.kitti");
+  const std::string g2o = tempPath("fmt_out.g2o"), txt = tempPath("fmt_out.txt");
+  for (const std::string command : {"batch", "replay"}) {
+    ASSERT_EQ(run(command + " " + file + " -o " + tum).status, 0) << command;
+    ASSERT_EQ(run(command + " " + file + " -o " + kitti).status, 0) << command;
+    ASSERT_EQ(run(command + " " + file + " -o " + g2o).status, 0) << command;
+    const auto tum_rows = fieldsOf(tum), kitti_rows = fieldsOf(kitti);
+    ASSERT_EQ(tum_rows.size(), 50u) << command;
+    EXPECT_EQ(tum_rows[0].size(), 8u) << command;
+    ASSERT_EQ(kitti_rows.size(), 50u) << command;
+    EXPECT_EQ(kitti_rows[0].size(), 12u) << command;
+    EXPECT_EQ(fieldsOf(g2o)[0][0].rfind("VERTEX", 0), 0u) << command;
+    // .txt: refused without --format, written as --format says with it.
+    const Result bare = run(command + " " + file + " -o " + txt);
+    EXPECT_EQ(bare.status, 2) << command;
+    EXPECT_NE(bare.out.find("--format tum or kitti"), std::string::npos) << bare.out;
+    ASSERT_EQ(run(command + " " + file + " --format kitti -o " + txt).status, 0) << command;
+    EXPECT_EQ(fieldsOf(txt)[0].size(), 12u) << command;
+    const Result disagree = run(command + " " + file + " --format kitti -o " + tum);
+    EXPECT_EQ(disagree.status, 2) << command;
+    EXPECT_EQ(std::count(disagree.out.begin(), disagree.out.end(), '\n'), 1) << disagree.out;
+    EXPECT_NE(disagree.out.find("--format kitti disagrees with -o " + tum), std::string::npos)
+        << disagree.out;
+  }
+  // serve: refused at parsing, before any LCM link is opened.
+  const Result serve = run("serve --lcm-url memq:// --format g2o -o " + tum);
+  EXPECT_EQ(serve.status, 2) << serve.out;
+  EXPECT_NE(serve.out.find("--format g2o disagrees with -o " + tum), std::string::npos)
+      << serve.out;
+  for (const std::string& f : {file, tum, kitti, g2o, txt}) std::filesystem::remove(f);
+}
+
+// Every output path is checked before the graph is read: an unwritable one is refused with exit
+// 2 and one line naming the flag, the path and the OS's reason; nothing is solved or written
+// (an existing file named by another flag keeps its content, a new one is not left behind).
+TEST(Cli, UnwritableOutputsAreRefusedBeforeTheSolve) {
+  const std::string file = tempPath("unwritable.g2o");
+  ASSERT_EQ(run("generate manhattan --poses 50 --grid 5 --seed 3 -o " + file).status, 0);
+  const std::string missing_dir = tempPath("no_such_dir") + "/out.g2o";
+  const std::string directory = arbor::testing::processTempDir().string();
+  const std::string kept = tempPath("kept.g2o"), fresh = tempPath("fresh.tum");
+  { std::ofstream(kept) << "untouched\n"; }
+  struct Case {
+    std::string command, flag;
+  };
+  const std::vector<Case> cases = {{"batch", "--output"},
+                                   {"batch", "--covariances"},
+                                   {"batch --robust", "--rejected-out"},
+                                   {"replay", "--output"},
+                                   {"replay", "--covariances"},
+                                   {"replay", "--latency-csv"},
+                                   {"replay --robust", "--rejected-out"}};
+  for (const Case& c : cases) {
+    const std::string other = c.flag == "--output" ? " --covariances " + kept : " -o " + fresh;
+    for (const auto& [path, reason] : {std::pair<std::string, std::string>{missing_dir,
+                                                                           "No such file or "
+                                                                           "directory"},
+                                       {directory, "Is a directory"}}) {
+      const Result r = run(c.command + " " + file + other + " " + c.flag + " " + path);
+      EXPECT_EQ(r.status, 2) << c.command << " " << c.flag << ": " << r.out;
+      EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << r.out;
+      EXPECT_NE(r.out.find(c.flag + " " + path + ": cannot write: " + reason), std::string::npos)
+          << r.out;
+    }
+    // The input is not even read: a missing input file is not what is reported.
+    const Result unread = run(c.command + " /no/such/input.g2o " + c.flag + " " + missing_dir);
+    EXPECT_EQ(unread.status, 2) << unread.out;
+    EXPECT_NE(unread.out.find(missing_dir), std::string::npos) << unread.out;
+  }
+  std::ifstream in(kept);
+  std::string content;
+  std::getline(in, content);
+  EXPECT_EQ(content, "untouched");
+  EXPECT_FALSE(std::filesystem::exists(fresh));
+  const Result serve = run("serve --lcm-url memq:// -o " + missing_dir);
+  EXPECT_EQ(serve.status, 2) << serve.out;
+  EXPECT_NE(serve.out.find("--output " + missing_dir + ": cannot write"), std::string::npos)
+      << serve.out;
+  std::filesystem::remove(file);
+  std::filesystem::remove(kept);
+}
+
+// --stamps: TUM's first field is the pose's time from the file (here 1000 + id/4 s); a graph pose
+// without a time is refused naming the file and the id, and --stamps without TUM output is a
+// usage error.
+TEST(Cli, StampsGiveTumTheMeasurementsTimes) {
+  const std::string file = tempPath("stamped.g2o");
+  ASSERT_EQ(run("generate manhattan --poses 40 --grid 5 --seed 3 -o " + file).status, 0);
+  const std::string stamps = tempPath("stamps.txt"), partial = tempPath("partial_stamps.txt");
+  {
+    std::ofstream all(stamps), some(partial);
+    all << "# id seconds\n";
+    for (int id = 0; id < 40; ++id) {
+      all << id << " " << 1000 + 0.25 * id << "\n";
+      if (id != 17) some << id << " " << 1000 + 0.25 * id << "\n";
+    }
+  }
+  const std::string tum = tempPath("stamped.tum");
+  for (const std::string command : {"batch", "replay"}) {
+    ASSERT_EQ(run(command + " " + file + " -o " + tum + " --stamps " + stamps).status, 0);
+    const auto rows = fieldsOf(tum);
+    ASSERT_EQ(rows.size(), 40u);
+    for (int id = 0; id < 40; ++id) EXPECT_EQ(std::stod(rows[id][0]), 1000 + 0.25 * id) << id;
+    const Result gap = run(command + " " + file + " -o " + tum + " --stamps " + partial);
+    EXPECT_EQ(gap.status, 1) << gap.out;
+    EXPECT_NE(gap.out.find(partial + ": no time for pose id 17"), std::string::npos) << gap.out;
+    const Result g2o =
+        run(command + " " + file + " -o " + tempPath("x.g2o") + " --stamps " + stamps);
+    EXPECT_EQ(g2o.status, 2) << g2o.out;
+    EXPECT_NE(g2o.out.find("--stamps " + stamps + " needs TUM output"), std::string::npos)
+        << g2o.out;
+  }
+  for (const std::string& f : {file, stamps, partial, tum}) std::filesystem::remove(f);
+}
+
 }  // namespace

@@ -1,8 +1,11 @@
 // Tests of the service's engine (tools/serve/serve_engine.h): the "changed" estimates, built from
 // the smoother's updatedPoses, carry every pose whose published value changed.
 
+#include <cstdio>
+#include <fstream>
 #include <map>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "arbor/tests/random_graphs.h"
@@ -72,6 +75,36 @@ TEST(ServeEngine, ChangedMessagesAddUpToTheFullEstimate) {
     }
   }
   EXPECT_LT(changed_total, 400 * 401 / 2) << "fewer than every pose every time";
+}
+
+// TUM output of the service: a pose's time is the utime (µs, written in s) of the edge or prior
+// that created it, not of later edges to it; g2o and KITTI are as before.
+TEST(ServeEngine, TumTimesAreTheUtimeOfTheMeasurementThatCreatedEachPose) {
+  std::unique_ptr<Engine> engine = makeEngine(2, SmootherOptions{});
+  const auto omega = diagonalInformation<SE2>(100.0, 400.0);
+  auto send = [&](Key from, Key to, std::int64_t utime) {
+    StreamEdge<SE2> e;
+    e.from = from;
+    e.to = to;
+    e.z = SE2(1.0, 0.0, 0.1);
+    e.omega = omega;
+    e.utime = utime;
+    engine->add(AnyStreamEdge(e));
+  };
+  send(10, 11, 1'700'000'000'000'000);  // creates 10 and 11
+  send(11, 12, 1'700'000'000'250'000);
+  send(12, 13, 1'700'000'000'500'000);
+  send(10, 13, 1'700'000'009'000'000);  // a loop closure: no new pose
+  engine->update();
+  const std::string path = ::testing::TempDir() + "serve_engine_stamps.tum";
+  engine->writeEstimate(path, TrajectoryFormat::kTum);
+  std::ifstream in(path);
+  std::vector<double> times;
+  std::string line;
+  while (std::getline(in, line)) times.push_back(std::stod(line.substr(0, line.find(' '))));
+  EXPECT_EQ(times, (std::vector<double>{1'700'000'000.0, 1'700'000'000.0, 1'700'000'000.25,
+                                        1'700'000'000.5}));
+  std::remove(path.c_str());
 }
 
 }  // namespace

@@ -185,5 +185,75 @@ TEST(TrajectoryWriter, EstimateFilesByFormat) {
   std::remove((base + ".g2o").c_str());
 }
 
+// With stamps, TUM's first field is the pose's time (ascending id order kept), written so that
+// it reads back exactly; a pose without a stamp is refused naming its id. KITTI has no time.
+TEST(TrajectoryWriter, TumTimesFromStamps) {
+  std::mt19937 rng(5);
+  std::vector<Key> ids = {7, 2, 40};
+  std::vector<SE3> poses;
+  for (size_t k = 0; k < ids.size(); ++k)
+    poses.push_back(SE3::Exp(testing::isotropicNoise<SE3>(rng, 1.0)));
+  const PoseStamps stamps = {{2, 1305031102.175304}, {7, 1305031102.211214}, {40, 0.5}};
+  std::ostringstream out;
+  writeTrajectory(out, TrajectoryFormat::kTum, ids, poses, &stamps);
+  const auto rows = parseLines(out.str());
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0][0], stamps.at(2));
+  EXPECT_EQ(rows[1][0], stamps.at(7));
+  EXPECT_EQ(rows[2][0], stamps.at(40));
+  EXPECT_EQ(rows[1][1], poses[0].translation().x());
+  std::ostringstream unstamped;
+  writeTrajectory(unstamped, TrajectoryFormat::kTum, ids, poses);
+  EXPECT_EQ(parseLines(unstamped.str())[2][0], 40.0);
+  std::ostringstream kitti_stamped, kitti;
+  writeTrajectory(kitti_stamped, TrajectoryFormat::kKitti, ids, poses, &stamps);
+  writeTrajectory(kitti, TrajectoryFormat::kKitti, ids, poses);
+  EXPECT_EQ(kitti_stamped.str(), kitti.str());
+  const PoseStamps missing = {{2, 1.0}, {40, 3.0}};
+  std::ostringstream sink;
+  try {
+    writeTrajectory(sink, TrajectoryFormat::kTum, ids, poses, &missing);
+    ADD_FAILURE() << "a pose without a stamp was written";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("pose id 7 has no stamp"), std::string::npos) << e.what();
+  }
+}
+
+TEST(TrajectoryWriter, FormatOfAPathsExtension) {
+  EXPECT_EQ(trajectoryFormatOfPath("a/b.tum"), TrajectoryFormat::kTum);
+  EXPECT_EQ(trajectoryFormatOfPath("B.KITTI"), TrajectoryFormat::kKitti);
+  EXPECT_EQ(trajectoryFormatOfPath("x.y/out.g2o"), TrajectoryFormat::kG2o);
+  EXPECT_EQ(trajectoryFormatOfPath("out.txt"), std::nullopt);
+  EXPECT_EQ(trajectoryFormatOfPath("dir.tum/out"), std::nullopt);
+  EXPECT_EQ(trajectoryFormatOfPath("out"), std::nullopt);
+}
+
+// The stamps file: "ID TIME" a line, comments and blank lines skipped; every malformed line is
+// refused naming the file, the line and the value.
+TEST(StampsFile, ReadsIdsAndTimesAndNamesBadLines) {
+  std::istringstream good("# id time\n0 1305031102.175304\n\n3 +2.5  # comment\n");
+  const PoseStamps stamps = readStamps(good, "s.txt");
+  ASSERT_EQ(stamps.size(), 2u);
+  EXPECT_EQ(stamps.at(0), 1305031102.175304);
+  EXPECT_EQ(stamps.at(3), 2.5);
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"0 1\n1\n", "s.txt:2: expected 'ID TIME_SECONDS', found 1 fields"},
+      {"-1 2\n", "s.txt:1: pose id '-1'"},
+      {"0 nan\n", "s.txt:1: time 'nan'"},
+      {"0 abc\n", "s.txt:1: time 'abc'"},
+      {"0 1\n0 2\n", "s.txt:2: pose id 0 is given twice"},
+  };
+  for (const auto& [text, message] : bad) {
+    std::istringstream in(text);
+    try {
+      readStamps(in, "s.txt");
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const FileError& e) {
+      EXPECT_EQ(std::string(e.what()).rfind(message, 0), 0u) << e.what();
+    }
+  }
+  EXPECT_THROW(readStampsFile("/nonexistent/stamps.txt"), FileError);
+}
+
 }  // namespace
 }  // namespace arbor

@@ -17,6 +17,7 @@
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/covariance_output.h"
 #include "arbor/tools/cli/online_threshold.h"
+#include "arbor/tools/cli/output_files.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/refine/batch_solvers.h"
 
@@ -33,7 +34,9 @@ struct BatchRun {
   refine::BatchSolveSettings settings;
   std::string init;  // empty: "file" when the file has VERTEX lines, else "odometry"
   std::string output;
-  TrajectoryFormat format = TrajectoryFormat::kG2o;  // --format
+  TrajectoryFormat format = TrajectoryFormat::kG2o;  // --format, or -o's extension
+  std::string stamps_file;                           // --stamps FILE (io/stamps_file.h)
+  std::optional<PoseStamps> stamps;                  // read from it before the solve
   std::string covariances;                           // --covariances
   bool json = false;
   ReadOptions read;
@@ -44,10 +47,12 @@ struct BatchRun {
   std::string edge_choices;       // --edge-choices FILE (io/edge_choice_file.h)
 };
 
-// -o in --format, --covariances: the marginal covariances at the final estimate.
+// -o in --format (TUM stamped from --stamps), --covariances: the marginal covariances at the
+// final estimate.
 template <class G>
 void writeOutputs(const BatchRun& run, const PoseGraph<G>& graph, const std::vector<G>& poses) {
-  if (!run.output.empty()) writeEstimateFile(run.output, run.format, graph, poses);
+  if (!run.output.empty())
+    writeEstimateFile(run.output, run.format, graph, poses, run.stamps ? &*run.stamps : nullptr);
   if (!run.covariances.empty()) writeBatchCovariancesFile(run.covariances, graph, poses);
 }
 
@@ -372,7 +377,7 @@ int batchCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
-  std::string format = "g2o", inner_start = "initial", mu_start = "initial";
+  std::string format, inner_start = "initial", mu_start = "initial";
   po::options_description options("arbor batch FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
                                                     "g2o or TORO file")(
@@ -389,9 +394,8 @@ int batchCommand(const std::vector<std::string>& args) {
       "information", po::value(&information)->default_value("refuse"),
       "what to do with information matrices that are not positive definite: refuse | repair | "
       "isotropic")("output,o", po::value(&run.output), "write the estimate (as --format)")(
-      "format", po::value(&format)->default_value("g2o"),
-      "of -o: g2o (the graph with the estimate) | tum (`id tx ty tz qx qy qz qw` a line) | kitti "
-      "(3x4 [R t] row-major a line, by ascending id); docs/files.md")(
+      "format", po::value(&format), kOutputFormatHelp)("stamps", po::value(&run.stamps_file),
+                                                       kStampsHelp)(
       "covariances", po::value(&run.covariances),
       "write every pose's marginal covariance at the final estimate, `id` and the upper triangle "
       "a line (docs/files.md)")("json", po::bool_switch(&run.json), "print one JSON object")(
@@ -454,17 +458,17 @@ int batchCommand(const std::vector<std::string>& args) {
         throw UsageError(std::string("--") + flag + " needs --robust");
   }
   if (!(run.settings.relative_tolerance >= 0)) throw UsageError("--rel-tol must be >= 0");
-  try {
-    run.format = parseTrajectoryFormat(format);
-  } catch (const std::invalid_argument& e) {
-    throw UsageError(std::string("--format: ") + e.what());
-  }
-  if (given.count("format") && !given["format"].defaulted() && run.output.empty())
-    throw UsageError("--format needs --output");
+  if (!format.empty() && run.output.empty()) throw UsageError("--format needs --output");
+  run.format = outputFormat(run.output, format);
+  requireTumForStamps(run.stamps_file, run.format);
   run.read.information = parseInformationPolicy(information);
+  requireWritable("--output", run.output);
+  requireWritable("--covariances", run.covariances);
+  requireWritable("--rejected-out", run.rejected_out);
 
   ReadReport report;
   AnyPoseGraph any = readGraphFile(run.file, run.read, &report);
+  if (!run.stamps_file.empty()) run.stamps = readStampsOf(run.stamps_file, any);
   return std::visit(
       [&](auto& graph) {
         if (run.robust) return solveRobustAndReport(run, graph, report, total);

@@ -19,6 +19,7 @@
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/covariance_output.h"
+#include "arbor/tools/cli/output_files.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/cli/smoother_flags.h"
 
@@ -38,7 +39,8 @@ std::string batchLabel(const ReplayRun& run) {
 }
 
 template <class G>
-int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clock) {
+int replay(const ReplayRun& run, PoseGraph<G>& graph, const std::optional<PoseStamps>& stamps,
+           const Stopwatch& total_clock) {
   ReplaySettings settings;
   settings.smoother = run.smoother;
   settings.per_pose = run.step == "pose";
@@ -75,7 +77,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
   }
   const ReplayResult<G>& r = loop_result.replay;
   for (const auto& line : r.rejections) std::cerr << "arbor replay: " << line << "\n";
-  if (!run.output.empty()) writeEstimateFile(run.output, run.format, graph, r.poses);
+  if (!run.output.empty())
+    writeEstimateFile(run.output, run.format, graph, r.poses, stamps ? &*stamps : nullptr);
   if (!run.covariances.empty())
     writeCovariancesFile<G::kDoF>(run.covariances, r.covariance_ids, r.covariances);
   if (!run.latency_csv.empty()) writeLatencyCsv(run.latency_csv, r.rows);
@@ -241,7 +244,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const Stopwatch& total_clo
 
 std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args) {
   ReplayCommandLine run;
-  std::string information = "refuse", batch, format = "g2o";
+  std::string information = "refuse", batch, format;
   bool no_finalize = false;
   po::options_description options("arbor replay FILE [options]");
   options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
@@ -261,9 +264,8 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
       "information", po::value(&information)->default_value("refuse"),
       "refuse | repair | isotropic (information matrices that are not positive definite)")(
       "output,o", po::value(&run.output), "write the final estimate (as --format)")(
-      "format", po::value(&format)->default_value("g2o"),
-      "of -o: g2o (the graph with the estimate) | tum (`id tx ty tz qx qy qz qw` a line) | kitti "
-      "(3x4 [R t] row-major a line, by ascending id); docs/files.md")(
+      "format", po::value(&format), kOutputFormatHelp)("stamps", po::value(&run.stamps_file),
+                                                       kStampsHelp)(
       "covariances", po::value(&run.covariances),
       "write every pose's marginal covariance from the final Bayes tree, `id` and the upper "
       "triangle a line (docs/files.md)")("latency-csv", po::value(&run.latency_csv),
@@ -324,13 +326,9 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
     throw UsageError("--edge-choices needs --robust");
   readOnlineRobustFlags(vm, run.robust.robust, &run.online);
   requireInlineWithRobust(run.robust.robust, run.smoother);
-  try {
-    run.format = parseTrajectoryFormat(format);
-  } catch (const std::invalid_argument& e) {
-    throw UsageError(std::string("--format: ") + e.what());
-  }
-  if (vm.count("format") && !vm["format"].defaulted() && run.output.empty())
-    throw UsageError("--format needs --output");
+  if (!format.empty() && run.output.empty()) throw UsageError("--format needs --output");
+  run.format = outputFormat(run.output, format);
+  requireTumForStamps(run.stamps_file, run.format);
   run.read.information = parseInformationPolicy(information);
   return run;
 }
@@ -339,9 +337,15 @@ int replayCommand(const std::vector<std::string>& args) {
   Stopwatch total;
   const std::optional<ReplayCommandLine> run = parseReplayCommandLine(args);
   if (!run) return 0;
+  requireWritable("--output", run->output);
+  requireWritable("--covariances", run->covariances);
+  requireWritable("--latency-csv", run->latency_csv);
+  requireWritable("--rejected-out", run->robust.rejected_out);
   if (run->bounded_heap) useBoundedHeap();
   AnyPoseGraph any = readGraphFile(run->file, run->read);
-  return std::visit([&](auto& graph) { return replay(*run, graph, total); }, any);
+  std::optional<PoseStamps> stamps;
+  if (!run->stamps_file.empty()) stamps = readStampsOf(run->stamps_file, any);
+  return std::visit([&](auto& graph) { return replay(*run, graph, stamps, total); }, any);
 }
 
 }  // namespace arbor::cli

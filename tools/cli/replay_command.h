@@ -16,7 +16,8 @@ namespace arbor::cli {
 
 struct ReplayCommandLine {
   std::string file, output, latency_csv, step = "edge";
-  TrajectoryFormat format = TrajectoryFormat::kG2o;  ///< --format of --output
+  TrajectoryFormat format = TrajectoryFormat::kG2o;  ///< --format, or --output's extension
+  std::string stamps_file;  ///< --stamps FILE: TUM's times (io/stamps_file.h)
   std::string covariances;  ///< --covariances FILE: every pose's marginal at the end
   bool json = false, finalize = true, reseed = false;
   bool bounded_heap = false;  ///< --bounded-heap: arbor::useBoundedHeap before reading the file

@@ -23,6 +23,7 @@
 #include "arbor/tools/cli/batch_refinement.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/output_files.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/cli/smoother_flags.h"
 #include "arbor/tools/serve/closure_report.h"
@@ -95,7 +96,7 @@ double parseExitBudget(const std::string& text) {
 std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args) {
   ServeCommandLine line;
   serve::ServeOptions& options = line.options;
-  std::string fsync = "update", publish = "changed", batch;
+  std::string fsync = "update", publish = "changed", batch, format;
   bool no_refine = false;
   std::string exit_budget = "1";
   long long max_senders = static_cast<long long>(options.max_senders);
@@ -134,8 +135,13 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "exit-refine-budget", po::value(&exit_budget)->default_value(exit_budget),
       "seconds the exit refinement may take: it stops at the first iteration boundary after "
       "them (none: to convergence, however long; a second SIGINT/SIGTERM cuts it at once)")(
-      "output,o", po::value(&line.output), "on exit, write the estimate as g2o")(
-      "json", po::bool_switch(&line.json), "on exit, print one JSON object")(
+      "output,o", po::value(&line.output), "on exit, write the estimate (as --format)")(
+      "format", po::value(&format),
+      "of -o: g2o (the graph with the edges applied) | tum (`time tx ty tz qx qy qz qw` a line, "
+      "the time the utime in seconds of the edge that created the pose) | kitti (3x4 [R t] "
+      "row-major a line), by ascending id; default: -o's extension (.g2o, .tum, .kitti; .txt "
+      "needs --format), else g2o; docs/files.md")("json", po::bool_switch(&line.json),
+                                                  "on exit, print one JSON object")(
       "bounded-heap", po::bool_switch(&line.bounded_heap),
       "return freed clique storage to the system: glibc's mmap threshold fixed at 1 MiB "
       "(core/heap_policy.h). Lowers the peak of very large graphs; costs page faults where "
@@ -202,6 +208,8 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
     robust.threshold = line.robust.threshold;
     options.robust = robust;
   }
+  if (!format.empty() && line.output.empty()) throw UsageError("--format needs --output");
+  line.format = outputFormat(line.output, format);
   parseFsync(fsync, &options);
   options.full_every = parsePublishMode(publish);
   options.refine_on_exit = !no_refine;
@@ -226,6 +234,8 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
 int serveCommand(const std::vector<std::string>& args) {
   std::optional<ServeCommandLine> line = parseServeCommandLine(args);
   if (!line) return 0;
+  requireWritable("--output", line->output);
+  requireWritable("--rejected-out", line->robust.rejected_out);
   if (line->bounded_heap) useBoundedHeap();
   serve::ServeOptions& options = line->options;
   const std::string& url = line->url;
@@ -308,7 +318,7 @@ int serveCommand(const std::vector<std::string>& args) {
   stopped = true;
   second_signal.join();
   const serve::ServeSummary& s = service.summary();
-  if (!output.empty() && !service.writeG2o(output)) {
+  if (!output.empty() && !service.writeEstimate(output, line->format)) {
     std::cerr << "arbor serve: no edge was applied; " << output << " not written\n";
   }
   if (!line->robust.rejected_out.empty())

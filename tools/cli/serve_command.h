@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "arbor/io/trajectory_writer.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/serve/serve_service.h"
 
@@ -16,6 +17,7 @@ struct ServeCommandLine {
   std::string url;          ///< --lcm-url (empty: LCM's default)
   std::string journal_dir;  ///< --journal; options.journal_path is the file inside it
   std::string output;       ///< --output
+  TrajectoryFormat format = TrajectoryFormat::kG2o;  ///< --format, or --output's extension
   bool json = false;
   bool bounded_heap = false;  ///< --bounded-heap: arbor::useBoundedHeap before serving
   RobustFlags robust;         ///< --robust ... (options.robust is set from it)

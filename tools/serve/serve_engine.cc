@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/io/trajectory_writer.h"
 
 namespace arbor::serve {
 namespace {
@@ -27,15 +28,23 @@ class EngineImpl final : public Engine {
     if (e == nullptr) {
       return {EdgeStatus::kRejected, "edge of another dimension than the stream"};
     }
-    return smoother_.addEdge(e->from, e->to, e->z, e->omega, e->trust, e->kernel);
+    const size_t known = smoother_.ids().size();
+    const EdgeResult r = smoother_.addEdge(e->from, e->to, e->z, e->omega, e->trust, e->kernel);
+    stampNewPoses(known, e->utime);
+    return r;
   }
 
   EdgeResult addPrior(const AnyStreamPrior& any) override {
-    if (const auto* p = std::get_if<StreamPosePrior<G>>(&any))
-      return smoother_.addPosePrior(p->id, p->z, p->omega, p->offset);
-    if (const auto* p = std::get_if<StreamPositionPrior<G>>(&any))
-      return smoother_.addPositionPrior(p->id, p->p, p->omega);
-    return {EdgeStatus::kRejected, "prior of another dimension than the stream"};
+    const size_t known = smoother_.ids().size();
+    EdgeResult r{EdgeStatus::kRejected, "prior of another dimension than the stream"};
+    if (const auto* p = std::get_if<StreamPosePrior<G>>(&any)) {
+      r = smoother_.addPosePrior(p->id, p->z, p->omega, p->offset);
+      stampNewPoses(known, p->utime);
+    } else if (const auto* p = std::get_if<StreamPositionPrior<G>>(&any)) {
+      r = smoother_.addPositionPrior(p->id, p->p, p->omega);
+      stampNewPoses(known, p->utime);
+    }
+    return r;
   }
 
   EdgeSwitchResult command(const StreamEdgeCommand& c) override {
@@ -186,6 +195,24 @@ class EngineImpl final : public Engine {
 
  public:
   void writeG2o(const std::string& path) const override {
+    const PoseGraph<G> graph = graphOfEstimate();
+    writeG2oFile(path, graph, graph.poses);
+  }
+
+  void writeEstimate(const std::string& path, TrajectoryFormat format) const override {
+    const PoseGraph<G> graph = graphOfEstimate();
+    writeEstimateFile(path, format, graph, graph.poses, &stamps_);
+  }
+
+ private:
+  // The poses the smoother created since it knew `known` are stamped `utime` (µs) in seconds.
+  void stampNewPoses(size_t known, std::int64_t utime) {
+    const std::vector<Key>& ids = smoother_.ids();
+    for (size_t k = known; k < ids.size(); ++k) stamps_.emplace(ids[k], 1e-6 * double(utime));
+  }
+
+  // The estimate and the edges applied but the disabled ones, poses by ascending id.
+  PoseGraph<G> graphOfEstimate() const {
     const std::vector<G> poses = smoother_.smoother().estimate();
     const std::vector<Key>& ids = smoother_.ids();
     PoseGraph<G> graph;
@@ -211,10 +238,9 @@ class EngineImpl final : public Engine {
     }
     std::sort(graph.fixed.begin(), graph.fixed.end());
     graph.has_initial_estimate = true;
-    writeG2oFile(path, graph, graph.poses);
+    return graph;
   }
 
- private:
   using Fields = std::array<double, 7>;
   static OnlineSmootherOptions<G> makeOptions(const SmootherOptions& s,
                                               const std::optional<RobustOptions>& robust) {
@@ -228,6 +254,7 @@ class EngineImpl final : public Engine {
   std::vector<Fields> published_;  ///< per dense index: the values last put in a message
   std::vector<int> changed_;       ///< poses to compare at the next "changed" message
   std::vector<char> is_changed_;   ///< per dense index: listed in changed_
+  PoseStamps stamps_;  ///< per pose id: the utime of the edge or prior that created it, in s
 };
 
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/io/stream_measurements.h"
+#include "arbor/io/trajectory_writer.h"
 #include "arbor/tools/refine/batch_refiner.h"
 #include "arbor/tools/serve/stream_types.h"
 
@@ -58,6 +59,9 @@ class Engine {
   /// Writes the estimate and the edges applied so far but the disabled ones as g2o (the first
   /// pose is FIXed).
   virtual void writeG2o(const std::string& path) const = 0;
+  /// As writeG2o in `format`; TUM's time of a pose is the utime (in seconds) of the edge or
+  /// prior that created it.
+  virtual void writeEstimate(const std::string& path, TrajectoryFormat format) const = 0;
 
   // Batch refinement (tools/refine/batch_refiner.h).
   virtual const refine::RefinerOptions& batchOptions() const = 0;

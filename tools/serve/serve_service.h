@@ -87,9 +87,10 @@ class LcmService final : public Publisher {
   status_t status() const;
   /// After stop(): the whole run.
   const ServeSummary& summary() const { return summary_; }
-  /// After stop(): writes the final estimate and the edges applied as g2o; false when there is
-  /// no estimate (no edge was applied). Throws FileError if it cannot be written.
-  bool writeG2o(const std::string& path) const { return core_->writeG2o(path); }
+  /// After stop(): StreamingCore::writeEstimate.
+  bool writeEstimate(const std::string& path, TrajectoryFormat format) const {
+    return core_->writeEstimate(path, format);
+  }
   const Channels& channels() const { return channels_; }
 
   // Publisher: the core's estimates, status and answers onto the publish link.

@@ -167,10 +167,10 @@ void StreamingCore::stop() {
   summary_.transport = cli::summarizeLatency(transport_ms_);
 }
 
-bool StreamingCore::writeG2o(const std::string& path) const {
-  if (running_) throw std::logic_error("serve: writeG2o() while running");
+bool StreamingCore::writeEstimate(const std::string& path, TrajectoryFormat format) const {
+  if (running_) throw std::logic_error("serve: writeEstimate() while running");
   if (!engine_) return false;
-  engine_->writeG2o(path);
+  engine_->writeEstimate(path, format);
   return true;
 }
 

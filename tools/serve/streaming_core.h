@@ -223,9 +223,10 @@ class StreamingCore {
   CoreStatus status() const;
   /// After stop(): the whole run.
   const ServeSummary& summary() const { return summary_; }
-  /// After stop(): writes the final estimate and the edges applied as g2o; false when there is
-  /// no estimate (no edge was applied). Throws FileError if it cannot be written.
-  bool writeG2o(const std::string& path) const;
+  /// After stop(): writes the final estimate (Engine::writeEstimate: g2o with the edges
+  /// applied, TUM stamped with the edges' utime, or KITTI); false when there is no estimate (no
+  /// edge was applied). Throws FileError if it cannot be written.
+  bool writeEstimate(const std::string& path, TrajectoryFormat format) const;
 
   void logLine(const std::string& line);
   /// A line that a sender can provoke at will: at most one per `key` a second.
