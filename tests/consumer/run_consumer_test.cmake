@@ -1,6 +1,7 @@
 # ctest install_consumer (tests/CMakeLists.txt), run with cmake -P: installs the build tree into
 # a fresh prefix, then, as a user would,
-#   1. configures and builds tests/consumer (find_package(Arbor), Arbor::arbor) against it and
+#   1. configures and builds tests/consumer (find_package(Arbor), Arbor::arbor) against it (its
+#      CMakeLists checks ARBOR_INCLUDE_DIR and ARBOR_LCM_TYPES_JAR point into the prefix) and
 #      replays each DATA file with it; its F must equal the installed `arbor replay`'s F_final
 #      (within 1e-9 relative), and OpenBLAS must run one thread per call without the program
 #      asking (unless the BLAS is not OpenBLAS);
@@ -45,7 +46,8 @@ endforeach()
 
 # 1. The CMake package.
 set(configure ${CMAKE_COMMAND} -S ${SOURCE_DIR}/tests/consumer -B ${WORK_DIR}/consumer
-    -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_CXX_COMPILER=${CXX})
+    -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_CXX_COMPILER=${CXX}
+    -DARBOR_EXPECTED_PREFIX=${prefix})
 if(LAUNCHER)
   list(APPEND configure -DCMAKE_CXX_COMPILER_LAUNCHER=${LAUNCHER})
 endif()
