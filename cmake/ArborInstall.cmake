@@ -29,6 +29,10 @@ if(TARGET arbor-bench)
   install(TARGETS arbor-bench RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} OPTIONAL)
 endif()
 
+# `arbor plot` looks for its drawing script in PREFIX/share/arbor/ (tools/cli/plot_command.cc).
+install(PROGRAMS ${PROJECT_SOURCE_DIR}/tools/plots/plot_trajectory.py
+  DESTINATION ${CMAKE_INSTALL_DATADIR}/arbor)
+
 # `arbor spy` looks for the jar in PREFIX/share/arbor/ (tools/cli/spy_command.cc).
 set(ARBOR_INSTALL_JAR ${CMAKE_INSTALL_DATADIR}/arbor/arbor_lcm_types.jar)
 if(TARGET arbor_lcm_java)

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <set>
 #include <sstream>
 #include <string>
@@ -944,6 +945,72 @@ TEST(Cli, StampsGiveTumTheMeasurementsTimes) {
         << g2o.out;
   }
   for (const std::string& f : {file, stamps, partial, tum}) std::filesystem::remove(f);
+}
+
+// `arbor plot` writes a PNG (the PNG signature, more than it) and, with a reference, ATE and RPE:
+// 0 for an estimate against itself; 0 after the alignment for a copy shifted and turned as a
+// whole; for the unit square's corners lifted by +ε, −ε, +ε, −ε along z, ATE = ε (the best rigid
+// move is the identity) and RPE = 2ε (each step off by 2ε), by hand. A 2D g2o reference (ids
+// for times) associates with replay's TUM output pose by pose.
+TEST(Cli, PlotWritesAPngAndEvosErrors) {
+  const double eps = 0.05;
+  const std::string square = tempPath("square.tum"), moved = tempPath("moved.tum");
+  const std::string lifted = tempPath("lifted.tum"), png = tempPath("square.png");
+  {
+    std::ofstream a(square), b(moved), c(lifted);
+    a.precision(17);
+    b.precision(17);
+    c.precision(17);
+    const double corners[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    // The moved copy: the square turned by 0.3 rad about z and shifted by (3, -2, 1).
+    const double turn = 0.3, s = std::sin(turn / 2), cs = std::cos(turn / 2);
+    for (int k = 0; k < 4; ++k) {
+      const double x = corners[k][0], y = corners[k][1];
+      a << k << " " << x << " " << y << " 0 0 0 0 1\n";
+      b << k << " " << std::cos(turn) * x - std::sin(turn) * y + 3 << " "
+        << std::sin(turn) * x + std::cos(turn) * y - 2 << " 1 0 0 " << s << " " << cs << "\n";
+      c << k << " " << x << " " << y << " " << (k % 2 == 0 ? eps : -eps) << " 0 0 0 1\n";
+    }
+  }
+  const auto plot = [&](const std::string& estimate, const std::string& reference) {
+    const Result r = run("plot " + estimate + " " + reference + " -o " + png + " --json");
+    EXPECT_EQ(r.status, 0) << r.out;
+    std::ifstream in(png, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_GT(bytes.size(), 8u);
+    EXPECT_EQ(bytes.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
+    std::filesystem::remove(png);
+    return nlohmann::json::parse(r.out);
+  };
+  const auto self = plot(square, square);
+  EXPECT_LT(self["ate"]["rmse"].get<double>(), 1e-12);
+  EXPECT_EQ(self["rpe"]["rmse"].get<double>(), 0.0);
+  EXPECT_EQ(self["reference"]["associated"], 4);
+  const auto shifted = plot(moved, square);
+  EXPECT_LT(shifted["ate"]["rmse"].get<double>(), 1e-9);
+  EXPECT_LT(shifted["rpe"]["rmse"].get<double>(), 1e-9);
+  const auto perturbed = plot(lifted, square);
+  EXPECT_NEAR(perturbed["ate"]["rmse"].get<double>(), eps, 1e-12);
+  EXPECT_NEAR(perturbed["rpe"]["rmse"].get<double>(), 2 * eps, 1e-12);
+  EXPECT_EQ(perturbed["rpe"]["pairs"], 3);
+
+  // A replay's TUM estimate against the g2o file it came from; and the trajectory alone.
+  const std::string graph = tempPath("plotted.g2o"), tum = tempPath("plotted.tum");
+  ASSERT_EQ(run("generate manhattan --poses 60 --grid 5 --seed 3 -o " + graph).status, 0);
+  ASSERT_EQ(run("replay " + graph + " -o " + tum).status, 0);
+  const auto replayed = plot(tum, graph);
+  EXPECT_EQ(replayed["reference"]["associated"], 60);
+  EXPECT_GT(replayed["ate"]["rmse"].get<double>(), 0.0);
+  const Result alone = run("plot " + tum + " -o " + png);
+  EXPECT_EQ(alone.status, 0) << alone.out;
+  EXPECT_GT(std::filesystem::file_size(png), 0u);
+  // Bad input: an unwritable PNG (exit 2, before reading), an unreadable estimate (exit 1).
+  const Result unwritable = run("plot " + tum + " -o " + tempPath("no_dir") + "/x.png");
+  EXPECT_EQ(unwritable.status, 2) << unwritable.out;
+  const Result unreadable = run("plot " + tempPath("missing.tum") + " -o " + png);
+  EXPECT_EQ(unreadable.status, 1) << unreadable.out;
+  EXPECT_NE(unreadable.out.find("missing.tum: cannot open"), std::string::npos) << unreadable.out;
+  for (const std::string& f : {square, moved, lifted, png, graph, tum}) std::filesystem::remove(f);
 }
 
 }  // namespace

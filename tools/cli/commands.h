@@ -14,6 +14,8 @@ int replayCommand(const std::vector<std::string>& args);
 int serveCommand(const std::vector<std::string>& args);
 int publishCommand(const std::vector<std::string>& args);
 int spyCommand(const std::vector<std::string>& args);
+/// `arbor plot ESTIMATE [REFERENCE]`: a PNG of the trajectory, ATE and RPE against a reference.
+int plotCommand(const std::vector<std::string>& args);
 int commandCommand(const std::vector<std::string>& args);
 /// `arbor command covariance ID [ID2]` (commandCommand hands it over).
 int covarianceCommand(const std::vector<std::string>& args);
