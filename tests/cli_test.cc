@@ -906,6 +906,8 @@ TEST(Cli, UnwritableOutputsAreRefusedBeforeTheSolve) {
   std::getline(in, content);
   EXPECT_EQ(content, "untouched");
   EXPECT_FALSE(std::filesystem::exists(fresh));
+  // A device is checked without being opened for the check, and written.
+  EXPECT_EQ(run("replay " + file + " --format tum -o /dev/null").status, 0);
   const Result serve = run("serve --lcm-url memq:// -o " + missing_dir);
   EXPECT_EQ(serve.status, 2) << serve.out;
   EXPECT_NE(serve.out.find("--output " + missing_dir + ": cannot write"), std::string::npos)

@@ -62,6 +62,12 @@ void requireWritable(const std::string& flag, const std::string& path) {
   const bool existed = ::stat(path.c_str(), &before) == 0;
   if (existed && S_ISDIR(before.st_mode))
     throw UsageError(flag + " " + path + ": cannot write: " + std::strerror(EISDIR));
+  if (existed && !S_ISREG(before.st_mode)) {
+    // A device or a FIFO: opening one may block (a FIFO without a reader) or have effects.
+    if (::access(path.c_str(), W_OK) != 0)
+      throw UsageError(flag + " " + path + ": cannot write: " + std::strerror(errno));
+    return;
+  }
   const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0666);
   if (fd < 0) throw UsageError(flag + " " + path + ": cannot write: " + std::strerror(errno));
   ::close(fd);

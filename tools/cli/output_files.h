@@ -35,7 +35,8 @@ PoseStamps readStampsOf(const std::string& stamps_file, const AnyPoseGraph& grap
 
 /// Throws UsageError "FLAG PATH: cannot write: REASON" (REASON the OS's) unless PATH can be
 /// opened for writing. An existing file is left as it is; a file that did not exist is removed
-/// again. Nothing to check when PATH is empty (the flag not given).
+/// again; a device or FIFO is checked with access(W_OK), not opened. Nothing to check when PATH
+/// is empty (the flag not given).
 void requireWritable(const std::string& flag, const std::string& path);
 
 }  // namespace arbor::cli
