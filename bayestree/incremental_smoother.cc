@@ -200,9 +200,13 @@ struct IncrementalSmoother<G>::Impl {
   typename bayestree::BayesTree<D>::Top top;
   // updatedPoses(): the poses of the last update (each once: updated_stamp[v] == publish_stamp),
   // every variable when updated_all; `moved` waits for the next update (transformPoses).
-  std::vector<int> updated, moved, updated_stamp;
+  // Sorted when first asked for (updated_sorted), not by every update: a replay never asks, and
+  // sorting a few hundred solved poses an update was 4% of intel's update instructions.
+  mutable std::vector<int> updated;
+  std::vector<int> moved, updated_stamp;
   int publish_stamp = 0;
   bool updated_all = false;
+  mutable bool updated_is_sorted = true;
   // Alg. 5's candidates: the variables solved since the last relinearisation check (each once:
   // is_candidate), the only ones whose Δ can have crossed β; every variable when check_all
   // (after a step that set Δ everywhere: dogleg, relinearizeAll).
@@ -433,7 +437,15 @@ struct IncrementalSmoother<G>::Impl {
       for (int v = 0; v < numPoses(); ++v)
         if (!fixed[v]) updated.push_back(v);
     }
-    std::sort(updated.begin(), updated.end());
+    updated_is_sorted = updated_all;  // the loop above lists them in order
+  }
+  // The list updatedPoses() returns: `updated` in increasing order, sorted once per update.
+  const std::vector<int>& updatedInOrder() const {
+    if (!updated_is_sorted) {
+      std::sort(updated.begin(), updated.end());
+      updated_is_sorted = true;
+    }
+    return updated;
   }
   // After a solve: its variables are updated and are the next relinearisation check's
   // candidates.
@@ -973,10 +985,10 @@ struct IncrementalSmoother<G>::Impl {
     } else if (pass.check_relinearization) {
       // Only a variable solved since the last check can have crossed β (every other one was
       // below it then, or relinearised and solved since). In index order, as a scan of all
-      // would list them.
-      std::sort(relin_candidates.begin(), relin_candidates.end());
+      // would list them (the few that crossed sorted, not every candidate).
       for (int v : relin_candidates)
         if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
+      std::sort(relin.begin(), relin.end());
       st->variables_checked = static_cast<int>(relin_candidates.size());
     }
     if (pass.relinearize_all || pass.check_relinearization) {
@@ -1052,10 +1064,12 @@ struct IncrementalSmoother<G>::Impl {
     // Extension (docs/design.md, "Never costlier than batch"): a top of more than a share of
     // the variables, or a tree whose ordering has decayed, is re-eliminated as the whole graph
     // in a fresh ordering (the touched variables still last).
+    const double top_size = static_cast<double>(top.variables.size());
     const bool batch =
         !relinearize_all && !top.variables.empty() &&
-        (reorder_due || static_cast<double>(top.variables.size()) >
-                            opt.batch.top_share * static_cast<double>(num_variables));
+        (reorder_due || top_size > opt.batch.top_share * static_cast<double>(num_variables));
+    // A top of every variable is ordered afresh all the same: the decay watch measures from it.
+    const bool whole_graph = top_size >= static_cast<double>(num_variables);
     if (batch) {
       marked.clear();
       for (int c = 0; c < static_cast<int>(tree.cliques.size()); ++c)
@@ -1088,8 +1102,8 @@ struct IncrementalSmoother<G>::Impl {
     st->variables_reeliminated += out.variables;
     st->reelimination_flops += out.flops;
     if (newest_marked) mark[newest] = 0;
-    tree.releaseFreeStorage();       // cliques not recycled hold no memory
-    if (relinearize_all || batch) {  // a fresh ordering
+    tree.releaseFreeStorage();                      // cliques not recycled hold no memory
+    if (relinearize_all || batch || whole_graph) {  // a fresh ordering
       flops_reference = tree.flops;
       doubles_reference = tree.doubles;
       if (!relinearizationPending()) reorder_job_wanted = false;
@@ -1378,7 +1392,7 @@ G IncrementalSmoother<G>::estimate(int index) const {
 }
 template <class G>
 const std::vector<int>& IncrementalSmoother<G>::updatedPoses() const {
-  return impl_->updated;
+  return impl_->updatedInOrder();
 }
 template <class G>
 double IncrementalSmoother<G>::factorizationFlops() const {

@@ -103,8 +103,11 @@ typename PartialSolve<D>::Output PartialSolve<D>::run(BayesTree<D>* tree, bool f
   solved_variables.clear();
   for (size_t l = 0; l < threads->lanes.size(); ++l) {
     Lane& lane = threads->lanes[l];
-    solved_variables.insert(solved_variables.end(), lane.solved_list.begin(),
-                            lane.solved_list.end());
+    if (l == 0)
+      solved_variables.swap(lane.solved_list);  // the usual case: one lane solved them all
+    else
+      solved_variables.insert(solved_variables.end(), lane.solved_list.begin(),
+                              lane.solved_list.end());
     out.solved += lane.solved;
     if (l > 0) out.on_helpers += lane.solved;
     for (int v : lane.changed_list) changed_[v] = 0;
