@@ -264,6 +264,31 @@ TEST_P(LcmProcess, PublishIntoServeGivesReplaysEstimate) {
   EXPECT_NEAR(objective(original, served.poses), F, 1e-9 * F);
 }
 
+// `arbor command covariance` right after serve has the graph, six times in a row, each a new
+// process: every request is answered (over tcpq a request published before the command's own
+// subscription reached the hub lost its answer, 2 of 6, until the command waited for a probe of
+// its own to come back first), and each answer is a pose's 3x3 marginal or a pair's 6x6 joint.
+TEST_P(LcmProcess, EveryCovarianceCommandIsAnswered) {
+  const std::string file = smallGraph();
+  Process serve(serveArgs("PC_"), path("servec.out"), path("servec.err"));
+  const RunResult pub = publish(file, "PC_");
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  const std::vector<std::vector<std::string>> asks = {{"5"}, {"17"},       {"399"},
+                                                      {"0"}, {"42", "43"}, {"120"}};
+  for (size_t k = 0; k < asks.size(); ++k) {
+    std::vector<std::string> argv = {
+        ARBOR_EXE,          "command", "covariance", "--lcm-url", url(),
+        "--channel-prefix", "PC_",     "--timeout",  "10",        "--json"};
+    argv.insert(argv.begin() + 3, asks[k].begin(), asks[k].end());
+    const RunResult r = run(argv, path("covariance" + std::to_string(k)));
+    ASSERT_EQ(r.status, 0) << "request " << k << ": " << r.err << r.out;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j.at("dim").get<int>(), 3 * static_cast<int>(asks[k].size())) << r.out;
+    EXPECT_EQ(j.at("ids").size(), asks[k].size()) << r.out;
+  }
+  stopServe(serve);
+}
+
 TEST_P(LcmProcess, ServeRunsBackgroundBatchesAndReseedsWhileEdgesFlow) {
   const std::string file = smallGraph();
   const int edges = edgesOf(file);

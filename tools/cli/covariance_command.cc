@@ -2,6 +2,7 @@
 // (or the joint covariance of ID and ID2) with command COVARIANCE on ARBOR_COMMAND (the ids in
 // its path, its utime the request) and prints the covariance_t answer from ARBOR_COVARIANCE
 // (docs/lcm.md).
+#include <algorithm>
 #include <chrono>
 #include <iomanip>
 #include <iostream>
@@ -59,11 +60,38 @@ int covarianceCommand(const std::vector<std::string>& args) {
   AnswerWatcher<covariance_t> watcher(
       listen, channels.covariance,
       [request](const covariance_t& m) { return m.request == request; });
+  // Over a hub (tcpq) a subscription reaches the hub some time after subscribe() returns, and
+  // an answer published before then is not forwarded to us: asked at once, 2 of 6 requests went
+  // unanswered. So the command first sees a probe of its own (a covariance_t answering no
+  // request: request −1, never a utime) come back on the answer channel, then asks, once.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  covariance_t probe;  // lcm-gen leaves its numbers unset
+  probe.utime = request;
+  probe.request = -1;
+  probe.num_ids = 0;
+  probe.update = 0;
+  probe.dim = 0;
+  probe.error = "probe: arbor command covariance waits for its subscription";
+  const auto probe_bytes = encodeMessage(probe);
+  bool subscribed = false;
+  while (!subscribed && std::chrono::steady_clock::now() < deadline) {
+    if (lcm.publish(channels.covariance, probe_bytes.data(),
+                    static_cast<unsigned>(probe_bytes.size())) != 0)
+      throw std::runtime_error("LCM publish failed on " + channels.covariance);
+    subscribed = watcher.waitAny(0.05);
+  }
+  if (!subscribed) {
+    std::cerr << "arbor command: nothing came back on " << channels.covariance << " within "
+              << timeout_s << " s (is the LCM hub or network up?)\n";
+    return 1;
+  }
   const auto bytes = encodeMessage(c);
   if (lcm.publish(channels.command, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
     throw std::runtime_error("LCM publish failed on " + channels.command);
   covariance_t answer;
-  if (!watcher.waitAnswer(timeout_s, &answer)) {
+  const double left_s =
+      std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
+  if (!watcher.waitAnswer(std::max(left_s, 0.0), &answer)) {
     std::cerr << "arbor command: no answer on " << channels.covariance << " within " << timeout_s
               << " s (is arbor serve running?)\n";
     return 1;
