@@ -103,12 +103,15 @@ TEST(SnapshotDir, RefusesEveryNameThatIsNotAPlainFileName) {
                                               std::string("a\0b", 3),
                                               std::string(256, 'a'),
                                               "x y",
-                                              "*"};
+                                              "*",
+                                              "-rf",
+                                              "--help",
+                                              "+x"};
   for (const std::string& bad : bad_names) {
     EXPECT_NE(SnapshotDir::checkName(bad), "") << SnapshotDir::printable(bad);
   }
   for (const std::string& good :
-       std::vector<std::string>{"a", "snapshot.g2o", "run-2_final+1.g2o", "x..y"}) {
+       std::vector<std::string>{"a", "snapshot.g2o", "run-2_final+1.g2o", "x..y", "a-"}) {
     EXPECT_EQ(SnapshotDir::checkName(good), "") << good;
   }
 }

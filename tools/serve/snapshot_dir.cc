@@ -46,6 +46,10 @@ std::string SnapshotDir::checkName(const std::string& name) {
   if (name[0] == '.') {
     return "file name " + printable(name) + " starts with '.' (\"..\", hidden files)";
   }
+  if (name[0] == '-' || name[0] == '+') {  // "-rf" in a directory is an option to `rm *`
+    return "file name " + printable(name) + " starts with '" + name[0] +
+           "' (a command line would read it as an option)";
+  }
   for (char c : name) {
     if (!plainChar(c)) {
       return "file name " + printable(name) +
