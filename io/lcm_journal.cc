@@ -61,31 +61,52 @@ struct Parsed {
   std::int64_t end = 0;  ///< just after the event (kChecked, kUnchecked)
 };
 
+std::string hex(std::uint64_t v) {
+  char text[24];
+  std::snprintf(text, sizeof text, "0x%llx", static_cast<unsigned long long>(v));
+  return text;
+}
+
 /// Validates the event at `at` in the `n` bytes of `b`: every length against the file before
-/// it is used, then the checksum.
-Parsed parseAt(const std::uint8_t* b, std::int64_t n, std::int64_t at, bool unchecked_allowed) {
+/// it is used, then the checksum. `why` (if given) says what failed, with the value read.
+Parsed parseAt(const std::uint8_t* b, std::int64_t n, std::int64_t at, bool unchecked_allowed,
+               std::string* why = nullptr) {
   Parsed p;
+  const auto fail = [&](Parsed::Kind kind, const std::string& what) {
+    p.kind = kind;
+    if (why != nullptr) *why = what;
+    return p;
+  };
   const std::int64_t left = n - at;
-  if (std::memcmp(b + at, kSyncWord, static_cast<size_t>(std::min<std::int64_t>(4, left))) != 0)
-    return p;
-  if (left < kHeaderBytes) {
-    p.kind = Parsed::kIncomplete;
-    return p;
-  }
+  const auto head = static_cast<size_t>(std::min<std::int64_t>(4, left));
+  if (std::memcmp(b + at, kSyncWord, head) != 0)
+    return fail(Parsed::kNotAnEvent,
+                "no sync word (reads " + hex(bigEndian(b + at, static_cast<int>(head))) + ")");
+  if (left < kHeaderBytes)
+    return fail(Parsed::kIncomplete, "an event header cut short after " + std::to_string(left) +
+                                         " bytes by the end of the file");
   const std::uint8_t* h = b + at;
   const std::uint64_t number = bigEndian(h + 4, 8);
   const auto tag = static_cast<std::uint32_t>(number >> 32);
   const auto channel_bytes = static_cast<std::int32_t>(bigEndian(h + 20, 4));
   const auto data_bytes = static_cast<std::int32_t>(bigEndian(h + 24, 4));
   const bool tagged = tag == kEventChecksumTag;
-  if (!tagged && !(tag == 0 && unchecked_allowed)) return p;
-  if (channel_bytes < 1 || channel_bytes > kMaxChannelBytes || data_bytes < 0) return p;
+  if (!tagged && !(tag == 0 && unchecked_allowed))
+    return fail(Parsed::kNotAnEvent, "event number " + hex(number) + " without the checksum tag");
+  if (channel_bytes < 1 || channel_bytes > kMaxChannelBytes)
+    return fail(Parsed::kNotAnEvent, "channel length " + std::to_string(channel_bytes));
+  if (data_bytes < 0) return fail(Parsed::kNotAnEvent, "data length " + std::to_string(data_bytes));
   const std::int64_t end = at + kHeaderBytes + channel_bytes + data_bytes;
-  if (end > n) {
-    p.kind = Parsed::kIncomplete;
-    return p;
+  if (end > n)
+    return fail(Parsed::kIncomplete, "data length " + std::to_string(data_bytes) +
+                                         " runs past the end of the file by " +
+                                         std::to_string(end - n) + " bytes");
+  if (tagged) {
+    const std::uint32_t crc = checksum(0, h + 12, end - at - 12);
+    if (crc != static_cast<std::uint32_t>(number))
+      return fail(Parsed::kNotAnEvent, "checksum " + hex(static_cast<std::uint32_t>(number)) +
+                                           ", the bytes give " + hex(crc));
   }
-  if (tagged && checksum(0, h + 12, end - at - 12) != static_cast<std::uint32_t>(number)) return p;
   p.kind = tagged ? Parsed::kChecked : Parsed::kUnchecked;
   p.end = end;
   return p;
@@ -160,16 +181,21 @@ EventLogContents readEventLog(const std::string& path) {
   // which one does; the stretch becomes `damaged` once an event follows it.
   bool checked_seen = false;
   std::int64_t damage_start = -1;
+  std::string why;  // what the first offset of the damaged stretch failed
   std::int64_t at = 0;
   while (at < n) {
     const Parsed p = parseAt(b, n, at, !checked_seen);
     if (p.kind != Parsed::kChecked && p.kind != Parsed::kUnchecked) {
-      if (damage_start < 0) damage_start = at;
+      if (damage_start < 0) {
+        damage_start = at;
+        parseAt(b, n, at, !checked_seen, &why);
+      }
       at = nextSyncWord(b, n, at + 1);
       continue;
     }
     if (damage_start >= 0) {
       out.damaged.emplace_back(damage_start, at);
+      out.damage_reasons.push_back(why);
       out.damaged_events += std::max<std::int64_t>(1, syncWordsIn(b, damage_start, at));
       damage_start = -1;
     }
@@ -191,6 +217,7 @@ EventLogContents readEventLog(const std::string& path) {
     out.valid_bytes = at;
   }
   // The tail: every event start in it is damage, but for a last write cut short.
+  if (out.valid_bytes < n) parseAt(b, n, out.valid_bytes, !checked_seen, &out.tail_reason);
   for (std::int64_t k = out.valid_bytes; k < n; k = nextSyncWord(b, n, k + 1)) {
     if (parseAt(b, n, k, !checked_seen).kind == Parsed::kIncomplete) {
       out.torn_tail = true;

@@ -40,6 +40,11 @@ struct EventLogContents {
   /// event's sync word. Empty for a sound log. They lie before valid_bytes, so a writer opened
   /// at valid_bytes keeps them, and every event after them, in the file.
   std::vector<std::pair<std::int64_t, std::int64_t>> damaged;
+  /// For each damaged stretch, what its first bytes failed, with the value read (e.g.
+  /// "checksum 0x…, the bytes give 0x…", "data length 2147483647 runs past the end …").
+  std::vector<std::string> damage_reasons;
+  /// What the bytes after valid_bytes failed (empty when there are none).
+  std::string tail_reason;
   /// Events skipped as damaged: one per damaged stretch, or one per event start (sync word) in
   /// it when it holds several; at the end, every event start in the tail that is not a torn
   /// (incomplete) last write.

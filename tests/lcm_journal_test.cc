@@ -134,6 +134,10 @@ TEST(LcmJournalDamage, AnImpossibleLengthCostsOnlyItsEvent) {
         SCOPED_TRACE("event " + std::to_string(k) + " field " + std::to_string(field));
         EXPECT_EQ(channels(c), channelsWithout(n, k));
         EXPECT_EQ(c.damaged_events, 1);
+        ASSERT_EQ(c.damage_reasons.size(), 1u);  // the value read, named
+        EXPECT_NE(c.damage_reasons[0].find(std::to_string(static_cast<std::int32_t>(value))),
+                  std::string::npos)
+            << c.damage_reasons[0];
       }
     }
   }

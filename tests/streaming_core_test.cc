@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -394,9 +395,10 @@ struct Restart {
   Estimate first;  ///< the first full estimate published: the journal's
   ServeSummary summary;
 };
-Restart restartOnFile(const std::string& path) {
+Restart restartOnFile(const std::string& path, std::ostream* log = nullptr) {
   StreamingOptions options;
   options.refine_on_exit = false;
+  options.log = log;
   MemoryPublisher out;
   StreamingCore core(
       out,
@@ -482,6 +484,11 @@ TEST(StreamingCore, ADamagedJournalReplaysAsTheJournalWithoutTheDamagedEvents) {
     b[dataAt(k) + 24] ^= 1;  // edge_t: hash, utime, sender, seq
     const Restart r = check("seq", b, {k}, 1);
     EXPECT_EQ(r.summary.journal_edges, static_cast<std::int64_t>(order.size()) - 1);
+    std::ostringstream log_lines;  // the place and the values, in one line
+    restartOnFile(damaged_path, &log_lines);
+    const std::string line = "bytes " + std::to_string(start(k)) + " to " + std::to_string(end(k)) +
+                             " are damaged (at byte " + std::to_string(start(k)) + ": checksum 0x";
+    EXPECT_NE(log_lines.str().find(line), std::string::npos) << log_lines.str();
   }
   // A data length of 0x7FFFFFFF.
   {

@@ -48,8 +48,9 @@ void LcmEventJournal::reportDamage(const EventLogContents& log,
       continue;
     }
     note(where + "bytes " + std::to_string(first) + " to " + std::to_string(end) +
-         " are damaged (no event there verifies its checksum and lengths); skipped, not "
-         "replayed; the events after them are replayed and the bytes stay in the file");
+         " are damaged (at byte " + std::to_string(first) + ": " + log.damage_reasons[k] +
+         "); skipped, not replayed; the events after them are replayed and the bytes stay in "
+         "the file");
   }
   if (log.damaged.size() > kDamageLines) {
     note(where + std::to_string(log.damaged.size() - kDamageLines) + " more damaged stretches (" +
@@ -57,8 +58,8 @@ void LcmEventJournal::reportDamage(const EventLogContents& log,
   }
   if (damage_.tail_bytes > 0) {
     note(where + "dropping the " + std::to_string(damage_.tail_bytes) + " bytes after byte " +
-         std::to_string(log.valid_bytes) + ", the end of the last whole event (" +
-         (log.torn_tail ? "an event cut short by the end of the file" : "not an event") + ")");
+         std::to_string(log.valid_bytes) +
+         ", the end of the last whole event (there: " + log.tail_reason + ")");
   }
   if (damage_.events > 0) {
     note(where + std::to_string(damage_.events) + " damaged events skipped in all");
