@@ -3,7 +3,7 @@
 // checked against the file before anything is read from it (0x7FFFFFFF used to crash liblcm's
 // reader); junk after the last event costs no event; a cut anywhere costs only the events it
 // cuts; a log written by liblcm before checksums is still read, unchecked, up to its first
-// checksummed event.
+// checksummed event; liblcm (lcm-logplayer) still reads a checksummed log.
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -79,7 +79,7 @@ int eventAt(const std::vector<std::pair<std::int64_t, std::int64_t>>& spans, std
   return -1;
 }
 
-// 400 single-byte changes (ARBOR_JOURNAL_FLIPS sets how many; positions and values from a fixed
+// 1,000 single-byte changes (ARBOR_JOURNAL_FLIPS sets how many; positions and values from a fixed
 // seed, the value always differs): each costs exactly the event it falls in, counted; every other
 // event is read. Inside the log the event is counted damaged; the last event's damage is dropped
 // with the tail (counted in bytes: a length that now runs past the end reads as a write cut short).
@@ -91,7 +91,7 @@ TEST(LcmJournalDamage, EveryChangedByteCostsExactlyTheEventItFallsIn) {
   const std::vector<char> clean = readBytes(path);
   std::mt19937 rng(56);
   const int trials =
-      std::getenv("ARBOR_JOURNAL_FLIPS") ? std::atoi(std::getenv("ARBOR_JOURNAL_FLIPS")) : 400;
+      std::getenv("ARBOR_JOURNAL_FLIPS") ? std::atoi(std::getenv("ARBOR_JOURNAL_FLIPS")) : 1000;
   for (int trial = 0; trial < trials; ++trial) {
     std::vector<char> b = clean;
     const auto at = static_cast<std::int64_t>(rng() % b.size());
@@ -210,6 +210,32 @@ TEST(LcmJournalDamage, ACutAnywhereCostsOnlyTheEventsItCuts) {
   }
   std::remove(path.c_str());
   std::remove(copy.c_str());
+}
+
+// The checksum rides in the event number, which liblcm's reader (lcm-logplayer's) ignores: it
+// still reads every event of a checksummed log, channel, timestamp and data.
+TEST(LcmJournalDamage, LiblcmStillReadsAChecksummedLog) {
+  const int n = 7;
+  const std::string path = tempPath("liblcm.lcmlog");
+  writeLog(path, n);
+  const EventLogContents ours = readEventLog(path);
+  lcm_eventlog_t* log = lcm_eventlog_create(path.c_str(), "r");
+  ASSERT_NE(log, nullptr);
+  int k = 0;
+  while (lcm_eventlog_event_t* e = lcm_eventlog_read_next_event(log)) {
+    ASSERT_LT(k, n);
+    const LogEvent& o = ours.events[static_cast<size_t>(k)];
+    EXPECT_EQ(std::string(e->channel, static_cast<size_t>(e->channellen)), o.channel);
+    EXPECT_EQ(e->timestamp, o.timestamp);
+    EXPECT_EQ(static_cast<std::uint64_t>(e->eventnum) >> 32, kEventChecksumTag);
+    const auto* data = static_cast<const std::uint8_t*>(e->data);
+    EXPECT_EQ(std::vector<std::uint8_t>(data, data + e->datalen), o.data);
+    lcm_eventlog_free_event(e);
+    ++k;
+  }
+  lcm_eventlog_destroy(log);
+  EXPECT_EQ(k, n);
+  std::remove(path.c_str());
 }
 
 // A log written by liblcm (event numbers 0, 1, 2, …: no checksum) is read, its events counted
