@@ -60,7 +60,8 @@ install(FILES ${PROJECT_BINARY_DIR}/ArborConfig.cmake ${PROJECT_BINARY_DIR}/Arbo
 
 # arbor.pc: Libs.private lists the link-only dependencies (for -DBUILD_SHARED_LIBS=OFF).
 set(arbor_pc_private "")
-foreach(lib ${ArborSuiteSparse_LIBRARIES} ${LAPACK_LIBRARIES} ${CMAKE_DL_LIBS} gomp)
+foreach(lib ${ArborSuiteSparse_LIBRARIES} ${LAPACK_LIBRARIES} ${ZLIB_LIBRARIES} ${CMAKE_DL_LIBS}
+            gomp)
   if(IS_ABSOLUTE "${lib}")
     get_filename_component(name "${lib}" NAME_WE)
     string(REGEX REPLACE "^lib" "" name "${name}")

@@ -1,22 +1,34 @@
 // The journal of `arbor serve`: an LCM event log (the format lcm-logger writes and lcm-logplayer
-// plays, read and written with liblcm's lcm_eventlog API). Bytes only: what the events mean
-// (edge_t, journal_mark_t) is up to the caller.
+// plays) whose events each carry a CRC-32 in their event-number field, read and written here
+// (not with liblcm's lcm_eventlog API, whose reader allocates from an unchecked length field).
+// Bytes only: what the events mean (edge_t, journal_mark_t) is up to the caller.
+//
+// An event on disk, big-endian: sync word 0xEDA1DA01, event number (8 bytes), timestamp (8),
+// channel length (4), data length (4), channel, data. The event number's high 32 bits are
+// kEventChecksumTag and its low 32 bits zlib's crc32 of everything after it (timestamp, both
+// lengths, channel, data). lcm-logplayer ignores the event number, so it still plays the log.
+// A log written before the checksum (event numbers 0, 1, 2, …: high bits 0) is read unchecked up
+// to its first checksummed event; after that an event without the tag is damage.
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
 
-struct _lcm_eventlog_t;
-
 namespace arbor {
+
+/// The high 32 bits of a checksummed event's event number ("ARB1").
+inline constexpr std::uint32_t kEventChecksumTag = 0x41524231;
 
 struct LogEvent {
   std::string channel;
   std::int64_t timestamp = 0;  ///< µs since the epoch
   std::vector<std::uint8_t> data;
+  std::int64_t offset = 0;  ///< file offset of its sync word
+  bool checked = true;      ///< its checksum verified (false: an event written before them)
 };
 
 struct EventLogContents {
@@ -28,10 +40,24 @@ struct EventLogContents {
   /// event's sync word. Empty for a sound log. They lie before valid_bytes, so a writer opened
   /// at valid_bytes keeps them, and every event after them, in the file.
   std::vector<std::pair<std::int64_t, std::int64_t>> damaged;
+  /// For each damaged stretch, what its first bytes failed, with the value read (e.g.
+  /// "checksum 0x…, the bytes give 0x…", "data length 2147483647 runs past the end …").
+  std::vector<std::string> damage_reasons;
+  /// What the bytes after valid_bytes failed (empty when there are none).
+  std::string tail_reason;
+  /// Events skipped as damaged: one per damaged stretch, or one per event start (sync word) in
+  /// it when it holds several; at the end, every event start in the tail that is not a torn
+  /// (incomplete) last write.
+  std::int64_t damaged_events = 0;
+  /// The tail after valid_bytes ends in an incomplete event (a write cut short: kill -9).
+  bool torn_tail = false;
+  /// Events read without a checksum (written before checksums: a prefix of the log).
+  std::int64_t unchecked_events = 0;
 };
 
-/// Reads an LCM event log: every complete event, skipping damaged stretches (see
-/// EventLogContents::damaged), up to a torn tail. A missing file is empty. Throws
+/// Reads an LCM event log: every complete event whose checksum verifies, skipping damaged
+/// stretches (see EventLogContents::damaged), up to a damaged or torn tail. Lengths are checked
+/// against the file before anything is read from them. A missing file is empty. Throws
 /// std::runtime_error if the file exists but cannot be read.
 EventLogContents readEventLog(const std::string& path);
 
@@ -98,7 +124,7 @@ class EventLogWriter {
   bool makeReserve();
   std::string path_;
   EventLogWriterOptions options_;
-  _lcm_eventlog_t* log_ = nullptr;
+  std::FILE* file_ = nullptr;
   mutable std::mutex mutex_;
   std::int64_t written_ = 0;
   std::int64_t bytes_ = 0;  ///< file length after the last whole event

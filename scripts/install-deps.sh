@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config git clang-format ccache jq
   libeigen3-dev libsuitesparse-dev libboost-program-options-dev
-  liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless
+  liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless zlib1g-dev
   default-jdk-headless libjchart2d-java
   libgtest-dev libgmock-dev libbenchmark-dev libspectra-dev
   libceres-dev nlohmann-json3-dev

@@ -25,9 +25,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <random>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -410,6 +412,81 @@ TEST_P(LcmProcess, KillNineMidStreamThenResumeAfterTheJournal) {
 // published from this process as `arbor publish` orders them; serve is killed with -9 after the
 // first half and restarted from its journal: the replayed estimate is the one it had, bit for
 // bit, and the whole stream ends where the smoother fed directly ends.
+// Issue 56: an edge whose data length reads 0x7FFFFFFF (serve used to crash at every start on
+// it), an edge whose seq reads 2^56 + seq (the replay used to refuse every later edge as stale)
+// and 3,000 junk bytes after the exit refinement's mark (which used to drop the mark): serve
+// starts, skips exactly those two edges, counts them in --json and ends with the F of a serve
+// restarted on the journal without them.
+TEST_P(LcmProcess, ADamagedJournalCostsExactlyItsDamagedEvents) {
+  const std::string file = smallGraph();
+  const int edges = edgesOf(file);
+  const std::string prefix = "P10_";
+  const auto serveOn = [&](const std::string& name, const std::vector<char>* journal_bytes) {
+    const std::string dir = path(name);
+    if (journal_bytes != nullptr) {
+      fs::create_directories(dir);
+      std::ofstream out(dir + "/journal.lcmlog", std::ios::binary | std::ios::trunc);
+      out.write(journal_bytes->data(), static_cast<std::streamsize>(journal_bytes->size()));
+    }
+    std::vector<std::string> args = serveArgs(prefix);
+    args.insert(args.end(), {"--journal", dir});
+    EstimateListener listener(url(), prefix);
+    Process serve(args, path(name + ".out"), path(name + ".err"));
+    EXPECT_TRUE(listener.waitStatus()) << serve.err();
+    if (journal_bytes == nullptr) {
+      const RunResult pub = publish(file, prefix);
+      EXPECT_EQ(pub.status, 0) << pub.err << pub.out;
+    }
+    nlohmann::json j = stopServe(serve);
+    j["log"] = serve.err();
+    return j;
+  };
+  serveOn("journal_damage", nullptr);
+  const std::string journal = path("journal_damage") + "/journal.lcmlog";
+  std::vector<char> clean;
+  {
+    std::ifstream in(journal, std::ios::binary);
+    clean.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const EventLogContents log = readEventLog(journal);
+  ASSERT_EQ(log.valid_bytes, static_cast<std::int64_t>(clean.size()));
+  ASSERT_EQ(log.events.back().channel, "ARBOR_JOURNAL_MARK");
+  std::vector<size_t> edge_events;
+  for (size_t k = 0; k < log.events.size(); ++k) {
+    edge_t m;
+    const auto& data = log.events[k].data;
+    if (decodeMessage(data.data(), static_cast<int>(data.size()), &m) == MessageProblem::kNone)
+      edge_events.push_back(k);
+  }
+  ASSERT_EQ(edge_events.size(), static_cast<size_t>(edges));
+  const size_t a = edge_events[edge_events.size() / 3], b = edge_events[2 * edge_events.size() / 3];
+  const auto start = [&](size_t k) { return static_cast<size_t>(log.events[k].offset); };
+  std::vector<char> damaged = clean;
+  for (int i = 0; i < 4; ++i) damaged[start(a) + 24 + i] = i == 0 ? '\x7f' : '\xff';
+  damaged[start(b) + 28 + log.events[b].channel.size() + 24] ^= 1;  // edge_t: seq's high byte
+  std::mt19937 rng(56);
+  for (int i = 0; i < 3000; ++i) damaged.push_back(static_cast<char>(rng()));
+  std::vector<char> reference;
+  for (size_t k = 0; k < log.events.size(); ++k) {
+    if (k == a || k == b) continue;
+    const size_t end = k + 1 < log.events.size() ? start(k + 1) : clean.size();
+    reference.insert(reference.end(), clean.begin() + static_cast<std::ptrdiff_t>(start(k)),
+                     clean.begin() + static_cast<std::ptrdiff_t>(end));
+  }
+  const nlohmann::json d = serveOn("journal_damaged", &damaged);
+  const nlohmann::json r = serveOn("journal_reference", &reference);
+  EXPECT_EQ(d.at("journal_edges").get<int>(), edges - 2);
+  EXPECT_EQ(r.at("journal_edges").get<int>(), edges - 2);
+  EXPECT_EQ(d.at("faults").at("journal_damaged").at("events").get<int>(), 2);
+  EXPECT_EQ(d.at("faults").at("journal_damaged").at("tail_bytes").get<int>(), 3000);
+  EXPECT_EQ(r.at("faults").at("journal_damaged").at("events").get<int>(), 0);
+  const double F = r.at("F_final").get<double>();
+  EXPECT_NEAR(d.at("F_final").get<double>(), F, 1e-12 * F);
+  const std::string lines = d.at("log").get<std::string>();
+  EXPECT_NE(lines.find("data length 2147483647"), std::string::npos) << lines;
+  EXPECT_NE(lines.find("2 damaged events skipped"), std::string::npos) << lines;
+}
+
 TEST_P(LcmProcess, KillNineWithPriorsAndRestartReplaysThemInOrder) {
   const PoseGraph2 graph = serve::testing::manhattanGraphWithPriors(300, 4);
   const std::vector<serve::testing::StreamBytes> messages = serve::testing::streamBytes(graph);

@@ -9,15 +9,20 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "arbor/io/lcm_journal.h"
 #include "arbor/tests/lcm_test_support.h"
 #include "arbor/tools/serve/journal_sink.h"
 #include "arbor/tools/serve/lcm_event_journal.h"
@@ -373,6 +378,174 @@ TEST(StreamingCore, AnExitRefinementOverItsBudgetIsRepeatedByARestart) {
   ASSERT_EQ(entries->back().type, JournalEntry::Type::kRefineMark);
   EXPECT_EQ(entries->back().measurements > 0, s.exit_refine_cut);
   expectBitForBit(restartFrom(entries, StreamingOptions{}), s.final_estimate);
+}
+
+std::vector<char> fileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void writeFile(const std::string& path, const std::vector<char>& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+/// A restart on the LCM event journal at `path` without an exit refinement of its own.
+struct Restart {
+  Estimate first;  ///< the first full estimate published: the journal's
+  ServeSummary summary;
+};
+Restart restartOnFile(const std::string& path, std::ostream* log = nullptr) {
+  StreamingOptions options;
+  options.refine_on_exit = false;
+  options.log = log;
+  MemoryPublisher out;
+  StreamingCore core(
+      out,
+      std::make_unique<LcmEventJournal>(path, Channels::withPrefix(""), EventLogWriterOptions{}),
+      options);
+  core.start();
+  core.stop();
+  Restart r;
+  if (!out.full().empty()) r.first = out.full().front();
+  r.summary = core.summary();
+  return r;
+}
+
+// Issue 56: damage to the journal (a changed seq, a length of 0x7FFFFFFF, junk after the exit
+// refinement's mark, random changed bytes and cuts) costs exactly the damaged events: a restart
+// on the damaged journal gives bit for bit the estimate (and F) of a restart on the journal
+// with those events removed, and counts them.
+TEST(StreamingCore, ADamagedJournalReplaysAsTheJournalWithoutTheDamagedEvents) {
+  const PoseGraph2 g = graph();
+  const std::vector<int> order = replayOrder(g);
+  const std::string path = testing::tempPath("arbor_streaming_core", "damage.lcmlog");
+  const std::string damaged_path = path + ".damaged";
+  const std::string reference_path = path + ".reference";
+  {
+    MemoryPublisher out;
+    StreamingCore core(
+        out,
+        std::make_unique<LcmEventJournal>(path, Channels::withPrefix(""), EventLogWriterOptions{}),
+        StreamingOptions{});  // with the exit refinement: its mark is the last event
+    core.start();
+    feedMemory(core, out, g, order, 0, order.size());
+    core.stop();
+  }
+  const std::vector<char> clean = fileBytes(path);
+  const EventLogContents log = readEventLog(path);
+  ASSERT_EQ(log.valid_bytes, static_cast<std::int64_t>(clean.size()));
+  ASSERT_EQ(log.events.back().channel, kJournalMarkChannel);
+  const auto n = static_cast<int>(log.events.size());
+  const auto start = [&](int k) { return log.events[static_cast<size_t>(k)].offset; };
+  const auto end = [&](int k) {
+    return k + 1 < n ? start(k + 1) : static_cast<std::int64_t>(clean.size());
+  };
+  const auto dataAt = [&](int k) {
+    return static_cast<size_t>(
+        start(k) + 28 +
+        static_cast<std::int64_t>(log.events[static_cast<size_t>(k)].channel.size()));
+  };
+  std::vector<int> edges;  // events holding an edge
+  for (int k = 0; k < n; ++k)
+    if (log.events[static_cast<size_t>(k)].channel == Channels::withPrefix("").edges)
+      edges.push_back(k);
+  ASSERT_EQ(edges.size(), order.size());
+  const Restart clean_restart = restartOnFile(path);
+
+  // `damaged` must cost exactly the events `lost` (`events`: how many counted damaged, or −1
+  // where the damage is the tail's).
+  const auto check = [&](const std::string& what, const std::vector<char>& damaged,
+                         const std::vector<int>& lost, std::int64_t events) {
+    SCOPED_TRACE(what);
+    std::vector<char> reference;
+    for (int k = 0; k < n; ++k)
+      if (std::find(lost.begin(), lost.end(), k) == lost.end())
+        reference.insert(reference.end(), clean.begin() + start(k), clean.begin() + end(k));
+    writeFile(damaged_path, damaged);
+    writeFile(reference_path, reference);
+    const Restart a = restartOnFile(damaged_path);
+    const Restart b = restartOnFile(reference_path);
+    expectBitForBit(a.first, b.first);
+    expectBitForBit(a.summary.final_estimate, b.summary.final_estimate);
+    EXPECT_EQ(a.summary.F_final, b.summary.F_final);
+    EXPECT_EQ(a.summary.journal_edges, b.summary.journal_edges);
+    EXPECT_EQ(b.summary.journal_damaged.events, 0);
+    if (events >= 0) {
+      EXPECT_EQ(a.summary.journal_damaged.events, events);
+    }
+    return a;
+  };
+
+  // Seq 2^56 + seq (its high byte changed): the edge alone is lost, the later ones replayed.
+  {
+    const int k = edges[edges.size() / 2];
+    std::vector<char> b = clean;
+    b[dataAt(k) + 24] ^= 1;  // edge_t: hash, utime, sender, seq
+    const Restart r = check("seq", b, {k}, 1);
+    EXPECT_EQ(r.summary.journal_edges, static_cast<std::int64_t>(order.size()) - 1);
+    std::ostringstream log_lines;  // the place and the values, in one line
+    restartOnFile(damaged_path, &log_lines);
+    const std::string line = "bytes " + std::to_string(start(k)) + " to " + std::to_string(end(k)) +
+                             " are damaged (at byte " + std::to_string(start(k)) + ": checksum 0x";
+    EXPECT_NE(log_lines.str().find(line), std::string::npos) << log_lines.str();
+  }
+  // A data length of 0x7FFFFFFF.
+  {
+    const int k = edges[edges.size() / 3];
+    std::vector<char> b = clean;
+    for (int i = 0; i < 4; ++i)
+      b[static_cast<size_t>(start(k) + 24 + i)] = i == 0 ? '\x7f' : '\xff';
+    check("length", b, {k}, 1);
+  }
+  // Junk after the exit refinement's mark: the mark is kept, the restart is the clean one.
+  std::mt19937 rng(56);
+  for (const int size : {4, 3000}) {
+    std::vector<char> b = clean;
+    for (int i = 0; i < size; ++i) b.push_back(static_cast<char>(rng()));
+    const Restart r = check("junk of " + std::to_string(size) + " bytes", b, {}, 0);
+    expectBitForBit(r.first, clean_restart.first);
+    EXPECT_EQ(r.summary.journal_damaged.tail_bytes, size);
+  }
+  // Changed bytes anywhere and cuts anywhere.
+  for (int trial = 0; trial < 8; ++trial) {
+    std::vector<char> b = clean;
+    const auto at = static_cast<std::int64_t>(rng() % b.size());
+    b[static_cast<size_t>(at)] = static_cast<char>(b[static_cast<size_t>(at)] ^ (1 + rng() % 255));
+    int k = 0;
+    while (end(k) <= at) ++k;
+    check("byte " + std::to_string(at), b, {k}, k + 1 < n ? 1 : -1);
+  }
+  for (int trial = 0; trial < 4; ++trial) {
+    const auto length = static_cast<std::int64_t>(rng() % clean.size());
+    std::vector<int> lost;
+    for (int k = 0; k < n; ++k)
+      if (end(k) > length) lost.push_back(k);
+    check("cut at " + std::to_string(length),
+          std::vector<char>(clean.begin(), clean.begin() + length), lost, 0);
+  }
+  // The same journal as an older arbor wrote it (event numbers 0, 1, 2, …: no checksums):
+  // replayed as before, unchecked, counted and said so.
+  {
+    std::vector<char> b = clean;
+    for (int k = 0; k < n; ++k)
+      for (int i = 0; i < 8; ++i)
+        b[static_cast<size_t>(start(k) + 4 + i)] =
+            static_cast<char>(i < 4 ? 0 : k >> (8 * (7 - i)));
+    writeFile(damaged_path, b);
+    std::ostringstream log_lines;
+    const Restart r = restartOnFile(damaged_path, &log_lines);
+    expectBitForBit(r.first, clean_restart.first);
+    EXPECT_EQ(r.summary.journal_damaged.unchecked, n);
+    EXPECT_EQ(r.summary.journal_damaged.events, 0);
+    EXPECT_NE(log_lines.str().find("the first " + std::to_string(n) +
+                                   " events were written before events carried checksums"),
+              std::string::npos)
+        << log_lines.str();
+  }
+  std::remove(path.c_str());
+  std::remove(damaged_path.c_str());
+  std::remove(reference_path.c_str());
 }
 
 }  // namespace

@@ -384,6 +384,10 @@ int serveCommand(const std::vector<std::string>& args) {
     for (const auto& [reason, count] : s.control_refused) control[reason] = count;
     j["faults"] = {
         {"journal_refused", s.journal_refused},
+        {"journal_damaged",
+         {{"events", s.journal_damaged.events},
+          {"tail_bytes", s.journal_damaged.tail_bytes},
+          {"unchecked", s.journal_damaged.unchecked}}},
         {"held_at_stop", s.held_at_stop},
         {"link_outages", s.link_outages},
         {"control_refused", control},

@@ -32,6 +32,13 @@ struct JournalEntry {
   std::string problem;   ///< kUnreadable
 };
 
+/// What a replay found damaged and skipped (JournalSink::damage()).
+struct JournalDamage {
+  std::int64_t events = 0;      ///< events that failed their checksum or header: not replayed
+  std::int64_t tail_bytes = 0;  ///< bytes after the last whole event, dropped (torn or damaged)
+  std::int64_t unchecked = 0;   ///< events replayed without a checksum (written before them)
+};
+
 class JournalSink {
  public:
   virtual ~JournalSink() = default;
@@ -51,6 +58,8 @@ class JournalSink {
   /// fsync now / when the fsync interval has passed (no-ops where that means nothing).
   virtual void sync() = 0;
   virtual void syncIfDue() = 0;
+  /// What the replay skipped (after replay(); none for a journal that cannot be damaged).
+  virtual JournalDamage damage() const { return {}; }
   /// The journal's size in bytes (status).
   virtual std::int64_t bytes() const = 0;
   /// Its name in log lines (the file's path).

@@ -29,7 +29,48 @@ std::vector<std::uint8_t> encodeMeasurement(const Arrival& a) {
   return std::visit([](const auto& e) { return encodeMessage(makeEdgeMessage(e)); }, a.edge);
 }
 
+/// Damaged stretches logged one line each, up to this many; the rest in one line.
+constexpr size_t kDamageLines = 10;
+
 }  // namespace
+
+void LcmEventJournal::reportDamage(const EventLogContents& log,
+                                   const std::function<void(const std::string&)>& note) {
+  damage_.events = log.damaged_events;
+  damage_.tail_bytes = log.file_bytes - log.valid_bytes;
+  damage_.unchecked = log.unchecked_events;
+  const std::string where = "journal " + path_ + ": ";
+  std::int64_t more_events = 0;
+  for (size_t k = 0; k < log.damaged.size(); ++k) {
+    const auto [first, end] = log.damaged[k];
+    if (k >= kDamageLines) {
+      more_events += end - first;
+      continue;
+    }
+    note(where + "bytes " + std::to_string(first) + " to " + std::to_string(end) +
+         " are damaged (at byte " + std::to_string(first) + ": " + log.damage_reasons[k] +
+         "); skipped, not replayed; the events after them are replayed and the bytes stay in "
+         "the file");
+  }
+  if (log.damaged.size() > kDamageLines) {
+    note(where + std::to_string(log.damaged.size() - kDamageLines) + " more damaged stretches (" +
+         std::to_string(more_events) + " bytes) skipped");
+  }
+  if (damage_.tail_bytes > 0) {
+    note(where + "dropping the " + std::to_string(damage_.tail_bytes) + " bytes after byte " +
+         std::to_string(log.valid_bytes) +
+         ", the end of the last whole event (there: " + log.tail_reason + ")");
+  }
+  if (damage_.events > 0) {
+    note(where + std::to_string(damage_.events) + " damaged events skipped in all");
+  }
+  if (damage_.unchecked > 0) {
+    note(where + "the first " + std::to_string(damage_.unchecked) +
+         " events were written before events carried checksums (an older arbor): replayed "
+         "unchecked, damage in them cannot be told; the events appended from now on are "
+         "checksummed (a journal started anew is checked throughout)");
+  }
+}
 
 LcmEventJournal::LcmEventJournal(std::string path, Channels channels, EventLogWriterOptions options)
     : path_(std::move(path)), channels_(std::move(channels)), options_(options) {}
@@ -42,15 +83,7 @@ EventLogWriter& LcmEventJournal::writer() {
 void LcmEventJournal::replay(const std::function<void(JournalEntry&&)>& entry,
                              const std::function<void(const std::string&)>& note) {
   const EventLogContents log = readEventLog(path_);
-  for (const auto& [first, end] : log.damaged) {
-    note("journal " + path_ + ": bytes " + std::to_string(first) + " to " + std::to_string(end) +
-         " are not events (damaged); skipped, the events after them are replayed and the bytes "
-         "stay in the file");
-  }
-  if (log.valid_bytes < log.file_bytes) {
-    note("journal " + path_ + ": dropping " + std::to_string(log.file_bytes - log.valid_bytes) +
-         " bytes of an incomplete event at the end");
-  }
+  reportDamage(log, note);
   const std::int64_t prior_hash = prior_t::getHash();
   const std::int64_t command_hash = edge_command_t::getHash();
   const std::int64_t mark_hash = journal_mark_t::getHash();

@@ -110,6 +110,7 @@ void StreamingCore::stop() {
     }
   }
   summary_ = ServeSummary();
+  if (journal_) summary_.journal_damaged = journal_->damage();
   if (engine_) {
     publishEstimate(true);
     summary_.final_estimate = engine_->estimate(true);

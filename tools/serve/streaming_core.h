@@ -175,6 +175,7 @@ struct ServeSummary {
   Estimate final_estimate;           ///< full
   std::int64_t journal_refused = 0;  ///< measurements refused: the journal could not take them
   std::int64_t held_at_stop = 0;     ///< journaled, not applied: their update mark did not fit
+  JournalDamage journal_damaged;     ///< what the replay at start found damaged and skipped
   std::int64_t link_outages = 0;     ///< receive and publish links
   std::map<std::string, std::int64_t> control_refused;  ///< operator command refusals by reason
   std::int64_t recv_buf_bytes = 0;  ///< the transport's receive buffer (TransportState)
