@@ -33,7 +33,7 @@ struct BatchSwitchOptions {
   /// cliques too) has more than this share of the variables re-eliminates all of them, ordered
   /// afresh by CCOLAMD with the touched variables last (as GTSAM's ISAM2 re-orders in batch past
   /// 0.65 of the variables). 1: never, the default: at 0.65 the updates of every 2D and 3D set
-  /// measured executed 1-15% more instructions (intel 15%, MIT 8%), the later updates paying
+  /// measured executed 0.2-19% more instructions (intel 19%, MIT 9%), the later updates paying
   /// for the fresh orderings' trees; reorder_decay bounds a decayed ordering on its own
   /// (docs/design.md, "Never costlier than batch").
   double top_share = 1.0;
