@@ -73,6 +73,11 @@ void StreamingCore::logLimited(const std::string& key, const std::string& line) 
 void StreamingCore::start() {
   if (running_) throw std::logic_error("serve: start() twice");
   if (journal_) replayJournal();
+  if (intake_.dim() == 0) {
+    logLine(
+        "no --dim and no journaled edge: the first edge or prior received fixes the stream's "
+        "dimension, whoever sends it; on a shared bus set --dim 2|3");
+  }
   if (engine_) publishEstimate(true);
   last_status_ = std::chrono::steady_clock::now();
   smoother_stop_ = false;
