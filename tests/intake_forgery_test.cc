@@ -169,20 +169,34 @@ TEST_F(Forgery, AConfirmedJumpFixesAnOpenDimensionOnce) {
   EXPECT_EQ(intake.dim(), 2);
 }
 
-TEST_F(Forgery, EdgeCommandsJumpsAreHeldToo) {
+TEST_F(Forgery, AnEdgeCommandBeyondTheLimitIsAcceptedButNeverMovesTheHighestSeq) {
+  // `arbor command` numbers commands by the clock (ms): each one is a jump.
   EdgeIntake intake(2);
-  StreamEdgeCommand forged;
-  forged.sender = 1;
-  forged.seq = std::int64_t{1} << 62;
-  forged.from = 4;
-  forged.to = 9;
-  const auto f = encodeMessage(makeEdgeCommandMessage(forged));
-  EXPECT_EQ(intake.admitCommand(f.data(), static_cast<int>(f.size())).verdict, Intake::kHeld);
-  StreamEdgeCommand real = forged;
-  real.seq = 1;
-  const auto r = encodeMessage(makeEdgeCommandMessage(real));
-  EXPECT_EQ(intake.admitCommand(r.data(), static_cast<int>(r.size())).verdict, Intake::kAccepted);
-  EXPECT_EQ(intake.commandCounts().gaps, 0);
+  auto admit = [&](std::int64_t seq, Key to = 9) {
+    StreamEdgeCommand c;
+    c.sender = 1;
+    c.seq = seq;
+    c.from = 4;
+    c.to = to;
+    const auto b = encodeMessage(makeEdgeCommandMessage(c));
+    return intake.admitCommand(b.data(), static_cast<int>(b.size()));
+  };
+  EXPECT_EQ(admit(std::int64_t{1} << 62).verdict, Intake::kAccepted);  // forged
+  const std::int64_t now_ms = 1796671434868;
+  EXPECT_EQ(admit(now_ms).verdict, Intake::kAccepted);
+  EXPECT_EQ(admit(now_ms).verdict, Intake::kDuplicate);
+  EXPECT_EQ(admit(now_ms, 10).reason, "seq reused");
+  EXPECT_EQ(admit(now_ms + 5000).verdict, Intake::kAccepted);
+  EXPECT_EQ(admit(1).verdict, Intake::kAccepted);  // the window was never moved
+  const IntakeResult late = admit(now_ms + 9000);
+  intake.revoke(late, "journal");
+  EXPECT_EQ(admit(now_ms + 9000).verdict, Intake::kAccepted);  // may be sent again
+  // Only the last kRecentJumps are remembered: memory stays bounded.
+  for (std::int64_t k = 0; k < 100; ++k) admit(now_ms + 10000 + k);
+  EXPECT_EQ(admit(now_ms + 10099).verdict, Intake::kDuplicate);
+  const IntakeCounts& c = intake.commandCounts();
+  EXPECT_EQ(c.gaps, 0);  // jumped over, never skipped
+  EXPECT_EQ(c.held, 0);
 }
 
 }  // namespace

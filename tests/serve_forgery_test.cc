@@ -182,7 +182,7 @@ TEST(ServeForgery, SixtyFourInventedSendersDoNotShutOutTheRealOne) {
   }
   StreamEdgeCommand real;  // the real operator's command, after the flood
   real.sender = 1;
-  real.seq = 1;
+  real.seq = nowMicros() / 1000;  // as `arbor command` numbers it
   real.kind = StreamEdgeCommand::Kind::kEnable;
   real.from = 0;
   real.to = 1;

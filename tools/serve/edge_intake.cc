@@ -110,17 +110,25 @@ IntakeResult EdgeIntake::reject(Stream& stream, IntakeResult r, const std::strin
 void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason) {
   if (accepted.verdict != Intake::kAccepted) return;
   Stream& stream = accepted.is_command ? commands_ : accepted.is_prior ? priors_ : edges_;
+  bool gap = true;  // its seq is missing now, until it is sent again
   const auto known = stream.senders.find(accepted.sender);
   if (known != stream.senders.end()) {  // else evicted meanwhile: nothing to forget
     Sender& s = known->second;
-    if (accepted.seq > s.highest - window_) {
-      if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
+    if (accepted.seq > s.highest) {  // an edge command beyond the jump limit: not a gap
+      const auto it = std::find_if(s.jumped.begin(), s.jumped.end(),
+                                   [&](const auto& j) { return j.first == accepted.seq; });
+      if (it != s.jumped.end()) s.jumped.erase(it);
+      gap = false;
+    } else {
+      if (accepted.seq > s.highest - window_) {
+        if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
+      }
+      addSaturating(s.gaps, 1);
     }
-    addSaturating(s.gaps, 1);
   }
   IntakeCounts& c = stream.counts;
   --c.accepted;
-  addSaturating(c.gaps, 1);  // its seq is missing now, until it is sent again
+  if (gap) addSaturating(c.gaps, 1);
   ++c.rejected;
   ++c.rejected_by_reason[reason];
 }
@@ -256,6 +264,27 @@ std::int64_t EdgeIntake::dropHeld(Stream& stream, Sender& s) {
   return n;
 }
 
+IntakeResult EdgeIntake::acceptJumpedCommand(Stream& stream, Sender& s, IntakeResult r,
+                                             std::uint64_t fp) {
+  for (const auto& [seq, seen] : s.jumped) {
+    if (seq != r.seq) continue;
+    if (seen == fp) {
+      r.verdict = Intake::kDuplicate;
+      r.reason = "duplicate";
+      ++stream.counts.duplicates;
+      return r;
+    }
+    return reject(stream, std::move(r), "seq reused",
+                  "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
+                      " was already received with other contents");
+  }
+  if (s.jumped.size() >= kRecentJumps) s.jumped.erase(s.jumped.begin());
+  s.jumped.emplace_back(r.seq, fp);
+  r.verdict = Intake::kAccepted;
+  ++stream.counts.accepted;
+  return r;
+}
+
 IntakeResult EdgeIntake::holdJump(Stream& stream, Sender& s, IntakeResult r, std::uint64_t fp,
                                   const void* wire, int wire_size) {
   // One run, of one dimension (which matters while the stream's is not fixed yet).
@@ -330,8 +359,10 @@ IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::
   const std::uint64_t fp = std::max<std::uint64_t>(contents, 1);  // 0: empty slot
   r.fingerprint = fp;
   // seq >= 1 and highest >= 0: no overflow.
-  if (r.seq - s.highest > jump_limit_)
+  if (r.seq - s.highest > jump_limit_) {
+    if (r.is_command) return acceptJumpedCommand(stream, s, std::move(r), fp);
     return holdJump(stream, s, std::move(r), fp, wire, wire_size);
+  }
   if (r.seq <= s.highest - window_) {
     return reject(stream, std::move(r), "stale",
                   "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +

@@ -17,6 +17,10 @@
 //    result carries the others in `released`). A message of that sender accepted inside its
 //    window meanwhile, or a jump outside [s, s+kConfirmRun), drops what was held ("unconfirmed
 //    jump"). A sender's first message counts from highest 0.
+//    Edge commands are the exception: `arbor command` numbers them by the clock (ms), so each is
+//    a jump; one beyond jumpLimit() is accepted at once (one operator action, idempotent) and
+//    remembered among the sender's last kRecentJumps such seqs (duplicates, "seq reused"), but
+//    it never moves the highest seq either.
 //  - sender tables are bounded (`max_senders` per stream), and a new sender takes the place of
 //    the least recently heard one (evicted, counted) instead of being refused. An evicted sender
 //    that comes back starts afresh: its next seq above jumpLimit() must be confirmed.
@@ -90,6 +94,8 @@ class EdgeIntake {
   /// defeats a forged message repeated once under the next seq, and costs a sender that truly
   /// jumped (a restart without the journal, an evicted table) two messages of delay.
   static constexpr int kConfirmRun = 3;
+  /// Edge commands accepted beyond the jump limit, remembered per sender (16 · 16 bytes).
+  static constexpr std::size_t kRecentJumps = 16;
 
   /// `dim` 2 or 3 fixes the stream's dimension; 0 takes it from the first accepted edge or
   /// prior. `window` (>= 1): how many of each sender's latest seq numbers are remembered
@@ -150,6 +156,8 @@ class EdgeIntake {
     std::uint64_t heard = 0;         ///< the intake's message count when last heard from
     std::int64_t jump_from = 0;      ///< the held jump's first seq
     std::vector<IntakeResult> held;  ///< its messages (< kConfirmRun)
+    /// Edge commands accepted beyond the jump limit: (seq, fingerprint), oldest first.
+    std::vector<std::pair<std::int64_t, std::uint64_t>> jumped;
   };
   /// One kind of message: its senders' seq tables and its counts.
   struct Stream {
@@ -167,6 +175,8 @@ class EdgeIntake {
   /// A seq beyond jumpLimit(): held, or the run that confirms the jump.
   IntakeResult holdJump(Stream& stream, Sender& s, IntakeResult r, std::uint64_t fp,
                         const void* wire, int wire_size);
+  /// An edge command beyond jumpLimit(): accepted unless a duplicate or a reused seq.
+  IntakeResult acceptJumpedCommand(Stream& stream, Sender& s, IntakeResult r, std::uint64_t fp);
   /// Drops what `s` holds (counted "unconfirmed jump"); how many.
   std::int64_t dropHeld(Stream& stream, Sender& s);
   std::uint64_t* slot(Sender& s, std::int64_t seq, bool grow) const;
