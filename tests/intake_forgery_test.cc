@@ -134,12 +134,12 @@ TEST_F(Forgery, ANewSenderTakesTheLeastRecentlyHeardTable) {
   EXPECT_EQ(intake.counts().rejected, 0);
   // An evicted sender that comes back beyond the jump limit must confirm its seq again.
   for (std::int64_t sender = 200; sender < 204; ++sender) admit(intake, 1, sender);
-  EXPECT_EQ(admit(intake, 5000, 1).verdict, Intake::kHeld);
+  EXPECT_EQ(admit(intake, 100000, 1).verdict, Intake::kHeld);
 }
 
 TEST_F(Forgery, AHeldMessageOfAnEvictedSenderIsDropped) {
   EdgeIntake intake(0, EdgeIntake::kDefaultWindow, 2);
-  EXPECT_EQ(admit(intake, 5000, 1).verdict, Intake::kHeld);
+  EXPECT_EQ(admit(intake, 100000, 1).verdict, Intake::kHeld);
   admit(intake, 1, 2);
   const IntakeResult third = admit(intake, 1, 3);
   EXPECT_EQ(third.evicted, 1);
@@ -164,7 +164,9 @@ TEST_F(Forgery, AFixedDimensionNeverMoves) {
 
 TEST_F(Forgery, AConfirmedJumpFixesAnOpenDimensionOnce) {
   EdgeIntake intake;  // no dimension yet
-  for (std::int64_t seq = 5000; seq < 5000 + EdgeIntake::kConfirmRun; ++seq) admit(intake, seq);
+  for (std::int64_t seq = 100000; seq < 100000 + EdgeIntake::kConfirmRun; ++seq) {
+    admit(intake, seq);
+  }
   EXPECT_EQ(intake.counts().jumps_confirmed, 1);
   EXPECT_EQ(intake.dim(), 2);
 }

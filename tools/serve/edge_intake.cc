@@ -34,7 +34,7 @@ EdgeIntake::EdgeIntake(int dim, std::int64_t window, std::size_t max_senders)
     : dim_(dim),
       window_(window),
       max_senders_(max_senders),
-      jump_limit_(std::min(kMaxJump, std::max<std::int64_t>(1, window - 1))) {
+      jump_limit_(std::max<std::int64_t>(1, window - 1)) {
   if (window < 1) {
     throw std::invalid_argument("EdgeIntake: window " + std::to_string(window) + " is not >= 1");
   }

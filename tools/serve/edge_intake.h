@@ -85,11 +85,11 @@ class EdgeIntake {
  public:
   static constexpr std::int64_t kDefaultWindow = 65536;
   static constexpr std::size_t kDefaultMaxSenders = 64;
-  /// The largest seq advance applied at once: a sender publishing at 100 Hz (faster than any
-  /// odometry front-end we serve) that loses 10 s of messages jumps 1,000. A larger jump is not
-  /// lost, only held for kConfirmRun messages. Capped at window − 1 (jumpLimit()), so that one
-  /// message inside the limit never makes an unreceived seq stale.
-  static constexpr std::int64_t kMaxJump = 1000;
+  /// The largest seq advance applied at once is window − 1 (jumpLimit()): the largest after
+  /// which every seq the sender sent before and we have not received yet is still inside the
+  /// window, so one message never makes a real seq stale. A 1,000-message limit (10 s at 100 Hz)
+  /// was measured to hold a lone message sent after a udpm burst lost more than 1,000, with
+  /// nothing after it to confirm it (tests/lcm_process_test.cc, BurstLossIsAllReportedAsGaps).
   /// Consecutive seq numbers that confirm a jump: any run >= 2 defeats one forged message; 3 also
   /// defeats a forged message repeated once under the next seq, and costs a sender that truly
   /// jumped (a restart without the journal, an evicted table) two messages of delay.
@@ -143,7 +143,7 @@ class EdgeIntake {
   /// Sender tables held per stream (each <= max_senders()).
   std::size_t senders(Kind kind) const;
   std::size_t maxSenders() const { return max_senders_; }
-  /// min(kMaxJump, max(1, window − 1)).
+  /// max(1, window − 1).
   std::int64_t jumpLimit() const { return jump_limit_; }
 
  private:
