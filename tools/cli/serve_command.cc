@@ -115,7 +115,8 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "2 or 3; an edge or prior of the other dimension is refused ('dim'). 0: the first edge's "
       "(the journal's first on a restart); set it where others share the bus")(
       "intake-window", po::value(&options.intake_window)->default_value(options.intake_window),
-      "seqs remembered per sender for duplicate detection (older ones are refused as stale)")(
+      "seqs remembered per sender for duplicate detection (older ones are refused as stale); a "
+      "seq W or more above its sender's highest is held until 3 consecutive seqs confirm it")(
       "max-senders", po::value(&max_senders)->default_value(max_senders),
       "sender tables per stream (edges, priors, edge commands); a new sender takes the place of "
       "the least recently heard one (counted as senders_evicted)")(
