@@ -124,8 +124,11 @@ TEST(EdgeIntake, WindowDropsDuplicatesExactlyAndRefusesStaleSeqs) {
   for (std::int64_t seq : {5, 2, 4, 1, 3}) EXPECT_EQ(admit(seq).verdict, Intake::kAccepted) << seq;
   for (std::int64_t seq = 1; seq <= 5; ++seq) EXPECT_EQ(admit(seq).verdict, Intake::kDuplicate);
   EXPECT_EQ(intake.counts().gaps, 0);
-  // Jump to 20: the window is now 13..20.
-  EXPECT_EQ(admit(20).skipped, 14);
+  // Jump to 18..20 (beyond the jump limit 7: held until the run confirms it): the window is
+  // now 13..20.
+  EXPECT_EQ(admit(18).verdict, Intake::kHeld);
+  EXPECT_EQ(admit(19).verdict, Intake::kHeld);
+  EXPECT_EQ(admit(20).skipped, 12);
   EXPECT_EQ(admit(13).verdict, Intake::kAccepted);  // the oldest seq in the window, late
   EXPECT_EQ(admit(13).verdict, Intake::kDuplicate);
   EXPECT_EQ(admit(13, 1).reason, "seq reused");
@@ -135,10 +138,10 @@ TEST(EdgeIntake, WindowDropsDuplicatesExactlyAndRefusesStaleSeqs) {
   EXPECT_EQ(admit(3).reason, "stale");  // received long ago: not a duplicate we can prove
   EXPECT_EQ(admit(20).verdict, Intake::kDuplicate);
   const IntakeCounts& c = intake.counts();
-  EXPECT_EQ(c.accepted, 7);
+  EXPECT_EQ(c.accepted, 9);
   EXPECT_EQ(c.duplicates, 7);
   EXPECT_EQ(c.rejected_by_reason.at("stale"), 2);
-  EXPECT_EQ(c.gaps, 13);  // 6..19 skipped, 13 filled; 12 stays missing
+  EXPECT_EQ(c.gaps, 11);  // 6..17 skipped, 13 filled; 12 stays missing
   EXPECT_THROW(EdgeIntake(0, 0), std::invalid_argument);
 }
 
@@ -161,9 +164,13 @@ TEST(EdgeIntake, SeqTableStaysWithinTheWindow) {
   // The default window: a sender jumping far ahead holds at most that many slots.
   EdgeIntake wide;
   const auto first = edgeBytes(streamEdge(graph, 0, 1, 2));
-  const auto far = edgeBytes(streamEdge(graph, 0, 10 * EdgeIntake::kDefaultWindow, 2));
   EXPECT_EQ(wide.admit(first.data(), static_cast<int>(first.size())).verdict, Intake::kAccepted);
-  EXPECT_EQ(wide.admit(far.data(), static_cast<int>(far.size())).verdict, Intake::kAccepted);
+  IntakeResult far;
+  for (int k = 0; k < EdgeIntake::kConfirmRun; ++k) {  // a jump, confirmed by its run
+    const auto b = edgeBytes(streamEdge(graph, 0, 10 * EdgeIntake::kDefaultWindow + k, 2));
+    far = wide.admit(b.data(), static_cast<int>(b.size()));
+  }
+  EXPECT_EQ(far.verdict, Intake::kAccepted);
   EXPECT_LE(wide.trackedSeqs(2), static_cast<std::size_t>(EdgeIntake::kDefaultWindow));
   EXPECT_EQ(wide.admit(first.data(), static_cast<int>(first.size())).reason, "stale");
 }

@@ -112,12 +112,15 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "journal fsync: update (before each update), edge, N (at most every N ms) or never")(
       "publish", po::value(&publish)->default_value("changed"),
       "estimates: changed (poses that changed), full, or N (full every N updates)")(
-      "dim", po::value(&options.dim)->default_value(0), "2 or 3 (0: the first edge's)")(
+      "dim", po::value(&options.dim)->default_value(0),
+      "2 or 3; an edge or prior of the other dimension is refused ('dim'). 0: the first edge's "
+      "(the journal's first on a restart); set it where others share the bus")(
       "intake-window", po::value(&options.intake_window)->default_value(options.intake_window),
-      "seqs remembered per sender for duplicate detection (older ones are refused as stale)")(
+      "seqs remembered per sender for duplicate detection (older ones are refused as stale); a "
+      "seq W or more above its sender's highest is held until 3 consecutive seqs confirm it")(
       "max-senders", po::value(&max_senders)->default_value(max_senders),
-      "sender tables per stream (edges, priors, edge commands); messages of more senders are "
-      "refused as 'sender limit'")(
+      "sender tables per stream (edges, priors, edge commands); a new sender takes the place of "
+      "the least recently heard one (counted as senders_evicted)")(
       "snapshot-dir", po::value(&options.snapshot_dir),
       "directory command SNAPSHOT writes into (a plain file name from the message; never over a "
       "file this service did not create); unset: SNAPSHOT refused")(
@@ -335,6 +338,9 @@ int serveCommand(const std::vector<std::string>& args) {
         {"rejected_by_reason", reasons},
         {"duplicates", s.intake.duplicates + s.smoother_duplicates},
         {"gaps", s.intake.gaps},
+        {"jumps_held", s.intake.held},
+        {"jumps_confirmed", s.intake.jumps_confirmed},
+        {"senders_evicted", s.intake.senders_evicted},
         {"updates", s.updates},
         {"poses", s.poses},
         {"pending", s.pending},
@@ -366,6 +372,9 @@ int serveCommand(const std::vector<std::string>& args) {
         {"rejected_by_reason", prior_reasons},
         {"duplicates", s.prior_intake.duplicates},
         {"gaps", s.prior_intake.gaps},
+        {"jumps_held", s.prior_intake.held},
+        {"jumps_confirmed", s.prior_intake.jumps_confirmed},
+        {"senders_evicted", s.prior_intake.senders_evicted},
         {"journal_priors", s.journal_priors},
     };
     nlohmann::json command_reasons = nlohmann::json::object();
@@ -374,11 +383,19 @@ int serveCommand(const std::vector<std::string>& args) {
     nlohmann::json refused = nlohmann::json::object();
     for (const auto& [reason, count] : s.commands_refused_by_reason) refused[reason] = count;
     j["commands"] = {
-        {"received", s.command_intake.received},  {"accepted", s.command_intake.accepted},
-        {"applied", s.commands_applied},          {"rejected", s.command_intake.rejected},
-        {"rejected_by_reason", command_reasons},  {"refused", s.commands_refused},
-        {"refused_by_reason", refused},           {"duplicates", s.command_intake.duplicates},
+        {"received", s.command_intake.received},
+        {"accepted", s.command_intake.accepted},
+        {"applied", s.commands_applied},
+        {"rejected", s.command_intake.rejected},
+        {"rejected_by_reason", command_reasons},
+        {"refused", s.commands_refused},
+        {"refused_by_reason", refused},
+        {"duplicates", s.command_intake.duplicates},
         {"journal_commands", s.journal_commands},
+        {"gaps", s.command_intake.gaps},
+        {"jumps_held", s.command_intake.held},
+        {"jumps_confirmed", s.command_intake.jumps_confirmed},
+        {"senders_evicted", s.command_intake.senders_evicted},
     };
     nlohmann::json control = nlohmann::json::object();
     for (const auto& [reason, count] : s.control_refused) control[reason] = count;

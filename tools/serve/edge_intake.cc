@@ -1,11 +1,27 @@
 #include "arbor/tools/serve/edge_intake.h"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 
 #include "arbor/io/lcm_messages.h"
 
 namespace arbor::serve {
+namespace {
+
+/// total += n (n >= 0), stopping at INT64_MAX: a seq near 2^63 cannot overflow a gap count.
+void addSaturating(std::int64_t& total, std::int64_t n) {
+  constexpr std::int64_t kMax = std::numeric_limits<std::int64_t>::max();
+  total = n > kMax - total ? kMax : total + n;
+}
+
+/// The dimension a held message would fix (0: a command, which has none).
+int heldDim(const IntakeResult& r) {
+  if (r.is_command) return 0;
+  return r.is_prior ? dimOf(r.prior) : (r.edge.index() == 0 ? 2 : 3);
+}
+
+}  // namespace
 
 std::uint64_t EdgeIntake::fingerprint(const void* data, int size) {
   std::uint64_t h = 1469598103934665603ULL;
@@ -15,7 +31,10 @@ std::uint64_t EdgeIntake::fingerprint(const void* data, int size) {
 }
 
 EdgeIntake::EdgeIntake(int dim, std::int64_t window, std::size_t max_senders)
-    : dim_(dim), window_(window), max_senders_(max_senders) {
+    : dim_(dim),
+      window_(window),
+      max_senders_(max_senders),
+      jump_limit_(std::max<std::int64_t>(1, window - 1)) {
   if (window < 1) {
     throw std::invalid_argument("EdgeIntake: window " + std::to_string(window) + " is not >= 1");
   }
@@ -91,14 +110,25 @@ IntakeResult EdgeIntake::reject(Stream& stream, IntakeResult r, const std::strin
 void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason) {
   if (accepted.verdict != Intake::kAccepted) return;
   Stream& stream = accepted.is_command ? commands_ : accepted.is_prior ? priors_ : edges_;
-  Sender& s = stream.senders[accepted.sender];
-  if (accepted.seq > s.highest - window_) {
-    if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
+  bool gap = true;  // its seq is missing now, until it is sent again
+  const auto known = stream.senders.find(accepted.sender);
+  if (known != stream.senders.end()) {  // else evicted meanwhile: nothing to forget
+    Sender& s = known->second;
+    if (accepted.seq > s.highest) {  // an edge command beyond the jump limit: not a gap
+      const auto it = std::find_if(s.jumped.begin(), s.jumped.end(),
+                                   [&](const auto& j) { return j.first == accepted.seq; });
+      if (it != s.jumped.end()) s.jumped.erase(it);
+      gap = false;
+    } else {
+      if (accepted.seq > s.highest - window_) {
+        if (std::uint64_t* e = slot(s, accepted.seq, false)) *e = 0;
+      }
+      addSaturating(s.gaps, 1);
+    }
   }
-  ++s.gaps;
   IntakeCounts& c = stream.counts;
   --c.accepted;
-  ++c.gaps;  // its seq is missing now, until it is sent again
+  if (gap) addSaturating(c.gaps, 1);
   ++c.rejected;
   ++c.rejected_by_reason[reason];
 }
@@ -109,7 +139,7 @@ IntakeResult EdgeIntake::admit(const void* data, int size) {
     ++edges_.counts.received;
     return reject(edges_, IntakeResult(), toString(d.problem), d.detail);
   }
-  return admitEdge(std::move(d.edge), fingerprint(data, size));
+  return admitEdge(std::move(d.edge), fingerprint(data, size), data, size);
 }
 
 IntakeResult EdgeIntake::admitPrior(const void* data, int size) {
@@ -120,7 +150,7 @@ IntakeResult EdgeIntake::admitPrior(const void* data, int size) {
     r.is_prior = true;
     return reject(priors_, std::move(r), toString(d.problem), d.detail);
   }
-  return admitPrior(std::move(d.prior), fingerprint(data, size));
+  return admitPrior(std::move(d.prior), fingerprint(data, size), data, size);
 }
 
 IntakeResult EdgeIntake::admitCommand(const void* data, int size) {
@@ -131,7 +161,7 @@ IntakeResult EdgeIntake::admitCommand(const void* data, int size) {
     r.is_command = true;
     return reject(commands_, std::move(r), toString(d.problem), d.detail);
   }
-  return admitCommand(d.command, fingerprint(data, size));
+  return admitCommand(d.command, fingerprint(data, size), data, size);
 }
 
 IntakeResult EdgeIntake::admit(const Arrival& a) {
@@ -145,16 +175,17 @@ IntakeResult EdgeIntake::admit(const Arrival& a) {
   }
   switch (a.kind) {
     case Kind::kPrior:
-      return admitPrior(a.prior, a.fingerprint);
+      return admitPrior(a.prior, a.fingerprint, a.wire, a.wire_size);
     case Kind::kCommand:
-      return admitCommand(a.command, a.fingerprint);
+      return admitCommand(a.command, a.fingerprint, a.wire, a.wire_size);
     case Kind::kEdge:
       break;
   }
-  return admitEdge(a.edge, a.fingerprint);
+  return admitEdge(a.edge, a.fingerprint, a.wire, a.wire_size);
 }
 
-IntakeResult EdgeIntake::admitEdge(AnyStreamEdge edge, std::uint64_t fp) {
+IntakeResult EdgeIntake::admitEdge(AnyStreamEdge edge, std::uint64_t fp, const void* wire,
+                                   int wire_size) {
   ++edges_.counts.received;
   IntakeResult r;
   std::visit(
@@ -164,12 +195,14 @@ IntakeResult EdgeIntake::admitEdge(AnyStreamEdge edge, std::uint64_t fp) {
       },
       edge);
   const int dim = edge.index() == 0 ? 2 : 3;
-  r = admitSeq(edges_, std::move(r), dim, fp);
-  if (r.verdict == Intake::kAccepted) r.edge = std::move(edge);
+  r.edge = std::move(edge);  // kept while held; dropped below unless accepted
+  r = admitSeq(edges_, std::move(r), dim, fp, wire, wire_size);
+  if (r.verdict != Intake::kAccepted) r.edge = AnyStreamEdge();
   return r;
 }
 
-IntakeResult EdgeIntake::admitPrior(AnyStreamPrior prior, std::uint64_t fp) {
+IntakeResult EdgeIntake::admitPrior(AnyStreamPrior prior, std::uint64_t fp, const void* wire,
+                                    int wire_size) {
   ++priors_.counts.received;
   IntakeResult r;
   r.is_prior = true;
@@ -179,41 +212,157 @@ IntakeResult EdgeIntake::admitPrior(AnyStreamPrior prior, std::uint64_t fp) {
         r.seq = p.seq;
       },
       prior);
-  r = admitSeq(priors_, std::move(r), dimOf(prior), fp);
-  if (r.verdict == Intake::kAccepted) r.prior = std::move(prior);
+  const int dim = dimOf(prior);
+  r.prior = std::move(prior);
+  r = admitSeq(priors_, std::move(r), dim, fp, wire, wire_size);
+  if (r.verdict != Intake::kAccepted) r.prior = AnyStreamPrior();
   return r;
 }
 
-IntakeResult EdgeIntake::admitCommand(const StreamEdgeCommand& command, std::uint64_t fp) {
+IntakeResult EdgeIntake::admitCommand(const StreamEdgeCommand& command, std::uint64_t fp,
+                                      const void* wire, int wire_size) {
   ++commands_.counts.received;
   IntakeResult r;
   r.is_command = true;
   r.sender = command.sender;
   r.seq = command.seq;
-  r = admitSeq(commands_, std::move(r), dim_, fp);  // a command has no dimension
-  if (r.verdict == Intake::kAccepted) r.command = command;
+  r.command = command;
+  // A command has no dimension.
+  r = admitSeq(commands_, std::move(r), dim_, fp, wire, wire_size);
+  if (r.verdict != Intake::kAccepted) r.command = StreamEdgeCommand();
   return r;
 }
 
-IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents) {
+EdgeIntake::Sender& EdgeIntake::table(Stream& stream, IntakeResult& r) {
+  auto known = stream.senders.find(r.sender);
+  if (known == stream.senders.end()) {
+    if (stream.senders.size() >= max_senders_) {
+      // The least recently heard sender's table goes: O(max_senders) once per new sender.
+      auto idle = stream.senders.begin();
+      for (auto it = stream.senders.begin(); it != stream.senders.end(); ++it) {
+        if (it->second.heard < idle->second.heard) idle = it;
+      }
+      r.evicted = idle->first;
+      r.dropped += dropHeld(stream, idle->second);
+      stream.senders.erase(idle);
+      ++stream.counts.senders_evicted;
+    }
+    known = stream.senders.emplace(r.sender, Sender()).first;
+  }
+  known->second.heard = ++heard_;
+  return known->second;
+}
+
+std::int64_t EdgeIntake::dropHeld(Stream& stream, Sender& s) {
+  const auto n = static_cast<std::int64_t>(s.held.size());
+  if (n == 0) return 0;
+  stream.counts.held -= n;
+  stream.counts.rejected += n;
+  stream.counts.rejected_by_reason["unconfirmed jump"] += n;
+  s.held.clear();
+  s.jump_from = 0;
+  return n;
+}
+
+IntakeResult EdgeIntake::acceptJumpedCommand(Stream& stream, Sender& s, IntakeResult r,
+                                             std::uint64_t fp) {
+  for (const auto& [seq, seen] : s.jumped) {
+    if (seq != r.seq) continue;
+    if (seen == fp) {
+      r.verdict = Intake::kDuplicate;
+      r.reason = "duplicate";
+      ++stream.counts.duplicates;
+      return r;
+    }
+    return reject(stream, std::move(r), "seq reused",
+                  "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
+                      " was already received with other contents");
+  }
+  if (s.jumped.size() >= kRecentJumps) s.jumped.erase(s.jumped.begin());
+  s.jumped.emplace_back(r.seq, fp);
+  r.verdict = Intake::kAccepted;
+  ++stream.counts.accepted;
+  return r;
+}
+
+IntakeResult EdgeIntake::holdJump(Stream& stream, Sender& s, IntakeResult r, std::uint64_t fp,
+                                  const void* wire, int wire_size) {
+  // One run, of one dimension (which matters while the stream's is not fixed yet).
+  const bool in_run = !s.held.empty() && r.seq >= s.jump_from &&
+                      r.seq - s.jump_from < kConfirmRun && heldDim(s.held[0]) == heldDim(r);
+  if (in_run) {
+    for (const IntakeResult& h : s.held) {
+      if (h.seq != r.seq) continue;
+      if (h.fingerprint == fp) {
+        r.verdict = Intake::kDuplicate;
+        r.reason = "duplicate";
+        ++stream.counts.duplicates;
+        return r;
+      }
+      return reject(stream, std::move(r), "seq reused",
+                    "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
+                        " is already held with other contents");
+    }
+  } else {
+    r.dropped += dropHeld(stream, s);  // a jump elsewhere: what was held is not confirmed
+    s.jump_from = r.seq;
+  }
+  r.fingerprint = fp;
+  if (static_cast<int>(s.held.size()) + 1 < kConfirmRun) {
+    IntakeResult held = r;
+    held.verdict = Intake::kAccepted;  // as it will be when released
+    held.dropped = 0;
+    held.evicted = 0;
+    if (wire != nullptr && wire_size > 0) {
+      const auto* bytes = static_cast<const unsigned char*>(wire);
+      held.wire.assign(bytes, bytes + wire_size);
+    }
+    s.held.push_back(std::move(held));
+    ++stream.counts.held;
+    r.verdict = Intake::kHeld;
+    r.reason = "held";
+    r.detail = "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
+               " is more than " + std::to_string(jump_limit_) + " above its highest seq " +
+               std::to_string(s.highest) + ": held until seqs " + std::to_string(s.jump_from) +
+               " to " + std::to_string(s.jump_from + (kConfirmRun - 1)) + " confirm the jump";
+    return r;
+  }
+  // Confirmed: the run s.jump_from .. s.jump_from + kConfirmRun − 1 is complete.
+  const std::int64_t last = s.jump_from + (kConfirmRun - 1);
+  r.skipped = s.jump_from - s.highest - 1;
+  addSaturating(stream.counts.gaps, r.skipped);
+  addSaturating(s.gaps, r.skipped);
+  advance(s, last);
+  *slot(s, r.seq, true) = fp;
+  for (IntakeResult& h : s.held) *slot(s, h.seq, true) = h.fingerprint;
+  r.released = std::move(s.held);
+  s.held.clear();
+  s.jump_from = 0;
+  const auto n = static_cast<std::int64_t>(r.released.size());
+  stream.counts.held -= n;
+  stream.counts.accepted += n + 1;
+  ++stream.counts.jumps_confirmed;
+  if (dim_ == 0 && !r.is_command) dim_ = heldDim(r);
+  r.verdict = Intake::kAccepted;
+  return r;
+}
+
+IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents,
+                                  const void* wire, int wire_size) {
   const char* what = r.is_command ? "edge command" : r.is_prior ? "prior" : "edge";
   if (dim_ != 0 && dim != dim_) {
     return reject(
         stream, std::move(r), "dim",
         "a " + std::to_string(dim) + "D " + what + " on a " + std::to_string(dim_) + "D stream");
   }
-  auto known = stream.senders.find(r.sender);
-  if (known == stream.senders.end()) {
-    if (stream.senders.size() >= max_senders_) {
-      return reject(stream, std::move(r), "sender limit",
-                    "sender " + std::to_string(r.sender) + " would be sender " +
-                        std::to_string(max_senders_ + 1) + " of this stream; at most " +
-                        std::to_string(max_senders_) + " are tracked (--max-senders)");
-    }
-    known = stream.senders.emplace(r.sender, Sender()).first;
-  }
-  Sender& s = known->second;
+  Sender& s = table(stream, r);
   const std::uint64_t fp = std::max<std::uint64_t>(contents, 1);  // 0: empty slot
+  r.fingerprint = fp;
+  // seq >= 1 and highest >= 0: no overflow.
+  if (r.seq - s.highest > jump_limit_) {
+    if (r.is_command) return acceptJumpedCommand(stream, s, std::move(r), fp);
+    return holdJump(stream, s, std::move(r), fp, wire, wire_size);
+  }
   if (r.seq <= s.highest - window_) {
     return reject(stream, std::move(r), "stale",
                   "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
@@ -234,15 +383,18 @@ IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::
                     "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
                         " was already received with other contents");
     }
-    --stream.counts.gaps;  // a late message fills a gap reported before
-    --s.gaps;
+    // A late message fills a gap reported before (a saturated count stays an upper bound).
+    if (stream.counts.gaps > 0) --stream.counts.gaps;
+    if (s.gaps > 0) --s.gaps;
   } else {
     r.skipped = r.seq - s.highest - 1;
-    stream.counts.gaps += r.skipped;
-    s.gaps += r.skipped;
+    addSaturating(stream.counts.gaps, r.skipped);
+    addSaturating(s.gaps, r.skipped);
     advance(s, r.seq);
   }
   *slot(s, r.seq, true) = fp;
+  // The sender speaks inside its window: a jump held meanwhile was not its own.
+  r.dropped += dropHeld(stream, s);
   if (dim_ == 0) dim_ = dim;
   r.verdict = Intake::kAccepted;
   ++stream.counts.accepted;

@@ -9,9 +9,23 @@
 // edge or a repeat of one applied long ago, and we cannot tell, so we never apply it (a repeat
 // applied twice would silently count one measurement twice; a refused edge is counted and logged
 // and can be sent again under a new seq).
-// Sender tables are bounded too: at most `max_senders` per stream; a message from a sender beyond
-// them is refused as "sender limit" (its table is never made), so a flood of made-up sender ids
-// costs counts, not memory. Worst case: 3 streams x max_senders x window x 8 bytes.
+// No single message moves shared state (issue 56):
+//  - a seq more than jumpLimit() above its sender's highest (a "jump": a forged seq 2^62 would
+//    make every real seq stale) is held, not applied, and does not move the highest seq until it
+//    is confirmed: the sender's held messages cover kConfirmRun consecutive seq numbers s, s+1,
+//    …, s+kConfirmRun−1 (any order). They are then accepted together (the current message's
+//    result carries the others in `released`). A message of that sender accepted inside its
+//    window meanwhile, or a jump outside [s, s+kConfirmRun), drops what was held ("unconfirmed
+//    jump"). A sender's first message counts from highest 0.
+//    Edge commands are the exception: `arbor command` numbers them by the clock (ms), so each is
+//    a jump; one beyond jumpLimit() is accepted at once (one operator action, idempotent) and
+//    remembered among the sender's last kRecentJumps such seqs (duplicates, "seq reused"), but
+//    it never moves the highest seq either.
+//  - sender tables are bounded (`max_senders` per stream), and a new sender takes the place of
+//    the least recently heard one (evicted, counted) instead of being refused. An evicted sender
+//    that comes back starts afresh: its next seq above jumpLimit() must be confirmed.
+//  - gap counts saturate at INT64_MAX instead of overflowing.
+// Worst case memory: 3 streams x max_senders x (window x 8 bytes + kConfirmRun − 1 held messages).
 // Not thread-safe: one thread (the receive thread, or the journal replay before it starts).
 #pragma once
 
@@ -32,6 +46,7 @@ enum class Intake {
   kAccepted,   ///< valid and new: to be journaled and applied
   kDuplicate,  ///< byte-for-byte repeat of an earlier (sender, seq): dropped
   kRejected,   ///< invalid, or "stale" (below the sender's window): dropped, counted under `reason`
+  kHeld,       ///< a seq jump waiting for its confirmation: neither journaled nor applied yet
 };
 
 struct IntakeResult {
@@ -45,6 +60,13 @@ struct IntakeResult {
   StreamEdgeCommand command;  ///< when an accepted edge command
   std::int64_t sender = 0, seq = 0;  ///< when decoded
   std::int64_t skipped = 0;          ///< seq numbers of this sender jumped over by this message
+  std::uint64_t fingerprint = 0;     ///< as admitted
+  /// Accepted with this one: the held messages its arrival confirmed, in the order received
+  /// (each kAccepted, with `wire` the bytes it arrived with, empty if none were given).
+  std::vector<IntakeResult> released;
+  std::vector<unsigned char> wire;  ///< a released message's bytes as received
+  std::int64_t dropped = 0;         ///< held messages this arrival dropped ("unconfirmed jump")
+  std::int64_t evicted = 0;         ///< the sender whose table this arrival's sender took (0: none)
 };
 
 struct IntakeCounts {
@@ -52,7 +74,10 @@ struct IntakeCounts {
   std::int64_t accepted = 0;
   std::int64_t rejected = 0;
   std::int64_t duplicates = 0;
-  std::int64_t gaps = 0;  ///< seq numbers skipped by senders and not received since
+  std::int64_t gaps = 0;  ///< seq numbers skipped by senders and not received since (saturates)
+  std::int64_t held = 0;  ///< messages held now, waiting for their jump's confirmation
+  std::int64_t jumps_confirmed = 0;  ///< seq jumps confirmed (the highest seq moved)
+  std::int64_t senders_evicted = 0;  ///< sender tables given to a new sender (least recently heard)
   std::map<std::string, std::int64_t> rejected_by_reason;
 };
 
@@ -60,6 +85,17 @@ class EdgeIntake {
  public:
   static constexpr std::int64_t kDefaultWindow = 65536;
   static constexpr std::size_t kDefaultMaxSenders = 64;
+  /// The largest seq advance applied at once is window − 1 (jumpLimit()): the largest after
+  /// which every seq the sender sent before and we have not received yet is still inside the
+  /// window, so one message never makes a real seq stale. A 1,000-message limit (10 s at 100 Hz)
+  /// was measured to hold a lone message sent after a udpm burst lost more than 1,000, with
+  /// nothing after it to confirm it (tests/lcm_process_test.cc, BurstLossIsAllReportedAsGaps).
+  /// Consecutive seq numbers that confirm a jump: any run >= 2 defeats one forged message; 3 also
+  /// defeats a forged message repeated once under the next seq, and costs a sender that truly
+  /// jumped (a restart without the journal, an evicted table) two messages of delay.
+  static constexpr int kConfirmRun = 3;
+  /// Edge commands accepted beyond the jump limit, remembered per sender (16 · 16 bytes).
+  static constexpr std::size_t kRecentJumps = 16;
 
   /// `dim` 2 or 3 fixes the stream's dimension; 0 takes it from the first accepted edge or
   /// prior. `window` (>= 1): how many of each sender's latest seq numbers are remembered
@@ -75,9 +111,13 @@ class EdgeIntake {
   IntakeResult admitCommand(const void* data, int size);
   /// A validated edge, whatever carried it: the seq accounting alone. `fingerprint` identifies
   /// the message's exact contents (duplicate against "seq reused"; fingerprint() of its bytes).
-  IntakeResult admitEdge(AnyStreamEdge edge, std::uint64_t fingerprint);
-  IntakeResult admitPrior(AnyStreamPrior prior, std::uint64_t fingerprint);
-  IntakeResult admitCommand(const StreamEdgeCommand& command, std::uint64_t fingerprint);
+  /// `wire`: the bytes it arrived with, kept while it is held (may be null).
+  IntakeResult admitEdge(AnyStreamEdge edge, std::uint64_t fingerprint, const void* wire = nullptr,
+                         int wire_size = 0);
+  IntakeResult admitPrior(AnyStreamPrior prior, std::uint64_t fingerprint,
+                          const void* wire = nullptr, int wire_size = 0);
+  IntakeResult admitCommand(const StreamEdgeCommand& command, std::uint64_t fingerprint,
+                            const void* wire = nullptr, int wire_size = 0);
   /// An arrival from a transport: refused under its `problem` when it has one, else admitted
   /// by its kind.
   IntakeResult admit(const Arrival& arrival);
@@ -103,6 +143,8 @@ class EdgeIntake {
   /// Sender tables held per stream (each <= max_senders()).
   std::size_t senders(Kind kind) const;
   std::size_t maxSenders() const { return max_senders_; }
+  /// max(1, window − 1).
+  std::int64_t jumpLimit() const { return jump_limit_; }
 
  private:
   struct Sender {
@@ -111,6 +153,11 @@ class EdgeIntake {
     /// Ring over the window: slot (seq − 1) mod W holds the hash of seq's bytes, 0 = not
     /// received. Grown on demand up to W slots.
     std::vector<std::uint64_t> ring;
+    std::uint64_t heard = 0;         ///< the intake's message count when last heard from
+    std::int64_t jump_from = 0;      ///< the held jump's first seq
+    std::vector<IntakeResult> held;  ///< its messages (< kConfirmRun)
+    /// Edge commands accepted beyond the jump limit: (seq, fingerprint), oldest first.
+    std::vector<std::pair<std::int64_t, std::uint64_t>> jumped;
   };
   /// One kind of message: its senders' seq tables and its counts.
   struct Stream {
@@ -121,7 +168,17 @@ class EdgeIntake {
                       const std::string& detail);
   /// The seq accounting of a decoded message of `dim` (r.sender, r.seq set): accepted,
   /// duplicate or rejected ("dim", "stale", "seq reused").
-  IntakeResult admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents);
+  IntakeResult admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents,
+                        const void* wire, int wire_size);
+  /// r's sender's table, made (taking the least recently heard one's place when full).
+  Sender& table(Stream& stream, IntakeResult& r);
+  /// A seq beyond jumpLimit(): held, or the run that confirms the jump.
+  IntakeResult holdJump(Stream& stream, Sender& s, IntakeResult r, std::uint64_t fp,
+                        const void* wire, int wire_size);
+  /// An edge command beyond jumpLimit(): accepted unless a duplicate or a reused seq.
+  IntakeResult acceptJumpedCommand(Stream& stream, Sender& s, IntakeResult r, std::uint64_t fp);
+  /// Drops what `s` holds (counted "unconfirmed jump"); how many.
+  std::int64_t dropHeld(Stream& stream, Sender& s);
   std::uint64_t* slot(Sender& s, std::int64_t seq, bool grow) const;
   void advance(Sender& s, std::int64_t seq) const;
 
@@ -129,6 +186,8 @@ class EdgeIntake {
   int dim_;
   std::int64_t window_;
   std::size_t max_senders_;
+  std::int64_t jump_limit_;
+  std::uint64_t heard_ = 0;  ///< messages seen, as the senders' clock
   Stream edges_, priors_, commands_;
 };
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <iterator>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -72,6 +73,11 @@ void StreamingCore::logLimited(const std::string& key, const std::string& line) 
 void StreamingCore::start() {
   if (running_) throw std::logic_error("serve: start() twice");
   if (journal_) replayJournal();
+  if (intake_.dim() == 0) {
+    logLine(
+        "no --dim and no journaled edge: the first edge or prior received fixes the stream's "
+        "dimension, whoever sends it; on a shared bus set --dim 2|3");
+  }
   if (engine_) publishEstimate(true);
   last_status_ = std::chrono::steady_clock::now();
   smoother_stop_ = false;
@@ -211,21 +217,37 @@ StreamingCore::Queued StreamingCore::queued(IntakeResult accepted,
   return q;
 }
 
+void StreamingCore::logIntakeNotes(const IntakeResult& r, const char* what) {
+  if (r.evicted != 0) {
+    logLimited(std::string("evicted ") + what,
+               std::string(what) + " sender table full (--max-senders " +
+                   std::to_string(intake_.maxSenders()) + "): sender " + std::to_string(r.evicted) +
+                   ", heard from least recently, forgotten for sender " + std::to_string(r.sender));
+  }
+  if (r.dropped > 0) {
+    logLimited(std::string("unconfirmed jump ") + what,
+               "dropped " + std::to_string(r.dropped) + " held " + what +
+                   " message(s) whose seq jump was not confirmed (at sender " +
+                   std::to_string(r.sender) + " seq " + std::to_string(r.seq) + ")");
+  }
+}
+
 void StreamingCore::receive(const Arrival& arrival) {
   const auto received = std::chrono::steady_clock::now();
   const bool prior = arrival.kind == MeasurementKind::kPrior;
   const bool command = arrival.kind == MeasurementKind::kCommand;
   const char* what = nameOf(arrival.kind);
-  IntakeResult r;
+  std::vector<IntakeResult> accepted;
   {
     std::lock_guard<std::mutex> lock(intake_mutex_);
-    r = intake_.admit(arrival);
-    if (r.verdict == Intake::kRejected) {
+    IntakeResult r = intake_.admit(arrival);
+    logIntakeNotes(r, what);
+    if (r.verdict == Intake::kRejected || r.verdict == Intake::kHeld) {
       const std::string key = command ? "command " + r.reason
                               : prior ? "prior " + r.reason
                                       : r.reason;
       std::ostringstream os;
-      os << "rejected " << what;
+      os << (r.verdict == Intake::kHeld ? "held " : "rejected ") << what;
       if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
       os << ": " << r.reason << ": " << r.detail;
       logLimited(key, os.str());
@@ -238,27 +260,46 @@ void StreamingCore::receive(const Arrival& arrival) {
                                                  std::to_string(r.skipped) + " " + what +
                                                  " seq numbers before " + std::to_string(r.seq));
     }
+    // A confirmed jump: the held messages first, in the order received, then this one.
+    accepted = std::move(r.released);
+    r.released.clear();
+    accepted.push_back(std::move(r));
     // Journal before it can be applied: an accepted edge, prior or edge command is never lost.
     // All go into the one journal in the order received, which is the order they are queued in.
-    if (journal_) {
+    for (auto it = accepted.begin(); journal_ && it != accepted.end();) {
+      Arrival a;
+      const bool current = std::next(it) == accepted.end();
+      if (current) {
+        a = arrival;
+      } else {
+        a.kind = arrival.kind;
+        a.edge = it->edge;
+        a.prior = it->prior;
+        a.command = it->command;
+        a.fingerprint = it->fingerprint;
+        a.wire = it->wire.empty() ? nullptr : it->wire.data();
+        a.wire_size = static_cast<int>(it->wire.size());
+      }
       try {
-        journal_->appendMeasurement(arrival);
+        journal_->appendMeasurement(a);
+        ++it;
       } catch (const std::exception& e) {
         // Write-ahead: what the journal does not hold is never applied. The sender may send it
         // again under the same seq once there is room.
-        intake_.revoke(r, "journal");
+        intake_.revoke(*it, "journal");
         ++journal_refused_;
         logLimited(std::string("journal ") + what,
-                   std::string(what) + " (sender " + std::to_string(r.sender) + " seq " +
-                       std::to_string(r.seq) +
+                   std::string(what) + " (sender " + std::to_string(it->sender) + " seq " +
+                       std::to_string(it->seq) +
                        ") refused, the journal cannot take it: " + e.what());
-        return;
+        it = accepted.erase(it);
       }
     }
   }
+  if (accepted.empty()) return;
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
-    queue_.push_back(queued(std::move(r), received));
+    for (IntakeResult& r : accepted) queue_.push_back(queued(std::move(r), received));
   }
   queue_cv_.notify_one();
 }
@@ -838,13 +879,20 @@ void StreamingCore::replayJournal() {
   const auto entry = [&](JournalEntry&& e) {
     switch (e.type) {
       case JournalEntry::Type::kMeasurement: {
+        // The same rules as live: a seq jump is held until confirmed (a live run journals a
+        // jump's messages together once confirmed, so the replay confirms them alike).
         IntakeResult r = intake_.admit(e.arrival);
+        logIntakeNotes(r, nameOf(e.arrival.kind));
+        if (r.verdict == Intake::kHeld) return;
         if (r.verdict != Intake::kAccepted) {
           logLine(std::string("journal: ") + nameOf(e.arrival.kind) + " (sender " +
                   std::to_string(r.sender) + " seq " + std::to_string(r.seq) +
                   ") skipped on replay: " + r.reason);
           return;
         }
+        for (IntakeResult& released : r.released)
+          unmarked.push_back(queued(std::move(released), now));
+        r.released.clear();
         unmarked.push_back(queued(std::move(r), now));
         return;
       }

@@ -248,6 +248,8 @@ class StreamingCore {
   static Queued queued(IntakeResult accepted, std::chrono::steady_clock::time_point received);
 
   void smootherLoop();
+  /// Logs (rate-limited) the sender table `r`'s arrival evicted and the held messages it dropped.
+  void logIntakeNotes(const IntakeResult& r, const char* what);
   /// --solve-budget-mb: while nothing waits in the queue, solves the cliques the budget deferred,
   /// one budget's worth at a time (a measurement that arrives waits one slice at most), and
   /// publishes the poses they moved.
