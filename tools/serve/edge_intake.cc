@@ -107,6 +107,19 @@ IntakeResult EdgeIntake::reject(Stream& stream, IntakeResult r, const std::strin
   return r;
 }
 
+IntakeResult EdgeIntake::repeated(Stream& stream, IntakeResult r, bool same_contents,
+                                  const std::string& where) {
+  if (same_contents) {
+    r.verdict = Intake::kDuplicate;
+    r.reason = "duplicate";
+    ++stream.counts.duplicates;
+    return r;
+  }
+  const std::string detail = "seq " + std::to_string(r.seq) + " of sender " +
+                             std::to_string(r.sender) + " " + where + " with other contents";
+  return reject(stream, std::move(r), "seq reused", detail);
+}
+
 void EdgeIntake::revoke(const IntakeResult& accepted, const std::string& reason) {
   if (accepted.verdict != Intake::kAccepted) return;
   Stream& stream = accepted.is_command ? commands_ : accepted.is_prior ? priors_ : edges_;
@@ -266,18 +279,8 @@ std::int64_t EdgeIntake::dropHeld(Stream& stream, Sender& s) {
 
 IntakeResult EdgeIntake::acceptJumpedCommand(Stream& stream, Sender& s, IntakeResult r,
                                              std::uint64_t fp) {
-  for (const auto& [seq, seen] : s.jumped) {
-    if (seq != r.seq) continue;
-    if (seen == fp) {
-      r.verdict = Intake::kDuplicate;
-      r.reason = "duplicate";
-      ++stream.counts.duplicates;
-      return r;
-    }
-    return reject(stream, std::move(r), "seq reused",
-                  "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
-                      " was already received with other contents");
-  }
+  for (const auto& [seq, seen] : s.jumped)
+    if (seq == r.seq) return repeated(stream, std::move(r), seen == fp, "was already received");
   if (s.jumped.size() >= kRecentJumps) s.jumped.erase(s.jumped.begin());
   s.jumped.emplace_back(r.seq, fp);
   r.verdict = Intake::kAccepted;
@@ -291,18 +294,8 @@ IntakeResult EdgeIntake::holdJump(Stream& stream, Sender& s, IntakeResult r, std
   const bool in_run = !s.held.empty() && r.seq >= s.jump_from &&
                       r.seq - s.jump_from < kConfirmRun && heldDim(s.held[0]) == heldDim(r);
   if (in_run) {
-    for (const IntakeResult& h : s.held) {
-      if (h.seq != r.seq) continue;
-      if (h.fingerprint == fp) {
-        r.verdict = Intake::kDuplicate;
-        r.reason = "duplicate";
-        ++stream.counts.duplicates;
-        return r;
-      }
-      return reject(stream, std::move(r), "seq reused",
-                    "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
-                        " is already held with other contents");
-    }
+    for (const IntakeResult& h : s.held)
+      if (h.seq == r.seq) return repeated(stream, std::move(r), h.fingerprint == fp, "is held");
   } else {
     r.dropped += dropHeld(stream, s);  // a jump elsewhere: what was held is not confirmed
     s.jump_from = r.seq;
@@ -372,17 +365,8 @@ IntakeResult EdgeIntake::admitSeq(Stream& stream, IntakeResult r, int dim, std::
   }
   if (r.seq <= s.highest) {
     const std::uint64_t* seen = slot(s, r.seq, false);
-    if (seen != nullptr && *seen == fp) {
-      r.verdict = Intake::kDuplicate;
-      r.reason = "duplicate";
-      ++stream.counts.duplicates;
-      return r;
-    }
-    if (seen != nullptr && *seen != 0) {
-      return reject(stream, std::move(r), "seq reused",
-                    "seq " + std::to_string(r.seq) + " of sender " + std::to_string(r.sender) +
-                        " was already received with other contents");
-    }
+    if (seen != nullptr && (*seen == fp || *seen != 0))
+      return repeated(stream, std::move(r), *seen == fp, "was already received");
     // A late message fills a gap reported before (a saturated count stays an upper bound).
     if (stream.counts.gaps > 0) --stream.counts.gaps;
     if (s.gaps > 0) --s.gaps;

@@ -166,6 +166,10 @@ class EdgeIntake {
   };
   IntakeResult reject(Stream& stream, IntakeResult r, const std::string& reason,
                       const std::string& detail);
+  /// A seq seen before (`where`: "was already received", "is held"): a duplicate when its
+  /// contents are the same, else refused as "seq reused".
+  IntakeResult repeated(Stream& stream, IntakeResult r, bool same_contents,
+                        const std::string& where);
   /// The seq accounting of a decoded message of `dim` (r.sender, r.seq set): accepted,
   /// duplicate or rejected ("dim", "stale", "seq reused").
   IntakeResult admitSeq(Stream& stream, IntakeResult r, int dim, std::uint64_t contents,
