@@ -32,7 +32,7 @@ struct BatchSwitchOptions {
   /// An update whose top to re-eliminate (Alg. 4 step 1; it holds the relinearised variables'
   /// cliques too) has more than this share of the variables re-eliminates all of them, ordered
   /// afresh by CCOLAMD with the touched variables last (as GTSAM's ISAM2 re-orders in batch past
-  /// 0.65 of the variables). 1: never, the default: at 0.65 the updates of every 2D and 3D set
+  /// 0.65 of the variables). 1: never, the default: at 0.65 the updates of eight of nine sets
   /// measured executed 0.2-19% more instructions (intel 19%, MIT 9%), the later updates paying
   /// for the fresh orderings' trees; reorder_decay bounds a decayed ordering on its own
   /// (docs/design.md, "Never costlier than batch").
