@@ -6,7 +6,11 @@ cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 bash scripts/check-format.sh
 build=${ARBOR_BUILD_DIR:-build-ci}
-cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DARBOR_WERROR=ON >/dev/null
+# ccache (installed by install-deps.sh) makes a rebuild of unchanged files a cache hit.
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache
+                                         -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DARBOR_WERROR=ON "${launcher[@]}" >/dev/null
 cmake --build "$build" -j "$(nproc)"
 cd "$build"
 # A test that fails is run once more (--repeat until-pass:2): a second failure is red. Only a
