@@ -35,6 +35,7 @@
 #include "arbor/bayestree/tree_shape.h"
 #include "arbor/bayestree/update_threads.h"
 #include "arbor/core/blas_threads.h"
+#include "arbor/core/elapsed.h"
 #include "arbor/core/finite_pose.h"
 #include "arbor/core/information.h"
 
@@ -67,10 +68,6 @@ void addUpdateCounts(UpdateStats* total, const UpdateStats& s) {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double secondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 void accumulate(UpdateStats* total, const UpdateStats& s) {
   addUpdateCounts(total, s);

@@ -10,6 +10,7 @@
 #include <Spectra/SymEigsSolver.h>
 #include <Eigen/Eigenvalues>
 
+#include "arbor/core/elapsed.h"
 #include "arbor/core/initialization.h"
 #include "arbor/core/serial_openmp.h"
 #include "arbor/core/stiefel_product.h"
@@ -19,10 +20,6 @@ namespace arbor {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double secondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 double inner(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B) { return A.cwiseProduct(B).sum(); }
 

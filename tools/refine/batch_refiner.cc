@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "arbor/core/elapsed.h"
 #include "arbor/core/serial_openmp.h"
 #include "arbor/core/thread_priority.h"
 
@@ -20,10 +21,6 @@ void requireRefining(BatchSolver solver) {
     throw std::invalid_argument("batch refinement runs " + batchSolverNames(true, " or ") +
                                 ", not " + toString(solver));
   }
-}
-
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
 template <class G>

@@ -9,6 +9,7 @@
 #include <poll.h>
 #include <unistd.h>
 
+#include "arbor/core/elapsed.h"
 #include "arbor/tools/serve/lcm_tuning.h"
 #include "arbor/tools/serve/tcpq_handshake.h"
 
@@ -16,10 +17,6 @@ namespace arbor::serve {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double secondsSince(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
 
 std::string describe(const std::string& url) { return url.empty() ? "LCM's default URL" : url; }
 
