@@ -20,50 +20,47 @@ std::pair<Key, Key> pairKey(Key a, Key b) { return {std::min(a, b), std::max(a, 
 
 EdgeChoices readEdgeChoices(std::istream& in, const std::string& name) {
   EdgeChoices choices;
-  std::vector<std::string_view> fields;
-  std::string line;
-  for (int number = 1; std::getline(in, line); ++number) {
-    io_detail::splitFields(line, &fields);
-    if (fields.empty()) continue;
-    const std::string where = name + ":" + std::to_string(number) + ": ";
-    if (fields.size() != 3 && fields.size() != 4) {
-      throw FileError(where + "expected 'FROM TO TRUST [KERNEL]', found " +
-                      std::to_string(fields.size()) + " fields");
-    }
-    Key ids[2];
-    for (int k = 0; k < 2; ++k) {
-      if (const char* why = io_detail::parseId(fields[k], &ids[k]))
-        throw FileError(where + "pose id '" + std::string(fields[k]) + "' " + why);
-    }
-    if (ids[0] == ids[1]) throw FileError(where + "self-loop " + std::to_string(ids[0]));
-    EdgeChoice c;
-    c.line = number;
-    const std::string trust(fields[2]);
-    if (trust == "trusted") {
-      c.trust = EdgeTrust::kTrusted;
-    } else if (trust == "robust") {
-      c.trust = EdgeTrust::kRobust;
-    } else if (trust != "default") {
-      throw FileError(where + "trust '" + trust + "' is not default, trusted or robust");
-    }
-    if (fields.size() == 4 && fields[3] != "default") {
-      const std::string kernel(fields[3]);
-      try {
-        c.kernel = parseKernelKind(kernel);
-      } catch (const std::invalid_argument&) {
-        c.kernel = KernelKind::kNone;
-      }
-      if (c.kernel == KernelKind::kNone)
-        throw FileError(where + "kernel '" + kernel + "' is not default, tls, gm, cauchy or huber");
-    }
-    const auto [it, inserted] = choices.emplace(pairKey(ids[0], ids[1]), c);
-    if (!inserted) {
-      throw FileError(where + "a second choice for " + std::to_string(ids[0]) + " " +
-                      std::to_string(ids[1]) + " (the first is on line " +
-                      std::to_string(it->second.line) + ")");
-    }
-  }
-  if (in.bad()) throw FileError(name + ": read error");
+  io_detail::forEachFieldLine(
+      in, name,
+      [&](const std::vector<std::string_view>& fields, int number, const std::string& where) {
+        if (fields.size() != 3 && fields.size() != 4) {
+          throw FileError(where + "expected 'FROM TO TRUST [KERNEL]', found " +
+                          std::to_string(fields.size()) + " fields");
+        }
+        Key ids[2];
+        for (int k = 0; k < 2; ++k) {
+          if (const char* why = io_detail::parseId(fields[k], &ids[k]))
+            throw FileError(where + "pose id '" + std::string(fields[k]) + "' " + why);
+        }
+        if (ids[0] == ids[1]) throw FileError(where + "self-loop " + std::to_string(ids[0]));
+        EdgeChoice c;
+        c.line = number;
+        const std::string trust(fields[2]);
+        if (trust == "trusted") {
+          c.trust = EdgeTrust::kTrusted;
+        } else if (trust == "robust") {
+          c.trust = EdgeTrust::kRobust;
+        } else if (trust != "default") {
+          throw FileError(where + "trust '" + trust + "' is not default, trusted or robust");
+        }
+        if (fields.size() == 4 && fields[3] != "default") {
+          const std::string kernel(fields[3]);
+          try {
+            c.kernel = parseKernelKind(kernel);
+          } catch (const std::invalid_argument&) {
+            c.kernel = KernelKind::kNone;
+          }
+          if (c.kernel == KernelKind::kNone)
+            throw FileError(where + "kernel '" + kernel +
+                            "' is not default, tls, gm, cauchy or huber");
+        }
+        const auto [it, inserted] = choices.emplace(pairKey(ids[0], ids[1]), c);
+        if (!inserted) {
+          throw FileError(where + "a second choice for " + std::to_string(ids[0]) + " " +
+                          std::to_string(ids[1]) + " (the first is on line " +
+                          std::to_string(it->second.line) + ")");
+        }
+      });
   return choices;
 }
 

@@ -12,25 +12,21 @@ namespace arbor {
 
 std::vector<LabelPair> readLabels(std::istream& in, const std::string& name) {
   std::vector<LabelPair> labels;
-  std::vector<std::string_view> fields;
-  std::string line;
-  for (int number = 1; std::getline(in, line); ++number) {
-    io_detail::splitFields(line, &fields);
-    if (fields.empty()) continue;
-    const std::string where = name + ":" + std::to_string(number) + ": ";
-    if (fields.size() != 2) {
-      throw FileError(where + "expected two pose ids 'i j', found " +
-                      std::to_string(fields.size()) + " fields");
-    }
-    Key ids[2];
-    for (int k = 0; k < 2; ++k) {
-      if (const char* why = io_detail::parseId(fields[k], &ids[k])) {
-        throw FileError(where + "pose id '" + std::string(fields[k]) + "' " + why);
-      }
-    }
-    labels.emplace_back(ids[0], ids[1]);
-  }
-  if (in.bad()) throw FileError(name + ": read error");
+  io_detail::forEachFieldLine(
+      in, name,
+      [&](const std::vector<std::string_view>& fields, int /*number*/, const std::string& where) {
+        if (fields.size() != 2) {
+          throw FileError(where + "expected two pose ids 'i j', found " +
+                          std::to_string(fields.size()) + " fields");
+        }
+        Key ids[2];
+        for (int k = 0; k < 2; ++k) {
+          if (const char* why = io_detail::parseId(fields[k], &ids[k])) {
+            throw FileError(where + "pose id '" + std::string(fields[k]) + "' " + why);
+          }
+        }
+        labels.emplace_back(ids[0], ids[1]);
+      });
   return labels;
 }
 

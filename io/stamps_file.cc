@@ -12,26 +12,22 @@ namespace arbor {
 
 PoseStamps readStamps(std::istream& in, const std::string& name) {
   PoseStamps stamps;
-  std::vector<std::string_view> fields;
-  std::string line;
-  for (int number = 1; std::getline(in, line); ++number) {
-    io_detail::splitFields(line, &fields);
-    if (fields.empty()) continue;
-    const std::string where = name + ":" + std::to_string(number) + ": ";
-    if (fields.size() != 2) {
-      throw FileError(where + "expected 'ID TIME_SECONDS', found " + std::to_string(fields.size()) +
-                      " fields");
-    }
-    Key id = 0;
-    if (const char* why = io_detail::parseId(fields[0], &id))
-      throw FileError(where + "pose id '" + std::string(fields[0]) + "' " + why);
-    double seconds = 0;
-    if (const char* why = io_detail::parseNumber(fields[1], &seconds))
-      throw FileError(where + "time '" + std::string(fields[1]) + "' " + why);
-    if (!stamps.emplace(id, seconds).second)
-      throw FileError(where + "pose id " + std::to_string(id) + " is given twice");
-  }
-  if (in.bad()) throw FileError(name + ": read error");
+  io_detail::forEachFieldLine(
+      in, name,
+      [&](const std::vector<std::string_view>& fields, int /*number*/, const std::string& where) {
+        if (fields.size() != 2) {
+          throw FileError(where + "expected 'ID TIME_SECONDS', found " +
+                          std::to_string(fields.size()) + " fields");
+        }
+        Key id = 0;
+        if (const char* why = io_detail::parseId(fields[0], &id))
+          throw FileError(where + "pose id '" + std::string(fields[0]) + "' " + why);
+        double seconds = 0;
+        if (const char* why = io_detail::parseNumber(fields[1], &seconds))
+          throw FileError(where + "time '" + std::string(fields[1]) + "' " + why);
+        if (!stamps.emplace(id, seconds).second)
+          throw FileError(where + "pose id " + std::to_string(id) + " is given twice");
+      });
   return stamps;
 }
 

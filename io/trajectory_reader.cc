@@ -41,42 +41,40 @@ std::string firstField(const std::string& path) {
 
 Trajectory readTrajectory(std::istream& in, const std::string& name) {
   Trajectory t;
-  std::vector<std::string_view> fields;
-  std::string line;
   size_t count = 0;
   double v[12];
-  for (int number = 1; std::getline(in, line); ++number) {
-    io_detail::splitFields(line, &fields);
-    if (fields.empty()) continue;
-    const std::string where = name + ":" + std::to_string(number) + ": ";
-    if (count == 0) {
-      if (fields.size() != 8 && fields.size() != 12)
-        throw FileError(where + "expected 8 fields (TUM) or 12 (KITTI), found " +
-                        std::to_string(fields.size()));
-      count = fields.size();
-    } else if (fields.size() != count) {
-      throw FileError(where + "expected " + std::to_string(count) + " fields as the first line, " +
-                      "found " + std::to_string(fields.size()));
-    }
-    for (size_t k = 0; k < count; ++k)
-      if (const char* why = io_detail::parseNumber(fields[k], &v[k]))
-        throw FileError(where + "field " + std::to_string(k + 1) + " '" + std::string(fields[k]) +
-                        "' " + why);
-    if (count == 8) {
-      Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
-      if (!(q.norm() > 0)) throw FileError(where + "the quaternion is zero");
-      t.stamps.push_back(v[0]);
-      t.poses.emplace_back(q.normalized(), Eigen::Vector3d(v[1], v[2], v[3]));
-    } else {
-      Eigen::Matrix3d R;
-      R << v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10];
-      if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() > 1e-6 || R.determinant() < 0)
-        throw FileError(where + "the 3x3 part is not a rotation");
-      t.stamps.push_back(static_cast<double>(t.poses.size()));
-      t.poses.emplace_back(Eigen::Quaterniond(R).normalized(), Eigen::Vector3d(v[3], v[7], v[11]));
-    }
-  }
-  if (in.bad()) throw FileError(name + ": read error");
+  io_detail::forEachFieldLine(
+      in, name,
+      [&](const std::vector<std::string_view>& fields, int /*number*/, const std::string& where) {
+        if (count == 0) {
+          if (fields.size() != 8 && fields.size() != 12)
+            throw FileError(where + "expected 8 fields (TUM) or 12 (KITTI), found " +
+                            std::to_string(fields.size()));
+          count = fields.size();
+        } else if (fields.size() != count) {
+          throw FileError(where + "expected " + std::to_string(count) +
+                          " fields as the first line, " + "found " + std::to_string(fields.size()));
+        }
+        for (size_t k = 0; k < count; ++k)
+          if (const char* why = io_detail::parseNumber(fields[k], &v[k]))
+            throw FileError(where + "field " + std::to_string(k + 1) + " '" +
+                            std::string(fields[k]) + "' " + why);
+        if (count == 8) {
+          Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
+          if (!(q.norm() > 0)) throw FileError(where + "the quaternion is zero");
+          t.stamps.push_back(v[0]);
+          t.poses.emplace_back(q.normalized(), Eigen::Vector3d(v[1], v[2], v[3]));
+        } else {
+          Eigen::Matrix3d R;
+          R << v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10];
+          if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() > 1e-6 ||
+              R.determinant() < 0)
+            throw FileError(where + "the 3x3 part is not a rotation");
+          t.stamps.push_back(static_cast<double>(t.poses.size()));
+          t.poses.emplace_back(Eigen::Quaterniond(R).normalized(),
+                               Eigen::Vector3d(v[3], v[7], v[11]));
+        }
+      });
   return t;
 }
 
