@@ -197,7 +197,7 @@ struct IncrementalSmoother<G>::Impl {
   typename bayestree::BayesTree<D>::Top top;
   // updatedPoses(): the poses of the last update (each once: updated_stamp[v] == publish_stamp),
   // every variable when updated_all; `moved` waits for the next update (transformPoses).
-  // Sorted when first asked for (updated_sorted), not by every update: a replay never asks, and
+  // Sorted when first asked for (updated_is_sorted), not by every update: a replay never asks, and
   // sorting a few hundred solved poses an update was 4% of intel's update instructions.
   mutable std::vector<int> updated;
   std::vector<int> moved, updated_stamp;
