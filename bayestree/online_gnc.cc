@@ -901,6 +901,23 @@ void OnlineGnc<G>::remap(const IncrementalSmoother<G>& smoother) {
   resolved_factors_ = smoother.numFactors();
 }
 
+// Kept at Ω's word: s at the final estimate, the closure out of it (weight 0), against the
+// given c². Taken back, it is in the next relinearisation's estimate, which the caller makes.
+template <class G>
+int OnlineGnc<G>::takeBackAtWord(IncrementalSmoother<G>& smoother) {
+  int taken = 0;
+  for (Closure& c : closures_) {
+    if (c.state != State::kSettled || c.factor < 0 || c.held || c.weight != 0.0 || !binaryKernel(c))
+      continue;
+    c.s = residual(smoother, c);
+    if (!(c.s <= c2_given_)) continue;
+    setWeight(smoother, &c, 1.0);
+    ++taken;
+  }
+  totals_.kept_at_word += taken;
+  return taken;
+}
+
 template <class G>
 int OnlineGnc<G>::sweepInliers(IncrementalSmoother<G>& smoother) {
   sweep_due_ = false;

@@ -442,6 +442,14 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
       break;
     }
   }
+  // Kept at Ω's word (RobustOptions::end_word; online_gnc.h): what the final estimate explains
+  // within Ω's own χ² bound comes back, and the estimate is relinearised with it; again while
+  // one came back.
+  if (gnc_->options().end_word)
+    for (int round = 0; round < gnc_->options().finalize_rounds && !total.cancelled; ++round) {
+      if (gnc_->takeBackAtWord(smoother_) == 0) break;
+      relinearizeAll();
+    }
   const UpdateStats s = recordUpdate(total);
   if (!total.cancelled) finalized_update_ = stats_.updates;
   return s;
@@ -668,6 +676,7 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.closures_unconfirmed = c.unconfirmed;
     s.closures_left_out = c.left_out;
     s.closures_disowned = c.disowned;
+    s.closures_kept_at_word = c.kept_at_word;
     s.rechecks_bounded = c.rechecks_bounded;
     s.closure_threshold = gnc_->threshold();
     s.closure_threshold_at_end = gnc_->thresholdAtEnd();

@@ -141,6 +141,9 @@ struct OnlineStats {
   /// Of those, the closures dropped within the margin because every partner had been rejected
   /// (ClosureCounts::disowned; RobustOptions::end_rejected_partners).
   int closures_disowned = 0;
+  /// Rejected closures taken back at the end by their residual within Ω's χ² bound
+  /// (ClosureCounts::kept_at_word; RobustOptions::end_word).
+  int closures_kept_at_word = 0;
   /// Re-checks of rejected closures that (E)'s lower bound settled without a path solve
   /// (ClosureCounts::rechecks_bounded).
   int rechecks_bounded = 0;

@@ -55,6 +55,7 @@ py::dict statsDict(const OnlineStats& s) {
   d["rechecks_bounded"] = s.rechecks_bounded;
   d["closures_left_out"] = s.closures_left_out;
   d["closures_disowned"] = s.closures_disowned;
+  d["closures_kept_at_word"] = s.closures_kept_at_word;
   d["graduation_steps"] = s.graduation_steps;
   d["graduation_updates"] = s.graduation_updates;
   d["warm_up_relinearizations"] = s.warm_up_relinearizations;

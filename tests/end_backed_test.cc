@@ -33,9 +33,11 @@ PoseGraph3 load(const std::string& name) {
   return std::get<PoseGraph3>(readPoseGraphFile(testing::datasetPath(name)));
 }
 
+// The backing off, and kept at Ω's word off too (it takes the same closures back: below).
 RobustOptions withoutBacking() {
   RobustOptions o;
   o.end_backed_margin = 0;
+  o.end_word = false;
   return o;
 }
 
@@ -61,6 +63,10 @@ TEST(EndBacked, KeepsTheCleanGaragesHeavyTail) {
   EXPECT_GT(without.F_clean, 1.005 * F_plain);
   EXPECT_TRUE(with.rejected.empty());
   EXPECT_NEAR(with.F_clean, F_plain, 1e-3 * F_plain);  // issue 14: within 0.1%
+  // Kept at Ω's word alone keeps them too: their s at the end is within Ω's c².
+  RobustOptions word_only = withoutBacking();
+  word_only.end_word = true;
+  EXPECT_TRUE(replayRobust(clean, clean, word_only).rejected.empty());
 }
 
 // `arbor batch --robust --init online --inlier-threshold online`: GNC at twice the replay's c²

@@ -156,6 +156,7 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const std::optional<PoseSt
           {"closures_unconfirmed", online.closures_unconfirmed},
           {"closures_left_out", online.closures_left_out},
           {"closures_disowned", online.closures_disowned},
+          {"closures_kept_at_word", online.closures_kept_at_word},
           {"rechecks_bounded", online.rechecks_bounded},
           {"warm_up_relinearizations", online.warm_up_relinearizations},
       };
@@ -213,7 +214,8 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const std::optional<PoseSt
               << " trusted, " << online.closures_graduating << " still graduating; "
               << online.graduation_steps << " graduation steps, " << online.graduation_updates
               << " extra updates, " << online.closures_unconfirmed
-              << " inliers dropped by their leave-one-out innovation\n"
+              << " inliers dropped by their leave-one-out innovation, "
+              << online.closures_kept_at_word << " kept at Ω's word\n"
               << std::setprecision(10) << "F kept        " << F_kept
               << " (the final estimate without the rejected edges)\n";
     if (!run.robust.rejected_out.empty())
