@@ -17,6 +17,7 @@
 #include <Eigen/Core>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/online_smoother.h"
 #include "arbor/core/batch_solver.h"
 #include "arbor/core/custom_factor.h"
 #include "arbor/core/example_factors.h"
@@ -447,6 +448,92 @@ TEST(CustomFactorGauge, RangesAnchorOnlyWhenTheyFixEverything) {
       CustomFactor<SE2>::make(std::make_shared<const examples::RelativePositionFactor<SE2>>(p),
                               Eigen::Matrix2d::Identity(), 1, 2));
   EXPECT_EQ(two.gaugeIndices(), std::vector<int>{0});
+}
+
+// The online layer: ranges to three beacons on a trajectory streamed edge by edge release the
+// first pose's anchor once they fix the gauge, and the final estimate is batch LM's minimum of
+// F over every factor; what it cannot take is refused with the reason, changing nothing.
+template <class G>
+void expectOnlineWithRanges(unsigned seed) {
+  constexpr int D = G::kDim;
+  std::mt19937_64 rng(seed);
+  const int n = 30;
+  const std::vector<G> truth = trajectory<G>(n, rng);  // truth[0]: the anchor's identity
+  std::vector<Eigen::Matrix<double, D, 1>> beacons;
+  for (int b = 0; b < 3; ++b) beacons.push_back(randomPoint<G>(rng, 10));
+  std::normal_distribution<double> normal(0.0, 0.05);
+  const auto omega = diagonalInformation<G>(100, 400);
+  const Eigen::MatrixXd omega_range = Eigen::MatrixXd::Constant(1, 1, 400.0);
+  OnlineSmoother<G> s;
+  PoseGraph<G> graph;
+  for (int k = 0; k < n; ++k) {
+    graph.ids.push_back(k);
+    graph.index[k] = k;
+  }
+  int ranges = 0;
+  for (int k = 1; k < n; ++k) {
+    const G z = truth[k - 1].between(truth[k]).compose(G::Exp(randomTangent<G>(rng, .02, .01)));
+    ASSERT_EQ(s.addEdge(k - 1, k, z, omega).status, EdgeStatus::kAccepted);
+    graph.edges.push_back(RelativePoseEdge<G>::make(k - 1, k, z, omega));
+    if (k % 2 == 0) {
+      for (const auto& b : beacons) {
+        const auto model = rangeModel<G>(b, (truth[k].translation() - b).norm() + normal(rng));
+        const EdgeResult r = s.addFactor(CustomFactor<G>::make(model, omega_range, 0), k);
+        ASSERT_EQ(r.status, EdgeStatus::kAccepted) << r.reason;
+        graph.custom_factors.push_back(CustomFactor<G>::make(model, omega_range, k));
+        ++ranges;
+      }
+    }
+    s.update();
+    s.smoother().checkInvariants();
+  }
+  EXPECT_FALSE(s.anchorOf(0).has_value());  // the ranges fix the gauge: nothing is fixed
+  EXPECT_EQ(s.stats().anchors_released, 1);
+  EXPECT_EQ(s.stats().custom_accepted, ranges);
+  s.finalize();
+  std::vector<G> x(n);
+  for (int k = 0; k < n; ++k) x[k] = s.estimate(k);
+  graph.poses = x;
+  EXPECT_TRUE(graph.gaugeIndices().empty());
+  std::vector<G> batch = x;
+  const BatchSummary summary =
+      solveBatch(graph, &batch, batchOptions(BatchMethod::kLevenbergMarquardt, 100, 1e-14));
+  ASSERT_NE(summary.termination, Termination::kDiverged) << summary.message;
+  EXPECT_NEAR(objective(graph, x), summary.F_final, 1e-6 * summary.F_final);
+  EXPECT_NEAR(s.objective(), objective(graph, x), 1e-9 * summary.F_final);
+
+  // Refusals, each naming the factor and the reason; nothing changes.
+  const auto unary = CustomFactor<G>::make(rangeModel<G>(beacons[0], 1.0), omega_range, 0);
+  const Eigen::Matrix<double, D, 1> p = Eigen::Matrix<double, D, 1>::Ones();
+  const auto binary =
+      CustomFactor<G>::make(examples::RelativePositionAutoDiff<G>::Create({p}, "relative_position"),
+                            Eigen::MatrixXd::Identity(D, D), 0, 1);
+  const std::size_t factors = s.smoother().factors().size();
+  EdgeResult r = s.addFactor(unary, 99);
+  EXPECT_EQ(r.status, EdgeStatus::kRejected);
+  EXPECT_EQ(r.reason,
+            "custom factor 'range' on 99: unknown pose id 99 (an edge or a prior "
+            "creates a pose, a custom factor cannot)");
+  r = s.addFactor(unary, 1, 2);
+  EXPECT_EQ(r.reason, "custom factor 'range' on 1, 2: a factor on 1 pose(s) given 2 ids");
+  r = s.addFactor(binary, 3, 3);
+  EXPECT_EQ(r.reason, "custom factor 'relative_position' on 3, 3: self-loop");
+  ASSERT_EQ(s.addEdge(100, 101, G(), omega).status, EdgeStatus::kAccepted);  // a second component
+  r = s.addFactor(binary, 3, 100);
+  EXPECT_EQ(r.reason,
+            "custom factor 'relative_position' on 3, 100: its poses are in two components; an "
+            "edge must join them first");
+  EXPECT_EQ(s.stats().custom_rejected, 4);
+  EXPECT_EQ(s.smoother().factors().size(), factors);
+  r = s.addFactor(binary, 3, 5);
+  EXPECT_EQ(r.status, EdgeStatus::kAccepted) << r.reason;
+}
+
+TEST(CustomFactorOnline, RangesReleaseTheAnchorAndReachTheBatchMinimum2D) {
+  expectOnlineWithRanges<SE2>(12);
+}
+TEST(CustomFactorOnline, RangesReleaseTheAnchorAndReachTheBatchMinimum3D) {
+  expectOnlineWithRanges<SE3>(13);
 }
 
 // A robust kernel on a custom factor: ρ and w = ρ′ at eᵀΩe, √w scaling, and the smoother with
