@@ -49,8 +49,8 @@ struct BatchSummary {
   std::string message;  ///< e.g. why it diverged
 };
 
-/// Minimises F = objective(graph, ·) = Σ eᵀΩe over the edges, pose priors and position priors
-/// (a prior on a gauge pose is a constant in F), over the poses not in graph.gaugeIndices(),
+/// Minimises F = objective(graph, ·) = Σ eᵀΩe over the edges, priors and custom factors (a
+/// unary term on a gauge pose is a constant in F), over the poses not in graph.gaugeIndices(),
 /// starting from and writing to *poses (one per graph pose). A connected component that neither
 /// holds a gauge pose nor is anchored by its priors (gaugeProblem) ends as kDiverged with the
 /// message naming its first pose. On divergence *poses holds the best estimate seen. Throws
