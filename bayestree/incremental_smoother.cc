@@ -291,7 +291,7 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   void addFactor(const Factor<G>& f) {
-    std::string where = std::string("IncrementalSmoother::addFactor(") + toString(f.kind());
+    std::string where = "IncrementalSmoother::addFactor(" + f.name();
     for (int k = 0; k < f.arity(); ++k) where += (k ? ", " : " ") + std::to_string(f.key(k));
     where += "): ";
     for (int k = 0; k < f.arity(); ++k)

@@ -1,5 +1,6 @@
 #include "arbor/bayestree/online_smoother.h"
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -316,6 +317,54 @@ EdgeResult OnlineSmoother<G>::addPositionPrior(Key id, const typename G::Transla
     ++stats_.priors_rejected;
     return {EdgeStatus::kRejected, "position prior on " + std::to_string(id) + ": " + e.what()};
   }
+}
+
+template <class G>
+EdgeResult OnlineSmoother<G>::addFactor(const CustomFactor<G>& factor, Key id,
+                                        std::optional<Key> id2) {
+  std::string where = "custom factor '" + factor.name() + "' on " + std::to_string(id);
+  if (id2) where += ", " + std::to_string(*id2);
+  const auto reject = [&](const std::string& why) {
+    ++stats_.custom_rejected;
+    return EdgeResult{EdgeStatus::kRejected, where + ": " + why};
+  };
+  if (!factor.model) return reject("no model");
+  if ((factor.arity() == 2) != id2.has_value())
+    return reject("a factor on " + std::to_string(factor.arity()) + " pose(s) given " +
+                  (id2 ? "2 ids" : "1 id"));
+  std::array<int, 2> v{-1, -1};
+  for (int k = 0; k < factor.arity(); ++k) {
+    const Key key = k == 0 ? id : *id2;
+    auto it = index_.find(key);
+    if (it == index_.end())
+      return reject("unknown pose id " + std::to_string(key) +
+                    " (an edge or a prior creates a pose, a custom factor cannot)");
+    v[static_cast<size_t>(k)] = it->second;
+  }
+  if (factor.arity() == 2 && v[0] == v[1]) return reject("self-loop");
+  if (factor.arity() == 2 && root(v[0]) != root(v[1]))
+    return reject("its poses are in two components; an edge must join them first");
+  CustomFactor<G> f = factor;
+  f.i = v[0];
+  f.j = v[1];
+  const Factor<G> wrapped(f);
+  try {
+    smoother_.addFactor(wrapped);  // validates what a hand-assembled factor may lack
+  } catch (const std::invalid_argument& e) {
+    return reject(e.what());
+  }
+  queued_.push_back(wrapped);
+  // Its gauge information at the current estimates, keyed 0 (and 1) on a copy of two poses.
+  CustomFactor<G> local = f;
+  local.i = 0;
+  local.j = f.j < 0 ? -1 : 1;
+  std::vector<G> at{smoother_.estimate(v[0])};
+  if (f.j >= 0) at.push_back(smoother_.estimate(v[1]));
+  const int c = root(v[0]);
+  components_[c].gauge.addCustom(local, at);
+  releaseAnchorIfFixed(c);
+  ++stats_.custom_accepted;
+  return EdgeResult{EdgeStatus::kAccepted, ""};
 }
 
 template <class G>

@@ -113,6 +113,8 @@ struct OnlineStats {
   int edges_rejected = 0;
   int priors_accepted = 0;  ///< pose and position priors handed to the smoother
   int priors_rejected = 0;
+  int custom_accepted = 0;  ///< factors of your own handed to the smoother (addFactor)
+  int custom_rejected = 0;
   int components = 0;  ///< connected components now
   int joins = 0;       ///< edges that joined two components
   int anchors_released = 0;
@@ -195,6 +197,15 @@ class OnlineSmoother {
   /// unknown id starts a component there (at p, identity rotation).
   EdgeResult addPositionPrior(Key id, const typename G::Translation& p,
                               const PositionMatrix& omega);
+  /// A factor of your own (core/custom_factor.h; its keys are replaced) on pose `id`, or on
+  /// `id` and `id2` for a binary one. The poses must exist (nothing places a new pose from a
+  /// custom factor) and a binary one's be in one component (an edge joins components). Its
+  /// gauge information joins its component's (core/gauge.h): when that fixes the gauge, the
+  /// anchor is released (the estimate stays where the anchor held it: give initial guesses in
+  /// the factors' frame). Trusted by robust smoothing (weight 1). Refused with the reason
+  /// otherwise, changing nothing.
+  EdgeResult addFactor(const CustomFactor<G>& factor, Key id,
+                       std::optional<Key> id2 = std::nullopt);
   /// The value pose `id` starts at when an edge creates it, instead of the estimate of the pose
   /// the edge comes from composed with the measurement (iSAM2's new Θ of ISAM2::update): a map
   /// saved at its optimum, or a front end's own odometry, starts near its optimum, and the first

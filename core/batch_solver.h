@@ -49,8 +49,8 @@ struct BatchSummary {
   std::string message;  ///< e.g. why it diverged
 };
 
-/// Minimises F = objective(graph, ·) = Σ eᵀΩe over the edges, pose priors and position priors
-/// (a prior on a gauge pose is a constant in F), over the poses not in graph.gaugeIndices(),
+/// Minimises F = objective(graph, ·) = Σ eᵀΩe over the edges, priors and custom factors (a
+/// unary term on a gauge pose is a constant in F), over the poses not in graph.gaugeIndices(),
 /// starting from and writing to *poses (one per graph pose). A connected component that neither
 /// holds a gauge pose nor is anchored by its priors (gaugeProblem) ends as kDiverged with the
 /// message naming its first pose. On divergence *poses holds the best estimate seen. Throws
@@ -60,9 +60,9 @@ template <class G>
 BatchSummary solveBatch(const PoseGraph<G>& graph, std::vector<G>* poses,
                         const BatchOptions& options = {});
 
-/// Σ w_k e_kᵀΩ_k e_k over the edges (one weight per edge, in edge order) plus the priors'
-/// Σ eᵀΩe: the objective of the weighted (IRLS) problem. Throws std::invalid_argument on a size
-/// mismatch.
+/// Σ w_k e_kᵀΩ_k e_k over the edges (one weight per edge, in edge order) plus the priors' and
+/// the custom factors' Σ eᵀΩe: the objective of the weighted (IRLS) problem. Throws
+/// std::invalid_argument on a size mismatch.
 template <class G>
 double weightedObjective(const PoseGraph<G>& graph, const std::vector<double>& edge_weights,
                          const std::vector<G>& poses) {
@@ -77,6 +77,7 @@ double weightedObjective(const PoseGraph<G>& graph, const std::vector<double>& e
   }
   for (const auto& p : graph.pose_priors) f += p.cost(poses[p.i]);
   for (const auto& p : graph.position_priors) f += p.cost(poses[p.i]);
+  for (const auto& c : graph.custom_factors) f += c.cost(poses);
   return f;
 }
 

@@ -14,6 +14,8 @@ const char* toString(FactorKind kind) {
       return "pose_prior";
     case FactorKind::kPositionPrior:
       return "position_prior";
+    case FactorKind::kCustom:
+      return "custom";
   }
   return "unknown";
 }
@@ -26,6 +28,8 @@ bool Factor<G>::isFinite() const {
         bool ok = f.information.allFinite() && f.sqrt_information_t.allFinite();
         if constexpr (std::is_same_v<F, PositionPriorFactor<G>>)
           ok = ok && f.position.allFinite();
+        else if constexpr (std::is_same_v<F, CustomFactor<G>>)
+          ok = ok && f.model != nullptr;
         else
           ok = ok && allFinite(f.measurement);
         return ok;

@@ -1,12 +1,13 @@
 // One factor of the smoother's objective: a relative pose (binary), a pose prior or a position
-// prior (unary), as a value type with static dispatch (std::variant) so that the dense kernels
-// stay inlined. Every factor linearises into whitened blocks of one common shape,
+// prior (unary), or a factor of your own on one or two poses (core/custom_factor.h), as a value
+// type with static dispatch (std::variant) so that the built-ins' dense kernels stay inlined. Every
+// factor linearises into whitened blocks of one common shape,
 //
 //   ‖Σ_k A_k τ_{key k} + r‖²,   A_k: kDoF×kDoF,  r: kDoF,
 //
 // where a factor whose residual has fewer than kDoF entries (the position prior: kDim) fills the
 // remaining rows with zeros; zero rows change neither AᵀA nor Aᵀr, so the Bayes tree can treat
-// every factor alike (docs/design.md, "Factors"; how to add one: "Adding a factor").
+// every factor alike (docs/design.md, "Factors"; your own: "Factors of your own").
 //
 // A factor may carry a robust kernel (core/robust_kernel.h; default none) and an inlier weight
 // w ∈ [0, 1] (default 1) that an iteratively reweighted solver sets from the kernel, w = ρ′(s)
@@ -17,12 +18,14 @@
 
 #include <array>
 #include <cmath>
+#include <string>
 #include <type_traits>
 #include <variant>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "arbor/core/custom_factor.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/core/prior_factors.h"
 #include "arbor/core/relative_pose_factor.h"
@@ -30,9 +33,10 @@
 
 namespace arbor {
 
-enum class FactorKind { kRelativePose, kPosePrior, kPositionPrior };
+enum class FactorKind { kRelativePose, kPosePrior, kPositionPrior, kCustom };
 
-const char* toString(FactorKind kind);  ///< "relative_pose", "pose_prior", "position_prior"
+/// "relative_pose", "pose_prior", "position_prior", "custom"
+const char* toString(FactorKind kind);
 
 template <class G>
 class Factor {
@@ -41,7 +45,8 @@ class Factor {
   static constexpr int kMaxKeys = 2;
   using Block = Eigen::Matrix<double, kDoF, kDoF>;
   using Vector = Eigen::Matrix<double, kDoF, 1>;
-  using Variant = std::variant<RelativePoseEdge<G>, PosePriorFactor<G>, PositionPriorFactor<G>>;
+  using Variant = std::variant<RelativePoseEdge<G>, PosePriorFactor<G>, PositionPriorFactor<G>,
+                               CustomFactor<G>>;
 
   /// The whitened linearisation ‖Σ_k A[k] τ_k + r‖² over the factor's keys (arity() of them).
   struct Linearization {
@@ -53,12 +58,17 @@ class Factor {
   Factor(const RelativePoseEdge<G>& f) : f_(f) {}     // NOLINT: implicit on purpose
   Factor(const PosePriorFactor<G>& f) : f_(f) {}      // NOLINT
   Factor(const PositionPriorFactor<G>& f) : f_(f) {}  // NOLINT
+  Factor(const CustomFactor<G>& f) : f_(f) {}         // NOLINT
 
   FactorKind kind() const { return static_cast<FactorKind>(f_.index()); }
-  int arity() const { return kind() == FactorKind::kRelativePose ? 2 : 1; }
-  /// The k-th key (dense pose index): i then j for a relative pose.
+  int arity() const {
+    if (const auto* c = std::get_if<CustomFactor<G>>(&f_)) return c->arity();
+    return kind() == FactorKind::kRelativePose ? 2 : 1;
+  }
+  /// The k-th key (dense pose index): i then j for a binary factor.
   int key(int k) const {
     if (const auto* e = std::get_if<RelativePoseEdge<G>>(&f_)) return k == 0 ? e->i : e->j;
+    if (const auto* c = std::get_if<CustomFactor<G>>(&f_)) return k == 0 ? c->i : c->j;
     return std::visit([](const auto& f) { return f.i; }, f_);
   }
   /// Renumbers the keys (k-th key → keys[k]).
@@ -66,6 +76,11 @@ class Factor {
     if (auto* e = std::get_if<RelativePoseEdge<G>>(&f_)) {
       e->i = k0;
       e->j = k1;
+      return;
+    }
+    if (auto* c = std::get_if<CustomFactor<G>>(&f_)) {
+      c->i = k0;
+      if (c->arity() == 2) c->j = k1;
       return;
     }
     std::visit([&](auto& f) { f.i = k0; }, f_);
@@ -78,14 +93,20 @@ class Factor {
   const PositionPriorFactor<G>* positionPrior() const {
     return std::get_if<PositionPriorFactor<G>>(&f_);
   }
+  const CustomFactor<G>* custom() const { return std::get_if<CustomFactor<G>>(&f_); }
+  /// "relative_pose", "pose_prior", "position_prior", or a custom factor's model name.
+  std::string name() const { return custom() ? custom()->name() : toString(kind()); }
 
   /// eᵀΩe at the poses x (indexed by key).
   template <class Poses>
   double cost(const Poses& x) const {
     return std::visit(
         [&](const auto& f) {
-          if constexpr (std::is_same_v<std::decay_t<decltype(f)>, RelativePoseEdge<G>>)
+          using F = std::decay_t<decltype(f)>;
+          if constexpr (std::is_same_v<F, RelativePoseEdge<G>>)
             return f.cost(x[f.i], x[f.j]);
+          else if constexpr (std::is_same_v<F, CustomFactor<G>>)
+            return f.cost(x);
           else
             return f.cost(x[f.i]);
         },
@@ -127,6 +148,8 @@ class Factor {
           using F = std::decay_t<decltype(f)>;
           if constexpr (std::is_same_v<F, RelativePoseEdge<G>>) {
             f.linearize(x[f.i], x[f.j], &out->A[0], &out->A[1], &out->r);
+          } else if constexpr (std::is_same_v<F, CustomFactor<G>>) {
+            f.linearize(x, &out->A[0], &out->A[1], &out->r);  // zero-padded there
           } else if constexpr (F::kRows == kDoF) {
             f.linearize(x[f.i], &out->A[0], &out->r);
           } else {  // fewer residual rows: zero-padded
@@ -152,22 +175,26 @@ class Factor {
   double inlier_weight_ = 1.0;
 };
 
-/// Appends f to the graph's edges, pose priors or position priors, by its kind.
+/// Appends f to the graph's edges, pose priors, position priors or custom factors, by its kind.
 template <class G>
 void addToGraph(const Factor<G>& f, PoseGraph<G>* graph) {
   if (const auto* e = f.relativePose()) graph->edges.push_back(*e);
   if (const auto* p = f.posePrior()) graph->pose_priors.push_back(*p);
   if (const auto* p = f.positionPrior()) graph->position_priors.push_back(*p);
+  if (const auto* c = f.custom()) graph->custom_factors.push_back(*c);
 }
 
-/// Every factor of the graph: its edges, then its pose priors, then its position priors.
+/// Every factor of the graph: its edges, then its pose priors, its position priors and its
+/// custom factors.
 template <class G>
 std::vector<Factor<G>> factorsOf(const PoseGraph<G>& graph) {
   std::vector<Factor<G>> out;
-  out.reserve(graph.edges.size() + graph.pose_priors.size() + graph.position_priors.size());
+  out.reserve(graph.edges.size() + graph.pose_priors.size() + graph.position_priors.size() +
+              graph.custom_factors.size());
   for (const auto& e : graph.edges) out.emplace_back(e);
   for (const auto& p : graph.pose_priors) out.emplace_back(p);
   for (const auto& p : graph.position_priors) out.emplace_back(p);
+  for (const auto& c : graph.custom_factors) out.emplace_back(c);
   return out;
 }
 

@@ -73,6 +73,10 @@ double varianceFactor(const PoseGraph<G>& graph, const std::vector<G>& poses,
     f += p.cost(poses[p.i]);
     rows += G::kDim;
   }
+  for (const auto& c : graph.custom_factors) {
+    f += c.cost(poses);
+    rows += c.rows();
+  }
   const double unknowns =
       static_cast<double>(G::kDoF) * (graph.numPoses() - graph.gaugeIndices().size());
   const double redundancy = rows - unknowns;
@@ -129,6 +133,7 @@ PoseGraph<G> keepEdges(const PoseGraph<G>& graph, const std::vector<char>& keep)
   out.poses = graph.poses;
   out.pose_priors = graph.pose_priors;
   out.position_priors = graph.position_priors;
+  out.custom_factors = graph.custom_factors;
   out.fixed = graph.fixed;
   out.has_initial_estimate = graph.has_initial_estimate;
   for (size_t k = 0; k < keep.size(); ++k)

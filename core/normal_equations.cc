@@ -29,6 +29,14 @@ void checkIndices(const PoseGraph<G>& graph) {
   };
   checkPriors(graph.pose_priors, "pose prior");
   checkPriors(graph.position_priors, "position prior");
+  for (size_t k = 0; k < graph.custom_factors.size(); ++k) {
+    const auto& c = graph.custom_factors[k];
+    for (int key : {c.i, c.j})
+      if ((key < 0 || key >= n) && (key == c.i || c.arity() == 2))
+        throw std::invalid_argument("custom factor " + std::to_string(k) + " ('" + c.name() +
+                                    "') is on pose index " + std::to_string(key) + ", outside 0.." +
+                                    std::to_string(n - 1));
+  }
   for (int g : graph.gaugeIndices())
     if (g < 0 || g >= n)
       throw std::invalid_argument("fixed pose index " + std::to_string(g) + " outside 0.." +
@@ -59,14 +67,19 @@ std::string gaugeProblem(const PoseGraph<G>& graph) {
   std::vector<int> parent(n);
   std::iota(parent.begin(), parent.end(), 0);
   for (const auto& e : graph.edges) parent[findRoot(parent, e.i)] = findRoot(parent, e.j);
+  for (const auto& c : graph.custom_factors)
+    if (c.arity() == 2) parent[findRoot(parent, c.i)] = findRoot(parent, c.j);
   // A component is anchored by a gauge pose or by priors that fix its gauge.
   std::vector<char> anchored(n, 0);
   for (int g : graph.gaugeIndices()) anchored[findRoot(parent, g)] = 1;
-  if (graph.hasPriors()) {
+  if (graph.hasPriors() || !graph.custom_factors.empty()) {
     std::vector<GaugeInformation<G>> gauge(n);
     for (const auto& p : graph.pose_priors) gauge[findRoot(parent, p.i)].addPosePrior();
     for (const auto& p : graph.position_priors)
       gauge[findRoot(parent, p.i)].addPositionPrior(p.position, p.information);
+    if (graph.poses.size() == static_cast<size_t>(n))
+      for (const auto& c : graph.custom_factors)
+        gauge[findRoot(parent, c.i)].addCustom(c, graph.poses);
     for (int p = 0; p < n; ++p)
       if (parent[p] == p && gauge[p].fixesGauge()) anchored[p] = 1;
   }
@@ -103,6 +116,11 @@ NormalEquations<G>::NormalEquations(const PoseGraph<G>& graph, CholeskyBackend b
     pairs.reserve(graph.edges.size());
     for (const auto& e : graph.edges) {
       const int a = var[e.i], b = var[e.j];
+      if (a >= 0 && b >= 0 && a != b) pairs.emplace_back(std::max(a, b), std::min(a, b));
+    }
+    for (const auto& c : graph.custom_factors) {
+      if (c.arity() < 2) continue;
+      const int a = var[c.i], b = var[c.j];
       if (a >= 0 && b >= 0 && a != b) pairs.emplace_back(std::max(a, b), std::min(a, b));
     }
     std::sort(pairs.begin(), pairs.end());
@@ -143,17 +161,13 @@ NormalEquations<G>::NormalEquations(const PoseGraph<G>& graph, CholeskyBackend b
   off_diagonal_.resize(pairs.size());
   for (size_t b = 0; b < pairs.size(); ++b) off_diagonal_[b] = {pairs[b].first, pairs[b].second};
   slots_.resize(graph.edges.size());
-  for (size_t k = 0; k < graph.edges.size(); ++k) {
-    EdgeSlot& s = slots_[k];
-    s.var_i = var_of_pose_[graph.edges[k].i];
-    s.var_j = var_of_pose_[graph.edges[k].j];
-    if (s.var_i < 0 || s.var_j < 0 || s.var_i == s.var_j) continue;
-    const std::pair<int, int> key(std::max(s.var_i, s.var_j), std::min(s.var_i, s.var_j));
-    s.off_diagonal =
-        static_cast<int>(std::lower_bound(pairs.begin(), pairs.end(), key) - pairs.begin());
-    s.i_is_high = s.var_i > s.var_j;
-  }
+  for (size_t k = 0; k < graph.edges.size(); ++k)
+    slotFor(graph.edges[k].i, graph.edges[k].j, pairs, &slots_[k]);
   linearization_.resize(graph.edges.size());
+  custom_slots_.resize(graph.custom_factors.size());
+  for (size_t k = 0; k < graph.custom_factors.size(); ++k)
+    slotFor(graph.custom_factors[k].i, graph.custom_factors[k].j, pairs, &custom_slots_[k]);
+  custom_linearization_.resize(graph.custom_factors.size());
   pose_prior_linearization_.resize(graph.pose_priors.size());
   for (size_t k = 0; k < graph.pose_priors.size(); ++k)
     pose_prior_linearization_[k].var = var_of_pose_[graph.pose_priors[k].i];
@@ -184,6 +198,19 @@ NormalEquations<G>::NormalEquations(const PoseGraph<G>& graph, CholeskyBackend b
 
 template <class G>
 NormalEquations<G>::~NormalEquations() = default;
+
+// Where a term on poses i and j (j −1: unary) goes among the sorted off-diagonal pairs.
+template <class G>
+void NormalEquations<G>::slotFor(int i, int j, const std::vector<std::pair<int, int>>& pairs,
+                                 EdgeSlot* s) const {
+  s->var_i = var_of_pose_[i];
+  s->var_j = j < 0 ? -1 : var_of_pose_[j];
+  if (s->var_i < 0 || s->var_j < 0 || s->var_i == s->var_j) return;
+  const std::pair<int, int> key(std::max(s->var_i, s->var_j), std::min(s->var_i, s->var_j));
+  s->off_diagonal =
+      static_cast<int>(std::lower_bound(pairs.begin(), pairs.end(), key) - pairs.begin());
+  s->i_is_high = s->var_i > s->var_j;
+}
 
 // H's upper triangle for CHOLMOD: scalar column c·d + q holds block column c's off-diagonal
 // blocks (rows ascending), then the diagonal block's rows c·d .. c·d + q.
@@ -250,33 +277,45 @@ double NormalEquations<G>::linearize(const std::vector<G>& poses) {
       lin.r *= root;
     }
     f += lin.r.squaredNorm();
-    if (s.var_i >= 0 && s.var_i == s.var_j) {  // an edge from a pose to itself
-      const Block a = lin.A_i + lin.A_j;
-      diagonal_blocks_[s.var_i].noalias() += a.transpose() * a;
-      gradient_.template segment<d>(s.var_i * d).noalias() += a.transpose() * lin.r;
-      continue;
-    }
-    if (s.var_i >= 0) {
-      diagonal_blocks_[s.var_i].noalias() += lin.A_i.transpose() * lin.A_i;
-      gradient_.template segment<d>(s.var_i * d).noalias() += lin.A_i.transpose() * lin.r;
-    }
-    if (s.var_j >= 0) {
-      diagonal_blocks_[s.var_j].noalias() += lin.A_j.transpose() * lin.A_j;
-      gradient_.template segment<d>(s.var_j * d).noalias() += lin.A_j.transpose() * lin.r;
-    }
-    if (s.off_diagonal >= 0) {
-      Block& h = off_diagonal_blocks_[s.off_diagonal];
-      if (s.i_is_high)
-        h.noalias() += lin.A_i.transpose() * lin.A_j;
-      else
-        h.noalias() += lin.A_j.transpose() * lin.A_i;
-    }
+    addTerms(s, lin);
   }
   f += linearizePriors(graph_.pose_priors, poses, &pose_prior_linearization_);
   f += linearizePriors(graph_.position_priors, poses, &position_prior_linearization_);
+  for (size_t k = 0; k < graph_.custom_factors.size(); ++k) {
+    EdgeLinearization& lin = custom_linearization_[k];
+    graph_.custom_factors[k].linearize(poses, &lin.A_i, &lin.A_j, &lin.r);
+    f += lin.r.squaredNorm();
+    addTerms(custom_slots_[k], lin);
+  }
   for (int c = 0; c < num_variables_; ++c)
     hessian_diagonal_.template segment<d>(c * d) = diagonal_blocks_[c].diagonal();
   return f;
+}
+
+template <class G>
+void NormalEquations<G>::addTerms(const EdgeSlot& s, const EdgeLinearization& lin) {
+  constexpr int d = kDoF;
+  if (s.var_i >= 0 && s.var_i == s.var_j) {  // an edge from a pose to itself
+    const Block a = lin.A_i + lin.A_j;
+    diagonal_blocks_[s.var_i].noalias() += a.transpose() * a;
+    gradient_.template segment<d>(s.var_i * d).noalias() += a.transpose() * lin.r;
+    return;
+  }
+  if (s.var_i >= 0) {
+    diagonal_blocks_[s.var_i].noalias() += lin.A_i.transpose() * lin.A_i;
+    gradient_.template segment<d>(s.var_i * d).noalias() += lin.A_i.transpose() * lin.r;
+  }
+  if (s.var_j >= 0) {
+    diagonal_blocks_[s.var_j].noalias() += lin.A_j.transpose() * lin.A_j;
+    gradient_.template segment<d>(s.var_j * d).noalias() += lin.A_j.transpose() * lin.r;
+  }
+  if (s.off_diagonal >= 0) {
+    Block& h = off_diagonal_blocks_[s.off_diagonal];
+    if (s.i_is_high)
+      h.noalias() += lin.A_i.transpose() * lin.A_j;
+    else
+      h.noalias() += lin.A_j.transpose() * lin.A_i;
+  }
 }
 
 template <class G>
@@ -396,37 +435,38 @@ void NormalEquations<G>::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
   }
 }
 
+// Σ ‖r + A_i δ_i + A_j δ_j‖² (with_residual) or Σ ‖A_i δ_i + A_j δ_j‖² over binary terms.
 template <class G>
-double NormalEquations<G>::modelCost(const Eigen::VectorXd& delta) const {
+double NormalEquations<G>::slotModelCost(const std::vector<EdgeSlot>& slots,
+                                         const std::vector<EdgeLinearization>& lin,
+                                         const Eigen::VectorXd& delta, bool with_residual) const {
   constexpr int d = kDoF;
   double f = 0.0;
-  for (size_t k = 0; k < slots_.size(); ++k) {
-    const EdgeSlot& s = slots_[k];
-    const EdgeLinearization& lin = linearization_[k];
-    Vector v = lin.r;
-    if (s.var_i >= 0) v.noalias() += lin.A_i * delta.template segment<d>(s.var_i * d);
-    if (s.var_j >= 0) v.noalias() += lin.A_j * delta.template segment<d>(s.var_j * d);
+  for (size_t k = 0; k < slots.size(); ++k) {
+    const EdgeSlot& s = slots[k];
+    Vector v = with_residual ? lin[k].r : Vector::Zero();
+    if (s.var_i >= 0) v.noalias() += lin[k].A_i * delta.template segment<d>(s.var_i * d);
+    if (s.var_j >= 0) v.noalias() += lin[k].A_j * delta.template segment<d>(s.var_j * d);
     f += v.squaredNorm();
   }
+  return f;
+}
+
+template <class G>
+double NormalEquations<G>::modelCost(const Eigen::VectorXd& delta) const {
+  double f = slotModelCost(slots_, linearization_, delta, true);
   f += priorModelCost(pose_prior_linearization_, delta, true);
   f += priorModelCost(position_prior_linearization_, delta, true);
+  f += slotModelCost(custom_slots_, custom_linearization_, delta, true);
   return f;
 }
 
 template <class G>
 double NormalEquations<G>::jacobianSquaredNorm(const Eigen::VectorXd& v) const {
-  constexpr int d = kDoF;
-  double f = 0.0;
-  for (size_t k = 0; k < slots_.size(); ++k) {
-    const EdgeSlot& s = slots_[k];
-    const EdgeLinearization& lin = linearization_[k];
-    Vector w = Vector::Zero();
-    if (s.var_i >= 0) w.noalias() += lin.A_i * v.template segment<d>(s.var_i * d);
-    if (s.var_j >= 0) w.noalias() += lin.A_j * v.template segment<d>(s.var_j * d);
-    f += w.squaredNorm();
-  }
+  double f = slotModelCost(slots_, linearization_, v, false);
   f += priorModelCost(pose_prior_linearization_, v, false);
   f += priorModelCost(position_prior_linearization_, v, false);
+  f += slotModelCost(custom_slots_, custom_linearization_, v, false);
   return f;
 }
 

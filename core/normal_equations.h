@@ -1,5 +1,6 @@
 // The Gauss–Newton normal equations H δ = −g of a pose graph, H = Σ AᵀA and g = Aᵀr summed
-// block by block over the whitened linearisations of its edges and priors (a prior is unary:
+// block by block over the whitened linearisations of its edges, priors and custom factors (a
+// binary custom factor enters as an edge, a unary one as a prior; a prior is unary:
 // its AᵀA goes into one diagonal block and Aᵀr into one segment of g; a prior on a gauge pose
 // adds a constant to F and nothing else), with the block pattern, a
 // fill-reducing block ordering and the symbolic factorisation computed once (Dellaert & Kaess,
@@ -9,6 +10,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -131,6 +133,13 @@ class NormalEquations {
   using Blocks = std::vector<Block, Eigen::aligned_allocator<Block>>;
 
   void setUpCholmod();
+  void slotFor(int i, int j, const std::vector<std::pair<int, int>>& pairs, EdgeSlot* s) const;
+  // H and g += one binary term's AᵀA and Aᵀr (an edge, or a custom factor with var_j −1 if
+  // unary).
+  void addTerms(const EdgeSlot& s, const EdgeLinearization& lin);
+  double slotModelCost(const std::vector<EdgeSlot>& slots,
+                       const std::vector<EdgeLinearization>& lin, const Eigen::VectorXd& delta,
+                       bool with_residual) const;
   template <class Prior, class Linearization>
   double linearizePriors(const std::vector<Prior>& priors, const std::vector<G>& poses,
                          std::vector<Linearization>* out);
@@ -152,6 +161,8 @@ class NormalEquations {
   std::vector<EdgeLinearization> linearization_;
   std::vector<PosePriorLinearization> pose_prior_linearization_;
   std::vector<PositionPriorLinearization> position_prior_linearization_;
+  std::vector<EdgeSlot> custom_slots_;  // var_j −1 for a unary custom factor
+  std::vector<EdgeLinearization> custom_linearization_;
   Blocks diagonal_blocks_;      // H(j, j)
   Blocks off_diagonal_blocks_;  // H(row, col), one per OffDiagonalBlock
   Eigen::VectorXd gradient_;

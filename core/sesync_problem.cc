@@ -55,7 +55,13 @@ struct InverseOp {
 
 template <class G>
 void requireRelativePoseEdgesOnly(const PoseGraph<G>& graph) {
-  if (!graph.hasPriors()) return;
+  if (!graph.hasPriors() && graph.custom_factors.empty()) return;
+  if (!graph.custom_factors.empty())
+    throw std::invalid_argument(
+        "the certifiable solver takes relative-pose edges only: " +
+        std::to_string(graph.custom_factors.size()) + " custom factor(s) (the first '" +
+        graph.custom_factors.front().name() +
+        "') are not supported by its relaxation; use Levenberg–Marquardt (--solver lm)");
   throw std::invalid_argument("the certifiable solver takes relative-pose edges only: " +
                               std::to_string(graph.pose_priors.size()) + " pose priors, " +
                               std::to_string(graph.position_priors.size()) +

@@ -96,6 +96,16 @@ std::string tagHint(std::string_view name) {
   for (const auto& [wrong, right] : kNearMisses) {
     if (name == wrong) return " (g2o's tag is " + std::string(right) + ")";
   }
+  // g2o's landmark vertices and the edges to them: variables other than poses.
+  static constexpr std::string_view kLandmarkTags[] = {
+      "VERTEX_XY",         "VERTEX_POINTXY",    "VERTEX_TRACKXYZ",
+      "VERTEX_POINTXYZ",   "EDGE_SE2_XY",       "EDGE_SE2_POINTXY",
+      "EDGE_SE3_TRACKXYZ", "EDGE_SE3_POINTXYZ", "EDGE_BEARING_SE2_XY"};
+  for (std::string_view landmark : kLandmarkTags) {
+    if (name == landmark)
+      return " (landmarks are not supported: Arbor's variables are poses only; a measurement "
+             "of a known point is a factor of your own, docs/design.md \"Factors of your own\")";
+  }
   return "";
 }
 

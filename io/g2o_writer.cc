@@ -100,6 +100,12 @@ class OffsetTable {
 template <class G>
 void checkWritable(const PoseGraph<G>& graph, const std::vector<G>& poses) {
   const int n = graph.numPoses();
+  if (!graph.custom_factors.empty()) {
+    throw std::invalid_argument("writeG2o: custom factor 0 ('" +
+                                graph.custom_factors.front().name() + "', of " +
+                                std::to_string(graph.custom_factors.size()) +
+                                ") has no g2o tag; g2o holds relative poses and priors only");
+  }
   if (static_cast<int>(poses.size()) != n) {
     throw std::invalid_argument("writeG2o: " + std::to_string(poses.size()) +
                                 " poses for a graph of " + std::to_string(n) + " ids");

@@ -56,7 +56,8 @@ AnyPoseGraph readPoseGraph(std::istream& in, const std::string& name,
 /// EDGE_PRIOR_SE2_XY; EDGE_SE3_PRIOR and EDGE_SE3_XYZ_PRIOR), and in 3D the PARAMS_SE3OFFSET
 /// lines they name first of all (id 0 the identity, then each distinct offset); a graph without
 /// priors is written as before.
-/// Throws std::invalid_argument if poses do not match the graph or a value is not finite.
+/// Throws std::invalid_argument if poses do not match the graph, a value is not finite or the
+/// graph holds custom factors (g2o has no tag for them; the message names the first).
 template <class G>
 void writeG2o(std::ostream& out, const PoseGraph<G>& graph, const std::vector<G>& poses);
 

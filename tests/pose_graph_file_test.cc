@@ -284,7 +284,10 @@ TEST(PoseGraphFile, MalformedLinesNameTheLineAndTheProblem) {
   const std::vector<MalformedCase> cases = {
       {"FOO 1 2 3\n", 1, "unknown tag 'FOO'"},
       {v2 + "VERTEX_se2 2 0 0 0\n", 3, "unknown tag 'VERTEX_se2'"},
-      {v2 + "VERTEX_XY 2 0 0\n", 3, "unknown tag 'VERTEX_XY'"},
+      {v2 + "VERTEX_XY 2 0 0\n", 3,
+       "unknown tag 'VERTEX_XY' (landmarks are not supported: Arbor's variables are poses only; "
+       "a measurement of a known point is a factor of your own, docs/design.md"},
+      {v2 + "EDGE_SE2_XY 0 2 1 0 1 0 1\n", 3, "unknown tag 'EDGE_SE2_XY' (landmarks are not"},
       {"VERTEX_SE2 0 1 2\n", 1, "too few fields for VERTEX_SE2: expected 4 after the tag"},
       {"VERTEX_SE2 0 1 2 3 4\n", 1, "too many fields for VERTEX_SE2: expected 4"},
       {v2 + "EDGE_SE2 0 1 1 0 0 1 0 0 1 0\n", 3, "too few fields for EDGE_SE2: expected 11"},

@@ -4,7 +4,8 @@
 #      CMakeLists checks ARBOR_INCLUDE_DIR and ARBOR_LCM_TYPES_JAR point into the prefix) and
 #      replays each DATA file with it; its F must equal the installed `arbor replay`'s F_final
 #      (within 1e-9 relative), and OpenBLAS must run one thread per call without the program
-#      asking (unless the BLAS is not OpenBLAS);
+#      asking (unless the BLAS is not OpenBLAS); it also solves a graph with a factor of its own
+#      (an autodiff functor in main.cc, through the installed arbor/core/autodiff_factor.h);
 #   2. compiles pkg_config_check.cc with `pkg-config --cflags --libs arbor` alone
 #      (PKG_CONFIG_PATH into the prefix) and runs it.
 #   3. with PYTHON (ARBOR_PYTHON on): imports the installed module `arbor` (PYTHONPATH into
@@ -62,6 +63,9 @@ foreach(file ${DATA})
   message(STATUS "${file}: arbor replay F_final ${expected}; consumer ${out}")
   if(NOT out MATCHES "blas_threads (1|none)\n")
     message(FATAL_ERROR "the consumer's OpenBLAS does not run one thread per call:\n${out}")
+  endif()
+  if(NOT out MATCHES "custom_factor ok\n")  # its own autodiff factor, solved twice
+    message(FATAL_ERROR "the consumer's own factor did not reach the truth:\n${out}")
   endif()
   if(PYTHON)
     run(${CMAKE_COMMAND} -E env PYTHONPATH=${prefix}/${PYTHON_DIR} --unset=OPENBLAS_NUM_THREADS
