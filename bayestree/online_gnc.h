@@ -262,8 +262,8 @@
 //                 s at the end 0.2–0.6 of Ω's c²). Why s and not (E): m = s/(1 + AΣAᵀ) in one
 //                 dimension, and a long false closure's AΣAᵀ is large: on M3500 with 50% random
 //                 false closures the false ones' m at the end reach down to 0.27 of Ω's c², their
-//                 s to 55 times it; the true ones' s stay below 0.02 of it. Why only back, not
-//                 out: dropping inliers by s, an estimate they pull, adds nothing to (L) on the
+//                 s at least 55 times it; the true ones' s stay below 0.02 of it. Why only back,
+//                 not out: dropping inliers by s, an estimate they pull, adds nothing to (L) on the
 //                 shared and generated files (the same cases solved), and is not needed for
 //                 the property.
 //   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
