@@ -12,6 +12,7 @@
 
 #include "arbor/io/labels_file.h"
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/bench/ablation.h"
 #include "arbor/tools/bench/family_bench.h"
 #include "arbor/tools/bench/shared_data.h"
 #include "arbor/tools/bench/world_families.h"
@@ -143,6 +144,35 @@ TEST(FamilyBench, CasesAreTheWorldsWithTheirPlantedFilesAndFStarTheirCleanOptimu
             std::string::npos)
       << md;
   fs::remove_all(out);
+}
+
+// --ablate: every rule by a name of its own, with its field and property; the rule's field is
+// switched off and the other options given stay (the end-word rule's effect on the replay is
+// tests/kept_at_word_test.cc's).
+TEST(Ablation, EveryRuleHasANameAPropertyAndSwitchesItsFieldOff) {
+  std::set<std::string> names;
+  for (const bench::Ablation& a : bench::ablations()) {
+    EXPECT_FALSE(a.property.empty()) << a.name;
+    EXPECT_NE(a.field.find('='), std::string::npos) << a.name;
+    EXPECT_TRUE(names.insert(a.name).second) << "twice: " << a.name;
+    EXPECT_NO_THROW(bench::ablated(a.name));
+  }
+  EXPECT_GE(names.size(), 10u);
+  EXPECT_FALSE(bench::ablated("end-word").end_word);
+  EXPECT_EQ(bench::ablated("final-confirm").final_confirm_margin, 0);
+  EXPECT_EQ(bench::ablated("estimated-scale").scale, NoiseScale::kGiven);
+  EXPECT_EQ(bench::ablated("corroboration").corroboration_window, 0);
+  // The options given stay but for the rule: an ablation composes with a kernel or another rule.
+  RobustOptions o;
+  o.finalize_rounds = 3;
+  EXPECT_EQ(bench::ablated("end-word", o).finalize_rounds, 3);
+  try {
+    bench::ablated("no-such-rule");
+    ADD_FAILURE() << "no throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'no-such-rule'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("end-word"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

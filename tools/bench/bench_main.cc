@@ -49,6 +49,7 @@
 #include "arbor/core/blas_threads.h"
 #include "arbor/core/initialization.h"
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/bench/ablation.h"
 #include "arbor/tools/bench/ceres_pose_graph.h"
 #include "arbor/tools/bench/family_bench.h"
 #include "arbor/tools/bench/format.h"
@@ -643,8 +644,16 @@ std::string generatedDirectory(const std::string& keep_dir, TemporaryDirectory* 
 int robustFamilies(const DatasetOptions& data, const std::string& families, std::string seeds,
                    std::string dims, const std::string& fractions, const std::string& policies,
                    const bench::GenerationPlan& lists, const bench::RobustBatchSettings& settings,
-                   int repeat, const std::string& keep_dir) {
+                   int repeat, const std::string& keep_dir, const std::string& ablate) {
   if (seeds.empty()) seeds = "1-3";
+  RobustOptions online;
+  if (!ablate.empty()) {
+    try {
+      online = bench::ablated(ablate);
+    } catch (const std::invalid_argument& e) {
+      throw cli::UsageError(e.what());
+    }
+  }
   if (dims.empty()) dims = "2,3";
   bench::FamilyPlan plan;
   plan.families = splitList(families);
@@ -676,8 +685,16 @@ int robustFamilies(const DatasetOptions& data, const std::string& families, std:
   cases = bench::selectCases(cases, data.only);
   if (cases.empty()) throw std::runtime_error("no family case is named in --only " + data.only);
   const std::string load_before = loadAverage();
-  const bench::RobustReplayHooks hooks = bench::robustReplayHooks(settings.gnc.kernel, repeat);
+  const bench::RobustReplayHooks hooks =
+      bench::robustReplayHooks(settings.gnc.kernel, repeat, online);
   const auto rows = bench::runRobustBench(cases, {}, {}, settings, hooks, &std::cerr);
+  if (!ablate.empty()) {
+    for (const bench::Ablation& a : bench::ablations())
+      if (a.name == ablate)
+        std::cout << "Ablation: rule " << a.name << " off (RobustOptions::" << a.field
+                  << "; it guarantees: " << a.property
+                  << ") in the replay rows; the batch rows run the defaults.\n";
+  }
   std::cout << "Held-out protocol (issue 52): families " << families << ", dims " << dims
             << ", seeds " << seeds << ", fractions " << fractions << ", policies " << policies
             << ". Each world generated in memory and written to "
@@ -702,7 +719,8 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
   DatasetOptions data;
   bool no_generated = false;
   std::string generate_from, fractions, policies, kernel = "tls", threshold = "chi2", solver,
-                                                  keep_dir, batch_start, families, seeds, dims;
+                                                  keep_dir, batch_start, families, seeds, dims,
+                                                  ablate;
   int repeat = 3;
   bench::GenerationPlan plan;
   po::options_description options =
@@ -737,10 +755,15 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       "--dims × --seeds × --fractions × --policies, F* each world's clean optimum")(
       "seeds", po::value(&seeds),
       "with --family: the worlds' seeds, A-B or A (default 1-3, the tuning seeds; 4-10 are held "
-      "out)")("dims", po::value(&dims), "with --family: 2, 3 or 2,3 (default 2,3)");
+      "out)")("dims", po::value(&dims), "with --family: 2, 3 or 2,3 (default 2,3)")(
+      "ablate", po::value(&ablate),
+      "with --family: the replay with this rule of the robust layer off (end-word, "
+      "final-confirm, disowned, end-scale, end-backed, left-out, rehold, corroboration, "
+      "scale-start, warm-up, estimated-scale; tools/bench/ablation.h)");
   if (!parseOptions(args, options)) return 0;
   if (families.empty() && !seeds.empty()) throw cli::UsageError("--seeds needs --family NAMES");
   if (families.empty() && !dims.empty()) throw cli::UsageError("--dims needs --family NAMES");
+  if (families.empty() && !ablate.empty()) throw cli::UsageError("--ablate needs --family NAMES");
   bench::RobustBatchSettings settings;
   cli::readRobustFlags(kernel, threshold, &settings.gnc);
   if (solver != "lm" && solver != "rtr")
@@ -767,7 +790,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
         "seeds are --seeds)");
   if (!families.empty())
     return robustFamilies(data, families, seeds, dims, fractions, policies, plan, settings, repeat,
-                          keep_dir);
+                          keep_dir, ablate);
   const std::string robust_dir = data.shared + "/datasets/robust";
   std::vector<bench::RobustCase> cases = bench::sharedRobustCases(data.shared);
   std::vector<std::string> notes;

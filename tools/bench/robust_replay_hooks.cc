@@ -23,10 +23,11 @@ cli::ReplayResult<G> fastestReplay(const PoseGraph<G>& graph, const cli::ReplayS
 }
 
 template <class G>
-RobustEstimate<G> robustReplay(const PoseGraph<G>& graph, KernelKind kernel, int repeats) {
+RobustEstimate<G> robustReplay(const PoseGraph<G>& graph, KernelKind kernel, int repeats,
+                               const RobustOptions& online) {
   cli::ReplaySettings settings;
   settings.batch = false;
-  RobustOptions robust;
+  RobustOptions robust = online;
   robust.kernel = kernel;
   settings.robust = robust;
   const cli::ReplayResult<G> r = fastestReplay(graph, settings, repeats);
@@ -56,13 +57,13 @@ CleanReplayFigures cleanReplay(const PoseGraph<G>& graph, int repeats) {
 
 }  // namespace
 
-RobustReplayHooks robustReplayHooks(KernelKind kernel, int repeats) {
+RobustReplayHooks robustReplayHooks(KernelKind kernel, int repeats, const RobustOptions& online) {
   if (repeats < 1)
     throw std::invalid_argument("robustReplayHooks: repeats must be >= 1, not " +
                                 std::to_string(repeats));
   RobustReplayHooks h;
-  h.robust2 = [=](const PoseGraph2& g) { return robustReplay(g, kernel, repeats); };
-  h.robust3 = [=](const PoseGraph3& g) { return robustReplay(g, kernel, repeats); };
+  h.robust2 = [=](const PoseGraph2& g) { return robustReplay(g, kernel, repeats, online); };
+  h.robust3 = [=](const PoseGraph3& g) { return robustReplay(g, kernel, repeats, online); };
   h.clean2 = [=](const PoseGraph2& g) { return cleanReplay(g, repeats); };
   h.clean3 = [=](const PoseGraph3& g) { return cleanReplay(g, repeats); };
   return h;

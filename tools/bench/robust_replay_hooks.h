@@ -6,6 +6,7 @@
 // each the fastest of a few runs where the bench asks for more than one (--repeat).
 #pragma once
 
+#include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/robust_kernel.h"
 #include "arbor/tools/bench/robust_bench.h"
 
@@ -13,6 +14,9 @@ namespace arbor::bench {
 
 /// Hooks for both dimensions, the closures graduating towards `kernel`; each replay is run
 /// `repeats` times (≥ 1) and the fastest run's figures kept (the runs differ only in time).
-RobustReplayHooks robustReplayHooks(KernelKind kernel, int repeats = 1);
+/// `online`: the online layer's options but the kernel (default: RobustOptions{}, the
+/// defaults of `arbor replay --robust`; an ablation's, tools/bench/ablation.h).
+RobustReplayHooks robustReplayHooks(KernelKind kernel, int repeats = 1,
+                                    const RobustOptions& online = {});
 
 }  // namespace arbor::bench
