@@ -25,6 +25,7 @@ PYBIND11_MODULE(arbor, m) {
       PyErr_SetString(PyExc_ValueError, e.what());
     }
   });
+  arbor::python::definePoses(m);
   arbor::python::defineGraphs(m);
   arbor::python::defineSolve(m);
   arbor::python::defineSmoother(m);
