@@ -8,6 +8,7 @@
 #include "arbor/io/pose_graph_file.h"
 #include "bindings.h"
 #include "conversions.h"
+#include "graph_building.h"
 #include "graph_object.h"
 
 namespace arbor::python {
@@ -25,11 +26,11 @@ template <class G>
 void defineGraph(py::module_& m, const char* name) {
   using Graph = GraphObject<G>;
   constexpr int k = G::kDoF;
-  py::class_<Graph>(m, name,
-                    (std::string("A ") + (G::kDim == 2 ? "2D" : "3D") +
-                     " pose graph read from a file (arbor.read).")
-                        .c_str())
-      .def_property_readonly("dimension", [](const Graph&) { return G::kDim; })
+  py::class_<Graph> c(m, name,
+                      (std::string("A ") + (G::kDim == 2 ? "2D" : "3D") +
+                       " pose graph read from a file (arbor.read) or built in memory.")
+                          .c_str());
+  c.def_property_readonly("dimension", [](const Graph&) { return G::kDim; })
       .def_property_readonly("path", [](const Graph& g) { return g.path; })
       .def_property_readonly("num_poses", [](const Graph& g) { return g.graph.numPoses(); })
       .def_property_readonly("num_edges", [](const Graph& g) { return g.graph.numEdges(); })
@@ -41,8 +42,8 @@ void defineGraph(py::module_& m, const char* name) {
           "pose ids, ascending (the rows of poses)")
       .def_property_readonly(
           "poses", [](const Graph& g) { return posesToArray(g.graph.poses); },
-          G::kDim == 2 ? "the file's poses, n×3 [x y θ]"
-                       : "the file's poses, n×7 [x y z qx qy qz qw]")
+          G::kDim == 2 ? "the poses (initial values), n×3 [x y θ]"
+                       : "the poses (initial values), n×7 [x y z qx qy qz qw]")
       .def_property_readonly(
           "edges",
           [](const Graph& g) {
@@ -94,11 +95,13 @@ void defineGraph(py::module_& m, const char* name) {
           },
           py::arg("poses"), "F = Σ eᵀΩe over the edges and priors at `poses` (rows as `ids`)")
       .def("__repr__", [name](const Graph& g) {
-        return std::string("<arbor.") + name + " '" + g.path +
-               "': " + std::to_string(g.graph.numPoses()) + " poses, " +
+        return std::string("<arbor.") + name +
+               (g.path.empty() ? std::string(" (in memory)") : " '" + g.path + "'") + ": " +
+               std::to_string(g.graph.numPoses()) + " poses, " +
                std::to_string(g.graph.numEdges()) + " edges, " +
                std::to_string(g.graph.numPriors()) + " priors>";
       });
+  defineGraphBuilding<G>(c);
 }
 
 }  // namespace

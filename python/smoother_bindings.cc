@@ -12,6 +12,7 @@
 #include "arbor/tools/refine/batch_refiner.h"
 #include "bindings.h"
 #include "conversions.h"
+#include "graph_object.h"
 
 namespace arbor::python {
 namespace {
@@ -207,6 +208,50 @@ void defineSmootherOf(py::module_& m, const char* name) {
           },
           py::arg("id"), py::arg("position"), py::arg("information"),
           "A prior on the position of pose id in the world frame (GPS in a local frame).")
+      .def(
+          "add_graph",
+          [](Smoother& s, const GraphObject<G>& g, bool initial_guesses) {
+            const PoseGraph<G>& graph = g.graph;
+            if (graph.numCustomFactors() > 0)
+              throw std::invalid_argument("add_graph: the graph holds custom factors");
+            if (initial_guesses && graph.has_initial_estimate)
+              for (int i = 0; i < graph.numPoses(); ++i)
+                s.setInitialGuess(graph.ids[i], graph.poses[i]);
+            int accepted = 0, duplicate = 0;
+            const auto count = [&](const EdgeResult& r, const std::string& what) {
+              if (r.status == EdgeStatus::kRejected)
+                throw std::invalid_argument("add_graph: " + what + ": " + r.reason);
+              ++(r.status == EdgeStatus::kDuplicate ? duplicate : accepted);
+            };
+            // Edges in order of their later pose (file order among ties), as `arbor replay`.
+            std::vector<int> order(graph.edges.size());
+            for (size_t e = 0; e < order.size(); ++e) order[e] = static_cast<int>(e);
+            const auto later = [&](int e) { return std::max(graph.edges[e].i, graph.edges[e].j); };
+            std::stable_sort(order.begin(), order.end(),
+                             [&](int a, int b) { return later(a) < later(b); });
+            for (int e : order) {
+              const auto& edge = graph.edges[e];
+              const Key from = graph.ids[edge.i], to = graph.ids[edge.j];
+              count(s.addEdge(from, to, edge.measurement, edge.information),
+                    "edge " + std::to_string(from) + " -> " + std::to_string(to));
+            }
+            for (const auto& p : graph.pose_priors)
+              count(s.addPosePrior(graph.ids[p.i], p.measurement, p.information, p.offset),
+                    "pose prior on " + std::to_string(graph.ids[p.i]));
+            for (const auto& p : graph.position_priors)
+              count(s.addPositionPrior(graph.ids[p.i], p.position, p.information),
+                    "position prior on " + std::to_string(graph.ids[p.i]));
+            py::dict out;
+            out["accepted"] = accepted;
+            out["duplicate"] = duplicate;
+            return out;
+          },
+          py::arg("graph"), py::arg("initial_guesses") = true,
+          "Adds every edge and prior of a Graph2/Graph3 (read or built in memory): edges in "
+          "order of their later pose, then the priors; with initial_guesses (and a graph with "
+          "poses) each new pose starts at the graph's value. `fixed` poses are not held (the "
+          "smoother's gauge is its first pose or the priors). Call update() after. Returns "
+          "{'accepted': n, 'duplicate': n}; ValueError naming the first rejected one.")
       .def(
           "disable_edge",
           [](Smoother& s, Key a, Key b) { throwUnlessApplied(s.disableEdge(a, b)); },
