@@ -30,13 +30,20 @@ void defineGraph(py::module_& m, const char* name) {
                       (std::string("A ") + (G::kDim == 2 ? "2D" : "3D") +
                        " pose graph read from a file (arbor.read) or built in memory.")
                           .c_str());
-  c.def_property_readonly("dimension", [](const Graph&) { return G::kDim; })
-      .def_property_readonly("path", [](const Graph& g) { return g.path; })
-      .def_property_readonly("num_poses", [](const Graph& g) { return g.graph.numPoses(); })
-      .def_property_readonly("num_edges", [](const Graph& g) { return g.graph.numEdges(); })
-      .def_property_readonly("num_priors", [](const Graph& g) { return g.graph.numPriors(); })
-      .def_property_readonly("has_initial_estimate",
-                             [](const Graph& g) { return g.graph.has_initial_estimate; })
+  c.def_property_readonly(
+       "dimension", [](const Graph&) { return G::kDim; }, "2 or 3")
+      .def_property_readonly(
+          "path", [](const Graph& g) { return g.path; }, "the file read ('' in memory)")
+      .def_property_readonly(
+          "num_poses", [](const Graph& g) { return g.graph.numPoses(); }, "number of poses")
+      .def_property_readonly(
+          "num_edges", [](const Graph& g) { return g.graph.numEdges(); }, "number of edges")
+      .def_property_readonly(
+          "num_priors", [](const Graph& g) { return g.graph.numPriors(); },
+          "number of pose and position priors")
+      .def_property_readonly(
+          "has_initial_estimate", [](const Graph& g) { return g.graph.has_initial_estimate; },
+          "the poses are given (VERTEX lines, or add_pose), not only implied by edges")
       .def_property_readonly(
           "ids", [](const Graph& g) { return idsToArray(g.graph.ids); },
           "pose ids, ascending (the rows of poses)")
@@ -83,11 +90,15 @@ void defineGraph(py::module_& m, const char* name) {
             return idsToArray(ids);
           },
           "ids of the poses held fixed by the batch solvers (the gauge)")
-      .def_property_readonly("warnings", [](const Graph& g) { return g.report.warnings; })
-      .def_property_readonly("information_repaired",
-                             [](const Graph& g) { return g.report.repaired; })
-      .def_property_readonly("information_isotropic",
-                             [](const Graph& g) { return g.report.made_isotropic; })
+      .def_property_readonly(
+          "warnings", [](const Graph& g) { return g.report.warnings; },
+          "the reader's warnings, 'path:line: ...'")
+      .def_property_readonly(
+          "information_repaired", [](const Graph& g) { return g.report.repaired; },
+          "information matrices repaired on reading (information='repair')")
+      .def_property_readonly(
+          "information_isotropic", [](const Graph& g) { return g.report.made_isotropic; },
+          "information matrices made isotropic on reading (information='isotropic')")
       .def(
           "objective",
           [](const Graph& g, const RowMatrix& poses) {

@@ -260,7 +260,9 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "ValueError with the reason when refused.")
       .def(
           "enable_edge", [](Smoother& s, Key a, Key b) { throwUnlessApplied(s.enableEdge(a, b)); },
-          py::arg("from_id"), py::arg("to_id"))
+          py::arg("from_id"), py::arg("to_id"),
+          "Gives back the edges disable_edge took (from the next update on); raises ValueError "
+          "with the reason when refused.")
       .def(
           "update",
           [](Smoother& s) {
@@ -334,11 +336,13 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "With solve_budget_mb: the cliques whose solve the budget deferred.")
       .def("objective", &Smoother::objective,
            "F = Σ eᵀΩe at the estimate (disabled edges left out)")
-      .def("has_pose", &Smoother::hasPose, py::arg("id"))
-      .def_property_readonly("num_poses", [](const Smoother& s) { return s.stats().poses; })
+      .def("has_pose", &Smoother::hasPose, py::arg("id"),
+           "True when pose id is in the smoother (an accepted edge or prior made it)")
+      .def_property_readonly(
+          "num_poses", [](const Smoother& s) { return s.stats().poses; }, "number of poses")
       .def(
           "estimate", [](const Smoother& s, Key id) { return poseToArray(s.estimate(id)); },
-          py::arg("id"))
+          py::arg("id"), "The estimate of pose id as a row ([x y θ] or [x y z qx qy qz qw]).")
       .def(
           "estimates",
           [](const Smoother& s) {
