@@ -25,7 +25,15 @@ namespace {
 template <class G>
 G poseArgument(const py::handle& h, const std::string& what) {
   if (py::isinstance<G>(h)) return h.cast<G>();
-  return poseFromArray<G>(h.cast<Eigen::VectorXd>(), what);
+  Eigen::VectorXd row;
+  try {
+    row = h.cast<Eigen::VectorXd>();
+  } catch (const py::cast_error&) {
+    throw py::type_error(what + ": expected an " + (G::kDim == 2 ? "SE2" : "SE3") +
+                         " or its row of numbers, not " +
+                         std::string(py::str(py::type::of(h).attr("__name__"))));
+  }
+  return poseFromArray<G>(row, what);
 }
 
 template <class G>

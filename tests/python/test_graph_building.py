@@ -135,6 +135,8 @@ def test_bad_input_names_the_value(tmp_path):
         g.add_edge(0, 1, arbor.SE2(1, 0, 0), np.eye(2))
     with pytest.raises(ValueError, match="measurement: expected 3 numbers"):
         g.add_edge(0, 1, [1.0, 0.0], np.eye(3))
+    with pytest.raises(TypeError, match="add_edge 0 -> 1: measurement: expected an SE2"):
+        g.add_edge(0, 1, arbor.SE3(), np.eye(3))
     with pytest.raises(ValueError, match="add_pose_prior 5: unknown pose id 5"):
         g.add_pose_prior(5, arbor.SE2(), np.eye(3))
     assert g.num_edges == 0 and g.num_priors == 0  # nothing refused was kept
