@@ -100,6 +100,11 @@ def test_priors_fix_and_pose(tmp_path):
     again = arbor.read(out)
     assert_same(again, g)
     assert arbor.solve(again).F_final == pytest.approx(arbor.solve(g).F_final, rel=1e-12)
+    smoother = arbor.OnlineSmoother3()
+    assert smoother.add_graph(g) == {"accepted": 3, "duplicate": 0}  # the edge and both priors
+    smoother.update()
+    smoother.finalize()
+    assert smoother.objective() == pytest.approx(arbor.solve(g).F_final, rel=1e-9)
     g.fix(10)
     assert list(g.fixed) == [10]
 
