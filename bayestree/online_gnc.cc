@@ -34,100 +34,21 @@ bool odometry(Key from, Key to) { return from - to == 1 || to - from == 1; }
 // one take-back it stays out and F is 6% higher); past that it flips until finalize_rounds.
 constexpr int kEndTakeBacks = 2;
 
-// The median of χ²_d.
-double chiSquareMedian(int dof) {
-  return boost::math::quantile(boost::math::chi_squared_distribution<double>(dof), 0.5);
-}
-
 // The sample count at which an estimate re-made from n samples is made next: every new one up
 // to 64, then when their number has grown by an eighth (O(k) each, O(k) in all).
 size_t nextEstimateAt(size_t n) { return n < 64 ? n + 1 : n + n / 8; }
 
-// The q-quantile of the first j of the sorted v (0 ≤ q ≤ 1, 0 < j ≤ v.size()): what selection
-// (std::nth_element) of element ⌊q·j⌋ picks from them, in any order.
-double quantileOfSorted(const std::vector<double>& sorted, size_t j, double q) {
-  return sorted[std::min(j - 1, static_cast<size_t>(q * static_cast<double>(j)))];
-}
-
 }  // namespace
 
-NoiseScaleCuts::NoiseScaleCuts(int dof, double c2, const RobustOptions& o) : t(o.tail_factor * c2) {
-  const boost::math::chi_squared_distribution<double> chi2(dof);
-  const double Ft = boost::math::cdf(chi2, t);
-  q_median = boost::math::quantile(chi2, 0.5 * Ft);         // F⁻¹(F(t)/2)
-  q_tail = boost::math::quantile(chi2, o.confidence * Ft);  // F⁻¹(q F(t))
-  median = chiSquareMedian(dof);
-}
-
-NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
-                                      const RobustOptions& o, bool from_median) {
-  return estimateNoiseScale(std::move(m), NoiseScaleCuts(dof, c2, o), o, from_median);
-}
-
-NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, const NoiseScaleCuts& cuts,
-                                      const RobustOptions& o, bool from_median, double start_cap) {
-  std::sort(m.begin(), m.end());  // m is ours
-  return estimateNoiseScaleSorted(m, cuts, o, from_median, start_cap);
-}
-
-// The m ≤ t·σ² ("kept") are a prefix of the sorted m, so each step of the two fixed points is a
-// binary search and an index, not a pass over m.
-NoiseScaleEstimate estimateNoiseScaleSorted(const std::vector<double>& m,
-                                            const NoiseScaleCuts& cuts, const RobustOptions& o,
-                                            bool from_median, double start_cap) {
-  const double t = cuts.t, q_median = cuts.q_median, q_tail = cuts.q_tail;
-  auto within = [&](double bound) {  // how many m ≤ bound
-    return static_cast<size_t>(std::upper_bound(m.begin(), m.end(), bound) - m.begin());
-  };
-  NoiseScaleEstimate out;
-  double sigma2 = 1.0;
-  if (from_median && !m.empty()) {  // the untruncated median: samples with few false ones
-    const double start = quantileOfSorted(m, m.size(), 0.5) / cuts.median;
-    if (start > 0 && std::isfinite(start)) sigma2 = std::min(start, start_cap);
-  }
-  size_t kept = 0;  // the m ≤ t·σ²: m[0, kept)
-  auto keep = [&] {
-    kept = within(t * sigma2);
-    return kept >= 3;
-  };
-  if (!m.empty())
-    out.share_at_word = static_cast<double>(within(t)) / static_cast<double>(m.size());
-  // The median's fixed point.
-  for (int round = 0; round < 50 && keep(); ++round) {
-    const double next = quantileOfSorted(m, kept, 0.5) / q_median;
-    const bool done = std::abs(next - sigma2) <= 1e-9 * sigma2;
-    sigma2 = next;
-    if (done || !(sigma2 > 0)) break;
-  }
-  if (!(sigma2 > 0) || !keep()) return out;
-  // Loosening Ω (σ̂² > 1) takes a quarter of the innovations within the truncation at Ω's word, or
-  // loosen_min_samples of them: else the median that climbed there may be of a few false
-  // closures that drew it up.
-  if (sigma2 > 1 && out.share_at_word < o.min_kept_share &&
-      m.size() < static_cast<size_t>(o.loosen_min_samples))
-    return out;
-  out.estimated = true;
-  // The tail's fixed point, within max_tail_scale of the median's, once enough are kept for its
-  // quantile to be more than their largest.
-  const double median_sigma2 = sigma2;
-  out.median_sigma2 = median_sigma2;
-  if (kept < static_cast<size_t>(o.tail_min_samples)) {
-    out.sigma2 = sigma2;
-    return out;
-  }
-  for (int round = 0; round < 50 && keep(); ++round) {
-    const double next = std::max(sigma2, quantileOfSorted(m, kept, o.confidence) / q_tail);
-    if (next > o.max_tail_scale * median_sigma2) {
-      out.tail_cut = true;
-      sigma2 = median_sigma2;
-      break;
-    }
-    const bool done = next - sigma2 <= 1e-9 * sigma2;
-    sigma2 = next;
-    if (done) break;
-  }
-  out.sigma2 = sigma2;
-  return out;
+NoiseScaleOptions scaleOptions(const RobustOptions& o) {
+  NoiseScaleOptions s;
+  s.confidence = o.confidence;
+  s.tail_factor = o.tail_factor;
+  s.max_tail_scale = o.max_tail_scale;
+  s.tail_min_samples = o.tail_min_samples;
+  s.min_kept_share = o.min_kept_share;
+  s.loosen_min_samples = o.loosen_min_samples;
+  return s;
 }
 
 const char* toString(EntryTest entry) {
@@ -258,7 +179,8 @@ OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
   c2_given_ = options_.threshold > 0 ? options_.threshold
                                      : chiSquareThreshold(options_.confidence, G::kDoF);
   c2_ = c2_given_;
-  cuts_ = NoiseScaleCuts(G::kDoF, c2_given_, options_);
+  scale_options_ = scaleOptions(options_);
+  cuts_ = NoiseScaleCuts(G::kDoF, c2_given_, scale_options_);
 }
 
 // σ̂² from the innovations so far (scaleSource), once scale_min_samples of them are in;
@@ -307,7 +229,7 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   const double start_cap = had_estimate && options_.scale_start == ScaleStart::kAtMostLast
                                ? scale_
                                : std::numeric_limits<double>::infinity();
-  estimate_ = estimateNoiseScale(*source, cuts_, options_,
+  estimate_ = estimateNoiseScale(*source, cuts_, scale_options_,
                                  /*from_median=*/source == &corroborated_, start_cap);
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
@@ -410,7 +332,8 @@ bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& 
     std::sort(sorted_end, pair_s_.end());
     std::inplace_merge(pair_s_.begin(), sorted_end, pair_s_.end());
     pair_s_sorted_ = pair_s_.size();
-    pair_scale_ = estimateNoiseScaleSorted(pair_s_, cuts_, options_, /*from_median=*/true).sigma2;
+    pair_scale_ =
+        estimateNoiseScaleSorted(pair_s_, cuts_, scale_options_, /*from_median=*/true).sigma2;
     next_pair_estimate_ = nextEstimateAt(pair_s_.size());
   }
   return s <= c2_given_ * pair_scale_;
@@ -725,8 +648,8 @@ double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const 
   std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
   const size_t enough = static_cast<size_t>(options_.scale_min_samples);
   if (m_in.size() < enough || m_tr.size() < enough) return c2_;
-  const NoiseScaleEstimate in = estimateNoiseScale(std::move(m_in), cuts_, options_, true);
-  const NoiseScaleEstimate tr = estimateNoiseScale(std::move(m_tr), cuts_, options_, true);
+  const NoiseScaleEstimate in = estimateNoiseScale(std::move(m_in), cuts_, scale_options_, true);
+  const NoiseScaleEstimate tr = estimateNoiseScale(std::move(m_tr), cuts_, scale_options_, true);
   if (!in.estimated || !tr.estimated) return c2_;
   const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
   const double c2 = options_.tail_factor * c2_given_ * sigma2;

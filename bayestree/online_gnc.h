@@ -301,6 +301,7 @@
 #include <vector>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/bayestree/noise_scale.h"
 #include "arbor/core/edge_trust.h"
 #include "arbor/core/factor.h"
 #include "arbor/core/pose_graph.h"
@@ -487,57 +488,13 @@ struct RobustOptions {
   std::string problem() const;
 };
 
-/// σ̂² from innovations m_k (RobustOptions::scale, header comment), d degrees of freedom, c² the
-/// given threshold, o the options: with t = o.tail_factor·c², F the χ²_d distribution,
-/// q = o.confidence, from σ² = 1, kept = {m_k ≤ t·σ²},
-///   σ² ← median(kept) / F⁻¹(F(t)/2)                 to a fixed point σ²_med (≤ 50 rounds), then
-///   σ² ← max(σ², q-quantile(kept) / F⁻¹(q F(t)))     to a fixed point ≤ o.max_tail_scale·σ²_med
-/// (the median and the q-quantile of χ²_d truncated at t: for χ² data the two agree, a heavy
-/// tail of true closures raises the second: intel's settle at 4.5·σ²_med, the garage's at 10.6).
-/// Past o.max_tail_scale·σ²_med the tail holds false closures just inside the truncation, which
-/// raise it by about tail_factor a round until every one is in (σ̂² ran to 10²–10³ on the
-/// shared files with 10% local or 50% random false closures when the two were iterated
-/// together): σ²_med stands (tail_cut). With fewer than o.tail_min_samples kept (100:
-/// 1/(1 − q) at q = 0.99) the q-quantile is the largest kept one and σ²_med stands too: on
-/// smallGrid3D with 50% local false closures (seed 2) the first 20 corroborated innovations,
-/// 5 of them false, put σ²_med at 1.42, two false ones just inside the truncation (60, 91)
-/// the tail at 5.4, and four innovations later it is 36, 25 times σ²_med. The median breaks
-/// down at half the kept innovations false. With fewer than 3 kept there is no estimate and Ω is
-/// taken at its word; and so when σ²_med > 1 with fewer than o.min_kept_share (a quarter) of all
-/// the m_k within t at σ² = 1 and fewer than o.loosen_min_samples of them: a median that climbed
-/// from a few, false closures drawing it up (intel's first 44 closures with 50% local false ones: 3
-/// of them within t, σ̂² 148, c² 5042, and the replay diverged). sphere_bignoise's Ω is ~200× too
-/// confident: none of its true closures is within t at σ² = 1, and it is loosened from its 200th
-/// closure on.
-struct NoiseScaleEstimate {
-  double sigma2 = 1.0;         ///< σ̂² (1 without an estimate)
-  bool estimated = false;      ///< false: Ω at its word (σ̂² = 1 and the given c²)
-  bool tail_cut = false;       ///< the tail's fixed point passed max_tail_scale·σ²_med
-  double median_sigma2 = 1.0;  ///< σ²_med, the median's fixed point (σ̂² = it or the tail's)
-  double share_at_word = 0;    ///< of the m_k, those within the truncation at σ² = 1
-};
-/// `from_median`: the fixed points start from σ² = median(m)/F⁻¹(½) (all of m) instead of 1,
-/// for samples known to hold few false closures (the corroborated ones).
-NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
-                                      const RobustOptions& o, bool from_median = false);
-/// The χ²_dof points estimateNoiseScale reads, fixed by dof, c² and the options: the
-/// truncation t = tail_factor·c², q_median = F⁻¹(F(t)/2), q_tail = F⁻¹(confidence·F(t)) and
-/// the untruncated median F⁻¹(½).
-struct NoiseScaleCuts {
-  NoiseScaleCuts() = default;
-  NoiseScaleCuts(int dof, double c2, const RobustOptions& o);
-  double t = 0, q_median = 0, q_tail = 0, median = 0;
-};
-/// estimateNoiseScale at the cuts of its dof and c². `start_cap`: with `from_median`, the fixed
-/// points start from the lower of the median's σ² and it (ScaleStart::kAtMostLast passes the
-/// last σ̂²).
-NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, const NoiseScaleCuts& cuts,
-                                      const RobustOptions& o, bool from_median = false,
-                                      double start_cap = std::numeric_limits<double>::infinity());
-/// The same of m sorted ascending.
-NoiseScaleEstimate estimateNoiseScaleSorted(
-    const std::vector<double>& m, const NoiseScaleCuts& cuts, const RobustOptions& o,
-    bool from_median = false, double start_cap = std::numeric_limits<double>::infinity());
+/// The estimator's constants as RobustOptions holds them (bayestree/noise_scale.h).
+NoiseScaleOptions scaleOptions(const RobustOptions& o);
+/// bayestree/noise_scale.h's estimator at the online layer's options.
+inline NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
+                                             const RobustOptions& o, bool from_median = false) {
+  return estimateNoiseScale(std::move(m), dof, c2, scaleOptions(o), from_median);
+}
 
 /// What one OnlineGnc::step re-checks among the settled closures.
 enum class StepScope {
@@ -841,9 +798,10 @@ class OnlineGnc {
   /// of their scale, the rest in arrival order.
   std::vector<double> pair_s_;
   size_t pair_s_sorted_ = 0;
-  NoiseScaleCuts cuts_;            ///< estimateNoiseScale's χ² points at kDoF and c2_given_
-  double pair_scale_ = 1.0;        ///< their σ̂² (1 before 10 of them)
-  size_t next_pair_estimate_ = 0;  ///< pair_s_.size() at which it is estimated next
+  NoiseScaleOptions scale_options_;  ///< options_'s estimator constants (scaleOptions)
+  NoiseScaleCuts cuts_;              ///< estimateNoiseScale's χ² points at kDoF and c2_given_
+  double pair_scale_ = 1.0;          ///< their σ̂² (1 before 10 of them)
+  size_t next_pair_estimate_ = 0;    ///< pair_s_.size() at which it is estimated next
   std::vector<Closure> closures_;
   std::vector<int> unresolved_;  ///< closures added since the last resolve()
   std::vector<int> graduating_;  ///< closures graduating, by id

@@ -419,11 +419,12 @@ TEST(OnlineEntry, EstimateNoiseScaleIsTheSelectionsFixedPoint) {
     ASSERT_TRUE(std::is_sorted(merged.begin(), merged.end()));
     RobustOptions o;  // half the trials read the tail of however few are kept
     if (trial % 4 >= 2) o.tail_min_samples = 0;
-    const NoiseScaleCuts cuts(dof, c2, o);
+    const NoiseScaleCuts cuts(dof, c2, scaleOptions(o));
     for (bool from_median : {false, true}) {
       const NoiseScaleEstimate a = estimateNoiseScale(m, dof, c2, o, from_median);
       const NoiseScaleEstimate b = noiseScaleBySelection(m, dof, c2, o, from_median);
-      const NoiseScaleEstimate c = estimateNoiseScaleSorted(merged, cuts, o, from_median);
+      const NoiseScaleEstimate c =
+          estimateNoiseScaleSorted(merged, cuts, scaleOptions(o), from_median);
       ASSERT_EQ(a.estimated, b.estimated) << trial;
       ASSERT_EQ(a.tail_cut, b.tail_cut) << trial;
       ASSERT_EQ(a.sigma2, b.sigma2) << trial;

@@ -32,16 +32,18 @@ TEST(ScaleStart, StartCapKeepsTheFixedPointBelowAFalseMajority) {
   for (int k = 0; k < 300; ++k) m.push_back(chi2(rng));
   for (int k = 0; k < 400; ++k) m.push_back(std::pow(10.0, far(rng)));
   const RobustOptions o;
-  const NoiseScaleCuts cuts(dof, c2, o);
-  const NoiseScaleEstimate from_median = estimateNoiseScale(m, cuts, o, /*from_median=*/true);
-  const NoiseScaleEstimate capped = estimateNoiseScale(m, cuts, o, true, /*start_cap=*/1.2);
+  const NoiseScaleCuts cuts(dof, c2, scaleOptions(o));
+  const NoiseScaleEstimate from_median =
+      estimateNoiseScale(m, cuts, scaleOptions(o), /*from_median=*/true);
+  const NoiseScaleEstimate capped =
+      estimateNoiseScale(m, cuts, scaleOptions(o), true, /*start_cap=*/1.2);
   std::cout << "σ̂² from the median " << from_median.sigma2 << ", started at most at 1.2 "
             << capped.sigma2 << "\n";
   EXPECT_GT(from_median.sigma2, 100.0);
   EXPECT_TRUE(capped.estimated);
   EXPECT_NEAR(capped.sigma2, 1.0, 0.25);
   // Above the median the cap changes nothing.
-  EXPECT_EQ(estimateNoiseScale(m, cuts, o, true, 1e9).sigma2, from_median.sigma2);
+  EXPECT_EQ(estimateNoiseScale(m, cuts, scaleOptions(o), true, 1e9).sigma2, from_median.sigma2);
 }
 
 // `arbor generate manhattan --poses 1000 --seed 3`, then `arbor generate outliers --outliers 0.5
