@@ -263,7 +263,17 @@ void defineSmootherOf(py::module_& m, const char* name) {
           [](Smoother& s, const CustomFactorObject<G>& f) {
             const std::optional<Key> id2 =
                 f.keys.size() == 2 ? std::optional<Key>(f.keys[1]) : std::nullopt;
-            return statusOrThrow(s.addFactor(f.make(0, id2 ? 1 : -1), f.keys[0], id2));
+            const CustomFactor<G> factor = f.make(0, id2 ? 1 : -1);
+            // Evaluated once here at the estimates, so that an exception of its functions (or a
+            // wrong shape) is raised before the smoother holds it: addFactor evaluates it too.
+            std::vector<G> at;
+            for (Key id : f.keys)
+              if (s.hasPose(id)) at.push_back(s.estimate(id));
+            if (at.size() == f.keys.size()) {
+              typename FactorModel<G>::Jacobians J;
+              factor.error(at, &J);
+            }
+            return statusOrThrow(s.addFactor(factor, f.keys[0], id2));
           },
           py::arg("factor"),
           "Adds a factor of your own (an arbor.CustomFactor2/CustomFactor3) on poses an edge or a "
