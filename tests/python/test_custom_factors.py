@@ -3,6 +3,7 @@ factor to a known anchor gives the analytic optimum in batch and online, Python 
 with the central differences, online equals batch with odometry and ranges, an exception in the
 error function is raised by the solve or update, and bad input is a ValueError."""
 import pickle
+import threading
 
 import numpy as np
 import pytest
@@ -276,3 +277,39 @@ def test_poses_added_after_a_factor_keep_its_keys():
     graph.add_edge(5, 10, arbor.SE2(2.5, 0, 0), np.eye(3) * 1e-6)
     result = arbor.solve(graph)
     np.testing.assert_allclose(result.estimate[1], [2.5, 0.0, 0.0], atol=1e-5)
+
+
+def test_the_smoother_threads_call_python_and_raise_through_update():
+    # 700 factors linearised at once are shared by the update's worker threads (chunks of 128,
+    # bayestree/linear_factors.cc): error() runs on them under the GIL.
+    main, seen = threading.get_ident(), set()
+    state = {"fail_off_main": False}
+    anchor = np.array([3.0, 4.0])
+
+    def error(x):
+        seen.add(threading.get_ident())
+        if state["fail_off_main"] and threading.get_ident() != main:
+            raise Boom("from a worker")
+        return np.array([np.linalg.norm(x.translation() - anchor) - 5.0])
+
+    graph = arbor.Graph2()
+    for k in range(700):
+        graph.add_pose(k, arbor.SE2(0.01 * k, 0, 0))
+    for k in range(699):
+        graph.add_edge(k, k + 1, arbor.SE2(0.01, 0, 0), np.eye(3) * 100)
+    for k in range(700):
+        graph.add_factor(arbor.CustomFactor2(k, error, np.eye(1)))
+    smoother = arbor.OnlineSmoother2(threads=2)
+    smoother.add_graph(graph)
+    smoother.update()
+    assert len(seen) == 2
+    batch = arbor.solve(graph, solver="gn", relative_tolerance=1e-14)
+    for _ in range(10):
+        smoother.finalize()
+    assert smoother.objective() == pytest.approx(batch.F_final, rel=1e-6)
+
+    state["fail_off_main"] = True
+    smoother = arbor.OnlineSmoother2(threads=2)
+    smoother.add_graph(graph)
+    with pytest.raises(Boom, match="from a worker"):
+        smoother.update()
