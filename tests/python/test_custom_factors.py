@@ -258,12 +258,14 @@ def test_bad_input_is_a_value_error():
         bad_j.linearize([arbor.SE2(), arbor.SE2()])
 
 
-def test_write_and_pickle_refuse_a_graph_with_custom_factors(tmp_path):
+def test_write_pickle_and_rtr_refuse_a_graph_with_custom_factors(tmp_path):
     graph, _ = odometry_and_ranges(True)
     with pytest.raises(ValueError, match="custom factor"):
         graph.write(str(tmp_path / "out.g2o"))
     with pytest.raises(ValueError, match="custom factor.*not pickled"):
         pickle.dumps(graph)
+    with pytest.raises(ValueError, match="certifiable solver.*custom factor"):
+        arbor.solve(graph, solver="rtr")
     graph.write(str(tmp_path / "out.tum"))  # poses only
     assert len(open(tmp_path / "out.tum").read().splitlines()) == graph.num_poses
 
