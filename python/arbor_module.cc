@@ -26,6 +26,7 @@ PYBIND11_MODULE(arbor, m) {
     }
   });
   arbor::python::definePoses(m);
+  arbor::python::defineCustomFactors(m);
   arbor::python::defineGraphs(m);
   arbor::python::defineSolve(m);
   arbor::python::defineSmoother(m);

@@ -17,6 +17,7 @@
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/io/trajectory_writer.h"
 #include "conversions.h"
+#include "custom_factor_object.h"
 
 namespace arbor::python {
 namespace {
@@ -51,8 +52,6 @@ void insertPose(PoseGraph<G>& g, Key id, const G& x) {
   const auto at = std::lower_bound(g.ids.begin(), g.ids.end(), id);
   if (at != g.ids.end() && *at == id)
     throw std::invalid_argument("add_pose: id " + std::to_string(id) + " is already a pose");
-  if (!g.custom_factors.empty())
-    throw std::invalid_argument("add_pose: the graph holds custom factors");
   const int p = static_cast<int>(at - g.ids.begin());
   g.ids.insert(at, id);
   g.poses.insert(g.poses.begin() + p, x);
@@ -65,6 +64,10 @@ void insertPose(PoseGraph<G>& g, Key id, const G& x) {
   }
   for (auto& f : g.pose_priors) shift(f.i);
   for (auto& f : g.position_priors) shift(f.i);
+  for (auto& f : g.custom_factors) {
+    shift(f.i);
+    if (f.j >= 0) shift(f.j);
+  }
   for (int& f : g.fixed) shift(f);
   for (int k = p; k < g.numPoses(); ++k) g.index[g.ids[k]] = k;
 }
@@ -100,6 +103,11 @@ TrajectoryFormat formatOf(const std::string& path, const std::optional<std::stri
 
 template <class G>
 py::tuple pickleState(const GraphObject<G>& o) {
+  if (o.graph.numCustomFactors() > 0)
+    throw std::invalid_argument("pickle: the graph holds " +
+                                std::to_string(o.graph.numCustomFactors()) +
+                                " custom factor(s) ('" + o.graph.custom_factors.front().name() +
+                                "' first), whose Python functions are not pickled");
   std::ostringstream text;
   if (o.graph.numPoses() > 0) writeG2o(text, o.graph, o.graph.poses);
   return py::make_tuple(1, o.path, o.graph.has_initial_estimate, py::bytes(text.str()),
@@ -198,6 +206,23 @@ void defineGraphBuilding(py::class_<GraphObject<G>>& c) {
           py::arg("id"), py::arg("position"), py::arg("information"),
           "Adds a prior on the position of pose id in the world frame (d numbers, d×d "
           "information).")
+      .def(
+          "add_factor",
+          [](Graph& g, const CustomFactorObject<G>& f) {
+            std::string what =
+                "add_factor '" + f.model->name() + "' on " + std::to_string(f.keys[0]);
+            if (f.keys.size() == 2) what += ", " + std::to_string(f.keys[1]);
+            const int i = indexOf(g.graph, f.keys[0], what);
+            const int j = f.keys.size() == 2 ? indexOf(g.graph, f.keys[1], what) : -1;
+            g.graph.custom_factors.push_back(made(what, [&] { return f.make(i, j); }));
+          },
+          py::arg("factor"),
+          "Adds a factor of your own (an arbor.CustomFactor2/CustomFactor3) on poses added "
+          "before; ValueError for an unknown id. The batch solvers and the online smoother "
+          "(add_graph) take it; write() as g2o and pickle refuse a graph holding one (ValueError).")
+      .def_property_readonly(
+          "num_custom_factors", [](const Graph& g) { return g.graph.numCustomFactors(); },
+          "number of factors of your own (add_factor)")
       .def(
           "fix",
           [](Graph& g, Key id) {

@@ -12,6 +12,7 @@
 #include "arbor/tools/refine/batch_refiner.h"
 #include "bindings.h"
 #include "conversions.h"
+#include "custom_factor_object.h"
 #include "graph_object.h"
 
 namespace arbor::python {
@@ -212,8 +213,6 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "add_graph",
           [](Smoother& s, const GraphObject<G>& g, bool initial_guesses) {
             const PoseGraph<G>& graph = g.graph;
-            if (graph.numCustomFactors() > 0)
-              throw std::invalid_argument("add_graph: the graph holds custom factors");
             if (initial_guesses && graph.has_initial_estimate)
               for (int i = 0; i < graph.numPoses(); ++i)
                 s.setInitialGuess(graph.ids[i], graph.poses[i]);
@@ -241,6 +240,12 @@ void defineSmootherOf(py::module_& m, const char* name) {
             for (const auto& p : graph.position_priors)
               count(s.addPositionPrior(graph.ids[p.i], p.position, p.information),
                     "position prior on " + std::to_string(graph.ids[p.i]));
+            for (const auto& c : graph.custom_factors) {
+              const std::optional<Key> id2 =
+                  c.j < 0 ? std::nullopt : std::optional<Key>(graph.ids[c.j]);
+              count(s.addFactor(c, graph.ids[c.i], id2),
+                    "custom factor '" + c.name() + "' on " + std::to_string(graph.ids[c.i]));
+            }
             py::dict out;
             out["accepted"] = accepted;
             out["duplicate"] = duplicate;
@@ -248,10 +253,34 @@ void defineSmootherOf(py::module_& m, const char* name) {
           },
           py::arg("graph"), py::arg("initial_guesses") = true,
           "Adds every edge and prior of a Graph2/Graph3 (read or built in memory): edges in "
-          "order of their later pose, then the priors; with initial_guesses (and a graph with "
+          "order of their later pose, then the priors, then the custom factors; with "
+          "initial_guesses (and a graph with "
           "poses) each new pose starts at the graph's value. `fixed` poses are not held (the "
           "smoother's gauge is its first pose or the priors). Call update() after. Returns "
           "{'accepted': n, 'duplicate': n}; ValueError naming the first rejected one.")
+      .def(
+          "add_factor",
+          [](Smoother& s, const CustomFactorObject<G>& f) {
+            const std::optional<Key> id2 =
+                f.keys.size() == 2 ? std::optional<Key>(f.keys[1]) : std::nullopt;
+            const CustomFactor<G> factor = f.make(0, id2 ? 1 : -1);
+            // Evaluated once here at the estimates, so that an exception of its functions (or a
+            // wrong shape) is raised before the smoother holds it: addFactor evaluates it too.
+            std::vector<G> at;
+            for (Key id : f.keys)
+              if (s.hasPose(id)) at.push_back(s.estimate(id));
+            if (at.size() == f.keys.size()) {
+              typename FactorModel<G>::Jacobians J;
+              factor.error(at, &J);
+            }
+            return statusOrThrow(s.addFactor(factor, f.keys[0], id2));
+          },
+          py::arg("factor"),
+          "Adds a factor of your own (an arbor.CustomFactor2/CustomFactor3) on poses an edge or a "
+          "prior created already (a binary one's in one component); returns 'accepted', raises "
+          "ValueError with the reason if rejected. Its functions run during update() and "
+          "finalize(), under the GIL, from the smoother's threads; an exception they raise is "
+          "raised by that call.")
       .def(
           "disable_edge",
           [](Smoother& s, Key a, Key b) { throwUnlessApplied(s.disableEdge(a, b)); },

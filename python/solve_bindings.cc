@@ -193,6 +193,11 @@ SolveOutcome solve(const GraphObject<G>& object, const SolveRequest& q) {
                                 " starts from its own chordal relaxation: init must be None or "
                                 "'chordal', not '" +
                                 *q.init + "'");
+  if (solver == BatchSolver::kRtr && graph.numCustomFactors() > 0)
+    throw std::invalid_argument(
+        "solver rtr: the certifiable solver takes relative-pose edges only: " +
+        std::to_string(graph.numCustomFactors()) + " custom factor(s) (the first '" +
+        graph.custom_factors.front().name() + "'); use lm, gn or dogleg");
   if (q.max_iterations < 1)
     throw std::invalid_argument("max_iterations must be >= 1, not " +
                                 std::to_string(q.max_iterations));
