@@ -5,6 +5,7 @@
 // is to be deleted.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -16,13 +17,17 @@ struct Ablation {
   std::string name;      ///< "end-word", the --ablate value
   std::string field;     ///< the RobustOptions field(s) it sets, as written in the report
   std::string property;  ///< what the rule guarantees, one line
+  std::function<void(RobustOptions*)> off;  ///< sets `field`
 };
 
 /// Every rule --ablate knows, in the order of the table.
 const std::vector<Ablation>& ablations();
 
-/// `options` with rule `name` switched off; std::invalid_argument naming the value and the
-/// known names for any other name.
+/// The rule named `name`; std::invalid_argument naming the value and the known names for any
+/// other name.
+const Ablation& ablation(const std::string& name);
+
+/// `options` with rule `name` switched off (ablation(name).off); throws as ablation().
 RobustOptions ablated(const std::string& name, RobustOptions options = {});
 
 }  // namespace arbor::bench

@@ -646,13 +646,15 @@ int robustFamilies(const DatasetOptions& data, const std::string& families, std:
                    const bench::GenerationPlan& lists, const bench::RobustBatchSettings& settings,
                    int repeat, const std::string& keep_dir, const std::string& ablate) {
   if (seeds.empty()) seeds = "1-3";
+  const bench::Ablation* rule_off = nullptr;
   RobustOptions online;
   if (!ablate.empty()) {
     try {
-      online = bench::ablated(ablate);
+      rule_off = &bench::ablation(ablate);
     } catch (const std::invalid_argument& e) {
       throw cli::UsageError(e.what());
     }
+    rule_off->off(&online);
   }
   if (dims.empty()) dims = "2,3";
   bench::FamilyPlan plan;
@@ -688,13 +690,10 @@ int robustFamilies(const DatasetOptions& data, const std::string& families, std:
   const bench::RobustReplayHooks hooks =
       bench::robustReplayHooks(settings.gnc.kernel, repeat, online);
   const auto rows = bench::runRobustBench(cases, {}, {}, settings, hooks, &std::cerr);
-  if (!ablate.empty()) {
-    for (const bench::Ablation& a : bench::ablations())
-      if (a.name == ablate)
-        std::cout << "Ablation: rule " << a.name << " off (RobustOptions::" << a.field
-                  << "; it guarantees: " << a.property
-                  << ") in the replay rows; the batch rows run the defaults.\n";
-  }
+  if (rule_off)
+    std::cout << "Ablation: rule " << rule_off->name << " off (RobustOptions::" << rule_off->field
+              << "; it guarantees: " << rule_off->property
+              << ") in the replay rows; the batch rows run the defaults.\n";
   std::cout << "Held-out protocol (issue 52): families " << families << ", dims " << dims
             << ", seeds " << seeds << ", fractions " << fractions << ", policies " << policies
             << ". Each world generated in memory and written to "
