@@ -81,9 +81,7 @@ Counts expectKeptAtWord(std::uint64_t seed, double fraction, sim::OutlierPolicy 
   const cli::ReplayResult<G> with = replay(true), without = replay(false);
   auto trueRejected = [&](const cli::ReplayResult<G>& r) {
     int n = 0;
-    for (const ClosureReport& cr : r.closures)
-      n += cr.status == ClosureStatus::kOutlier &&
-           c.false_pairs.count({std::min(cr.from, cr.to), std::max(cr.from, cr.to)}) == 0;
+    for (const Pair& p : testing::rejectedPairs(r.closures)) n += c.false_pairs.count(p) == 0;
     return n;
   };
   // The property: no rejected closure within Ω's χ² bound at the final estimate (s of a
@@ -92,10 +90,7 @@ Counts expectKeptAtWord(std::uint64_t seed, double fraction, sim::OutlierPolicy 
   EXPECT_EQ(without.online.closures_kept_at_word, 0);
   // With it: every false closure out, every true one in, and F over the clean graph's edges
   // within 1% of the clean replay's.
-  std::set<Pair> rejected;
-  for (const ClosureReport& r : with.closures)
-    if (r.status == ClosureStatus::kOutlier)
-      rejected.insert({std::min(r.from, r.to), std::max(r.from, r.to)});
+  const std::set<Pair> rejected = testing::rejectedPairs(with.closures);
   int false_kept = 0;
   for (const Pair& p : c.false_pairs) false_kept += rejected.count(p) == 0;
   EXPECT_EQ(trueRejected(with), 0);

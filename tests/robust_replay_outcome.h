@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <set>
 #include <utility>
+#include <vector>
 
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/pose_graph.h"
@@ -22,6 +23,15 @@ struct RobustOutcome {
   double c2 = 0, c2_end = 0;    ///< OnlineStats::closure_threshold and closure_threshold_at_end
   int finalize_iterations = 0;  ///< ReplayResult::finalize_iterations
 };
+
+/// The closures a replay ended rejecting, as (from, to) with the low id first.
+inline std::set<std::pair<Key, Key>> rejectedPairs(const std::vector<ClosureReport>& closures) {
+  std::set<std::pair<Key, Key>> out;
+  for (const ClosureReport& c : closures)
+    if (c.status == ClosureStatus::kOutlier)
+      out.insert({std::min(c.from, c.to), std::max(c.from, c.to)});
+  return out;
+}
 
 /// F over `graph`'s edges at its plain replay's estimate (`arbor replay` without --robust and
 /// without its batch LM): the clean optimum the robust replays are compared with.
@@ -41,9 +51,7 @@ RobustOutcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
   settings.batch = false;
   const cli::ReplayResult<G> r = cli::runReplay(graph, settings);
   RobustOutcome out;
-  for (const ClosureReport& c : r.closures)
-    if (c.status == ClosureStatus::kOutlier)
-      out.rejected.insert({std::min(c.from, c.to), std::max(c.from, c.to)});
+  out.rejected = rejectedPairs(r.closures);
   out.unconfirmed = r.online.closures_unconfirmed;
   out.left_out = r.online.closures_left_out;
   out.disowned = r.online.closures_disowned;
