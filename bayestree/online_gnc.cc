@@ -43,119 +43,7 @@ size_t nextEstimateAt(size_t n) { return n < 64 ? n + 1 : n + n / 8; }
 NoiseScaleOptions scaleOptions(const RobustOptions& o) {
   NoiseScaleOptions s;
   s.confidence = o.confidence;
-  s.tail_factor = o.tail_factor;
-  s.max_tail_scale = o.max_tail_scale;
-  s.tail_min_samples = o.tail_min_samples;
-  s.min_kept_share = o.min_kept_share;
-  s.loosen_min_samples = o.loosen_min_samples;
   return s;
-}
-
-const char* toString(EntryTest entry) {
-  return entry == EntryTest::kInnovation ? "innovation" : "residual";
-}
-const char* toString(WarmUp warm_up) { return warm_up == WarmUp::kHold ? "hold" : "given"; }
-const char* toString(ScaleStart start) {
-  return start == ScaleStart::kAtMostLast ? "at-most-last" : "median";
-}
-const char* toString(FirstRecheck first) {
-  return first == FirstRecheck::kReplayEstimate ? "replay" : "relinearized";
-}
-const char* toString(NoiseScale scale) {
-  return scale == NoiseScale::kEstimated ? "estimated" : "given";
-}
-
-namespace {
-
-// The choice whose toString() is `text`.
-template <class Enum>
-Enum parseChoice(const std::string& text, std::initializer_list<Enum> choices) {
-  std::string names;
-  size_t k = 0;
-  for (const Enum choice : choices) {
-    if (text == toString(choice)) return choice;
-    names += std::string(k == 0 ? "" : k + 1 == choices.size() ? " or " : ", ") + toString(choice);
-    ++k;
-  }
-  throw std::invalid_argument("must be " + names + ", not '" + text + "'");
-}
-
-}  // namespace
-
-EntryTest parseEntryTest(const std::string& text) {
-  return parseChoice(text, {EntryTest::kInnovation, EntryTest::kResidual});
-}
-NoiseScale parseNoiseScale(const std::string& text) {
-  return parseChoice(text, {NoiseScale::kEstimated, NoiseScale::kGiven});
-}
-WarmUp parseWarmUp(const std::string& text) {
-  return parseChoice(text, {WarmUp::kHold, WarmUp::kGiven});
-}
-ScaleStart parseScaleStart(const std::string& text) {
-  return parseChoice(text, {ScaleStart::kAtMostLast, ScaleStart::kMedian});
-}
-FirstRecheck parseFirstRecheck(const std::string& text) {
-  return parseChoice(text, {FirstRecheck::kReplayEstimate, FirstRecheck::kRelinearized});
-}
-
-std::string RobustOptions::problem() const {
-  auto bad = [](const std::string& field, double value, const std::string& want) {
-    std::ostringstream out;
-    out << "RobustOptions::" << field << " must be " << want << ", not " << value;
-    return out.str();
-  };
-  if (kernel == KernelKind::kNone)
-    return "RobustOptions::kernel must be tls, gm, cauchy or huber, not none";
-  if (!std::isfinite(threshold)) return bad("threshold", threshold, "finite (≤ 0: automatic)");
-  if (threshold <= 0 && !(confidence > 0 && confidence < 1))
-    return bad("confidence", confidence, "in (0, 1)");
-  if (!(mu_step > 1) || !std::isfinite(mu_step)) return bad("mu_step", mu_step, "finite and > 1");
-  if (steps_per_update < 1) return bad("steps_per_update", steps_per_update, ">= 1");
-  if (max_steps_per_closure < 1) return bad("max_steps_per_closure", max_steps_per_closure, ">= 1");
-  if (!(max_mu > 0)) return bad("max_mu", max_mu, "> 0");
-  if (!(weight_tolerance > 0) || !std::isfinite(weight_tolerance))
-    return bad("weight_tolerance", weight_tolerance, "finite and > 0");
-  if (rechecks_per_update < 0) return bad("rechecks_per_update", rechecks_per_update, ">= 0");
-  if (!(recheck_margin >= 1) || !std::isfinite(recheck_margin))
-    return bad("recheck_margin", recheck_margin, "finite and >= 1");
-  if (finalize_rounds < 1) return bad("finalize_rounds", finalize_rounds, ">= 1");
-  if (end_scale_samples < 0) return bad("end_scale_samples", end_scale_samples, ">= 0");
-  if (!(left_out_backing_margin == 0 || left_out_backing_margin >= 1) ||
-      !std::isfinite(left_out_backing_margin))
-    return bad("left_out_backing_margin", left_out_backing_margin, "0 (off) or finite and >= 1");
-  if (!(rehold_growth == 0 || rehold_growth > 1) || !std::isfinite(rehold_growth))
-    return bad("rehold_growth", rehold_growth, "0 (off) or finite and > 1");
-  if (!(end_scale_gap >= 1) || !std::isfinite(end_scale_gap))
-    return bad("end_scale_gap", end_scale_gap, "finite and >= 1");
-  if (!(end_scale_growth == 0 || end_scale_growth > 1) || !std::isfinite(end_scale_growth))
-    return bad("end_scale_growth", end_scale_growth, "0 (off) or finite and > 1");
-  if (!(end_scale_work >= 0) || !std::isfinite(end_scale_work))
-    return bad("end_scale_work", end_scale_work, "finite and >= 0");
-  if (!(end_backed_margin == 0 || end_backed_margin >= 1) || !std::isfinite(end_backed_margin))
-    return bad("end_backed_margin", end_backed_margin, "0 (off) or finite and >= 1");
-  if (!(end_backed_pair_margin > 0) || !std::isfinite(end_backed_pair_margin))
-    return bad("end_backed_pair_margin", end_backed_pair_margin, "finite and > 0");
-  if (end_backed_partners < 1) return bad("end_backed_partners", end_backed_partners, ">= 1");
-  if (!(final_confirm_margin == 0 || final_confirm_margin >= 1) ||
-      !std::isfinite(final_confirm_margin))
-    return bad("final_confirm_margin", final_confirm_margin, "0 (off) or finite and >= 1");
-  if (!(end_confirm_margin > 0) || !std::isfinite(end_confirm_margin))
-    return bad("end_confirm_margin", end_confirm_margin, "finite and > 0");
-  if (end_rejected_partners < 0)
-    return bad("end_rejected_partners", end_rejected_partners, "0 (off) or >= 1");
-  if (!(entry_band >= 1) || !std::isfinite(entry_band))
-    return bad("entry_band", entry_band, "finite and >= 1");
-  if (scale_min_samples < 1) return bad("scale_min_samples", scale_min_samples, ">= 1");
-  if (!(tail_factor > 1) || !std::isfinite(tail_factor))
-    return bad("tail_factor", tail_factor, "finite and > 1");
-  if (!(max_tail_scale >= 1) || !std::isfinite(max_tail_scale))
-    return bad("max_tail_scale", max_tail_scale, "finite and >= 1");
-  if (tail_min_samples < 0) return bad("tail_min_samples", tail_min_samples, ">= 0");
-  if (!(min_kept_share >= 0 && min_kept_share < 1))
-    return bad("min_kept_share", min_kept_share, "in [0, 1)");
-  if (loosen_min_samples < 0) return bad("loosen_min_samples", loosen_min_samples, ">= 0");
-  if (corroboration_window < 0) return bad("corroboration_window", corroboration_window, ">= 0");
-  return "";
 }
 
 const char* toString(ClosureStatus status) {
@@ -224,9 +112,9 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   last_source_ = source;
   samples_used_ = static_cast<int>(n);
   const bool had_estimate = estimate_.estimated;
-  // The fixed point starts from the untruncated median, and with ScaleStart::kAtMostLast at
+  // The fixed point starts from the untruncated median, and with RobustRule::kScaleStart at
   // most from the last σ̂² (header comment, "the noise scale").
-  const double start_cap = had_estimate && options_.scale_start == ScaleStart::kAtMostLast
+  const double start_cap = had_estimate && options_.on(RobustRule::kScaleStart)
                                ? scale_
                                : std::numeric_limits<double>::infinity();
   estimate_ = estimateNoiseScale(*source, cuts_, scale_options_,
@@ -234,12 +122,12 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   scale_ = estimate_.sigma2;
   // The estimator's own truncation; Ω at its word without an estimate.
   const double c2_before = c2_;
-  c2_ = estimate_.estimated ? options_.tail_factor * c2_given_ * scale_ : c2_given_;
+  c2_ = estimate_.estimated ? scale_options_.tail_factor * c2_given_ * scale_ : c2_given_;
   // The first estimate, many times Ω's word: what was rejected at Ω's word is held again, to be
   // judged as the warm-up's closures are (RobustOptions::rehold_growth; header, "warm-up").
-  const double growth = options_.rehold_growth;
+  const double growth = options_.on(RobustRule::kRehold) ? robust_constants::kReholdGrowth : 0.0;
   if (growth > 0 && !had_estimate && estimate_.estimated && c2_ >= growth * c2_before &&
-      options_.warm_up == WarmUp::kHold) {
+      options_.on(RobustRule::kWarmUp)) {
     for (size_t k = 0; k < closures_.size(); ++k) {
       Closure& o = closures_[k];
       if (o.state != State::kSettled || o.weight != 0.0 || o.held || !binaryKernel(o) ||
@@ -253,7 +141,7 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   // the next step checks them all at once (header comment, "a shrinking c²"). Not on losing the
   // estimate: Ω's word then stands in for want of one and says nothing of the inliers.
   if (c2_ > c2_swept_) c2_swept_ = c2_;
-  if (estimate_.estimated && options_.recheck_margin * c2_ < c2_swept_) {
+  if (estimate_.estimated && robust_constants::kRecheckMargin * c2_ < c2_swept_) {
     sweep_due_ = true;
     c2_swept_ = c2_;
   }
@@ -262,11 +150,12 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
 
 template <class G>
 const std::vector<double>* OnlineGnc<G>::scaleSource() const {
-  const size_t enough = static_cast<size_t>(options_.scale_min_samples);
+  const size_t enough = static_cast<size_t>(robust_constants::kScaleMinSamples);
   if (options_.corroboration_window == 0)
     return innovations_.size() >= enough ? &innovations_ : nullptr;
   if (corroborated_.size() >= enough) return &corroborated_;
-  if (innovations_.size() >= std::max(enough, static_cast<size_t>(options_.loosen_min_samples)))
+  if (innovations_.size() >=
+      std::max(enough, static_cast<size_t>(scale_options_.loosen_min_samples)))
     return &innovations_;
   return nullptr;
 }
@@ -364,24 +253,16 @@ double OnlineGnc<G>::innovationLowerBound(const IncrementalSmoother<G>& smoother
 }
 
 template <class G>
-bool OnlineGnc<G>::confirms() const {
-  // Only on an estimated σ̂²: at Ω's word (no estimate, NoiseScale::kGiven) c² is as wrong as
-  // Ω, and (L), which sees a closure's whole cost, drops true ones that graduation keeps (MIT:
-  // four, and the estimate is lost).
-  return options_.confirm && options_.entry == EntryTest::kInnovation && estimate_.estimated;
-}
-
-template <class G>
 bool OnlineGnc<G>::confirmsAtTheEnd() const {
   // Without corroboration (K = 0) no closure is backed, and true closures in runs sit up to
   // 2.7·c² by (L): the garage lost three more at K = 0 (F_clean 1.0092 → 1.0184).
-  return options_.final_confirm_margin > 0 && options_.corroboration_window > 0 &&
+  return options_.on(RobustRule::kFinalConfirm) && options_.corroboration_window > 0 &&
          options_.entry == EntryTest::kInnovation && estimate_.estimated;
 }
 
 template <class G>
 bool OnlineGnc<G>::recordsPartners() const {
-  return options_.confirm || options_.final_confirm_margin > 0;
+  return options_.on(RobustRule::kFinalConfirm);
 }
 
 template <class G>
@@ -433,9 +314,7 @@ std::optional<double> OnlineGnc<G>::innovationPast(const IncrementalSmoother<G>&
 template <class G>
 std::optional<double> OnlineGnc<G>::unconfirmedBy(const IncrementalSmoother<G>& smoother,
                                                   Closure* c, double bound, bool at_the_end) {
-  if (!judgedByL(smoother, *c) ||
-      backed(*c, at_the_end && options_.end_partners_agree ? &smoother : nullptr))
-    return std::nullopt;
+  if (!judgedByL(smoother, *c) || backed(*c, at_the_end ? &smoother : nullptr)) return std::nullopt;
   c->judged_c2 = c2_;
   return innovationPast(smoother, *c, bound, at_the_end);
 }
@@ -459,99 +338,27 @@ double OnlineGnc<G>::endBound() const {
   return c2_end_ > 0 ? std::min(c2_, c2_end_) : c2_;
 }
 
-// Backed at the end: within end_backed_margin·c² and agreed with (P) by at least
-// end_backed_partners settled inliers at the closures' own scale, pairS ≤ pair_margin·c².
 template <class G>
-bool OnlineGnc<G>::backedAtTheEnd(const IncrementalSmoother<G>& smoother, const Closure& c,
-                                  double value, double bound) const {
-  return options_.end_backed_margin > 0 && confirmsAtTheEnd() &&
-         c.kernel == KernelKind::kTruncatedLeastSquares &&
-         value <= options_.end_backed_margin * bound &&
-         agreedBy(c, &smoother, options_.end_backed_pair_margin * bound,
-                  options_.end_backed_partners);
-}
-
-template <class G>
-int OnlineGnc<G>::confirm(IncrementalSmoother<G>& smoother) {
-  int changed = 0;
-  for (int id : confirming_) changed += unconfirmed(smoother, &closures_[id], c2_) ? 1 : 0;
-  confirming_.clear();
-  return changed;
-}
-
-template <class G>
-int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped,
-                             const std::function<void()>& update) {
+int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped) {
   int changed = 0;
   dropped->assign(closures_.size(), 0);
   keepHeldJoints(smoother);
   c2_end_ = endThreshold(smoother);
-  const double bound =
-      c2_end_ < c2_ ? options_.end_confirm_margin * c2_end_ : options_.final_confirm_margin * c2_;
+  const double bound = c2_end_ < c2_ ? robust_constants::kEndConfirmMargin * c2_end_
+                                     : robust_constants::kFinalConfirmMargin * c2_;
   std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound, unbacked
-  std::vector<int> backed_over;              // past it, but backed
-  std::set<int> disowned_within;             // of `over`, the disowned ones within `bound`
-  const bool leave_out = update && options_.left_out_backing_margin > 0;
   for (size_t id = 0; id < closures_.size(); ++id) {
     Closure& c = closures_[id];
-    if (!judgedByL(smoother, c)) continue;
-    const bool is_backed = backed(c, options_.end_partners_agree ? &smoother : nullptr);
-    if (is_backed && !leave_out) continue;
-    if (!is_backed) c.judged_c2 = c2_;  // as unconfirmedBy
-    // Disowned: past the c² in use itself, no margin (header comment, "disowned at the end").
-    const bool is_disowned = !is_backed && disowned(c);
-    const std::optional<double> m = innovationPast(
-        smoother, c, is_disowned ? std::min(bound, endBound()) : bound, /*at_the_end=*/true);
-    if (!m) continue;
-    if (is_backed) {
-      backed_over.push_back(static_cast<int>(id));
-    } else {
-      over.emplace_back(*m, static_cast<int>(id));
-      if (is_disowned && *m <= bound) disowned_within.insert(static_cast<int>(id));
-    }
+    if (!judgedByL(smoother, c) || backed(c, &smoother)) continue;
+    c.judged_c2 = c2_;  // as unconfirmedBy
+    const std::optional<double> m = innovationPast(smoother, c, bound, /*at_the_end=*/true);
+    if (m) over.emplace_back(*m, static_cast<int>(id));
   }
-  // Each backed one left out in turn, at the estimate the ones before it made (header comment,
-  // "backing left out"); the (L) drops follow.
-  for (int id : backed_over)
-    if (leftOut(smoother, id, update)) {
-      (*dropped)[static_cast<size_t>(id)] = 1;
-      ++changed;
-    }
   for (int id : dropLargestPerPose(smoother, std::move(over))) {
     (*dropped)[static_cast<size_t>(id)] = 1;
-    totals_.disowned += static_cast<int>(disowned_within.count(id));
     ++changed;
   }
   return changed;
-}
-
-template <class G>
-bool OnlineGnc<G>::disowned(const Closure& c) const {
-  const size_t needed = static_cast<size_t>(options_.end_rejected_partners);
-  if (needed == 0 || c.partners.size() < needed) return false;
-  return std::all_of(c.partners.begin(), c.partners.end(), [&](int id) {
-    const Closure& p = closures_[static_cast<size_t>(id)];
-    return p.state == State::kSettled && !p.held && p.weight == 0.0;
-  });
-}
-
-// A false closure bends the chains between its ends, and the true closures beside it, read
-// through those chains, then agree with it; without it the chains relax and they no longer do.
-template <class G>
-bool OnlineGnc<G>::leftOut(IncrementalSmoother<G>& smoother, int id,
-                           const std::function<void()>& update) {
-  Closure& c = closures_[static_cast<size_t>(id)];
-  setWeight(smoother, &c, 0.0);
-  update();
-  const double pair_bound = std::min(c2_given_ * pair_scale_, c2_);  // backed()'s at an estimate
-  if (agreedBy(c, &smoother, options_.left_out_backing_margin * pair_bound, 1)) {
-    setWeight(smoother, &c, 1.0);
-    update();
-    return false;
-  }
-  ++totals_.unconfirmed;
-  ++totals_.left_out;
-  return true;
 }
 
 // The largest first; one drop per pose (smallGrid3D with 90% local false closures: the false
@@ -590,19 +397,18 @@ void OnlineGnc<G>::keepHeldJoints(const IncrementalSmoother<G>& smoother) const 
 
 template <class G>
 int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double update_flops) {
-  if (options_.end_scale_growth == 0 || options_.end_scale_samples == 0 || !confirmsAtTheEnd())
-    return 0;
+  if (!options_.on(RobustRule::kEndScale) || !confirmsAtTheEnd()) return 0;
   flops_since_reading_ += update_flops;
   const int poses = smoother.numPoses();
   if (poses < next_reading_ ||
-      flops_since_reading_ < options_.end_scale_work * smoother.factorizationFlops())
+      flops_since_reading_ < robust_constants::kEndScaleWork * smoother.factorizationFlops())
     return 0;
   flops_since_reading_ = 0;
-  next_reading_ = static_cast<int>(std::ceil(options_.end_scale_growth * poses));
+  next_reading_ = static_cast<int>(std::ceil(robust_constants::kEndScaleGrowth * poses));
   keepHeldJoints(smoother);
   c2_end_ = endThreshold(smoother);
   if (c2_end_ >= c2_) return 0;
-  const double bound = options_.final_confirm_margin * c2_end_;
+  const double bound = robust_constants::kFinalConfirmMargin * c2_end_;
   std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound
   for (size_t id = 0; id < closures_.size(); ++id)
     if (const auto m = unconfirmedBy(smoother, &closures_[id], bound, /*at_the_end=*/true))
@@ -618,8 +424,8 @@ int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double 
 // among them); c² from it as on entry, never above the c² in use.
 template <class G>
 double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const {
-  const size_t cap = static_cast<size_t>(options_.end_scale_samples);
-  if (cap == 0) return c2_;
+  if (!options_.on(RobustRule::kEndScale)) return c2_;
+  const size_t cap = static_cast<size_t>(robust_constants::kEndScaleSamples);
   const auto& factors = smoother.factors();
   std::vector<int> inliers, trusted;
   for (const Closure& c : closures_)
@@ -646,14 +452,14 @@ double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const 
     return m;
   };
   std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
-  const size_t enough = static_cast<size_t>(options_.scale_min_samples);
+  const size_t enough = static_cast<size_t>(robust_constants::kScaleMinSamples);
   if (m_in.size() < enough || m_tr.size() < enough) return c2_;
   const NoiseScaleEstimate in = estimateNoiseScale(std::move(m_in), cuts_, scale_options_, true);
   const NoiseScaleEstimate tr = estimateNoiseScale(std::move(m_tr), cuts_, scale_options_, true);
   if (!in.estimated || !tr.estimated) return c2_;
   const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
-  const double c2 = options_.tail_factor * c2_given_ * sigma2;
-  const double gap = dropped_on_the_way_ ? 1.0 : options_.end_scale_gap;
+  const double c2 = scale_options_.tail_factor * c2_given_ * sigma2;
+  const double gap = dropped_on_the_way_ ? 1.0 : robust_constants::kEndScaleGap;
   return c2 * gap < c2_ ? c2 : c2_;
 }
 
@@ -690,7 +496,7 @@ void OnlineGnc<G>::enter(Closure* c, double s, double m, bool may_reject) {
     c->weight = 1.0;
     return;
   }
-  if (may_reject && binaryKernel(*c) && m > options_.entry_band * c2_) {
+  if (may_reject && binaryKernel(*c) && m > robust_constants::kEntryBand * c2_) {
     c->state = State::kSettled;
     c->weight = 0.0;
     return;
@@ -716,11 +522,11 @@ double OnlineGnc<G>::graduate(Closure* c, double s) {
     const RobustKernel next = kernelAt(*c, c->mu);
     w = next.weight(s);
     settled = c->kernel == KernelKind::kTruncatedLeastSquares
-                  ? (w == 0.0 || w == 1.0 || c->mu >= options_.max_mu)
+                  ? (w == 0.0 || w == 1.0 || c->mu >= robust_constants::kMaxMu)
                   : next.atKernel();
   } else {
     w = now.weight(s);
-    settled = std::abs(w - c->weight) < options_.weight_tolerance;
+    settled = std::abs(w - c->weight) < robust_constants::kWeightTolerance;
   }
   if (!settled && c->steps >= options_.max_steps_per_closure) {
     w = finalWeight(*c, s);
@@ -763,7 +569,7 @@ double OnlineGnc<G>::admit(const IncrementalSmoother<G>& smoother, Key from, Key
     const double s = edge.cost(smoother.estimate(edge.i), smoother.estimate(edge.j));
     const double m = innovation(smoother, edge, s);
     observe(smoother, id, m);
-    if (!scaleKnown() && options_.warm_up == WarmUp::kHold && binaryKernel(c)) {
+    if (!scaleKnown() && options_.on(RobustRule::kWarmUp) && binaryKernel(c)) {
       c.state = State::kSettled;  // out of the tree until σ̂² exists (judgeHeld)
       c.weight = 0.0;
       c.judged_c2 = c2_;
@@ -850,7 +656,7 @@ int OnlineGnc<G>::sweepInliers(IncrementalSmoother<G>& smoother) {
     if (c.state != State::kSettled || c.factor < 0 || c.held || !isInlier(c)) continue;
     const double s = residual(smoother, c);
     c.s = s;
-    if (s <= options_.recheck_margin * c2_) continue;
+    if (s <= robust_constants::kRecheckMargin * c2_) continue;
     enter(&c, s, s, /*may_reject=*/false);
     changed += takeRecheck(smoother, static_cast<int>(k));
   }
@@ -896,18 +702,15 @@ int OnlineGnc<G>::judgeHeld(IncrementalSmoother<G>& smoother, size_t at_most) {
 }
 
 template <class G>
-int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
-                       const std::function<void()>& update) {
+int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope) {
   const bool recheck_all = scope != StepScope::kRoundRobin;
   int changed = 0;
   // The warm-up's closures, once σ̂² is there (in finalize() whether or not it is).
   if (!held_.empty() && (recheck_all || scaleKnown())) changed += judgeHeld(smoother);
-  // The closures the last step's graduation settled at weight 1, now eliminated so: (L).
-  if (confirms()) changed += confirm(smoother);
   // In finalize(): every inlier no inlier agrees with, (L) at final_confirm_margin·c².
   std::vector<char> dropped;
   if (scope == StepScope::kFinalize && confirmsAtTheEnd())
-    changed += confirmAll(smoother, &dropped, update);
+    changed += confirmAll(smoother, &dropped);
   // The graduating closures: one step each (those not in the smoother yet keep w₀).
   std::vector<int> still;
   for (int id : graduating_) {
@@ -923,11 +726,7 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
       ++changed;
       ++totals_.graduation_steps;
     }
-    if (c.state == State::kGraduating) {
-      still.push_back(id);
-    } else if (confirms() && c.weight == 1.0) {
-      confirming_.push_back(id);  // (L) at the next step, once the tree holds it at 1
-    }
+    if (c.state == State::kGraduating) still.push_back(id);
   }
   graduating_.swap(still);
   // c² shrunk by recheck_margin: every settled inlier at once, not in the round robin's turn.
@@ -957,12 +756,10 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
       const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
       // A closure the end's scale dropped on the way is taken back by it, as in finalize().
       const double bound = at_the_end || c.dropped_on_the_way ? endBound() : c2_;
-      // Out by (E) = m (past the bound and, in finalize(), not backed within its margin); both
-      // hold for m when they hold for m's lower bound (the poses' marginals, no path solve),
-      // which comes first where the paths are kept (the marginals come from them).
-      auto staysOut = [&](double m) {
-        return m > bound && !(at_the_end && backedAtTheEnd(smoother, c, m, bound));
-      };
+      // Out by (E) = m past the bound; it holds for m when it holds for m's lower bound (the
+      // poses' marginals, no path solve), which comes first where the paths are kept (the
+      // marginals come from them).
+      auto staysOut = [&](double m) { return m > bound; };
       if (recheck_all && staysOut(innovationLowerBound(smoother, edge, s))) {
         ++totals_.rechecks_bounded;
         continue;
@@ -976,12 +773,10 @@ int OnlineGnc<G>::step(IncrementalSmoother<G>& smoother, StepScope scope,
       ++changed;
       continue;
     }
-    bool flip = s > options_.recheck_margin * c2_ ? inlier : !inlier;
-    if (flip && inlier && scope == StepScope::kFinalize && backedAtTheEnd(smoother, c, s, c2_))
-      flip = false;
-    const bool drift = c.kernel != KernelKind::kTruncatedLeastSquares &&
-                       c.kernel != KernelKind::kGemanMcClure &&
-                       std::abs(finalWeight(c, s) - c.weight) > 10 * options_.weight_tolerance;
+    const bool flip = s > robust_constants::kRecheckMargin * c2_ ? inlier : !inlier;
+    const bool drift =
+        c.kernel != KernelKind::kTruncatedLeastSquares && c.kernel != KernelKind::kGemanMcClure &&
+        std::abs(finalWeight(c, s) - c.weight) > 10 * robust_constants::kWeightTolerance;
     if (!flip && !drift) continue;
     if (inlier || drift) {
       enter(&c, s, s, /*may_reject=*/false);

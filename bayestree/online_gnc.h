@@ -171,18 +171,6 @@
 //                 "agreed" with the true (20, 29)). A false closure a long true run agrees with
 //                 is not reached, and agreement cannot be ignored: true closures in runs sit up
 //                 to 2.7·c² by (L).
-//   disowned at the end (RobustOptions::end_rejected_partners, 2 by default; 0: off) in that
-//                 pass, an inlier no inlier backs whose partners (the closures that agreed with it
-//                 (P) on arrival) are at least end_rejected_partners, every one of them rejected
-//                 since, is dropped past the c² in use itself (the end's where it stands), not
-//                 past the margin over it. The margin is room for true closures with heavy
-//                 tails; this closure came agreeing only with closures since found false. A
-//                 generated Manhattan world of 3000 poses with 50% (and 90%) group false closures,
-//                 seed 7, kept (12, 1306) of a group of ten whose nine others were rejected: its
-//                 measurement happens to lie within 0.48 m and 2° of the truth, its m₋ was 1.08·c²,
-//                 and it took F to 1.0101 F*; disowned, it is dropped and F is F*. On the shared
-//                 and generated robust files and the clean ones nothing else changes; three true
-//                 closures of that world are disowned too, and stay, within c².
 //   the end's scale (RobustOptions::end_scale_samples, 512 by default; 0: off) c² in use comes
 //                 from innovations at arrival, which carry the estimate's error of that moment
 //                 and, where false closures got in, their bending. At the end each of finalize()'s
@@ -216,37 +204,6 @@
 //                 On sphere_bignoise with 10% random false closures the false closures come
 //                 out during the replay, where each held the tops it touched open until
 //                 finalize(): updates 128 → 28 s, p99 246 → 43 ms, 1.0139 → 1.0113 F*.
-//   backed at the end (RobustOptions::end_backed_margin, 4 by default; 0: off) in finalize()'s
-//                 re-checks a TLS closure that at least end_backed_partners (5) settled inliers
-//                 agree with (P) at the end's estimate, at the closures' own scale (pairS ≤
-//                 end_backed_pair_margin·c², 1.5; not the pairs' scale, which false pairs
-//                 inflate where they are many: 80·c² on smallGrid3D with 90% local false
-//                 closures), is taken back when rejected and its innovation (E) is within
-//                 end_backed_margin·c² (c² the end's, or the one in use), and kept when an
-//                 inlier whose s is past recheck_margin·c² is within end_backed_margin times the
-//                 c² in use, the one that re-check reads (by the end's, the garage's three went
-//                 out and in every round). The clean garage's closures have a heavy tail: 526–646,
-//                 644–711 and 771–1016 sit at 2.5–2.9·c² by (E) with 7–14 such partners each,
-//                 where the false closures of smallGrid3D that true ones agree with have at most
-//                 4 (seed 1, 90% local).
-//   backing left out (RobustOptions::left_out_backing_margin, 1.1 by default; 0: off) in
-//                 each of finalize()'s (L) passes, a settled TLS inlier past the bound that a
-//                 partner backs is left out for an update (step's, in finalize()) and stays out
-//                 unless a partner still agrees with it, within the margin times the pair bound, at
-//                 the estimate without it: a local false closure bends the chains its partners
-//                 are read through, and without it they relax (smallGrid3D with 50% local false
-//                 closures, seed 3: 1.087 → 1 F*; sphere_bignoise with 10% random false
-//                 closures: 635 → 641 of 645 rejected, 1.0090 → 1.0016 F*). At margin 1 the
-//                 clean garage's true 644–711, agreed with at 1.025 times, went out.
-//   the first re-check (RobustOptions::first_recheck, kReplayEstimate by default) finalize()'s
-//                 first round re-checks at the replay's own estimate; a round after a change
-//                 relinearises everything first, and the last round ends relinearised. The
-//                 replay's estimate is within thousandths of the converged one in F, the 62
-//                 robust files, the clean ones and sphere_bignoise end with the same closures
-//                 rejected, and the passes saved were the part of finalize() that changed
-//                 nothing (smallGrid3D, 50% random: finalize() 6.2 against 7.8 ms; design.md,
-//                 "The first re-check"). After judging closures held
-//                 since the warm-up (MIT_random_0.1) the first round relinearises first.
 //   kept at Ω's word (RobustOptions::end_word, on by default) finalize()'s last stage, after
 //                 its rounds: every rejected TLS or GM closure whose residual s = eᵀΩe at the
 //                 final estimate is within the given c² (Ω at its word: the χ² quantile, or
@@ -302,6 +259,7 @@
 
 #include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/bayestree/noise_scale.h"
+#include "arbor/bayestree/robust_options.h"
 #include "arbor/core/edge_trust.h"
 #include "arbor/core/factor.h"
 #include "arbor/core/pose_graph.h"
@@ -309,186 +267,7 @@
 
 namespace arbor {
 
-/// How a new loop closure is first judged (header comment, "first check").
-enum class EntryTest {
-  kInnovation,  ///< m = rᵀ(I + AΣAᵀ)⁻¹r, Σ from the Bayes tree
-  kResidual,    ///< m = s₀ = rᵀr (Σ taken as 0)
-};
-/// The scale of Ω the threshold is put on.
-enum class NoiseScale {
-  kEstimated,  ///< σ̂² from the closures' innovations (estimateNoiseScale)
-  kGiven,      ///< Ω at its word: σ̂² = 1
-};
-const char* toString(EntryTest entry);   ///< "innovation", "residual"
-const char* toString(NoiseScale scale);  ///< "estimated", "given"
-
-/// What a loop closure that arrives before σ̂² is estimated enters with (NoiseScale::kEstimated).
-enum class WarmUp {
-  kHold,   ///< weight 0, judged by its innovation once σ̂² is estimated (or in finalize())
-  kGiven,  ///< judged at once at the given c² (Ω at its word)
-};
-const char* toString(WarmUp warm_up);  ///< "hold", "given"
-
-/// Where σ̂²'s fixed points start once there is an estimate (header comment, "the noise scale").
-enum class ScaleStart {
-  kAtMostLast,  ///< the source's untruncated median, or the last σ̂² where that is lower
-  kMedian,      ///< the source's untruncated median every time
-};
-const char* toString(ScaleStart start);  ///< "at-most-last", "median"
-
-/// Where finalize()'s first re-check reads the closures (header comment, "the first re-check").
-enum class FirstRecheck {
-  kReplayEstimate,  ///< at the replay's own estimate; later rounds relinearise all first
-  kRelinearized,    ///< after a relinearisation of everything, as every later round
-};
-const char* toString(FirstRecheck first);  ///< "replay", "relinearized"
-
-/// The inverses of the toString()s above: the value named `text`, else std::invalid_argument
-/// "must be a or b, not 'text'" (the caller puts its flag's or field's name before it).
-EntryTest parseEntryTest(const std::string& text);
-NoiseScale parseNoiseScale(const std::string& text);
-WarmUp parseWarmUp(const std::string& text);
-ScaleStart parseScaleStart(const std::string& text);
-FirstRecheck parseFirstRecheck(const std::string& text);
-
-struct RobustOptions {
-  /// The kernel the closures graduate towards: tls (default) or gm graduate (GNC); huber and
-  /// cauchy are reweighted without graduation (IRLS). Not none.
-  KernelKind kernel = KernelKind::kTruncatedLeastSquares;
-  /// c² on s = eᵀΩe; ≤ 0: the χ² quantile of the edge's dimension (kDoF) at `confidence`, Ω
-  /// taken at its word (as `arbor batch --robust --inlier-threshold chi2`).
-  double threshold = 0.0;
-  double confidence = 0.99;  ///< of the automatic threshold, in (0, 1)
-  double mu_step = 1.4;      ///< μ's factor per step (Yang et al.: 1.4), > 1
-  /// Graduation steps per OnlineSmoother::update, ≥ 1: the first rides on the update, each
-  /// further one runs one more smoother update (only while closures graduate).
-  int steps_per_update = 1;
-  /// A closure still graduating after this many steps is settled with the kernel's own weight.
-  int max_steps_per_closure = 40;
-  /// TLS: μ at which the surrogate counts as the kernel (riSAM's TLS convergence: 1e5).
-  double max_mu = 1e5;
-  /// Huber, Cauchy: settled when the weight moves by less than this in one step.
-  double weight_tolerance = 1e-3;
-  /// Settled closures re-checked at the kernel per update (round robin); 0: only in finalize().
-  int rechecks_per_update = 16;
-  /// A settled inlier graduates again when its s exceeds this many times c² (≥ 1).
-  double recheck_margin = 2.0;
-  /// The first check of a new closure (header comment): the innovation (default) or s₀.
-  EntryTest entry = EntryTest::kInnovation;
-  /// With EntryTest::kInnovation, TLS and an estimated σ̂²: a closure graduation settles at
-  /// weight 1 is judged again by its leave-one-out innovation (L) and dropped when that exceeds
-  /// c², unless an inlier agrees with it (header comment, "confirmed"). Off by default: it
-  /// drops sphere_bignoise's first true closures and the replay diverges.
-  bool confirm = false;
-  /// finalize(), with EntryTest::kInnovation, TLS, an estimated σ̂² and corroboration on
-  /// (corroboration_window > 0: agreement exempts true runs): in each round every
-  /// settled inlier no inlier agrees with is judged by (L) and dropped when m₋ exceeds this many
-  /// times c² (header comment, "confirmed at the end"). 0: off; otherwise ≥ 1.
-  double final_confirm_margin = 1.25;
-  /// ... and where the end's scale stands (c²_end in use, below the c² from the innovations),
-  /// the margin over c²_end instead (header comment, "the end's scale"): c²_end comes from
-  /// (L) at the estimate of the whole graph, not from innovations at arrival, and needs less
-  /// room (> 0; at 1 an unbacked inlier is dropped past c²_end itself).
-  double end_confirm_margin = 1.0;
-  /// finalize(): an inlier no inlier backs, whose partners (P) on arrival are at least this
-  /// many and all rejected since, is dropped past the c² in use itself, not final_confirm_margin
-  /// times it (header comment, "disowned at the end"); 0: off, else ≥ 1.
-  int end_rejected_partners = 2;
-  /// finalize()'s own scale (header comment, "the end's scale"): (L) of at most this many
-  /// settled inliers and as many trusted edges, evenly spaced, re-estimate c² at the end, which
-  /// only ever tightens it; 0: off (the c² in use stands).
-  int end_scale_samples = 512;
-  /// The end's c² replaces the c² in use only when it is at least this many times smaller
-  /// (the tail of a few hundred samples moves by tens of percent from run to run).
-  double end_scale_gap = 2.0;
-  /// The end's scale read during the replay too (header comment, "the end's scale on the
-  /// way"): each time the poses have grown by this factor since the last reading, and where
-  /// it is at least end_scale_gap times below the c² in use, the settled inliers no inlier
-  /// agrees with are dropped past final_confirm_margin times it, as finalize()'s (L) pass
-  /// drops them; 0: off, else > 1.
-  double end_scale_growth = 1.05;
-  /// ... and only once the updates since the last reading have re-eliminated at least this
-  /// many times the tree's factorisation flops (a reading costs about two), so that readings
-  /// cost a bounded share of the updates' work (≥ 0; at 2, smallGrid3D's p99 went from 1.0–1.2
-  /// to 3.3–4.1 times the clean replay's).
-  double end_scale_work = 16.0;
-  /// With WarmUp::kHold: when σ̂² is first estimated and that raises the c² in use at least
-  /// this many times, the closures rejected at the c² before (Ω at its word, the loosening rule
-  /// having refused an estimate) are held again and judged at the next update as the warm-up's
-  /// are (header comment, "warm-up"); 0: off, else > 1.
-  double rehold_growth = 4.0;
-  /// finalize()'s (L) passes: a partner backs a closure only while the two still agree (P) at
-  /// the estimate of the whole graph (header comment, "confirmed at the end"); false: a
-  /// partner that agreed once backs it for good.
-  bool end_partners_agree = true;
-  /// finalize(): a TLS closure that end_backed_partners settled inliers agree with (P) at the
-  /// end's estimate and the closures' own scale is kept, or taken back, up to this many times
-  /// c² (by s for an inlier, by its innovation (E) for a rejected one) (header comment,
-  /// "backed at the end"); 0: off, else ≥ 1.
-  double end_backed_margin = 4.0;
-  /// ... agreeing at pairS ≤ this many times c² (the c² in use, or the end's), not at the
-  /// pairs' scale, which false pairs inflate where they are many (> 0).
-  double end_backed_pair_margin = 1.5;
-  /// ... this many of them (≥ 1).
-  int end_backed_partners = 5;
-  /// finalize(): a TLS closure whose m₋ is past the end's bound but which a partner backs is
-  /// left out once (weight 0, one update) and stays out unless a partner still agrees with it
-  /// (P) at the estimate without it, within this many times the pair bound the backing reads
-  /// (header comment, "backing left out"); 0: off, else ≥ 1.
-  double left_out_backing_margin = 1.1;
-  /// TLS, GM: a closure whose first check exceeds entry_band·c² enters at weight 0; between c²
-  /// and that it graduates (≥ 1).
-  double entry_band = 2.0;
-  /// The scale of Ω the threshold is put on (header comment).
-  NoiseScale scale = NoiseScale::kEstimated;
-  /// Innovations needed before σ̂² is estimated (≥ 1); before, σ̂² = 1.
-  int scale_min_samples = 20;
-  /// The closures that arrive before that (header comment, "warm-up").
-  WarmUp warm_up = WarmUp::kHold;
-  /// Where each re-estimate of σ̂² from the corroborated innovations starts its fixed point
-  /// (header comment, "the noise scale"): at most at the last σ̂², so that false groups that
-  /// become most of the corroborated set do not move it by their median alone.
-  ScaleStart scale_start = ScaleStart::kAtMostLast;
-  /// finalize()'s first round: its re-check at the replay's estimate, or after relinearising
-  /// everything (header comment, "the first re-check").
-  FirstRecheck first_recheck = FirstRecheck::kReplayEstimate;
-  /// The truncation of estimateNoiseScale: innovations beyond tail_factor·c²·σ̂² count as false
-  /// closures (> 1).
-  double tail_factor = 3.0;
-  /// estimateNoiseScale: the tail's σ̂² at most this many times the median's (≥ 1).
-  double max_tail_scale = 30.0;
-  /// estimateNoiseScale: the tail's fixed point runs only once at least this many innovations
-  /// are within the truncation at the median's σ² (≥ 0; 0: always); with fewer, σ̂² is the
-  /// median's. Below 1/(1 − confidence) of them (100 at 0.99) their confidence quantile is
-  /// their largest, so one heavy-tailed true closure, or one false closure just inside the
-  /// truncation, would raise σ̂² by up to max_tail_scale (header comment, "noise scale").
-  int tail_min_samples = 100;
-  /// estimateNoiseScale: σ̂² > 1 (Ω loosened) only when at least this share of the
-  /// innovations is within the truncation at Ω's word, σ² = 1 (in [0, 1)).
-  double min_kept_share = 0.25;
-  /// estimateNoiseScale: ... or at least this many innovations (≥ 0). Also the closures judged
-  /// after which σ̂² is estimated from every innovation when fewer than scale_min_samples are
-  /// corroborated.
-  int loosen_min_samples = 200;
-  /// Poses K between the ends of two closures that may corroborate each other (header comment,
-  /// "corroboration"): σ̂² is estimated from corroborated closures' innovations. 0: from every
-  /// closure's innovation (≥ 0; on the shared files 10 against 0 takes intel with 90% false
-  /// closures from F_clean/F* 1.7e4 to 1 and MIT from 5.7 to 1).
-  int corroboration_window = 10;
-  /// Rounds of finalize(): graduate to the end, re-check every closure, relinearise all; again
-  /// while a re-check changed a weight (≥ 1). Each round's (L) pass drops the false closures
-  /// the last one's estimate showed; sphere_bignoise's drops fall 450, 60, 30, … over nine.
-  int finalize_rounds = 10;
-  /// finalize()'s last stage (header comment, "kept at Ω's word"): no TLS or GM loop closure
-  /// stays rejected whose residual s = eᵀΩe at the final estimate is within the given c² (Ω
-  /// at its word); false: off.
-  bool end_word = true;
-
-  /// Why the options cannot be used ("" when they can): names the field and the value.
-  std::string problem() const;
-};
-
-/// The estimator's constants as RobustOptions holds them (bayestree/noise_scale.h).
+/// The estimator's options at the online layer's confidence (bayestree/noise_scale.h).
 NoiseScaleOptions scaleOptions(const RobustOptions& o);
 /// bayestree/noise_scale.h's estimator at the online layer's options.
 inline NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, double c2,
@@ -534,11 +313,6 @@ struct ClosureCounts {
   int rechecks_bounded = 0;
   int regraduated = 0;  ///< re-checks that changed a settled closure's weight
   int unconfirmed = 0;  ///< inliers set to weight 0 by (L), online or in finalize()
-  /// of unconfirmed, the backed ones whose backing did not hold without them (finalize())
-  int left_out = 0;
-  /// of unconfirmed, those dropped within the margin because they were disowned (finalize();
-  /// RobustOptions::end_rejected_partners)
-  int disowned = 0;
   /// rejected closures taken back at the end by their residual within Ω's χ² bound
   /// (RobustOptions::end_word)
   int kept_at_word = 0;
@@ -561,11 +335,7 @@ class OnlineGnc {
                bool structural, const Edge& edge, KernelKind kernel = KernelKind::kNone);
   /// Before a smoother update: one graduation step of every graduating closure and the round
   /// robin of re-checks (StepScope). Returns the weights changed.
-  /// In kFinalize, `update` runs one update of the smoother (the owner's: its statistics count
-  /// it): the backed closures past the bound are each left out for an update and judged at the
-  /// estimate without them (RobustOptions::left_out_backing_margin; without `update`, not).
-  int step(IncrementalSmoother<G>& smoother, StepScope scope = StepScope::kRoundRobin,
-           const std::function<void()>& update = {});
+  int step(IncrementalSmoother<G>& smoother, StepScope scope = StepScope::kRoundRobin);
   /// After a smoother update, during the replay: the end's scale read again once the poses
   /// have grown by end_scale_growth since the last reading (header comment, "the end's scale
   /// on the way"); where it is at least end_scale_gap times below the c² in use, the settled
@@ -606,7 +376,7 @@ class OnlineGnc {
   double rho(int factor, double s) const;
 
   bool graduating() const { return !graduating_.empty(); }
-  /// Closures held in the warm-up (WarmUp::kHold), not judged yet.
+  /// Closures held in the warm-up (RobustRule::kWarmUp), not judged yet.
   size_t held() const { return held_.size(); }
   /// Every settled inlier whose residual is past recheck_margin·c² graduates again from μ₀ at
   /// it, all in this step (header comment, "a shrinking c²"); returns the weights set.
@@ -651,7 +421,7 @@ class OnlineGnc {
     double mu = 0, weight = 1, s = 0;
     double judged_c2 = 0;  ///< c² in use when it was last judged by its innovation
     int steps = 0;
-    bool held = false;                ///< at weight 0 until σ̂² is estimated (WarmUp::kHold)
+    bool held = false;  ///< at weight 0 until σ̂² is estimated (RobustRule::kWarmUp)
     bool dropped_on_the_way = false;  ///< by readEndScaleOnTheWay: taken back by the end's c²
     int end_take_backs = 0;     ///< from weight 0 in this finalize() (beginFinalize resets it)
     double m = 0;               ///< its innovation on entry
@@ -683,11 +453,8 @@ class OnlineGnc {
   /// Whether a closure that agreed with c (P) is a settled inlier now; with `now`, one that
   /// still agrees with it at that smoother's estimate.
   bool backed(const Closure& c, const IncrementalSmoother<G>* now = nullptr) const;
-  /// Whether c's partners are at least end_rejected_partners and every one a settled closure at
-  /// weight 0 (header comment, "disowned at the end").
-  bool disowned(const Closure& c) const;
   /// Whether at least `needed` of c's partners are settled inliers and, with `now`, agree with
-  /// it (P) at that smoother's estimate within `pair_bound` (backed, backedAtTheEnd).
+  /// it (P) at that smoother's estimate within `pair_bound` (backed).
   bool agreedBy(const Closure& c, const IncrementalSmoother<G>* now, double pair_bound,
                 int needed) const;
   /// (P)'s s of closures a and b at the smoother's estimate (+∞ when their ends are not within
@@ -704,7 +471,7 @@ class OnlineGnc {
   bool spansLoop(const Closure& c) const;
   /// (L) for a settled TLS closure the tree holds at weight 1 and no inlier agrees with, when
   /// it exceeds `bound` (nullopt otherwise, and for every other closure). `at_the_end`
-  /// (finalize()): kept path solves, and with end_partners_agree a partner backs it only while
+  /// (finalize()): kept path solves, and a partner backs it only while
   /// it still agrees (P) at the estimate.
   std::optional<double> unconfirmedBy(const IncrementalSmoother<G>& smoother, Closure* c,
                                       double bound, bool at_the_end);
@@ -715,34 +482,20 @@ class OnlineGnc {
   void dropUnconfirmed(IncrementalSmoother<G>& smoother, Closure* c);
   /// The c² finalize() judges by: the end's where there is one, else the c² in use.
   double endBound() const;
-  /// In finalize(): whether c, a TLS closure with s or innovation `value`, is within
-  /// end_backed_margin·bound and at least end_backed_partners settled inliers among its
-  /// partners agree with it (P) at the smoother's estimate within end_backed_pair_margin·bound.
-  bool backedAtTheEnd(const IncrementalSmoother<G>& smoother, const Closure& c, double value,
-                      double bound) const;
   /// finalize()'s c² (header comment, "the end's scale"): at most the c² in use.
   double endThreshold(const IncrementalSmoother<G>& smoother) const;
-  /// (L) for the closures graduation settled at weight 1 in the last step. Returns the
-  /// weights changed.
-  int confirm(IncrementalSmoother<G>& smoother);
   /// finalize()'s (L) over every settled inlier at final_confirm_margin·c²_end (endThreshold),
   /// the largest m₋ first and at most one drop per pose in a round: (L) reads one closure with
   /// the others held, so of two past the bound that share a pose the second is judged again
   /// next round, at the estimate without the first. Marks the closures it drops in `dropped`
   /// (by id), which the same step's re-checks leave alone (the tree still holds them at 1 until
   /// the next update). Returns the weights changed.
-  int confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped,
-                 const std::function<void()>& update);
+  int confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped);
   /// Drops the closures `over` names ((m₋, id), each past its bound), the largest m₋ first and
   /// at most one per pose: (L) reads one closure with the others held, so of two that share a
   /// pose the second is judged again at the estimate without the first. Returns the ids dropped.
   std::vector<int> dropLargestPerPose(IncrementalSmoother<G>& smoother,
                                       std::vector<std::pair<double, int>> over);
-  /// Closure id at weight 0, an update, and then: it stays out (counted as unconfirmed and
-  /// left_out) when no partner agrees with it (P) within left_out_backing_margin times the pair
-  /// bound at the estimate without it; else back at weight 1, and another update. Returns
-  /// whether it stays out.
-  bool leftOut(IncrementalSmoother<G>& smoother, int id, const std::function<void()>& update);
   /// Whether (L) judges c: a settled TLS closure the tree holds at weight 1.
   bool judgedByL(const IncrementalSmoother<G>& smoother, const Closure& c) const;
   /// c's (L) m₋ when past `bound` (c judgedByL), else nullopt; `at_the_end`: kept path solves.
@@ -763,8 +516,6 @@ class OnlineGnc {
   const std::vector<double>* scaleSource() const;
   /// σ̂² estimated, or given (NoiseScale::kGiven): new closures are judged at once.
   bool scaleKnown() const;
-  /// Whether (L) judges inliers (RobustOptions::confirm, EntryTest::kInnovation).
-  bool confirms() const;
   /// Whether (L) judges every inlier in finalize() (RobustOptions::final_confirm_margin).
   bool confirmsAtTheEnd() const;
   /// Whether (P)'s partners are recorded (read by backed()).
@@ -806,7 +557,6 @@ class OnlineGnc {
   std::vector<int> unresolved_;  ///< closures added since the last resolve()
   std::vector<int> graduating_;  ///< closures graduating, by id
   std::vector<int> held_;        ///< closures held in the warm-up, by id
-  std::vector<int> confirming_;  ///< settled at weight 1 by the last step's graduation, by id
   std::vector<int> by_factor_;   ///< factor index → closure id (−1: none)
   size_t cursor_ = 0;            ///< round robin of re-checks over closures_
   /// The c² every settled inlier was last checked against at once (sweepInliers), raised with

@@ -464,12 +464,12 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
   }
   const int bound = gnc_->options().max_steps_per_closure + 1;
   gnc_->beginFinalize();
-  // The first round's re-check reads the replay's own estimate (FirstRecheck::kReplayEstimate;
-  // not after judging held closures above); a round after one that changed a weight relinearises
+  // The first round's re-check reads the replay's own estimate (not after judging held closures
+  // above: those updates moved it); a round after one that changed a weight relinearises
   // everything first and reads the converged estimate, and the last round, whichever it is, ends
-  // relinearised (design.md, "The first re-check").
-  const bool relinearize_first =
-      judged_here || gnc_->options().first_recheck == FirstRecheck::kRelinearized;
+  // relinearised. The replay's estimate is within thousandths of the converged one in F, and
+  // the re-checks find the same closures at either.
+  const bool relinearize_first = judged_here;
   auto relinearizeAll = [&] {
     addStats(&total, smoother_.relinearizeAll(cancel));
     gnc_->resolve(smoother_);
@@ -481,20 +481,16 @@ UpdateStats OnlineSmoother<G>::finalize(const CancellationToken* cancel) {
     const bool relinearized = round > 0 || last || relinearize_first;
     if (relinearized) relinearizeAll();
     if (total.cancelled || last) break;
-    // The re-check's own updates (backing left out) count in this finalize()'s statistics.
-    const int changed = gnc_->step(smoother_, StepScope::kFinalize, [&] {
-      addStats(&total, smoother_.update());
-      gnc_->resolve(smoother_);
-    });
+    const int changed = gnc_->step(smoother_, StepScope::kFinalize);
     if (changed == 0 && !gnc_->graduating()) {
       if (!relinearized) relinearizeAll();
       break;
     }
   }
-  // Kept at Ω's word (RobustOptions::end_word; online_gnc.h): what the final estimate explains
+  // Kept at Ω's word (RobustRule::kEndWord; online_gnc.h): what the final estimate explains
   // within Ω's own χ² bound comes back, and the estimate is relinearised with it; again while
   // one came back.
-  if (gnc_->options().end_word)
+  if (gnc_->options().on(RobustRule::kEndWord))
     for (int round = 0; round < gnc_->options().finalize_rounds && !total.cancelled; ++round) {
       if (gnc_->takeBackAtWord(smoother_) == 0) break;
       relinearizeAll();
@@ -723,8 +719,6 @@ OnlineStats OnlineSmoother<G>::stats() const {
     s.closures_graduating = c.graduating;
     s.graduation_steps = c.graduation_steps;
     s.closures_unconfirmed = c.unconfirmed;
-    s.closures_left_out = c.left_out;
-    s.closures_disowned = c.disowned;
     s.closures_kept_at_word = c.kept_at_word;
     s.rechecks_bounded = c.rechecks_bounded;
     s.closure_threshold = gnc_->threshold();

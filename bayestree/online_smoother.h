@@ -137,12 +137,6 @@ struct OnlineStats {
   int graduation_updates = 0;
   /// Inliers dropped by their leave-one-out innovation (ClosureCounts::unconfirmed).
   int closures_unconfirmed = 0;
-  /// Of those, the backed closures whose backing did not hold without them in finalize()
-  /// (ClosureCounts::left_out; RobustOptions::left_out_backing_margin).
-  int closures_left_out = 0;
-  /// Of those, the closures dropped within the margin because every partner had been rejected
-  /// (ClosureCounts::disowned; RobustOptions::end_rejected_partners).
-  int closures_disowned = 0;
   /// Rejected closures taken back at the end by their residual within Ω's χ² bound
   /// (ClosureCounts::kept_at_word; RobustOptions::end_word).
   int closures_kept_at_word = 0;

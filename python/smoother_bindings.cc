@@ -55,8 +55,6 @@ py::dict statsDict(const OnlineStats& s) {
   d["closures_graduating"] = s.closures_graduating;
   d["closures_unconfirmed"] = s.closures_unconfirmed;
   d["rechecks_bounded"] = s.rechecks_bounded;
-  d["closures_left_out"] = s.closures_left_out;
-  d["closures_disowned"] = s.closures_disowned;
   d["closures_kept_at_word"] = s.closures_kept_at_word;
   d["graduation_steps"] = s.graduation_steps;
   d["graduation_updates"] = s.graduation_updates;

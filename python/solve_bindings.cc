@@ -61,18 +61,9 @@ void fillRtr(const RtrSummary& s, SolveOutcome* out) {
 
 // The online smoother's options that `arbor replay`'s online robust flags set, by the flags'
 // names with '_' for '-' (noise_scale is RobustOptions::scale).
-constexpr std::pair<const char*, double RobustOptions::*> kOnlineReals[] = {
-    {"final_confirm_margin", &RobustOptions::final_confirm_margin},
-    {"end_confirm_margin", &RobustOptions::end_confirm_margin},
-    {"rehold_growth", &RobustOptions::rehold_growth},
-    {"end_scale_growth", &RobustOptions::end_scale_growth},
-    {"end_backed_margin", &RobustOptions::end_backed_margin},
-    {"left_out_backing_margin", &RobustOptions::left_out_backing_margin}};
 constexpr std::pair<const char*, int RobustOptions::*> kOnlineInts[] = {
     {"corroboration_window", &RobustOptions::corroboration_window},
-    {"finalize_rounds", &RobustOptions::finalize_rounds},
-    {"end_rejected_partners", &RobustOptions::end_rejected_partners},
-    {"end_scale_samples", &RobustOptions::end_scale_samples}};
+    {"finalize_rounds", &RobustOptions::finalize_rounds}};
 
 // A value of the keyword `name`, as T, or a TypeError naming it.
 template <class T>
@@ -105,19 +96,23 @@ RobustOptions onlineOptions(const py::kwargs& keywords) {
       o.scale = keywordChoice(name, value, parseNoiseScale);
     } else if (name == "entry") {
       o.entry = keywordChoice(name, value, parseEntryTest);
-    } else if (name == "warm_up") {
-      o.warm_up = keywordChoice(name, value, parseWarmUp);
-    } else if (name == "scale_start") {
-      o.scale_start = keywordChoice(name, value, parseScaleStart);
-    } else if (name == "first_recheck") {
-      o.first_recheck = keywordChoice(name, value, parseFirstRecheck);
+    } else if (name == "rules_off") {
+      // A list of rule names (or one comma-separated str).
+      std::string names;
+      if (py::isinstance<py::str>(value)) {
+        names = py::str(value);
+      } else {
+        for (const auto& item :
+             keywordValue<std::vector<std::string>>(name, value, "a list of str"))
+          names += (names.empty() ? "" : ",") + item;
+      }
+      try {
+        o.rules_off = parseRuleSet(names);
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("RobustOptions: rules_off " + std::string(e.what()));
+      }
     } else {
       bool known = false;
-      for (const auto& [field, member] : kOnlineReals)
-        if (name == field) {
-          o.*member = keywordValue<double>(name, value, "a number");
-          known = true;
-        }
       for (const auto& [field, member] : kOnlineInts)
         if (name == field) {
           o.*member = keywordValue<int>(name, value, "an int");
@@ -135,9 +130,7 @@ RobustOptions onlineOptions(const py::kwargs& keywords) {
 // Whether any online option differs from RobustOptions' default (solve() refuses them).
 bool differsFromDefault(const RobustOptions& o) {
   const RobustOptions d;
-  bool differs = o.scale != d.scale || o.entry != d.entry || o.warm_up != d.warm_up ||
-                 o.scale_start != d.scale_start || o.first_recheck != d.first_recheck;
-  for (const auto& [field, member] : kOnlineReals) differs = differs || o.*member != d.*member;
+  bool differs = o.scale != d.scale || o.entry != d.entry || o.rules_off != d.rules_off;
   for (const auto& [field, member] : kOnlineInts) differs = differs || o.*member != d.*member;
   return differs;
 }
@@ -150,9 +143,8 @@ void solveRobust(const PoseGraph<G>& graph, const SolveRequest& q, BatchSolver s
                  SolveOutcome* out) {
   if (differsFromDefault(q.robust->online))
     throw std::invalid_argument(
-        "solve(): RobustOptions' online options (noise_scale, entry, warm_up, scale_start, "
-        "first_recheck, corroboration_window, the margins, rounds and end-scale settings) are "
-        "the OnlineSmoother's; solve() runs GNC from `init`");
+        "solve(): RobustOptions' online options (noise_scale, entry, corroboration_window, "
+        "finalize_rounds, rules_off) are the OnlineSmoother's; solve() runs GNC from `init`");
   GncOptions options;
   options.kernel = q.robust->kernel;
   options.threshold = q.robust->threshold;
@@ -298,12 +290,9 @@ void defineSolve(py::module_& m) {
                "quantile by the estimated variance factor (--inlier-threshold auto). The online "
                "smoother's own options, by keyword, as `arbor replay`'s flags of the same names "
                "('_' for '-'): noise_scale (estimated | given), entry (innovation | residual), "
-               "warm_up (hold | given), scale_start (at-most-last | median), first_recheck "
-               "(replay | relinearized), corroboration_window, finalize_rounds, "
-               "end_rejected_partners, "
-               "end_scale_samples (ints), final_confirm_margin, end_confirm_margin, "
-               "rehold_growth, end_scale_growth, end_backed_margin, left_out_backing_margin "
-               "(numbers); OnlineSmoother only (solve() refuses them).")
+               "corroboration_window, finalize_rounds (ints), rules_off (a list of rule names: "
+               "warm-up, rehold, scale-start, final-confirm, end-scale, end-word); "
+               "OnlineSmoother only (solve() refuses them).")
           .def_property_readonly("kernel",
                                  [](const RobustSettings& s) { return toString(s.kernel); })
           .def_readonly("threshold", &RobustSettings::threshold)
@@ -313,21 +302,18 @@ void defineSolve(py::module_& m) {
                                  [](const RobustSettings& s) { return toString(s.online.scale); })
           .def_property_readonly("entry",
                                  [](const RobustSettings& s) { return toString(s.online.entry); })
-          .def_property_readonly("warm_up",
-                                 [](const RobustSettings& s) { return toString(s.online.warm_up); })
-          .def_property_readonly(
-              "scale_start", [](const RobustSettings& s) { return toString(s.online.scale_start); })
-          .def_property_readonly(
-              "first_recheck",
-              [](const RobustSettings& s) { return toString(s.online.first_recheck); })
+          .def_property_readonly("rules_off",
+                                 [](const RobustSettings& s) {
+                                   std::vector<std::string> names;
+                                   for (RobustRule r : robustRules())
+                                     if (s.online.rules_off.has(r)) names.emplace_back(toString(r));
+                                   return names;
+                                 })
           .def("__repr__", [](const RobustSettings& s) {
             return "<arbor.RobustOptions kernel=" + toString(s.kernel) +
                    " threshold=" + std::to_string(s.threshold) +
                    " noise_scale=" + toString(s.online.scale) + ">";
           });
-  for (const auto& [field, member] : kOnlineReals)
-    options.def_property_readonly(
-        field, [member = member](const RobustSettings& s) { return s.online.*member; });
   for (const auto& [field, member] : kOnlineInts)
     options.def_property_readonly(
         field, [member = member](const RobustSettings& s) { return s.online.*member; });

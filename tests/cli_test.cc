@@ -382,7 +382,7 @@ TEST(Cli, BatchRobustTakesTheOnlineThresholdAndEstimate) {
   const auto j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["threshold_rule"], "online");
   EXPECT_EQ(j["init"], "online");
-  const double margin = arbor::RobustOptions{}.recheck_margin;
+  const double margin = arbor::robust_constants::kRecheckMargin;
   EXPECT_DOUBLE_EQ(j["inlier_threshold"].get<double>(), margin * c2);
   EXPECT_DOUBLE_EQ(j["online_threshold"]["c2"].get<double>(), margin * c2);
   EXPECT_DOUBLE_EQ(j["online_threshold"]["c2_in_use"].get<double>(), c2);

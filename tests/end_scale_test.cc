@@ -66,7 +66,7 @@ TEST(EndScale, DropsTheFalseClosuresTheEntrysScaleLetsIn) {
   const std::set<std::pair<Key, Key>> is_false = falseClosures();
   ASSERT_GE(is_false.size(), 30U);
   RobustOptions off;
-  off.end_scale_samples = 0;
+  off.rules_off.add(RobustRule::kEndScale);
   const Outcome without = replayRobust(clean, graph, off);
   const Outcome with = replayRobust(clean, graph, RobustOptions{});
   std::cout << "rejected " << without.rejected.size() << " -> " << with.rejected.size() << " of "
@@ -80,10 +80,10 @@ TEST(EndScale, DropsTheFalseClosuresTheEntrysScaleLetsIn) {
   EXPECT_LT(with.F_clean, 0.9 * without.F_clean);
   // The c² of the last pass: the entry's without the end's scale, several times below it with.
   EXPECT_DOUBLE_EQ(without.c2_end, without.c2);
-  EXPECT_LT(with.c2_end, with.c2 / RobustOptions{}.end_scale_gap);
+  EXPECT_LT(with.c2_end, with.c2 / robust_constants::kEndScaleGap);
 }
 
-// The end's scale read on the way (RobustOptions::end_scale_growth, end_scale_work): read again
+// The end's scale read on the way (robust_constants::kEndScaleGrowth, kEndScaleWork): read again
 // as the poses and the updates' work grow, and where it is far below the c² in use the false
 // closures come out during the replay, not only in finalize(), so the updates after carry
 // less fill. Measured: on the whole file the updates take 28 s against 128 s without.
@@ -91,16 +91,15 @@ TEST(EndScale, ReadOnTheWayDropsBeforeTheEnd) {
   if (!present()) GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kRobust);
   const PoseGraph3 graph = firstPoses(kRobust), clean = firstPoses(kClean);
   const std::set<std::pair<Key, Key>> is_false = falseClosures();
-  auto updatesOnly = [&](double growth) {
+  auto updatesOnly = [&](bool reading) {
     cli::ReplaySettings settings;
     settings.robust = RobustOptions{};
-    settings.robust->end_scale_growth = growth;
+    if (!reading) settings.robust->rules_off.add(RobustRule::kEndScale);
     settings.batch = false;
     settings.finalize = false;
     return cli::runReplay(graph, settings);
   };
-  const cli::ReplayResult<SE3> off = updatesOnly(0),
-                               on = updatesOnly(RobustOptions{}.end_scale_growth);
+  const cli::ReplayResult<SE3> off = updatesOnly(false), on = updatesOnly(true);
   std::cout << "before finalize(): " << off.online.closures_unconfirmed << " -> "
             << on.online.closures_unconfirmed << " dropped, " << off.online.closures_outlier
             << " -> " << on.online.closures_outlier << " rejected of " << is_false.size()
@@ -123,7 +122,7 @@ TEST(EndScale, ReadOnTheWayDropsBeforeTheEnd) {
   EXPECT_LE(true_on, true_off + 2);
   // And the replay with finalize() ends as well as without the readings.
   RobustOptions no_readings;
-  no_readings.end_scale_growth = 0;
+  no_readings.rules_off.add(RobustRule::kEndScale);
   const Outcome without = replayRobust(clean, graph, no_readings);
   const Outcome with = replayRobust(clean, graph, RobustOptions{});
   for (const auto& pair : with.rejected)
@@ -132,39 +131,13 @@ TEST(EndScale, ReadOnTheWayDropsBeforeTheEnd) {
   EXPECT_LE(with.F_clean, 1.01 * without.F_clean);
 }
 
-// A partner recorded on arrival backs a closure at the end only while the two still agree at
-// the end's estimate (RobustOptions::end_partners_agree): measured (the commit that added it),
-// 36 of the 42 false closures rejected for good partners, 39 with it, no true one either way.
-TEST(EndScale, PartnersBackOnlyWhileTheyStillAgree) {
-  if (!present()) GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kRobust);
-  const PoseGraph3 graph = firstPoses(kRobust), clean = firstPoses(kClean);
-  const std::set<std::pair<Key, Key>> is_false = falseClosures();
-  // Backing left out (RobustOptions::left_out_backing_margin) reads the same backing without
-  // each closure, and takes the closures this rule takes here whichever way partners back: off
-  // in both, to see this rule alone; with it on, 42 of 42 either way.
-  RobustOptions while_they_agree;
-  while_they_agree.left_out_backing_margin = 0;
-  RobustOptions for_good = while_they_agree;
-  for_good.end_partners_agree = false;
-  const Outcome once = replayRobust(clean, graph, for_good);
-  const Outcome now = replayRobust(clean, graph, while_they_agree);
-  const Outcome left_out = replayRobust(clean, graph, RobustOptions{});
-  std::cout << "rejected " << once.rejected.size() << " -> " << now.rejected.size() << " of "
-            << is_false.size() << " false\n";
-  for (const auto& pair : now.rejected)
-    EXPECT_TRUE(is_false.count(pair)) << "a true closure " << pair.first << " " << pair.second;
-  EXPECT_GT(now.rejected.size(), once.rejected.size());
-  EXPECT_LE(now.F_clean, once.F_clean);
-  EXPECT_EQ(left_out.rejected, is_false);
-}
-
 // The same first poses without false closures: every closure kept either way, and the same
 // estimate (the end's scale only tightens the final check, and no inlier is past it).
 TEST(EndScale, KeepsEveryClosureOfTheCleanGraph) {
   if (!present()) GTEST_SKIP() << "shared dataset absent: " << testing::datasetPath(kClean);
   const PoseGraph3 clean = firstPoses(kClean);
   RobustOptions off;
-  off.end_scale_samples = 0;
+  off.rules_off.add(RobustRule::kEndScale);
   const Outcome without = replayRobust(clean, clean, off);
   const Outcome with = replayRobust(clean, clean, RobustOptions{});
   EXPECT_TRUE(with.rejected.empty());

@@ -74,7 +74,7 @@ Counts expectKeptAtWord(std::uint64_t seed, double fraction, sim::OutlierPolicy 
   auto replay = [&](bool end_word) {
     cli::ReplaySettings settings;
     settings.robust = RobustOptions{};
-    settings.robust->end_word = end_word;
+    if (!end_word) settings.robust->rules_off.add(RobustRule::kEndWord);
     settings.batch = false;
     return cli::runReplay(c.graph, settings);
   };

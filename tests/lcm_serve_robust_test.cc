@@ -367,7 +367,7 @@ TEST(RobustBatch, ReplayBatchesNeverWorseInRobustCostThanOnline) {
       SCOPED_TRACE("update " + std::to_string(b.update) + " " + refine::toString(solver));
       EXPECT_TRUE(b.robust);
       EXPECT_GT(b.judged, 0);
-      EXPECT_DOUBLE_EQ(b.threshold, (b.final_run ? settings.robust->recheck_margin : 1.0) *
+      EXPECT_DOUBLE_EQ(b.threshold, (b.final_run ? robust_constants::kRecheckMargin : 1.0) *
                                         chiSquareThreshold(0.99, 3));
       const double winner = b.winner == "incremental" ? b.F_incremental
                             : b.winner == "gnc"       ? b.F_lm

@@ -158,7 +158,7 @@ void plantedClosureRejected() {
   c.addFalse(5, 57, badMeasurement<G>(6.0));
   OnlineSmootherOptions<G> options = robustOptions<G>();
   options.robust->entry = EntryTest::kResidual;
-  options.robust->warm_up = WarmUp::kGiven;  // judged on arrival, not held
+  options.robust->rules_off.add(RobustRule::kWarmUp);  // judged on arrival, not held
   OnlineSmoother<G> robust(options);
   feed(c, &robust);
   expectClassified(c, robust, "online");
@@ -202,7 +202,7 @@ template <class G>
 void cleanEqualsPlain() {
   Circle<G> c(100, 20, 2, 0.05, 3);
   OnlineSmootherOptions<G> options = robustOptions<G>();
-  options.robust->warm_up = WarmUp::kGiven;
+  options.robust->rules_off.add(RobustRule::kWarmUp);
   OnlineSmoother<G> robust(options), plain;
   feed(c, &robust);
   feed(c, &plain);
@@ -326,8 +326,8 @@ TEST(OnlineRobust, BadOptionsRefused) {
   o.confidence = 1.5;
   refused(o, "confidence");
   o = {};
-  o.recheck_margin = 0.5;
-  refused(o, "recheck_margin");
+  o.finalize_rounds = 0;
+  refused(o, "finalize_rounds");
 }
 
 // The generated robust files in data/ replayed with --robust: precision and recall of the

@@ -50,11 +50,7 @@ TEST(Rehold, RejectedAtOmegasWordAreJudgedAgain) {
     ASSERT_GE(p.is_false.size(), 20U);
     RobustOptions on;  // rehold_growth 4, the default
     RobustOptions off;
-    off.rehold_growth = 0;
-    // Backed at the end takes back one false closure of seed 2, (145, 172): five true closures
-    // between the same rings agree with it at 0.92–1.09·c²_end, where Ω's rotation blocks 100
-    // times too confident leave its translation unjudged (design.md, "Backed at the end").
-    on.end_backed_margin = 0;
+    off.rules_off.add(RobustRule::kRehold);
     const Outcome without = replayRobust(p, off);
     const Outcome with = replayRobust(p, on);
     // The clean graph's optimum from the plain replay of it.

@@ -16,8 +16,6 @@ namespace arbor::testing {
 struct RobustOutcome {
   std::set<std::pair<Key, Key>> rejected;  ///< (from, to), low id first
   int unconfirmed = 0;                     ///< OnlineStats::closures_unconfirmed
-  int left_out = 0;                        ///< OnlineStats::closures_left_out
-  int disowned = 0;                        ///< OnlineStats::closures_disowned
   int rechecks_bounded = 0;                ///< OnlineStats::rechecks_bounded
   double F_clean = 0;                      ///< F over `clean`'s edges at the estimate
   double c2 = 0, c2_end = 0;    ///< OnlineStats::closure_threshold and closure_threshold_at_end
@@ -53,8 +51,6 @@ RobustOutcome replayRobust(const PoseGraph<G>& clean, const PoseGraph<G>& graph,
   RobustOutcome out;
   out.rejected = rejectedPairs(r.closures);
   out.unconfirmed = r.online.closures_unconfirmed;
-  out.left_out = r.online.closures_left_out;
-  out.disowned = r.online.closures_disowned;
   out.rechecks_bounded = r.online.rechecks_bounded;
   out.F_clean = objective(clean, r.poses);
   out.c2 = r.online.closure_threshold;

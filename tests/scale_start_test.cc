@@ -56,7 +56,7 @@ TEST(ScaleStart, ManhattanWithFiftyPercentGroupFalseClosures) {
   const double F_star = testing::plainReplayF(p.clean);
   const testing::RobustOutcome at_defaults = testing::replayRobust(p.clean, p.graph, {});
   RobustOptions from_median;
-  from_median.scale_start = ScaleStart::kMedian;
+  from_median.rules_off.add(RobustRule::kScaleStart);
   const testing::RobustOutcome median = testing::replayRobust(p.clean, p.graph, from_median);
   std::cout << p.is_false.size()
             << " false closures; F_clean / F*: " << at_defaults.F_clean / F_star << " with "

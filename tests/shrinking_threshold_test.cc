@@ -46,7 +46,7 @@ TEST(ShrinkingThreshold, IntelWithNinetyPercentGroupFalseClosures) {
   const double F_star = testing::plainReplayF(p.clean);
   const testing::RobustOutcome at_defaults = testing::replayRobust(p.clean, p.graph, {});
   RobustOptions no_rehold;
-  no_rehold.rehold_growth = 0;
+  no_rehold.rules_off.add(RobustRule::kRehold);
   const testing::RobustOutcome without = testing::replayRobust(p.clean, p.graph, no_rehold);
   std::cout << "F_clean / F*: " << at_defaults.F_clean / F_star << " with "
             << at_defaults.rejected.size() << " rejected; without the re-hold "
@@ -85,12 +85,12 @@ TEST(ShrinkingThreshold, EveryInlierIsCheckedAtOnce) {
     const int regraduated_before = replay.gnc()->counts().regraduated;
     replay.update();
     peak = std::max(peak, c2);
-    if (robust.recheck_margin * c2 >= peak) continue;
+    if (robust_constants::kRecheckMargin * c2 >= peak) continue;
     int settled_inliers = 0;
     for (const ClosureReport& r : replay.closures()) {
       if (r.graduating || r.status != ClosureStatus::kInlier) continue;
       ++settled_inliers;
-      EXPECT_LE(r.residual, robust.recheck_margin * c2) << r.from << " " << r.to;
+      EXPECT_LE(r.residual, robust_constants::kRecheckMargin * c2) << r.from << " " << r.to;
     }
     const int regraduated = replay.gnc()->counts().regraduated - regraduated_before;
     std::cout << "c² " << peak << " -> " << c2 << ": " << regraduated

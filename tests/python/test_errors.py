@@ -42,14 +42,14 @@ def test_bad_options(data_dir):
     # them all (they are the online smoother's).
     with pytest.raises(ValueError, match="noise_scale must be estimated or given, not 'sometimes'"):
         arbor.RobustOptions(noise_scale="sometimes")
-    with pytest.raises(ValueError, match="scale_start must be at-most-last or median, not 'last'"):
-        arbor.RobustOptions(scale_start="last")
+    with pytest.raises(ValueError, match="rules_off must be warm-up, .* or end-word, not 'end'"):
+        arbor.RobustOptions(rules_off=["end"])
+    with pytest.raises(TypeError, match="unexpected keyword 'scale_start'"):
+        arbor.RobustOptions(scale_start="median")
     with pytest.raises(TypeError, match="unexpected keyword 'noise'"):
         arbor.RobustOptions(noise="given")
     with pytest.raises(TypeError, match="finalize_rounds must be an int, not float"):
         arbor.RobustOptions(finalize_rounds=2.5)
-    with pytest.raises(ValueError, match="final_confirm_margin"):
-        arbor.RobustOptions(final_confirm_margin=0.5)
     with pytest.raises(ValueError, match="corroboration_window"):
         arbor.RobustOptions(corroboration_window=-4)
     with pytest.raises(ValueError, match="online options"):

@@ -757,7 +757,7 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       "out)")("dims", po::value(&dims), "with --family: 2, 3 or 2,3 (default 2,3)")(
       "ablate", po::value(&ablate),
       "with --family: the replay with this rule of the robust layer off (end-word, "
-      "final-confirm, disowned, end-scale, end-backed, left-out, rehold, corroboration, "
+      "final-confirm, end-scale, rehold, corroboration, "
       "scale-start, warm-up, estimated-scale; tools/bench/ablation.h)");
   if (!parseOptions(args, options)) return 0;
   if (families.empty() && !seeds.empty()) throw cli::UsageError("--seeds needs --family NAMES");

@@ -29,7 +29,7 @@ OnlineThreshold onlineThreshold(const PoseGraph<G>& graph, KernelKind kernel,
   OnlineThreshold out;
   out.c2_in_use = st.closure_threshold;
   const refine::OnlineClassification bounds = refine::onlineBounds(
-      st.closure_threshold, st.closure_threshold_at_end, robust.recheck_margin);
+      st.closure_threshold, st.closure_threshold_at_end, robust_constants::kRecheckMargin);
   out.c2 = bounds.c2;
   out.c2_take_back = bounds.c2_take_back;
   out.noise_scale = st.noise_scale;

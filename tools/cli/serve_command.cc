@@ -424,9 +424,7 @@ int serveCommand(const std::vector<std::string>& args) {
       j["robust"] = {
           {"kernel", toString(options.robust->kernel)},
           {"noise_scale_mode", toString(options.robust->scale)},
-          {"warm_up", toString(options.robust->warm_up)},
-          {"scale_start", toString(options.robust->scale_start)},
-          {"first_recheck", toString(options.robust->first_recheck)},
+          {"rules_off", options.robust->rules_off.toString()},
           {"inlier_threshold", s.inlier_threshold},
           {"closures_inlier", counts[static_cast<int>(ClosureStatus::kInlier)]},
           {"closures_outlier", counts[static_cast<int>(ClosureStatus::kOutlier)]},

@@ -142,7 +142,7 @@ OnlineClassification robustStartOf(const OnlineSmoother<G>& smoother, std::vecto
     throw std::invalid_argument("robustStartOf: the smoother has no robust smoothing");
   if (!smoother.finalized()) return {};
   OnlineClassification c =
-      onlineBounds(online->threshold(), online->thresholdAtEnd(), online->options().recheck_margin);
+      onlineBounds(online->threshold(), online->thresholdAtEnd(), robust_constants::kRecheckMargin);
   c.held_out = std::move(held_out);
   return c;
 }
