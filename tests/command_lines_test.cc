@@ -252,37 +252,6 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
   }
 }
 
-// The help of replay, serve and a description filled by the binder list every smoother flag
-// with the same text.
-TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
-  boost::program_options::options_description binder;
-  addSmootherFlags(binder);
-  ASSERT_GE(binder.options().size(), fields().size());
-  // Whitespace runs as one space: the help wraps descriptions at its line length.
-  auto squeeze = [](const std::string& text) {
-    std::string out;
-    for (char c : text) {
-      const bool space = c == ' ' || c == '\n' || c == '\t';
-      if (!space || (!out.empty() && out.back() != ' ')) out += space ? ' ' : c;
-    }
-    return out;
-  };
-  auto help = [&](const std::function<void()>& parse) {
-    ::testing::internal::CaptureStdout();
-    parse();
-    return squeeze(::testing::internal::GetCapturedStdout());
-  };
-  const std::string replay = help([] { EXPECT_FALSE(parseReplayCommandLine({"--help"})); });
-  const std::string serve = help([] { EXPECT_FALSE(parseServeCommandLine({"--help"})); });
-  for (const auto& option : binder.options()) {
-    const std::string flag = option->format_name(), text = squeeze(option->description());
-    for (const std::string* h : {&replay, &serve}) {
-      EXPECT_NE(h->find(flag + " "), std::string::npos) << flag;
-      EXPECT_NE(h->find(text), std::string::npos) << flag << ": " << text;
-    }
-  }
-}
-
 // --bounded-heap (core/heap_policy.h) is off unless given, in replay and serve alike.
 TEST(HeapFlag, ReachesReplayAndServe) {
   EXPECT_FALSE(parseReplayCommandLine({"graph.g2o"})->bounded_heap);
