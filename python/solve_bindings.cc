@@ -1,6 +1,7 @@
 // arbor.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
 // (tools/refine/batch_solvers.h: lm, gn, dogleg, rtr) from any initialisation, optionally
 // robust (GNC, as `arbor batch --robust`), and arbor.RobustOptions.
+#include <algorithm>
 #include <optional>
 #include <string>
 #include <utility>
@@ -10,6 +11,7 @@
 
 #include "arbor/core/gnc_solver.h"
 #include "arbor/core/initialization.h"
+#include "arbor/tools/cli/online_robust_table.h"
 #include "arbor/tools/refine/batch_solvers.h"
 #include "bindings.h"
 #include "conversions.h"
@@ -18,6 +20,9 @@
 namespace arbor::python {
 namespace {
 
+using cli::onlineRobustOptionTable;
+using cli::OptionSpec;
+using cli::OptionType;
 using refine::BatchSolver;
 
 /// What solve() returns (arbor.SolveResult).
@@ -59,71 +64,79 @@ void fillRtr(const RtrSummary& s, SolveOutcome* out) {
   out->message = s.message;
 }
 
-// The online smoother's options that `arbor replay`'s online robust flags set, by the flags'
-// names with '_' for '-' (noise_scale is RobustOptions::scale).
-constexpr std::pair<const char*, double RobustOptions::*> kOnlineReals[] = {
-    {"final_confirm_margin", &RobustOptions::final_confirm_margin},
-    {"end_confirm_margin", &RobustOptions::end_confirm_margin},
-    {"rehold_growth", &RobustOptions::rehold_growth},
-    {"end_scale_growth", &RobustOptions::end_scale_growth},
-    {"end_backed_margin", &RobustOptions::end_backed_margin},
-    {"left_out_backing_margin", &RobustOptions::left_out_backing_margin}};
-constexpr std::pair<const char*, int RobustOptions::*> kOnlineInts[] = {
-    {"corroboration_window", &RobustOptions::corroboration_window},
-    {"finalize_rounds", &RobustOptions::finalize_rounds},
-    {"end_rejected_partners", &RobustOptions::end_rejected_partners},
-    {"end_scale_samples", &RobustOptions::end_scale_samples}};
+// A row's Python keyword: its flag with '_' for '-'.
+std::string keywordOf(const OptionSpec<RobustOptions>& row) {
+  std::string name = row.name;
+  std::replace(name.begin(), name.end(), '-', '_');
+  return name;
+}
 
-// A value of the keyword `name`, as T, or a TypeError naming it.
-template <class T>
-T keywordValue(const std::string& name, const py::handle& value, const char* type) {
+// arbor.RobustOptions' docstring, its online keywords from the table.
+const std::string& robustOptionsDoc() {
+  static const std::string doc = [] {
+    std::string text =
+        "kernel: tls | gm | cauchy | huber; threshold: c² on eᵀΩe (0: the χ² quantile of the "
+        "edge's dimension at `confidence`); estimate_scale (batch only): scale that quantile by "
+        "the estimated variance factor (--inlier-threshold auto). The online smoother's own "
+        "options, by keyword, as `arbor replay`'s flags of the same names ('_' for '-'):";
+    const char* separator = " ";
+    for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
+      text += separator + keywordOf(row) + " (" +
+              (row.type == OptionType::kInteger ? "an int"
+               : row.type == OptionType::kReal  ? "a number"
+                                                : row.arg) +
+              ")";
+      separator = ", ";
+    }
+    return text + "; OnlineSmoother only (solve() refuses them).";
+  }();
+  return doc;
+}
+
+// A keyword's value as the command line writes it, checked against the row's type (a TypeError
+// naming the keyword otherwise).
+std::string keywordText(const OptionSpec<RobustOptions>& row, const std::string& name,
+                        const py::handle& value) {
+  auto refuse = [&](const char* type) {
+    return py::type_error("RobustOptions: " + name + " must be " + type + ", not " +
+                          std::string(py::str(value.get_type().attr("__name__"))));
+  };
   try {
-    return value.cast<T>();
+    switch (row.type) {
+      case OptionType::kInteger:
+        try {
+          return std::to_string(value.cast<int>());
+        } catch (const py::cast_error&) {
+          throw refuse("an int");
+        }
+      case OptionType::kReal:
+        return cli::option_detail::text(value.cast<double>());
+      case OptionType::kSwitch:
+        return value.cast<bool>() ? "true" : "false";
+      case OptionType::kWord:
+        return value.cast<std::string>();
+    }
   } catch (const py::cast_error&) {
-    throw py::type_error("RobustOptions: " + name + " must be " + type + ", not " +
-                         std::string(py::str(value.get_type().attr("__name__"))));
   }
+  throw refuse(row.type == OptionType::kWord ? "a str" : "a number");
 }
 
-// The enum named by the keyword `name` (parse: the enum's inverse of toString).
-template <class Enum>
-Enum keywordChoice(const std::string& name, const py::handle& value,
-                   Enum (*parse)(const std::string&)) {
-  try {
-    return parse(keywordValue<std::string>(name, value, "a str"));
-  } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument("RobustOptions: " + name + " " + e.what());
-  }
-}
-
-// The online options from the keywords; anything else is a TypeError.
+// The online options from the keywords, by the online robust table (tools/cli/
+// online_robust_table.h: the flags' names with '_' for '-'); an unknown keyword is a TypeError.
 RobustOptions onlineOptions(const py::kwargs& keywords) {
   RobustOptions o;
   for (const auto& [key, value] : keywords) {
     const std::string name = py::str(key);
-    if (name == "noise_scale") {
-      o.scale = keywordChoice(name, value, parseNoiseScale);
-    } else if (name == "entry") {
-      o.entry = keywordChoice(name, value, parseEntryTest);
-    } else if (name == "warm_up") {
-      o.warm_up = keywordChoice(name, value, parseWarmUp);
-    } else if (name == "scale_start") {
-      o.scale_start = keywordChoice(name, value, parseScaleStart);
-    } else if (name == "first_recheck") {
-      o.first_recheck = keywordChoice(name, value, parseFirstRecheck);
-    } else {
-      bool known = false;
-      for (const auto& [field, member] : kOnlineReals)
-        if (name == field) {
-          o.*member = keywordValue<double>(name, value, "a number");
-          known = true;
-        }
-      for (const auto& [field, member] : kOnlineInts)
-        if (name == field) {
-          o.*member = keywordValue<int>(name, value, "an int");
-          known = true;
-        }
-      if (!known) throw py::type_error("RobustOptions: unexpected keyword '" + name + "'");
+    const auto& table = onlineRobustOptionTable();
+    const auto row =
+        std::find_if(table.begin(), table.end(),
+                     [&](const OptionSpec<RobustOptions>& r) { return keywordOf(r) == name; });
+    if (row == table.end())
+      throw py::type_error("RobustOptions: unexpected keyword '" + name + "'");
+    try {
+      row->set(o, keywordText(*row, name, value));
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("RobustOptions: " + name + " " + e.what());
     }
   }
   // The numbers by the options' own rule, which names the field (RobustOptions::problem).
@@ -135,11 +148,9 @@ RobustOptions onlineOptions(const py::kwargs& keywords) {
 // Whether any online option differs from RobustOptions' default (solve() refuses them).
 bool differsFromDefault(const RobustOptions& o) {
   const RobustOptions d;
-  bool differs = o.scale != d.scale || o.entry != d.entry || o.warm_up != d.warm_up ||
-                 o.scale_start != d.scale_start || o.first_recheck != d.first_recheck;
-  for (const auto& [field, member] : kOnlineReals) differs = differs || o.*member != d.*member;
-  for (const auto& [field, member] : kOnlineInts) differs = differs || o.*member != d.*member;
-  return differs;
+  for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable())
+    if (row.get(o) != row.get(d)) return true;
+  return false;
 }
 
 // As `arbor batch --robust`: GNC from the initialisation; with rtr, the certifiable solver on
@@ -292,45 +303,29 @@ void defineSolve(py::module_& m) {
                  return s;
                }),
                py::arg("kernel") = "tls", py::arg("threshold") = 0.0, py::arg("confidence") = 0.99,
-               py::arg("estimate_scale") = false,
-               "kernel: tls | gm | cauchy | huber; threshold: c² on eᵀΩe (0: the χ² quantile of "
-               "the edge's dimension at `confidence`); estimate_scale (batch only): scale that "
-               "quantile by the estimated variance factor (--inlier-threshold auto). The online "
-               "smoother's own options, by keyword, as `arbor replay`'s flags of the same names "
-               "('_' for '-'): noise_scale (estimated | given), entry (innovation | residual), "
-               "warm_up (hold | given), scale_start (at-most-last | median), first_recheck "
-               "(replay | relinearized), corroboration_window, finalize_rounds, "
-               "end_rejected_partners, "
-               "end_scale_samples (ints), final_confirm_margin, end_confirm_margin, "
-               "rehold_growth, end_scale_growth, end_backed_margin, left_out_backing_margin "
-               "(numbers); OnlineSmoother only (solve() refuses them).")
+               py::arg("estimate_scale") = false, robustOptionsDoc().c_str())
           .def_property_readonly("kernel",
                                  [](const RobustSettings& s) { return toString(s.kernel); })
           .def_readonly("threshold", &RobustSettings::threshold)
           .def_readonly("confidence", &RobustSettings::confidence)
           .def_readonly("estimate_scale", &RobustSettings::estimate_scale)
-          .def_property_readonly("noise_scale",
-                                 [](const RobustSettings& s) { return toString(s.online.scale); })
-          .def_property_readonly("entry",
-                                 [](const RobustSettings& s) { return toString(s.online.entry); })
-          .def_property_readonly("warm_up",
-                                 [](const RobustSettings& s) { return toString(s.online.warm_up); })
-          .def_property_readonly(
-              "scale_start", [](const RobustSettings& s) { return toString(s.online.scale_start); })
-          .def_property_readonly(
-              "first_recheck",
-              [](const RobustSettings& s) { return toString(s.online.first_recheck); })
           .def("__repr__", [](const RobustSettings& s) {
             return "<arbor.RobustOptions kernel=" + toString(s.kernel) +
                    " threshold=" + std::to_string(s.threshold) +
                    " noise_scale=" + toString(s.online.scale) + ">";
           });
-  for (const auto& [field, member] : kOnlineReals)
-    options.def_property_readonly(
-        field, [member = member](const RobustSettings& s) { return s.online.*member; });
-  for (const auto& [field, member] : kOnlineInts)
-    options.def_property_readonly(
-        field, [member = member](const RobustSettings& s) { return s.online.*member; });
+  // The online options, read-only, by the table: a str, an int or a float each.
+  for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
+    options.def_property_readonly(keywordOf(row).c_str(),
+                                  [row](const RobustSettings& s) -> py::object {
+                                    const std::string text = row.get(s.online).value_or("");
+                                    if (row.type == OptionType::kInteger)
+                                      return py::int_(std::stoi(text));
+                                    if (row.type == OptionType::kReal)
+                                      return py::float_(std::stod(text));
+                                    return py::str(text);
+                                  });
+  }
 
   py::class_<SolveOutcome>(m, "SolveResult", "What arbor.solve returns.")
       .def_readonly("solver", &SolveOutcome::solver)

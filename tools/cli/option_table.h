@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -20,10 +21,14 @@ namespace arbor::cli {
 /// experimental ones exist for the project's own comparisons).
 enum class Tier { kCommon, kAdvanced, kExperimental };
 
+/// The kind of value an option takes.
+enum class OptionType { kSwitch, kInteger, kReal, kWord };
+
 /// One option of an options struct O.
 template <class O>
 struct OptionSpec {
-  std::string name;  ///< the flag without "--", and the config file's key
+  std::string name;  ///< the flag without "--", the config file's key; '_' for '-': Python's
+  OptionType type = OptionType::kWord;
   Tier tier = Tier::kCommon;
   std::string section;  ///< the --help group it is listed under
   std::string arg;      ///< the value's placeholder ("N", "inline|async"); empty: a switch
@@ -81,9 +86,26 @@ T parseNumber(const std::string& text, const char* what) {
   } catch (const std::exception&) {
     used = 0;
   }
-  if (used == 0 || used != text.size())
+  const bool fits = !std::is_integral_v<T> || (value >= double(std::numeric_limits<T>::min()) &&
+                                               value <= double(std::numeric_limits<T>::max()));
+  if (used == 0 || used != text.size() || !fits)
     throw std::invalid_argument(std::string("must be ") + what + ", not '" + text + "'");
   return static_cast<T>(value);
+}
+
+// A row without its get and set.
+template <class O>
+OptionSpec<O> spec(std::string name, OptionType type, Tier tier, std::string section,
+                   std::string arg, std::string help, std::string needs) {
+  OptionSpec<O> out;
+  out.name = std::move(name);
+  out.type = type;
+  out.tier = tier;
+  out.section = std::move(section);
+  out.arg = std::move(arg);
+  out.help = std::move(help);
+  out.needs = std::move(needs);
+  return out;
 }
 
 }  // namespace option_detail
@@ -95,14 +117,9 @@ OptionSpec<O> numberOption(std::string name, Tier tier, std::string section, std
                            std::string help, Access access, Condition condition,
                            std::string needs = "") {
   using T = std::decay_t<decltype(access(std::declval<O&>()))>;
-  OptionSpec<O> spec{std::move(name),
-                     tier,
-                     std::move(section),
-                     std::move(arg),
-                     std::move(help),
-                     std::move(needs),
-                     {},
-                     {}};
+  OptionSpec<O> spec = option_detail::spec<O>(
+      std::move(name), std::is_integral_v<T> ? OptionType::kInteger : OptionType::kReal, tier,
+      std::move(section), std::move(arg), std::move(help), std::move(needs));
   spec.get = [access](const O& o) -> std::optional<std::string> {
     return option_detail::text(access(o));
   };
@@ -121,7 +138,8 @@ OptionSpec<O> numberOption(std::string name, Tier tier, std::string section, std
 template <class O, class Access>
 OptionSpec<O> switchOption(std::string name, Tier tier, std::string section, std::string help,
                            Access access, bool on) {
-  OptionSpec<O> spec{std::move(name), tier, std::move(section), "", std::move(help), "", {}, {}};
+  OptionSpec<O> spec = option_detail::spec<O>(std::move(name), OptionType::kSwitch, tier,
+                                              std::move(section), "", std::move(help), "");
   spec.get = [access, on](const O& o) -> std::optional<std::string> {
     return access(o) == on ? "true" : "false";
   };
@@ -139,14 +157,9 @@ template <class O, class Access, class Parse, class Name>
 OptionSpec<O> wordOption(std::string name, Tier tier, std::string section, std::string arg,
                          std::string help, Access access, Parse parse, Name word,
                          std::string needs = "") {
-  OptionSpec<O> spec{std::move(name),
-                     tier,
-                     std::move(section),
-                     std::move(arg),
-                     std::move(help),
-                     std::move(needs),
-                     {},
-                     {}};
+  OptionSpec<O> spec =
+      option_detail::spec<O>(std::move(name), OptionType::kWord, tier, std::move(section),
+                             std::move(arg), std::move(help), std::move(needs));
   spec.get = [access, word](const O& o) -> std::optional<std::string> {
     return std::string(word(access(o)));
   };

@@ -8,13 +8,9 @@
 #include <boost/program_options.hpp>
 
 #include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/tools/cli/option_table.h"
+#include "arbor/tools/cli/smoother_table.h"
 
 namespace arbor::cli {
-
-/// The table of SmootherOptions' flags (tools/cli/option_table.h): every flag below, its tier,
-/// default, range and help, in the order the flags apply (--relinearize-threshold first).
-const OptionTable<SmootherOptions>& smootherOptionTable();
 
 /// Adds every SmootherOptions flag to `options`, each showing its value in `defaults`:
 ///   --relinearize-threshold B (both β; the two below win over it), --relinearize-threshold-
