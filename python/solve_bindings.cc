@@ -16,13 +16,13 @@
 #include "bindings.h"
 #include "conversions.h"
 #include "graph_object.h"
+#include "option_keywords.h"
 
 namespace arbor::python {
 namespace {
 
 using cli::onlineRobustOptionTable;
 using cli::OptionSpec;
-using cli::OptionType;
 using refine::BatchSolver;
 
 /// What solve() returns (arbor.SolveResult).
@@ -64,13 +64,6 @@ void fillRtr(const RtrSummary& s, SolveOutcome* out) {
   out->message = s.message;
 }
 
-// A row's Python keyword: its flag with '_' for '-'.
-std::string keywordOf(const OptionSpec<RobustOptions>& row) {
-  std::string name = row.name;
-  std::replace(name.begin(), name.end(), '-', '_');
-  return name;
-}
-
 // arbor.RobustOptions' docstring, its online keywords from the table.
 const std::string& robustOptionsDoc() {
   static const std::string doc = [] {
@@ -79,46 +72,10 @@ const std::string& robustOptionsDoc() {
         "edge's dimension at `confidence`); estimate_scale (batch only): scale that quantile by "
         "the estimated variance factor (--inlier-threshold auto). The online smoother's own "
         "options, by keyword, as `arbor replay`'s flags of the same names ('_' for '-'):";
-    const char* separator = " ";
-    for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
-      text += separator + keywordOf(row) + " (" +
-              (row.type == OptionType::kInteger ? "an int"
-               : row.type == OptionType::kReal  ? "a number"
-                                                : row.arg) +
-              ")";
-      separator = ", ";
-    }
+    text += " " + keywordsDoc(onlineRobustOptionTable()) + "; each readable back";
     return text + "; OnlineSmoother only (solve() refuses them).";
   }();
   return doc;
-}
-
-// A keyword's value as the command line writes it, checked against the row's type (a TypeError
-// naming the keyword otherwise).
-std::string keywordText(const OptionSpec<RobustOptions>& row, const std::string& name,
-                        const py::handle& value) {
-  auto refuse = [&](const char* type) {
-    return py::type_error("RobustOptions: " + name + " must be " + type + ", not " +
-                          std::string(py::str(value.get_type().attr("__name__"))));
-  };
-  try {
-    switch (row.type) {
-      case OptionType::kInteger:
-        try {
-          return std::to_string(value.cast<int>());
-        } catch (const py::cast_error&) {
-          throw refuse("an int");
-        }
-      case OptionType::kReal:
-        return cli::option_detail::text(value.cast<double>());
-      case OptionType::kSwitch:
-        return value.cast<bool>() ? "true" : "false";
-      case OptionType::kWord:
-        return value.cast<std::string>();
-    }
-  } catch (const py::cast_error&) {
-  }
-  throw refuse(row.type == OptionType::kWord ? "a str" : "a number");
 }
 
 // The online options from the keywords, by the online robust table (tools/cli/
@@ -126,18 +83,7 @@ std::string keywordText(const OptionSpec<RobustOptions>& row, const std::string&
 RobustOptions onlineOptions(const py::kwargs& keywords) {
   RobustOptions o;
   for (const auto& [key, value] : keywords) {
-    const std::string name = py::str(key);
-    const auto& table = onlineRobustOptionTable();
-    const auto row =
-        std::find_if(table.begin(), table.end(),
-                     [&](const OptionSpec<RobustOptions>& r) { return keywordOf(r) == name; });
-    if (row == table.end())
-      throw py::type_error("RobustOptions: unexpected keyword '" + name + "'");
-    try {
-      row->set(o, keywordText(*row, name, value));
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument("RobustOptions: " + name + " " + e.what());
-    }
+    setKeyword(onlineRobustOptionTable(), "RobustOptions", py::str(key), value, &o);
   }
   // The numbers by the options' own rule, which names the field (RobustOptions::problem).
   const std::string problem = o.problem();
@@ -316,15 +262,9 @@ void defineSolve(py::module_& m) {
           });
   // The online options, read-only, by the table: a str, an int or a float each.
   for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
-    options.def_property_readonly(keywordOf(row).c_str(),
-                                  [row](const RobustSettings& s) -> py::object {
-                                    const std::string text = row.get(s.online).value_or("");
-                                    if (row.type == OptionType::kInteger)
-                                      return py::int_(std::stoi(text));
-                                    if (row.type == OptionType::kReal)
-                                      return py::float_(std::stod(text));
-                                    return py::str(text);
-                                  });
+    options.def_property_readonly(row.keyword.c_str(), [row](const RobustSettings& s) {
+      return keywordValue(row, s.online);
+    });
   }
 
   py::class_<SolveOutcome>(m, "SolveResult", "What arbor.solve returns.")

@@ -125,7 +125,11 @@ OptionTable<R> makeOnlineTable() {
 }  // namespace
 
 const OptionTable<RobustOptions>& onlineRobustOptionTable() {
-  static const OptionTable<RobustOptions> table = makeOnlineTable();
+  static const OptionTable<RobustOptions> table = [] {
+    OptionTable<R> rows = makeOnlineTable();
+    for (OptionSpec<R>& row : rows) row = inPython(row);  // arbor.RobustOptions' keywords
+    return rows;
+  }();
   return table;
 }
 

@@ -27,13 +27,14 @@ enum class OptionType { kSwitch, kInteger, kReal, kWord };
 /// One option of an options struct O.
 template <class O>
 struct OptionSpec {
-  std::string name;  ///< the flag without "--", the config file's key; '_' for '-': Python's
+  std::string name;  ///< the flag without "--", and the config file's key
   OptionType type = OptionType::kWord;
   Tier tier = Tier::kCommon;
   std::string section;  ///< the --help group it is listed under
   std::string arg;      ///< the value's placeholder ("N", "inline|async"); empty: a switch
   std::string help;
-  std::string needs;  ///< the switch this option needs ("robust"), or empty
+  std::string needs;    ///< the switch this option needs ("robust"), or empty
+  std::string keyword;  ///< the Python module's keyword for it, or empty: none
   /// The value in `o` as the command line writes it; nullopt: it has none of its own (an
   /// option that sets others).
   std::function<std::optional<std::string>(const O&)> get;
@@ -164,6 +165,18 @@ OptionSpec<O> wordOption(std::string name, Tier tier, std::string section, std::
     return std::string(word(access(o)));
   };
   spec.set = [access, parse](O& o, const std::string& text) { access(o) = parse(text); };
+  return spec;
+}
+
+/// `spec` with a Python keyword: `keyword`, or its name with '_' for '-' when empty.
+template <class O>
+OptionSpec<O> inPython(OptionSpec<O> spec, std::string keyword = "") {
+  if (keyword.empty()) {
+    keyword = spec.name;
+    for (char& c : keyword)
+      if (c == '-') c = '_';
+  }
+  spec.keyword = std::move(keyword);
   return spec;
 }
 

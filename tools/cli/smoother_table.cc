@@ -41,28 +41,29 @@ OptionTable<S> makeTable() {
                  kExperimental = Tier::kExperimental;
   return {
       bothThresholds(d),
-      numberOption<S>(
+      inPython(numberOption<S>(
           "relinearize-threshold-translation", kAdvanced, kSection, "B",
           "β on the translational part of a variable's step",
-          [](auto& o) -> auto& { return o.relinearize_threshold_translation; }, kNonNegative),
-      numberOption<S>(
+          [](auto& o) -> auto& { return o.relinearize_threshold_translation; }, kNonNegative)),
+      inPython(numberOption<S>(
           "relinearize-threshold-rotation", kAdvanced, kSection, "B",
           "β on the rotational part of a variable's step",
-          [](auto& o) -> auto& { return o.relinearize_threshold_rotation; }, kNonNegative),
-      numberOption<S>(
+          [](auto& o) -> auto& { return o.relinearize_threshold_rotation; }, kNonNegative)),
+      inPython(numberOption<S>(
           "relinearize-skip", kAdvanced, kSection, "K", "check relinearisation every K updates",
-          [](auto& o) -> auto& { return o.relinearize_skip; }, kAtLeastOne),
-      numberOption<S>(
-          "wildfire", kAdvanced, kSection, "A", "partial back-substitution threshold",
-          [](auto& o) -> auto& { return o.wildfire_threshold; }, kNonNegative),
+          [](auto& o) -> auto& { return o.relinearize_skip; }, kAtLeastOne)),
+      inPython(numberOption<S>(
+                   "wildfire", kAdvanced, kSection, "A", "partial back-substitution threshold",
+                   [](auto& o) -> auto& { return o.wildfire_threshold; }, kNonNegative),
+               "wildfire_threshold"),
       switchOption<S>(
           "full-backsubstitution", kAdvanced, kSection, "solve every clique on each update",
           [](auto& o) -> auto& { return o.full_backsubstitution; }, true),
-      numberOption<S>(
+      inPython(numberOption<S>(
           "solve-budget-mb", kAdvanced, kSection, "X",
           "bounded back-substitution: MB of conditionals an update reads past what it "
           "re-eliminated (0: no bound; the rest is deferred to later updates)",
-          [](auto& o) -> auto& { return o.solve_budget_mb; }, kFiniteNonNegative),
+          [](auto& o) -> auto& { return o.solve_budget_mb; }, kFiniteNonNegative)),
       switchOption<S>(
           "no-rank-updates", kExperimental, kSection,
           "re-eliminate the path of every loop closure (as GTSAM's iSAM2) instead of folding it "
@@ -73,9 +74,9 @@ OptionTable<S> makeTable() {
           "order only the touched variables last in a re-eliminated top (iSAM2's constraint), "
           "not the newest pose with them",
           [](auto& o) -> auto& { return o.newest_last; }, false),
-      switchOption<S>(
+      inPython(switchOption<S>(
           "dogleg", kCommon, kSection, "Powell's dogleg instead of Gauss-Newton",
-          [](auto& o) -> auto& { return o.dogleg; }, true),
+          [](auto& o) -> auto& { return o.dogleg; }, true)),
       numberOption<S>(
           "dogleg-radius", kAdvanced, kSection, "R", "dogleg: initial trust-region radius",
           [](auto& o) -> auto& { return o.dogleg_initial_radius; }, kPositive),
@@ -96,10 +97,10 @@ OptionTable<S> makeTable() {
                       "automatic, 0: always)",
                       [](auto& o) -> auto& { return o.nested_dissection_min; },
                       {">= -1", [](double x) { return x >= -1; }}),
-      numberOption<S>(
+      inPython(numberOption<S>(
           "threads", kCommon, kSection, "N",
           "threads per update, sharing independent subtrees (0: one per core, at most 4)",
-          [](auto& o) -> auto& { return o.threads; }, kNonNegative),
+          [](auto& o) -> auto& { return o.threads; }, kNonNegative)),
       numberOption<S>(
           "batch-top-share", kExperimental, kSection, "S",
           "re-eliminate the whole graph in a fresh ordering when the top of an update holds "
