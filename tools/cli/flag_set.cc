@@ -35,26 +35,37 @@ std::size_t columns(const std::string& text) {
   return n;
 }
 
-// `text` wrapped at kLineLength, its lines after the first indented to kNameColumn.
+// `text` wrapped at kLineLength, its lines after the first indented to kNameColumn; a line
+// break in `text` starts a new line, its leading spaces kept.
 void printWrapped(std::ostream& out, std::string left, const std::string& text) {
   if (columns(left) + 1 >= kNameColumn) {
     out << left << "\n";
     left.clear();
   }
   left.resize(kNameColumn, ' ');
-  std::istringstream words(text);
-  std::string word, line = left;
-  bool first = true;
-  while (words >> word) {
-    if (!first && columns(line) + 1 + columns(word) > kLineLength) {
-      out << line << "\n";
-      line = std::string(kNameColumn, ' ');
-      first = true;
+  std::istringstream paragraphs(text);
+  std::string paragraph;
+  bool first_paragraph = true;
+  while (std::getline(paragraphs, paragraph)) {
+    const std::size_t indent = std::min(paragraph.find_first_not_of(' '), paragraph.size());
+    const std::string margin(kNameColumn + indent, ' ');
+    std::string line = first_paragraph ? left : margin;
+    first_paragraph = false;
+    std::istringstream words(paragraph);
+    std::string word;
+    bool first = true;
+    while (words >> word) {
+      if (!first && columns(line) + 1 + columns(word) > kLineLength) {
+        out << line << "\n";
+        line = margin;
+        first = true;
+      }
+      line += (first ? "" : " ") + word;
+      first = false;
     }
-    line += (first ? "" : " ") + word;
-    first = false;
+    out << line << "\n";
   }
-  out << line << "\n";
+  if (first_paragraph) out << left << "\n";
 }
 
 // A stored value as the command line would write it.
