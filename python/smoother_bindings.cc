@@ -9,11 +9,13 @@
 #include <pybind11/stl.h>
 
 #include "arbor/bayestree/online_smoother.h"
+#include "arbor/tools/cli/smoother_table.h"
 #include "arbor/tools/refine/batch_refiner.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "custom_factor_object.h"
 #include "graph_object.h"
+#include "option_keywords.h"
 
 namespace arbor::python {
 namespace {
@@ -108,30 +110,17 @@ py::dict runDict(const refine::BatchRun& b) {
 }
 
 template <class G>
-OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, int threads,
-                                   double relinearize_translation, double relinearize_rotation,
-                                   int relinearize_skip, double wildfire, bool dogleg,
-                                   double solve_budget_mb) {
+OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust,
+                                   const py::kwargs& keywords) {
   OnlineSmootherOptions<G> o;
-  if (threads < 0)
-    throw std::invalid_argument("threads must be >= 0, not " + std::to_string(threads));
-  if (relinearize_skip < 1)
-    throw std::invalid_argument("relinearize_skip must be >= 1, not " +
-                                std::to_string(relinearize_skip));
-  if (!(relinearize_translation >= 0) || !(relinearize_rotation >= 0) || !(wildfire >= 0))
-    throw std::invalid_argument("relinearisation and wildfire thresholds must be >= 0");
-  o.smoother.threads = threads;
-  o.smoother.relinearize_threshold_translation = relinearize_translation;
-  o.smoother.relinearize_threshold_rotation = relinearize_rotation;
-  o.smoother.relinearize_skip = relinearize_skip;
-  o.smoother.wildfire_threshold = wildfire;
-  o.smoother.dogleg = dogleg;
-  // The smoother refuses a bad budget and one beside dogleg; the robust layer is this one's.
-  if (solve_budget_mb > 0 && robust)
+  // The smoother's keywords by their rows of the smoother table (tools/cli/smoother_table.h).
+  for (const auto& [key, value] : keywords)
+    setKeyword(cli::smootherOptionTable(), "OnlineSmoother", py::str(key), value, &o.smoother);
+  // The smoother refuses a budget beside dogleg; the robust layer is this one's.
+  if (o.smoother.solve_budget_mb > 0 && robust)
     throw std::invalid_argument(
         "solve_budget_mb needs no robust options (the robust layer judges closures against the "
         "estimate, which a budget leaves partly deferred)");
-  o.smoother.solve_budget_mb = solve_budget_mb;
   if (robust) {
     if (robust->estimate_scale)
       throw std::invalid_argument(
@@ -148,32 +137,29 @@ OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust, 
   return o;
 }
 
+// The constructor's docstring, its keywords from the smoother table.
+const std::string& smootherDoc() {
+  static const std::string doc =
+      "robust: an arbor.RobustOptions (online GNC per loop closure, as `arbor replay --robust`); "
+      "by keyword, `arbor replay`'s smoother flags of the same names ('_' for '-'; "
+      "wildfire_threshold is --wildfire): " +
+      keywordsDoc(cli::smootherOptionTable()) +
+      ". threads 0: one per core, at most 4; the estimate does not depend on it.";
+  return doc;
+}
+
 template <class G>
 void defineSmootherOf(py::module_& m, const char* name) {
   using Smoother = OnlineSmoother<G>;
   constexpr int k = G::kDoF;
   constexpr int d = G::kDim;
-  const SmootherOptions defaults;
   py::class_<Smoother>(m, name,
                        "The online smoother: poses named by ids, edges and priors in any order, "
                        "an incremental update at a time (docs/python.md).")
-      .def(
-          py::init([](const std::optional<RobustSettings>& robust, int threads, double rt,
-                      double rr, int skip, double wildfire, bool dogleg, double budget) {
-            return std::make_unique<Smoother>(
-                optionsOf<G>(robust, threads, rt, rr, skip, wildfire, dogleg, budget));
-          }),
-          py::arg("robust") = py::none(), py::arg("threads") = defaults.threads,
-          py::arg("relinearize_threshold_translation") = defaults.relinearize_threshold_translation,
-          py::arg("relinearize_threshold_rotation") = defaults.relinearize_threshold_rotation,
-          py::arg("relinearize_skip") = defaults.relinearize_skip,
-          py::arg("wildfire_threshold") = defaults.wildfire_threshold,
-          py::arg("dogleg") = defaults.dogleg,
-          py::arg("solve_budget_mb") = defaults.solve_budget_mb,
-          "robust: an arbor.RobustOptions (online GNC per loop closure, as `arbor replay "
-          "--robust`); the rest as `arbor replay`'s smoother flags (threads 0: one per core, "
-          "at most 4; the estimate does not depend on it; solve_budget_mb as "
-          "--solve-budget-mb).")
+      .def(py::init([](const std::optional<RobustSettings>& robust, const py::kwargs& keywords) {
+             return std::make_unique<Smoother>(optionsOf<G>(robust, keywords));
+           }),
+           py::arg("robust") = py::none(), smootherDoc().c_str())
       .def(
           "add_edge",
           [](Smoother& s, Key from, Key to, const Eigen::VectorXd& z,

@@ -1,6 +1,7 @@
 // arbor.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
 // (tools/refine/batch_solvers.h: lm, gn, dogleg, rtr) from any initialisation, optionally
 // robust (GNC, as `arbor batch --robust`), and arbor.RobustOptions.
+#include <algorithm>
 #include <optional>
 #include <string>
 #include <utility>
@@ -10,14 +11,18 @@
 
 #include "arbor/core/gnc_solver.h"
 #include "arbor/core/initialization.h"
+#include "arbor/tools/cli/online_robust_table.h"
 #include "arbor/tools/refine/batch_solvers.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "graph_object.h"
+#include "option_keywords.h"
 
 namespace arbor::python {
 namespace {
 
+using cli::onlineRobustOptionTable;
+using cli::OptionSpec;
 using refine::BatchSolver;
 
 /// What solve() returns (arbor.SolveResult).
@@ -59,67 +64,26 @@ void fillRtr(const RtrSummary& s, SolveOutcome* out) {
   out->message = s.message;
 }
 
-// The online smoother's options that `arbor replay`'s online robust flags set, by the flags'
-// names with '_' for '-' (noise_scale is RobustOptions::scale).
-constexpr std::pair<const char*, int RobustOptions::*> kOnlineInts[] = {
-    {"corroboration_window", &RobustOptions::corroboration_window},
-    {"finalize_rounds", &RobustOptions::finalize_rounds}};
-
-// A value of the keyword `name`, as T, or a TypeError naming it.
-template <class T>
-T keywordValue(const std::string& name, const py::handle& value, const char* type) {
-  try {
-    return value.cast<T>();
-  } catch (const py::cast_error&) {
-    throw py::type_error("RobustOptions: " + name + " must be " + type + ", not " +
-                         std::string(py::str(value.get_type().attr("__name__"))));
-  }
+// arbor.RobustOptions' docstring, its online keywords from the table.
+const std::string& robustOptionsDoc() {
+  static const std::string doc = [] {
+    std::string text =
+        "kernel: tls | gm | cauchy | huber; threshold: c² on eᵀΩe (0: the χ² quantile of the "
+        "edge's dimension at `confidence`); estimate_scale (batch only): scale that quantile by "
+        "the estimated variance factor (--inlier-threshold auto). The online smoother's own "
+        "options, by keyword, as `arbor replay`'s flags of the same names ('_' for '-'):";
+    text += " " + keywordsDoc(onlineRobustOptionTable()) + "; each readable back";
+    return text + "; OnlineSmoother only (solve() refuses them).";
+  }();
+  return doc;
 }
 
-// The enum named by the keyword `name` (parse: the enum's inverse of toString).
-template <class Enum>
-Enum keywordChoice(const std::string& name, const py::handle& value,
-                   Enum (*parse)(const std::string&)) {
-  try {
-    return parse(keywordValue<std::string>(name, value, "a str"));
-  } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument("RobustOptions: " + name + " " + e.what());
-  }
-}
-
-// The online options from the keywords; anything else is a TypeError.
+// The online options from the keywords, by the online robust table (tools/cli/
+// online_robust_table.h: the flags' names with '_' for '-'); an unknown keyword is a TypeError.
 RobustOptions onlineOptions(const py::kwargs& keywords) {
   RobustOptions o;
   for (const auto& [key, value] : keywords) {
-    const std::string name = py::str(key);
-    if (name == "noise_scale") {
-      o.scale = keywordChoice(name, value, parseNoiseScale);
-    } else if (name == "entry") {
-      o.entry = keywordChoice(name, value, parseEntryTest);
-    } else if (name == "rules_off") {
-      // A list of rule names (or one comma-separated str).
-      std::string names;
-      if (py::isinstance<py::str>(value)) {
-        names = py::str(value);
-      } else {
-        for (const auto& item :
-             keywordValue<std::vector<std::string>>(name, value, "a list of str"))
-          names += (names.empty() ? "" : ",") + item;
-      }
-      try {
-        o.rules_off = parseRuleSet(names);
-      } catch (const std::invalid_argument& e) {
-        throw std::invalid_argument("RobustOptions: rules_off " + std::string(e.what()));
-      }
-    } else {
-      bool known = false;
-      for (const auto& [field, member] : kOnlineInts)
-        if (name == field) {
-          o.*member = keywordValue<int>(name, value, "an int");
-          known = true;
-        }
-      if (!known) throw py::type_error("RobustOptions: unexpected keyword '" + name + "'");
-    }
+    setKeyword(onlineRobustOptionTable(), "RobustOptions", py::str(key), value, &o);
   }
   // The numbers by the options' own rule, which names the field (RobustOptions::problem).
   const std::string problem = o.problem();
@@ -130,9 +94,9 @@ RobustOptions onlineOptions(const py::kwargs& keywords) {
 // Whether any online option differs from RobustOptions' default (solve() refuses them).
 bool differsFromDefault(const RobustOptions& o) {
   const RobustOptions d;
-  bool differs = o.scale != d.scale || o.entry != d.entry || o.rules_off != d.rules_off;
-  for (const auto& [field, member] : kOnlineInts) differs = differs || o.*member != d.*member;
-  return differs;
+  for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable())
+    if (row.get(o) != row.get(d)) return true;
+  return false;
 }
 
 // As `arbor batch --robust`: GNC from the initialisation; with rtr, the certifiable solver on
@@ -284,39 +248,23 @@ void defineSolve(py::module_& m) {
                  return s;
                }),
                py::arg("kernel") = "tls", py::arg("threshold") = 0.0, py::arg("confidence") = 0.99,
-               py::arg("estimate_scale") = false,
-               "kernel: tls | gm | cauchy | huber; threshold: c² on eᵀΩe (0: the χ² quantile of "
-               "the edge's dimension at `confidence`); estimate_scale (batch only): scale that "
-               "quantile by the estimated variance factor (--inlier-threshold auto). The online "
-               "smoother's own options, by keyword, as `arbor replay`'s flags of the same names "
-               "('_' for '-'): noise_scale (estimated | given), entry (innovation | residual), "
-               "corroboration_window, finalize_rounds (ints), rules_off (a list of rule names: "
-               "warm-up, rehold, scale-start, final-confirm, end-scale, end-word); "
-               "OnlineSmoother only (solve() refuses them).")
+               py::arg("estimate_scale") = false, robustOptionsDoc().c_str())
           .def_property_readonly("kernel",
                                  [](const RobustSettings& s) { return toString(s.kernel); })
           .def_readonly("threshold", &RobustSettings::threshold)
           .def_readonly("confidence", &RobustSettings::confidence)
           .def_readonly("estimate_scale", &RobustSettings::estimate_scale)
-          .def_property_readonly("noise_scale",
-                                 [](const RobustSettings& s) { return toString(s.online.scale); })
-          .def_property_readonly("entry",
-                                 [](const RobustSettings& s) { return toString(s.online.entry); })
-          .def_property_readonly("rules_off",
-                                 [](const RobustSettings& s) {
-                                   std::vector<std::string> names;
-                                   for (RobustRule r : robustRules())
-                                     if (s.online.rules_off.has(r)) names.emplace_back(toString(r));
-                                   return names;
-                                 })
           .def("__repr__", [](const RobustSettings& s) {
             return "<arbor.RobustOptions kernel=" + toString(s.kernel) +
                    " threshold=" + std::to_string(s.threshold) +
                    " noise_scale=" + toString(s.online.scale) + ">";
           });
-  for (const auto& [field, member] : kOnlineInts)
-    options.def_property_readonly(
-        field, [member = member](const RobustSettings& s) { return s.online.*member; });
+  // The online options, read-only, by the table: a str, an int or a float each.
+  for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
+    options.def_property_readonly(row.keyword.c_str(), [row](const RobustSettings& s) {
+      return keywordValue(row, s.online);
+    });
+  }
 
   py::class_<SolveOutcome>(m, "SolveResult", "What arbor.solve returns.")
       .def_readonly("solver", &SolveOutcome::solver)

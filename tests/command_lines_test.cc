@@ -252,37 +252,6 @@ TEST(SmootherFlags, ABadValueIsRefusedNamingTheFlagAndTheValue) {
   }
 }
 
-// The help of replay, serve and a description filled by the binder list every smoother flag
-// with the same text.
-TEST(SmootherFlags, ReplayAndServeHelpShowEveryFlagWithOneText) {
-  boost::program_options::options_description binder;
-  addSmootherFlags(binder);
-  ASSERT_GE(binder.options().size(), fields().size());
-  // Whitespace runs as one space: the help wraps descriptions at its line length.
-  auto squeeze = [](const std::string& text) {
-    std::string out;
-    for (char c : text) {
-      const bool space = c == ' ' || c == '\n' || c == '\t';
-      if (!space || (!out.empty() && out.back() != ' ')) out += space ? ' ' : c;
-    }
-    return out;
-  };
-  auto help = [&](const std::function<void()>& parse) {
-    ::testing::internal::CaptureStdout();
-    parse();
-    return squeeze(::testing::internal::GetCapturedStdout());
-  };
-  const std::string replay = help([] { EXPECT_FALSE(parseReplayCommandLine({"--help"})); });
-  const std::string serve = help([] { EXPECT_FALSE(parseServeCommandLine({"--help"})); });
-  for (const auto& option : binder.options()) {
-    const std::string flag = option->format_name(), text = squeeze(option->description());
-    for (const std::string* h : {&replay, &serve}) {
-      EXPECT_NE(h->find(flag + " "), std::string::npos) << flag;
-      EXPECT_NE(h->find(text), std::string::npos) << flag << ": " << text;
-    }
-  }
-}
-
 // --bounded-heap (core/heap_policy.h) is off unless given, in replay and serve alike.
 TEST(HeapFlag, ReachesReplayAndServe) {
   EXPECT_FALSE(parseReplayCommandLine({"graph.g2o"})->bounded_heap);
@@ -291,7 +260,7 @@ TEST(HeapFlag, ReachesReplayAndServe) {
   EXPECT_TRUE(parseServeCommandLine({"--bounded-heap"})->bounded_heap);
 }
 
-// --entry, --noise-scale, --corroboration-window, --finalize-rounds and --rule-off
+// --entry, --noise-scale, --corroboration-window, --finalize-rounds and --rules-off
 // (tools/cli/robust_flags.h) reach the online robust options in replay and serve alike, are
 // refused without --robust, and a bad value is refused naming it.
 TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
@@ -304,7 +273,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
                                          "7",
                                          "--finalize-rounds",
                                          "4",
-                                         "--rule-off",
+                                         "--rules-off",
                                          "end-word,warm-up"};
   const RuleSet off{RobustRule::kEndWord, RobustRule::kWarmUp};
   std::vector<std::string> replay_args = args;
@@ -334,10 +303,10 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_EQ(plain->options.robust->corroboration_window, RobustOptions{}.corroboration_window);
   EXPECT_EQ(plain->options.robust->finalize_rounds, RobustOptions{}.finalize_rounds);
   EXPECT_TRUE(plain->options.robust->rules_off.empty());
-  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--rule-off", "end-word"}), UsageError);
+  EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--rules-off", "end-word"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
   for (const auto& [flag, bad] : std::vector<std::pair<std::string, std::string>>{
-           {"--finalize-rounds", "0"}, {"--rule-off", "end-words"}, {"--rule-off", "warm-up,x"}}) {
+           {"--finalize-rounds", "0"}, {"--rules-off", "end-words"}, {"--rules-off", "warm-up,x"}}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
       ADD_FAILURE() << flag << " " << bad << " accepted";
@@ -362,7 +331,7 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
     EXPECT_NE(message.find("-4"), std::string::npos) << message;
   }
   for (const auto& [flag, value] : std::vector<std::pair<std::string, std::string>>{
-           {"--entry", "residual"}, {"--noise-scale", "given"}, {"--rule-off", "rehold"}}) {
+           {"--entry", "residual"}, {"--noise-scale", "given"}, {"--rules-off", "rehold"}}) {
     EXPECT_THROW(parseServeCommandLine({flag, value}), UsageError) << flag;
     try {
       parseReplayCommandLine({"graph.g2o", flag, value});

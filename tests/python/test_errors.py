@@ -43,7 +43,7 @@ def test_bad_options(data_dir):
     with pytest.raises(ValueError, match="noise_scale must be estimated or given, not 'sometimes'"):
         arbor.RobustOptions(noise_scale="sometimes")
     with pytest.raises(ValueError, match="rules_off must be warm-up, .* or end-word, not 'end'"):
-        arbor.RobustOptions(rules_off=["end"])
+        arbor.RobustOptions(rules_off="end")
     with pytest.raises(TypeError, match="unexpected keyword 'scale_start'"):
         arbor.RobustOptions(scale_start="median")
     with pytest.raises(TypeError, match="unexpected keyword 'noise'"):
@@ -77,3 +77,21 @@ def test_bad_edges_and_ids():
     s3 = arbor.OnlineSmoother3()
     with pytest.raises(ValueError, match="quaternion norm"):
         s3.add_edge(0, 1, [1, 0, 0, 0, 0, 0, 2], np.eye(6))
+
+
+def test_smoother_keywords_come_from_the_table():
+    # Each keyword is a row of the smoother table, checked by the row's rule and named.
+    with pytest.raises(ValueError, match="OnlineSmoother: threads must be >= 0, not '-1'"):
+        arbor.OnlineSmoother2(threads=-1)
+    with pytest.raises(ValueError, match="relinearize_skip must be >= 1, not '0'"):
+        arbor.OnlineSmoother3(relinearize_skip=0)
+    with pytest.raises(TypeError, match="unexpected keyword 'thread'"):
+        arbor.OnlineSmoother2(thread=2)
+    with pytest.raises(TypeError, match="relinearize_skip must be an int, not float"):
+        arbor.OnlineSmoother2(relinearize_skip=2.5)
+    doc = arbor.OnlineSmoother2.__init__.__doc__
+    for keyword in ("threads (an int, default 0)", "wildfire_threshold (a number, default 0.001)",
+                    "dogleg (a bool, default False)", "solve_budget_mb (a number, default 0)"):
+        assert keyword in doc, keyword
+    arbor.OnlineSmoother2(threads=2, wildfire_threshold=0.01, dogleg=True,
+                          relinearize_threshold_translation=0.2)

@@ -16,6 +16,7 @@
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/covariance_output.h"
+#include "arbor/tools/cli/flag_set.h"
 #include "arbor/tools/cli/online_threshold.h"
 #include "arbor/tools/cli/output_files.h"
 #include "arbor/tools/cli/robust_flags.h"
@@ -378,49 +379,57 @@ int batchCommand(const std::vector<std::string>& args) {
   BatchRun run;
   std::string solver = refine::toString(run.solver), information = "refuse";
   std::string format, inner_start = "initial", mu_start = "initial";
-  po::options_description options("arbor batch FILE [options]");
-  options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
-                                                    "g2o or TORO file")(
-      "solver", po::value(&solver)->default_value(solver), solverHelp().c_str())(
+  FlagSet flags("arbor batch FILE [options]   (FILE: g2o or TORO)",
+                {"arbor batch data/sphere_3d.g2o --solver rtr --json",
+                 "arbor batch data/manhattan_2d_group_0.1.g2o --robust -o estimate.g2o"});
+  flags.positional("file", po::value(&run.file)->required());
+  const char* const solve = "Solve";
+  flags.add(Tier::kCommon, solve)("solver", po::value(&solver)->default_value(solver),
+                                  solverHelp().c_str())(
       "init", po::value(&run.init),
       "odometry | spanning-tree | chordal | file (default: file if it has VERTEX lines, else "
       "odometry; rtr starts from its own chordal relaxation); with --robust also online, its "
       "default: the estimate of the robust online replay (arbor replay --robust), whose rejected "
-      "closures GNC holds out and takes back only where they fit at the replay's bound")(
-      "max-iterations", po::value(&run.settings.max_iterations)->default_value(100),
-      "iteration limit (gn, lm, dogleg)")(
+      "closures GNC holds out and takes back only where they fit at the replay's bound");
+  flags.add(Tier::kAdvanced, solve)("max-iterations",
+                                    po::value(&run.settings.max_iterations)->default_value(100),
+                                    "iteration limit (gn, lm, dogleg)")(
       "rel-tol", po::value(&run.settings.relative_tolerance)->default_value(1e-5, "1e-05"),
       "stop when the relative decrease of F is below this (gn, lm, dogleg)")(
+      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr");
+  const char* const io = "Input and output";
+  flags.add(Tier::kCommon, io)("output,o", po::value(&run.output)->value_name("OUT"),
+                               "write the estimate (as --format)")(
+      "format", po::value(&format)->value_name("g2o|tum|kitti"), kOutputFormatHelp)(
+      "json", po::bool_switch(&run.json), "print one JSON object");
+  flags.add(Tier::kAdvanced, io)(
       "information", po::value(&information)->default_value("refuse"),
       "what to do with information matrices that are not positive definite: refuse | repair | "
-      "isotropic")("output,o", po::value(&run.output), "write the estimate (as --format)")(
-      "format", po::value(&format), kOutputFormatHelp)("stamps", po::value(&run.stamps_file),
-                                                       kStampsHelp)(
+      "isotropic")("stamps", po::value(&run.stamps_file), kStampsHelp)(
       "covariances", po::value(&run.covariances),
       "write every pose's marginal covariance at the final estimate, `id` and the upper triangle "
-      "a line (docs/files.md)")("json", po::bool_switch(&run.json), "print one JSON object")(
-      "verbose,v", po::bool_switch(&run.settings.verbose), "per-iteration log on stderr");
-  addRobustFlags(options,
+      "a line (docs/files.md)");
+  addRobustFlags(flags,
                  "robust to false loop closures: GNC over LM (Yang et al. 2020), odometry (|i-j| "
                  "= 1) trusted, by default from the robust online replay's estimate, "
                  "classification and threshold (--init online, --inlier-threshold online; "
                  "GTSAM's GncOptimizer: --init file --inlier-threshold chi2); with --solver rtr, "
                  "then the certifiable solver on the edges kept",
                  "online");
-  options.add_options()(
+  flags.add(Tier::kAdvanced, kRobustSection, "robust")(
       "edge-choices", po::value(&run.edge_choices),
       "with --robust: per-edge trust and kernel, \"FROM TO TRUST [KERNEL]\" a line "
-      "(docs/files.md); the default trust is the batch's rule (odometry |i-j| = 1 trusted)")(
+      "(docs/files.md); the default trust is the batch's rule (odometry |i-j| = 1 trusted)");
+  flags.add(Tier::kExperimental, kRobustSection, "robust")(
       "gnc-inner-start", po::value(&inner_start)->default_value(inner_start),
       "with --robust: each GNC step's weighted solve starts from the initial estimate (initial, "
       "as GTSAM's GncOptimizer) or from the previous step's (previous)")(
       "gnc-mu-start", po::value(&mu_start)->default_value(mu_start),
       "with --robust: GNC's first μ from the residuals at the initial estimate (initial, as "
       "GTSAM) or at the least-squares solution (least-squares)");
-  po::positional_options_description positional;
-  positional.add("file", 1);
-  if (helpRequested(args, options)) return 0;
-  const po::variables_map given = parseArguments(args, options, positional);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return 0;
+  const po::variables_map& given = *parsed;
   try {
     run.solver = refine::parseBatchSolver(solver, "--solver");
     if (!run.init.empty() && run.init != "online") parseInitMethod(run.init);

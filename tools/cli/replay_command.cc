@@ -19,6 +19,7 @@
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/covariance_output.h"
+#include "arbor/tools/cli/flag_set.h"
 #include "arbor/tools/cli/output_files.h"
 #include "arbor/tools/cli/replay_runner.h"
 #include "arbor/tools/cli/smoother_flags.h"
@@ -238,60 +239,92 @@ int replay(const ReplayRun& run, PoseGraph<G>& graph, const std::optional<PoseSt
 
 }  // namespace
 
-std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args) {
+namespace {
+
+// What the flags are read into before the checks turn them into a ReplayCommandLine.
+struct ReplayFlagValues {
   ReplayCommandLine run;
   std::string information = "refuse", batch, format;
   bool no_finalize = false;
-  po::options_description options("arbor replay FILE [options]");
-  options.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
-                                                    "g2o or TORO file")(
-      "step", po::value(&run.step)->default_value("edge"),
+};
+
+const char* const kInput = "Input and output";
+const char* const kBatch = "Batch refinement";
+
+// Every flag of `arbor replay`, bound to `v`; each is declared here or in its table only.
+FlagSet replayFlagSet(ReplayFlagValues& v) {
+  ReplayCommandLine& run = v.run;
+  FlagSet flags("arbor replay FILE [options]   (FILE: g2o or TORO)",
+                {"arbor replay data/manhattan_2d.g2o --json",
+                 "arbor replay data/sphere_3d_random_0.1.g2o --robust -o estimate.g2o"});
+  flags.positional("file", po::value(&run.file)->required());
+  flags.add(Tier::kCommon, kInput)(
+      "step", po::value(&run.step)->default_value("edge")->value_name("edge|pose"),
       "edge: update after every edge; pose: once per new pose with all its edges")(
+      "output,o", po::value(&run.output)->value_name("OUT"),
+      "write the final estimate (as --format)")(
+      "format", po::value(&v.format)->value_name("g2o|tum|kitti"), kOutputFormatHelp)(
+      "json", po::bool_switch(&run.json), "print one JSON object");
+  flags.add(Tier::kAdvanced, kInput)(
       "first-update-edges", po::value(&run.first_update_edges)->default_value(0),
       "the first N edges (whole --step groups) in one update, a map loaded before the rest "
       "streams in; the latency figures are then of the updates after it (0: off)")(
       "initial", po::value(&run.initial)->default_value("odometry"),
       "where a new pose starts: odometry (the pose its first edge comes from, composed with "
-      "it) | file (its VERTEX line: a saved map starts at its estimate)");
-  addSmootherFlags(options);
-  options.add_options()(
-      "no-finalize", po::bool_switch(&no_finalize),
+      "it) | file (its VERTEX line: a saved map starts at its estimate)")(
+      "no-finalize", po::bool_switch(&v.no_finalize),
       "skip the final relinearise-all pass (report the raw incremental estimate)")(
-      "information", po::value(&information)->default_value("refuse"),
+      "information", po::value(&v.information)->default_value("refuse"),
       "refuse | repair | isotropic (information matrices that are not positive definite)")(
-      "output,o", po::value(&run.output), "write the final estimate (as --format)")(
-      "format", po::value(&format), kOutputFormatHelp)("stamps", po::value(&run.stamps_file),
-                                                       kStampsHelp)(
+      "stamps", po::value(&run.stamps_file), kStampsHelp)(
       "covariances", po::value(&run.covariances),
       "write every pose's marginal covariance from the final Bayes tree, `id` and the upper "
       "triangle a line (docs/files.md)")("latency-csv", po::value(&run.latency_csv),
-                                         "one row per update")("json", po::bool_switch(&run.json),
-                                                               "print one JSON object")(
-      "batch", po::value(&batch),
-      (refine::batchSolverNames(true) + ": batch runs in the loop and after finalize").c_str())(
-      "batch-every", po::value(&run.batch_every)->default_value(0),
-      "a background batch run every N updates (needs --batch)")(
-      "reseed", po::bool_switch(&run.reseed),
-      "rebuild the smoother from a batch estimate with lower F")(
-      "batch-sync", po::bool_switch(&run.batch_sync),
-      "run each batch on the replay thread at its snapshot, blocking (not in the updates' "
-      "latency): the same batches and reseeds on any machine, for reproducible comparisons")(
+                                         "one row per update")(
       "bounded-heap", po::bool_switch(&run.bounded_heap),
       "return freed clique storage to the system: glibc's mmap threshold fixed at 1 MiB "
       "(core/heap_policy.h). Lowers the peak of very large graphs; costs page faults where "
       "large tops are re-eliminated every update (docs/design.md, \"Memory\")");
-  addRobustFlags(options,
+  flags.add(smootherOptionTable());
+  flags.add(Tier::kCommon, kBatch)(
+      "batch", po::value(&v.batch)->value_name("SOLVER"),
+      (refine::batchSolverNames(true) + ": batch runs in the loop and after finalize").c_str())(
+      "batch-every", po::value(&run.batch_every)->default_value(0)->value_name("N"),
+      "a background batch run every N updates (needs --batch)");
+  flags.add(Tier::kAdvanced, kBatch)("reseed", po::bool_switch(&run.reseed),
+                                     "rebuild the smoother from a batch estimate with lower F");
+  flags.add(Tier::kExperimental, kBatch)(
+      "batch-sync", po::bool_switch(&run.batch_sync),
+      "run each batch on the replay thread at its snapshot, blocking (not in the updates' "
+      "latency): the same batches and reseeds on any machine, for reproducible comparisons");
+  addRobustFlags(flags,
                  "robust to false loop closures: graduated non-convexity per loop closure in "
                  "the Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; the final batch "
                  "LM runs over the edges kept");
-  options.add_options()("edge-choices", po::value(&run.edge_choices),
-                        "with --robust: per-edge trust and kernel, 'FROM TO "
-                        "default|trusted|robust [KERNEL]' a line (docs/files.md)");
-  addOnlineRobustFlags(options);
-  po::positional_options_description positional;
-  positional.add("file", 1);
-  if (helpRequested(args, options)) return std::nullopt;
-  const po::variables_map vm = parseArguments(args, options, positional);
+  flags.add(Tier::kAdvanced, kRobustSection, "robust")(
+      "edge-choices", po::value(&run.edge_choices),
+      "with --robust: per-edge trust and kernel, 'FROM TO default|trusted|robust [KERNEL]' a line "
+      "(docs/files.md)");
+  flags.add(onlineRobustOptionTable());
+  return flags;
+}
+
+}  // namespace
+
+std::vector<FlagInfo> replayFlags() {
+  ReplayFlagValues v;
+  return replayFlagSet(v).flags();
+}
+
+std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args) {
+  ReplayFlagValues v;
+  const FlagSet flags = replayFlagSet(v);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  const po::variables_map& vm = *parsed;
+  ReplayCommandLine& run = v.run;
+  const std::string &information = v.information, &batch = v.batch, &format = v.format;
+  const bool no_finalize = v.no_finalize;
   if (run.step != "edge" && run.step != "pose") {
     throw UsageError("--step must be edge or pose, not '" + run.step + "'");
   }
@@ -326,7 +359,7 @@ std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::s
   run.format = outputFormat(run.output, format);
   requireTumForStamps(run.stamps_file, run.format);
   run.read.information = parseInformationPolicy(information);
-  return run;
+  return std::move(run);
 }
 
 int replayCommand(const std::vector<std::string>& args) {

@@ -9,6 +9,7 @@
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/io/trajectory_writer.h"
+#include "arbor/tools/cli/flag_set.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/refine/batch_solvers.h"
 
@@ -41,5 +42,8 @@ struct ReplayCommandLine {
 /// The options of `arbor replay ARGS`; nullopt (after printing the help) on --help. Throws
 /// UsageError on anything unknown, missing or malformed, naming the flag and the value.
 std::optional<ReplayCommandLine> parseReplayCommandLine(const std::vector<std::string>& args);
+
+/// Every flag of `arbor replay`, as --help-all lists them.
+std::vector<FlagInfo> replayFlags();
 
 }  // namespace arbor::cli

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/flag_set.h"
 
 namespace arbor::cli {
 
@@ -25,13 +26,17 @@ const char* const kInlierThresholdHelp =
     "feeds on its own truncation): that quantile times the variance factor estimated over the "
     "inliers";
 
-void addRobustFlags(po::options_description& options, const std::string& robust_help,
+void addRobustFlags(FlagSet& flags, const std::string& robust_help,
                     const std::string& default_threshold) {
-  options.add_options()("robust", po::bool_switch(), robust_help.c_str())(
-      "kernel", po::value<std::string>()->default_value("tls"), kKernelHelp)(
-      "inlier-threshold", po::value<std::string>()->default_value(default_threshold),
-      kInlierThresholdHelp)("rejected-out", po::value<std::string>(),
-                            "with --robust: write the rejected edges, `i j` (file ids) a line");
+  flags.add(Tier::kCommon, kRobustSection)("robust", po::bool_switch(), robust_help.c_str());
+  flags.add(Tier::kCommon, kRobustSection, "robust")(
+      "kernel", po::value<std::string>()->default_value("tls")->value_name("KERNEL"), kKernelHelp)(
+      "inlier-threshold",
+      po::value<std::string>()->default_value(default_threshold)->value_name("C2"),
+      kInlierThresholdHelp);
+  flags.add(Tier::kAdvanced, kRobustSection, "robust")(
+      "rejected-out", po::value<std::string>()->value_name("FILE"),
+      "with --robust: write the rejected edges, `i j` (file ids) a line");
 }
 
 namespace {
@@ -75,22 +80,6 @@ std::string listed(const std::vector<std::string>& items, const std::string& las
   return out;
 }
 
-// The flags of addOnlineRobustFlags, all of which need --robust.
-constexpr const char* kOnlineFlags[] = {"entry", "noise-scale", "corroboration-window",
-                                        "finalize-rounds", "rule-off"};
-
-// The value of a flag that names an enum's value (`parse`: the enum's inverse of toString);
-// anything else is refused naming the flag, the choices and the value.
-template <class Enum>
-Enum choiceOf(const po::variables_map& vm, const std::string& flag,
-              Enum (*parse)(const std::string&)) {
-  try {
-    return parse(vm[flag].as<std::string>());
-  } catch (const std::invalid_argument& e) {
-    throw UsageError("--" + flag + " " + e.what());
-  }
-}
-
 }  // namespace
 
 RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
@@ -108,43 +97,16 @@ RobustFlags readRobustFlags(const po::variables_map& vm, bool allow_auto) {
   return flags;
 }
 
-void addOnlineRobustFlags(po::options_description& options) {
-  std::string rules;
-  for (RobustRule r : robustRules()) rules += std::string(rules.empty() ? "" : ", ") + toString(r);
-  const std::string rule_help =
-      "with --robust, switch these rules of the robust layer off, comma-separated (" + rules +
-      "; docs/design.md, \"Robust smoothing\"): to see what one does";
-  options.add_options()(
-      "entry", po::value<std::string>()->default_value("innovation"),
-      "with --robust, how a new loop closure is first judged: innovation (r'(I + A S A')^-1 r, "
-      "S the poses' covariance in the Bayes tree) or residual (r'r)")(
-      "noise-scale", po::value<std::string>()->default_value("estimated"),
-      "with --robust, the scale of the information matrices the threshold is put on: estimated "
-      "(from the loop closures' innovations) or given (as the file or sender says)")(
-      "corroboration-window", po::value<int>()->default_value(RobustOptions{}.corroboration_window),
-      "with --robust and --noise-scale estimated, K > 0: the scale is estimated from the loop "
-      "closures that another closure within K poses of both ends agrees with (docs/design.md, "
-      "\"Robust smoothing\"); 0: from every closure")(
-      "finalize-rounds", po::value<int>()->default_value(RobustOptions{}.finalize_rounds),
-      "with --robust, at most this many rounds of the final pass (each graduates every closure "
-      "to the end and re-checks every closure; another round only while a re-check changed a "
-      "weight)")("rule-off", po::value<std::string>()->default_value(""), rule_help.c_str());
-}
-
 void readOnlineRobustFlags(const po::variables_map& vm, bool robust_on, RobustOptions* robust) {
   if (!robust_on) {
     std::vector<std::string> given;
-    for (const char* flag : kOnlineFlags)
-      if (!vm[flag].defaulted()) given.push_back(std::string("--") + flag);
+    for (const OptionSpec<RobustOptions>& spec : onlineRobustOptionTable())
+      if (vm.count(spec.name) && !vm[spec.name].defaulted()) given.push_back("--" + spec.name);
     if (!given.empty())
       throw UsageError(listed(given, "and") + (given.size() == 1 ? " needs" : " need") +
                        " --robust");
   }
-  robust->entry = choiceOf(vm, "entry", parseEntryTest);
-  robust->scale = choiceOf(vm, "noise-scale", parseNoiseScale);
-  robust->rules_off = choiceOf(vm, "rule-off", parseRuleSet);
-  robust->corroboration_window = vm["corroboration-window"].as<int>();
-  robust->finalize_rounds = vm["finalize-rounds"].as<int>();
+  readOptions(onlineRobustOptionTable(), vm, robust);
   // The numbers are checked by the options' own rule (RobustOptions::problem), which names the
   // field; each flag here is its field's name with '-' for '_'.
   const std::string problem = robust->problem();

@@ -11,8 +11,11 @@
 #include "arbor/bayestree/online_gnc.h"
 #include "arbor/core/gnc_solver.h"
 #include "arbor/core/robust_kernel.h"
+#include "arbor/tools/cli/online_robust_table.h"
 
 namespace arbor::cli {
+
+class FlagSet;
 
 struct RobustFlags {
   bool robust = false;                                     ///< --robust
@@ -26,22 +29,18 @@ struct RobustFlags {
   std::string rejected_out;  ///< --rejected-out FILE: the rejected edges, `i j` a line
 };
 
-/// Adds the four flags to `options`; `robust_help` says what --robust does in this command,
-/// `default_threshold` is --inlier-threshold's default ("online" for `arbor batch`).
-void addRobustFlags(boost::program_options::options_description& options,
-                    const std::string& robust_help, const std::string& default_threshold = "chi2");
+/// Adds the four flags to `flags` (tools/cli/flag_set.h), under kRobustSection: --robust,
+/// --kernel and --inlier-threshold common, --rejected-out advanced. `robust_help` says what
+/// --robust does in this command, `default_threshold` is --inlier-threshold's default ("online"
+/// for `arbor batch`).
+void addRobustFlags(FlagSet& flags, const std::string& robust_help,
+                    const std::string& default_threshold = "chi2");
 
 /// The flags in `vm` (parsed against a description addRobustFlags filled). Throws UsageError
 /// on a bad kernel or threshold, on `auto` when `allow_auto` is false, and on --kernel,
 /// --inlier-threshold or --rejected-out given without --robust.
 RobustFlags readRobustFlags(const boost::program_options::variables_map& vm, bool allow_auto);
 
-/// The online smoother's own robust flags (`arbor replay`, `arbor serve`): --entry
-/// innovation|residual, --noise-scale estimated|given, --warm-up hold|given, --scale-start
-/// at-most-last|median, --first-recheck replay|relinearized, and the numbers of
-/// RobustOptions each flag names (--corroboration-window K, --final-confirm-margin X, ...;
-/// bayestree/online_gnc.h).
-void addOnlineRobustFlags(boost::program_options::options_description& options);
 /// Those flags into `robust`. Throws UsageError on a bad value, and when one is given without
 /// --robust (`robust_on` false).
 void readOnlineRobustFlags(const boost::program_options::variables_map& vm, bool robust_on,

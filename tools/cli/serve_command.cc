@@ -23,6 +23,7 @@
 #include "arbor/tools/cli/batch_refinement.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
+#include "arbor/tools/cli/flag_set.h"
 #include "arbor/tools/cli/output_files.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/cli/smoother_flags.h"
@@ -93,32 +94,46 @@ double parseExitBudget(const std::string& text) {
 
 }  // namespace
 
-std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args) {
+namespace {
+
+// What the flags are read into before the checks turn them into a ServeCommandLine.
+struct ServeFlagValues {
   ServeCommandLine line;
-  serve::ServeOptions& options = line.options;
   std::string fsync = "update", publish = "changed", batch, format;
   bool no_refine = false;
   std::string exit_budget = "1";
-  long long max_senders = static_cast<long long>(options.max_senders);
-  po::options_description desc("arbor serve [options]");
-  desc.add_options()("help,h", "show this help")(
-      "lcm-url", po::value(&line.url),
-      "LCM provider URL (default: LCM_DEFAULT_URL / LCM's default)")(
+  long long max_senders = static_cast<long long>(line.options.max_senders);
+};
+
+const char* const kService = "Service";
+const char* const kOutput = "Output";
+const char* const kBatch = "Batch refinement";
+
+// Every flag of `arbor serve`, bound to `v`; each is declared here or in its table only.
+FlagSet serveFlagSet(ServeFlagValues& v) {
+  ServeCommandLine& line = v.line;
+  serve::ServeOptions& options = line.options;
+  FlagSet flags("arbor serve [options]",
+                {"arbor serve --journal /var/lib/arbor --robust -o map.g2o",
+                 "arbor serve --config serve.toml   (write one: arbor serve ... --print-config)"});
+  flags.add(Tier::kCommon, kService)("lcm-url", po::value(&line.url)->value_name("URL"),
+                                     "LCM provider URL (default: LCM_DEFAULT_URL / LCM's default)")(
+      "journal", po::value(&line.journal_dir)->value_name("DIR"),
+      "directory of the journal (journal.lcmlog); replayed on start")(
+      "publish", po::value(&v.publish)->default_value("changed")->value_name("changed|full|N"),
+      "estimates: changed (poses that changed), full, or N (full every N updates)");
+  flags.add(Tier::kAdvanced, kService)(
       "channel-prefix", po::value(&options.channel_prefix),
       "prefix of ARBOR_EDGES, ARBOR_PRIORS, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND")(
-      "journal", po::value(&line.journal_dir),
-      "directory of the journal (journal.lcmlog); replayed on start")(
-      "fsync", po::value(&fsync)->default_value("update"),
+      "fsync", po::value(&v.fsync)->default_value("update"),
       "journal fsync: update (before each update), edge, N (at most every N ms) or never")(
-      "publish", po::value(&publish)->default_value("changed"),
-      "estimates: changed (poses that changed), full, or N (full every N updates)")(
       "dim", po::value(&options.dim)->default_value(0),
       "2 or 3; an edge or prior of the other dimension is refused ('dim'). 0: the first edge's "
       "(the journal's first on a restart); set it where others share the bus")(
       "intake-window", po::value(&options.intake_window)->default_value(options.intake_window),
       "seqs remembered per sender for duplicate detection (older ones are refused as stale); a "
       "seq W or more above its sender's highest is held until 3 consecutive seqs confirm it")(
-      "max-senders", po::value(&max_senders)->default_value(max_senders),
+      "max-senders", po::value(&v.max_senders)->default_value(v.max_senders),
       "sender tables per stream (edges, priors, edge commands); a new sender takes the place of "
       "the least recently heard one (counted as senders_evicted)")(
       "snapshot-dir", po::value(&options.snapshot_dir),
@@ -129,41 +144,68 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "limit)")(
       "recv-buf", po::value(&line.recv_buf_bytes),
       "udpm: the receive buffer in bytes (LCM's recv_buf_size; capped by net.core.rmem_max; "
-      "default 4194304 unless the URL names recv_buf_size, which this flag replaces; docs/lcm.md)");
-  addSmootherFlags(desc);
-  desc.add_options()("status-period", po::value(&options.status_period_s)->default_value(1.0),
-                     "seconds between status messages")(
-      "no-refine", po::bool_switch(&no_refine),
-      "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
-      "exit-refine-budget", po::value(&exit_budget)->default_value(exit_budget),
-      "seconds the exit refinement may take: it stops at the first iteration boundary after "
-      "them (none: to convergence, however long; a second SIGINT/SIGTERM cuts it at once)")(
-      "output,o", po::value(&line.output), "on exit, write the estimate (as --format)")(
-      "format", po::value(&format),
-      "of -o: g2o (the graph with the edges applied) | tum (`time tx ty tz qx qy qz qw` a line, "
-      "the time the utime in seconds of the edge that created the pose) | kitti (3x4 [R t] "
-      "row-major a line), by ascending id; default: -o's extension (.g2o, .tum, .kitti; .txt "
-      "needs --format), else g2o; docs/files.md")("json", po::bool_switch(&line.json),
-                                                  "on exit, print one JSON object")(
+      "default 4194304 unless the URL names recv_buf_size, which this flag replaces; docs/lcm.md)")(
+      "status-period", po::value(&options.status_period_s)->default_value(1.0),
+      "seconds between status messages")(
       "bounded-heap", po::bool_switch(&line.bounded_heap),
       "return freed clique storage to the system: glibc's mmap threshold fixed at 1 MiB "
       "(core/heap_policy.h). Lowers the peak of very large graphs; costs page faults where "
-      "large tops are re-eliminated every update (docs/design.md, \"Memory\")")(
-      "batch", po::value(&batch),
+      "large tops are re-eliminated every update (docs/design.md, \"Memory\")");
+  flags.add(Tier::kCommon, kOutput)("output,o", po::value(&line.output)->value_name("OUT"),
+                                    "on exit, write the estimate (as --format)")(
+      "json", po::bool_switch(&line.json), "on exit, print one JSON object");
+  flags.add(Tier::kAdvanced, kOutput)(
+      "format", po::value(&v.format)->value_name("g2o|tum|kitti"),
+      "of -o: g2o (the graph with the edges applied) | tum (`time tx ty tz qx qy qz qw` a line, "
+      "the time the utime in seconds of the edge that created the pose) | kitti (3x4 [R t] "
+      "row-major a line), by ascending id; default: -o's extension (.g2o, .tum, .kitti; .txt "
+      "needs --format), else g2o; docs/files.md")(
+      "no-refine", po::bool_switch(&v.no_refine),
+      "on exit, skip the relinearise-all pass (the raw incremental estimate)")(
+      "exit-refine-budget", po::value(&v.exit_budget)->default_value(v.exit_budget),
+      "seconds the exit refinement may take: it stops at the first iteration boundary after "
+      "them (none: to convergence, however long; a second SIGINT/SIGTERM cuts it at once)");
+  flags.add(smootherOptionTable());
+  flags.add(Tier::kCommon, kBatch)(
+      "batch", po::value(&v.batch)->value_name("SOLVER"),
       (refine::batchSolverNames(true) +
        ": batch refinement in the background (every --batch-every updates and on command BATCH; "
        "lm when absent)")
-          .c_str())("batch-every", po::value(&options.batch.every)->default_value(0),
-                    "a background batch every N updates (needs --batch; 0: only on command BATCH)")(
+          .c_str())("batch-every",
+                    po::value(&options.batch.every)->default_value(0)->value_name("N"),
+                    "a background batch every N updates (needs --batch; 0: only on command BATCH)");
+  flags.add(Tier::kAdvanced, kBatch)(
       "reseed", po::bool_switch(&options.batch.reseed),
       "a batch estimate with lower F becomes the linearisation point (journaled)");
-  addRobustFlags(desc,
+  addRobustFlags(flags,
                  "robust to false loop closures: graduated non-convexity per loop closure in the "
                  "Bayes tree (riSAM-style), odometry (|i-j| = 1) trusted; edge_t's trust and "
                  "kernel choose per edge");
-  addOnlineRobustFlags(desc);
-  if (helpRequested(args, desc)) return std::nullopt;
-  const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
+  flags.add(onlineRobustOptionTable());
+  flags.allowConfig();
+  return flags;
+}
+
+}  // namespace
+
+std::vector<FlagInfo> serveFlags() {
+  ServeFlagValues v;
+  return serveFlagSet(v).flags();
+}
+
+std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args,
+                                                      std::ostream& out) {
+  ServeFlagValues v;
+  const FlagSet flags = serveFlagSet(v);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  const po::variables_map& vm = *parsed;
+  ServeCommandLine& line = v.line;
+  serve::ServeOptions& options = line.options;
+  const std::string &fsync = v.fsync, &publish = v.publish, &batch = v.batch, &format = v.format,
+                    &exit_budget = v.exit_budget;
+  const bool no_refine = v.no_refine;
+  const long long max_senders = v.max_senders;
   options.smoother = readSmootherFlags(vm);
   if (options.dim != 0 && options.dim != 2 && options.dim != 3) {
     throw UsageError("--dim must be 0, 2 or 3, not '" + std::to_string(options.dim) + "'");
@@ -231,7 +273,8 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   } else if (vm.count("recv-buf")) {
     throw UsageError("--recv-buf applies to udpm:// only, not '" + line.url + "'");
   }
-  return line;
+  if (flags.printConfig(vm, out)) return std::nullopt;
+  return std::move(line);
 }
 
 int serveCommand(const std::vector<std::string>& args) {

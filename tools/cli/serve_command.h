@@ -3,11 +3,13 @@
 #pragma once
 
 #include <cstdint>
+#include <iostream>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "arbor/io/trajectory_writer.h"
+#include "arbor/tools/cli/flag_set.h"
 #include "arbor/tools/cli/robust_flags.h"
 #include "arbor/tools/serve/serve_service.h"
 
@@ -29,9 +31,14 @@ struct ServeCommandLine {
   serve::ServeOptions options;
 };
 
-/// The options of `arbor serve ARGS`, without touching the journal or LCM; nullopt (after
-/// printing the help) on --help. Throws UsageError on anything unknown, missing or malformed,
-/// naming the flag and the value.
-std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args);
+/// The options of `arbor serve ARGS` (under them those of --config FILE), without touching the
+/// journal or LCM; nullopt after printing the help on --help or --help-all, or the options in
+/// force on --print-config (to `out`). Throws UsageError on anything unknown, missing or
+/// malformed, naming the flag and the value.
+std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::string>& args,
+                                                      std::ostream& out = std::cout);
+
+/// Every flag of `arbor serve`, as --help-all lists them.
+std::vector<FlagInfo> serveFlags();
 
 }  // namespace arbor::cli

@@ -8,6 +8,7 @@
 #include <boost/program_options.hpp>
 
 #include "arbor/bayestree/incremental_smoother.h"
+#include "arbor/tools/cli/smoother_table.h"
 
 namespace arbor::cli {
 

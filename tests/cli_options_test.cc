@@ -1,0 +1,267 @@
+// The command line in tiers (tools/cli/flag_set.h, tools/cli/option_table.h): --help lists the
+// common tier within 60 lines, --help-all every flag; a --config file round-trips through
+// --print-config; a prefix of a flag is refused on the command line and in a config file; the
+// README's synopsis and docs/cli.md agree with the flags the tables declare.
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/replay_command.h"
+#include "arbor/tools/cli/serve_command.h"
+#include "arbor/tools/cli/smoother_flags.h"
+
+namespace arbor::cli {
+namespace {
+
+struct Command {
+  const char* name;
+  std::function<std::vector<FlagInfo>()> flags;
+  std::function<void(std::vector<std::string>)> parse;  // --help or --help-all: prints, exits
+};
+
+std::vector<Command> commands() {
+  return {{"replay", replayFlags,
+           [](std::vector<std::string> args) {
+             args.insert(args.begin(), "graph.g2o");
+             EXPECT_FALSE(parseReplayCommandLine(args));
+           }},
+          {"serve", serveFlags, [](const std::vector<std::string>& args) {
+             EXPECT_FALSE(parseServeCommandLine(args));
+           }}};
+}
+
+std::string printed(const std::function<void()>& run) {
+  ::testing::internal::CaptureStdout();
+  run();
+  return ::testing::internal::GetCapturedStdout();
+}
+
+bool lists(const std::string& help, const std::string& flag) {
+  return std::regex_search(help, std::regex("(^|\\n)  (-., )?--" + flag + "( |\\n)"));
+}
+
+std::string tempPath(const std::string& name) {
+  return (std::filesystem::temp_directory_path() /
+          ("arbor_cli_options_" + std::to_string(::getpid()) + "_" + name))
+      .string();
+}
+
+void write(const std::string& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+}
+
+std::string readText(const std::string& path) {
+  std::ifstream in(path);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+TEST(CliOptions, HelpListsTheCommonTierWithinSixtyLinesAndHelpAllTheRest) {
+  for (const Command& c : commands()) {
+    const std::string help = printed([&] { c.parse({"--help"}); });
+    const std::string all = printed([&] { c.parse({"--help-all"}); });
+    EXPECT_LE(std::count(help.begin(), help.end(), '\n'), 60) << c.name << ":\n" << help;
+    EXPECT_NE(help.find("examples:"), std::string::npos) << c.name;
+    int common = 0;
+    for (const FlagInfo& f : c.flags()) {
+      EXPECT_TRUE(lists(all, f.name)) << c.name << " --help-all lacks --" << f.name;
+      EXPECT_EQ(lists(help, f.name), f.tier == Tier::kCommon) << c.name << " --" << f.name;
+      common += f.tier == Tier::kCommon;
+    }
+    EXPECT_LE(common, 16) << c.name;
+    EXPECT_GE(common, 8) << c.name;
+    EXPECT_NE(all.find("[experimental]"), std::string::npos) << c.name;
+  }
+}
+
+// The help of replay and serve and the table give every smoother flag one text.
+TEST(CliOptions, EverySmootherFlagHasItsTableTextInReplayAndServe) {
+  auto squeeze = [](const std::string& text) {
+    std::string out;
+    for (char c : text) {
+      const bool space = c == ' ' || c == '\n';
+      if (!space || (!out.empty() && out.back() != ' ')) out += space ? ' ' : c;
+    }
+    return out;
+  };
+  for (const Command& c : commands()) {
+    const std::string all = squeeze(printed([&] { c.parse({"--help-all"}); }));
+    for (const auto& row : smootherOptionTable())
+      EXPECT_NE(all.find(squeeze(row.help)), std::string::npos) << c.name << " --" << row.name;
+  }
+}
+
+// What --print-config writes, --config reads back to the same options, and prints the same.
+TEST(CliOptions, AConfigFileRoundTripsThroughPrintConfig) {
+  const std::vector<std::string> args = {"--threads",
+                                         "2",
+                                         "--relinearize",
+                                         "inline",
+                                         "--robust",
+                                         "--entry",
+                                         "residual",
+                                         "--batch",
+                                         "lm",
+                                         "--batch-every",
+                                         "50",
+                                         "--publish",
+                                         "full",
+                                         "--channel-prefix",
+                                         "TEAM A ",
+                                         "--final-confirm-margin",
+                                         "1.5",
+                                         "--dogleg",
+                                         "--print-config"};
+  std::ostringstream first;
+  EXPECT_FALSE(parseServeCommandLine(args, first));
+  const std::string file = tempPath("serve.toml");
+  write(file, first.str());
+  std::ostringstream second;
+  EXPECT_FALSE(parseServeCommandLine({"--config", file, "--print-config"}, second));
+  EXPECT_EQ(first.str(), second.str());
+  EXPECT_NE(first.str().find("threads = 2\n"), std::string::npos) << first.str();
+  EXPECT_NE(first.str().find("channel-prefix = \"TEAM A \"\n"), std::string::npos);
+
+  std::vector<std::string> flags(args.begin(), args.end() - 1);
+  const auto given = parseServeCommandLine(flags);
+  const auto read = parseServeCommandLine({"--config", file});
+  ASSERT_TRUE(given && read);
+  EXPECT_EQ(read->options.smoother.threads, 2);
+  EXPECT_TRUE(read->options.smoother.dogleg);
+  EXPECT_TRUE(read->options.robust.has_value());
+  EXPECT_EQ(read->options.robust->entry, EntryTest::kResidual);
+  EXPECT_EQ(read->options.robust->final_confirm_margin, 1.5);
+  EXPECT_EQ(read->options.batch.every, 50);
+  EXPECT_EQ(read->options.channel_prefix, "TEAM A ");
+  EXPECT_EQ(read->options.full_every, given->options.full_every);
+
+  // The command line wins over the file.
+  EXPECT_EQ(parseServeCommandLine({"--config", file, "--threads", "3"})->options.smoother.threads,
+            3);
+  // A file without --robust keeps the robust options it does not use as comments.
+  std::ostringstream plain;
+  EXPECT_FALSE(parseServeCommandLine({"--print-config"}, plain));
+  EXPECT_NE(plain.str().find("# entry = \"innovation\"\n"), std::string::npos) << plain.str();
+  write(file, plain.str());
+  EXPECT_FALSE(parseServeCommandLine({"--config", file})->options.robust.has_value());
+  std::filesystem::remove(file);
+}
+
+// A config file's bad line is refused naming the file, the line and what is wrong; a prefix of a
+// flag is no key.
+TEST(CliOptions, ABadConfigLineIsRefusedNamingFileAndLine) {
+  const std::string file = tempPath("bad.toml");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"threads = 2\nthread = 3\n", ":2: unknown option 'thread'"},
+      {"# a comment\n\nrobus = true\n", ":3: unknown option 'robus'"},
+      {"[smoother]\nthreads = 2\n", ":1: tables are not read"},
+      {"dogleg = yes\n", ":1: dogleg must be true or false, not 'yes'"},
+      {"threads = 2\nthreads = 3\n", ":2: threads is given twice"},
+      {"publish = \"full\n", ":1: publish: expected a string closed by \""},
+      {"threads 2\n", ":1: expected `key = value`"},
+      {"config = \"other.toml\"\n", ":1: unknown option 'config'"},
+  };
+  for (const auto& [text, message] : cases) {
+    write(file, text);
+    try {
+      parseServeCommandLine({"--config", file});
+      ADD_FAILURE() << text << " accepted";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find(file + message), std::string::npos)
+          << text << ": " << e.what();
+    }
+  }
+  write(file, "threads = many\n");
+  EXPECT_THROW(parseServeCommandLine({"--config", file}), UsageError);
+  std::filesystem::remove(file);
+  EXPECT_THROW(parseServeCommandLine({"--config", file}), UsageError);  // missing
+}
+
+// Only whole flag names are taken, --help-all's too.
+TEST(CliOptions, APrefixOfAFlagIsRefused) {
+  for (const std::vector<std::string>& args : {std::vector<std::string>{"--thread", "2"},
+                                               {"--help-al"},
+                                               {"--print-conf"},
+                                               {"--conf", "x.toml"},
+                                               {"--final-confirm", "0.3"}}) {
+    try {
+      parseServeCommandLine(args);
+      ADD_FAILURE() << args.front() << " accepted";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find(args.front()), std::string::npos) << e.what();
+    }
+  }
+}
+
+// The flags named in a text: every `--name`.
+std::set<std::string> flagsIn(const std::string& text) {
+  std::set<std::string> out;
+  const std::regex flag("--([a-z0-9][a-z0-9-]*)");
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), flag); it != std::sregex_iterator();
+       ++it)
+    out.insert((*it)[1]);
+  return out;
+}
+
+// The lines of a fenced block in `path` from the one starting `first` up to the next line that
+// starts with `arbor ` or is blank.
+std::string synopsisOf(const std::string& path, const std::string& first) {
+  std::istringstream in(readText(path));
+  std::string line, out;
+  bool inside = false;
+  while (std::getline(in, line)) {
+    if (inside && (line.rfind("arbor ", 0) == 0 || line.empty() || line == "```")) break;
+    if (line.rfind(first, 0) == 0) inside = true;
+    if (inside) out += line + "\n";
+  }
+  return out;
+}
+
+// The README's one line per command names only common flags of that command; docs/cli.md's
+// synopsis names every flag of replay and serve and no other ("[smoother flags]": the smoother
+// table's, listed once below the commands).
+TEST(CliOptions, ReadmeSynopsisAndDocsAgreeWithTheTables) {
+  const std::string root = ARBOR_SOURCE_DIR;
+  std::set<std::string> smoother;
+  for (const auto& row : smootherOptionTable()) smoother.insert(row.name);
+  std::set<std::string> smoother_documented =
+      flagsIn(synopsisOf(root + "/docs/cli.md", "smoother flags"));
+  smoother_documented.erase("help");
+  EXPECT_EQ(smoother_documented, smoother);
+  for (const Command& c : commands()) {
+    std::set<std::string> all, common;
+    for (const FlagInfo& f : c.flags()) {
+      all.insert(f.name);
+      if (f.tier == Tier::kCommon) common.insert(f.name);
+    }
+    const std::string head = std::string("arbor ") + c.name + " ";
+    const std::string readme = synopsisOf(root + "/README.md", head);
+    ASSERT_FALSE(readme.empty()) << c.name;
+    for (const std::string& f : flagsIn(readme))
+      EXPECT_TRUE(common.count(f))
+          << "README: arbor " << c.name << " --" << f << " is not a common flag";
+    const std::string docs = synopsisOf(root + "/docs/cli.md", head);
+    std::set<std::string> documented = flagsIn(docs);
+    if (docs.find("[smoother flags]") != std::string::npos)
+      documented.insert(smoother.begin(), smoother.end());
+    documented.erase("help");  // --help and --help-all: every command's, no table's
+    documented.erase("help-all");
+    for (const std::string& f : all)
+      EXPECT_TRUE(documented.count(f)) << "docs/cli.md: arbor " << c.name << " lacks --" << f;
+    for (const std::string& f : documented)
+      EXPECT_TRUE(all.count(f)) << "docs/cli.md: arbor " << c.name << " has no --" << f;
+  }
+}
+
+}  // namespace
+}  // namespace arbor::cli
