@@ -118,8 +118,8 @@ TEST(CliOptions, AConfigFileRoundTripsThroughPrintConfig) {
                                          "full",
                                          "--channel-prefix",
                                          "TEAM A ",
-                                         "--final-confirm-margin",
-                                         "1.5",
+                                         "--rules-off",
+                                         "end-word,rehold",
                                          "--dogleg",
                                          "--print-config"};
   std::ostringstream first;
@@ -140,7 +140,7 @@ TEST(CliOptions, AConfigFileRoundTripsThroughPrintConfig) {
   EXPECT_TRUE(read->options.smoother.dogleg);
   EXPECT_TRUE(read->options.robust.has_value());
   EXPECT_EQ(read->options.robust->entry, EntryTest::kResidual);
-  EXPECT_EQ(read->options.robust->final_confirm_margin, 1.5);
+  EXPECT_EQ(read->options.robust->rules_off, (RuleSet{RobustRule::kRehold, RobustRule::kEndWord}));
   EXPECT_EQ(read->options.batch.every, 50);
   EXPECT_EQ(read->options.channel_prefix, "TEAM A ");
   EXPECT_EQ(read->options.full_every, given->options.full_every);
