@@ -30,6 +30,7 @@
 #include "arbor/bayestree/marginals.h"
 #include "arbor/bayestree/ordering_decay.h"
 #include "arbor/bayestree/partial_solve.h"
+#include "arbor/bayestree/relinearization_check.h"
 #include "arbor/bayestree/relinearization_jobs.h"
 #include "arbor/bayestree/relinearization_swap.h"
 #include "arbor/bayestree/top_elimination.h"
@@ -133,6 +134,59 @@ void validate(const SmootherOptions& o) {
         "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
 }
 
+// The arguments of the smoother's calls, checked before anything changes.
+template <class G>
+void checkNewFactor(const Factor<G>& f, int num_poses) {
+  std::string where = "IncrementalSmoother::addFactor(" + f.name();
+  for (int k = 0; k < f.arity(); ++k) where += (k ? ", " : " ") + std::to_string(f.key(k));
+  where += "): ";
+  for (int k = 0; k < f.arity(); ++k)
+    if (f.key(k) < 0 || f.key(k) >= num_poses)
+      throw std::invalid_argument(where + "pose index out of range (" + std::to_string(num_poses) +
+                                  " poses)");
+  if (f.arity() == 2 && f.key(0) == f.key(1)) throw std::invalid_argument(where + "self-loop");
+  if (!f.isFinite()) throw std::invalid_argument(where + "measurement or information not finite");
+  const std::string problem =
+      std::visit([](const auto& x) { return informationProblem(x.information); }, f.variant());
+  if (!problem.empty()) throw std::invalid_argument(where + "information matrix " + problem);
+}
+
+template <class G>
+void checkMove(const std::vector<int>& poses, const G& T, int num_poses) {
+  if (!allFinite(T))
+    throw std::invalid_argument("IncrementalSmoother::transformPoses: transform not finite");
+  for (int v : poses)
+    if (v < 0 || v >= num_poses)
+      throw std::invalid_argument("IncrementalSmoother::transformPoses: index " +
+                                  std::to_string(v) + " out of range");
+}
+
+void checkWeight(int f, double w, int num_factors) {
+  if (f < 0 || f >= num_factors)
+    throw std::invalid_argument("IncrementalSmoother::setFactorWeight: factor " +
+                                std::to_string(f) + " out of range (" +
+                                std::to_string(num_factors) + " factors, queued included)");
+  if (!(w >= 0 && w <= 1))
+    throw std::invalid_argument("IncrementalSmoother::setFactorWeight(" + std::to_string(f) +
+                                "): weight " + std::to_string(w) + " not in [0, 1]");
+}
+
+// predictionCovariance's poses: in range and in the tree (or fixed).
+void checkPredictionPoseIndices(int a, int b, const std::vector<char>& fixed,
+                                const std::vector<int>& clique_of) {
+  const int num_poses = static_cast<int>(fixed.size());
+  for (int v : {a, b}) {
+    if (v < 0 || v >= num_poses)
+      throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
+                              std::to_string(v) + ": out of range (" + std::to_string(num_poses) +
+                              " poses)");
+    if (!fixed[v] && clique_of[v] < 0)
+      throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
+                             std::to_string(v) +
+                             ": not in the Bayes tree yet (call update() first)");
+  }
+}
+
 // 2D tops (SmootherOptions::nested_dissection_min automatic) whose CCOLAMD plan costs more than
 // this many flops per variable are ordered by nested dissection too, the cheaper plan kept. The
 // shared 2D sets stay below it (M3500 and manhattan whole: 2·10³ a variable, where nested
@@ -159,7 +213,6 @@ struct StepOptions {
 template <class G>
 struct IncrementalSmoother<G>::Impl {
   static constexpr int D = G::kDoF;
-  static constexpr int kTrans = G::kDim;  // the first kDim tangent entries are translational
   using Vec = Tangent;
 
   SmootherOptions opt;
@@ -192,12 +245,8 @@ struct IncrementalSmoother<G>::Impl {
   std::vector<int> touched, relin, to_linearize, marked;
   typename bayestree::BayesTree<D>::Top top;
   bayestree::UpdatedPoses updated;  // updatedPoses()
-  // Alg. 5's candidates: the variables solved since the last relinearisation check (each once:
-  // is_candidate), the only ones whose Δ can have crossed β; every variable when check_all
-  // (after a step that set Δ everywhere: dogleg, relinearizeAll).
-  std::vector<int> relin_candidates;
-  std::vector<char> is_candidate;
-  bool check_all = false;
+  // Alg. 5's check: the variables solved since the last one (bayestree/relinearization_check.h).
+  bayestree::RelinearizationCheck<G> relinearization_check;
   // The batch switch (BatchSwitchOptions): the variables (not fixed), and the watch of the
   // ordering's decay (bayestree/ordering_decay.h).
   int num_variables = 0;
@@ -214,18 +263,8 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
-  // predictionCovariance's poses: in range and in the tree (or fixed).
   void checkPredictionPoses(int a, int b) const {
-    for (int v : {a, b}) {
-      if (v < 0 || v >= numPoses())
-        throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
-                                std::to_string(v) + ": out of range (" +
-                                std::to_string(numPoses()) + " poses)");
-      if (!fixed[v] && tree.clique_of[v] < 0)
-        throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
-                               std::to_string(v) +
-                               ": not in the Bayes tree yet (call update() first)");
-    }
+    checkPredictionPoseIndices(a, b, fixed, tree.clique_of);
   }
   // A relinearisation job or its catch-up in flight (no check runs; changes are recorded).
   bool relinearizationPending() const { return async.pending(); }
@@ -248,7 +287,7 @@ struct IncrementalSmoother<G>::Impl {
     threads.addVariable();
     mark.push_back(0);
     updated.addPose();
-    is_candidate.push_back(0);
+    relinearization_check.addPose();
     if (!is_fixed) {
       new_vars.push_back(index);
       ++num_variables;
@@ -257,18 +296,7 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   void addFactor(const Factor<G>& f) {
-    std::string where = "IncrementalSmoother::addFactor(" + f.name();
-    for (int k = 0; k < f.arity(); ++k) where += (k ? ", " : " ") + std::to_string(f.key(k));
-    where += "): ";
-    for (int k = 0; k < f.arity(); ++k)
-      if (f.key(k) < 0 || f.key(k) >= numPoses())
-        throw std::invalid_argument(where + "pose index out of range (" +
-                                    std::to_string(numPoses()) + " poses)");
-    if (f.arity() == 2 && f.key(0) == f.key(1)) throw std::invalid_argument(where + "self-loop");
-    if (!f.isFinite()) throw std::invalid_argument(where + "measurement or information not finite");
-    const std::string problem =
-        std::visit([](const auto& x) { return informationProblem(x.information); }, f.variant());
-    if (!problem.empty()) throw std::invalid_argument(where + "information matrix " + problem);
+    checkNewFactor(f, numPoses());
     queued.push_back(f);
   }
 
@@ -293,12 +321,7 @@ struct IncrementalSmoother<G>::Impl {
   // Extension (the online layer's components): θ_v ← T θ_v; the factors not invariant under
   // the move are relinearised and their cliques re-eliminated by the next update.
   void transformPoses(const std::vector<int>& poses, const G& T) {
-    if (!allFinite(T))
-      throw std::invalid_argument("IncrementalSmoother::transformPoses: transform not finite");
-    for (int v : poses)
-      if (v < 0 || v >= numPoses())
-        throw std::invalid_argument("IncrementalSmoother::transformPoses: index " +
-                                    std::to_string(v) + " out of range");
+    checkMove(poses, T, numPoses());
     for (int v : poses) mark[v] = 1;
     updated.moved(poses);
     if (relinearizationPending())
@@ -327,14 +350,7 @@ struct IncrementalSmoother<G>::Impl {
   // enters the structure).
   void setFactorWeight(int f, double w) {
     const int added = factors.numFactors();
-    const int all = added + static_cast<int>(queued.size());
-    if (f < 0 || f >= all)
-      throw std::invalid_argument("IncrementalSmoother::setFactorWeight: factor " +
-                                  std::to_string(f) + " out of range (" + std::to_string(all) +
-                                  " factors, queued included)");
-    if (!(w >= 0 && w <= 1))
-      throw std::invalid_argument("IncrementalSmoother::setFactorWeight(" + std::to_string(f) +
-                                  "): weight " + std::to_string(w) + " not in [0, 1]");
+    checkWeight(f, w, added + static_cast<int>(queued.size()));
     if (f >= added) {
       queued[static_cast<size_t>(f - added)].setInlierWeight(w);
       return;
@@ -374,10 +390,7 @@ struct IncrementalSmoother<G>::Impl {
   void noteSolved() {
     for (int v : partial_solve.solved_variables) {
       updated.note(v);
-      if (!is_candidate[v]) {
-        is_candidate[v] = 1;
-        relin_candidates.push_back(v);
-      }
+      relinearization_check.solved(v);
     }
   }
 
@@ -494,9 +507,8 @@ struct IncrementalSmoother<G>::Impl {
     to_touch.insert(to_touch.end(), r.touch.begin(), r.touch.end());
     readmitted.insert(readmitted.end(), r.readmitted.begin(), r.readmitted.end());
     new_vars = std::move(r.new_vars);
-    for (int v : relin_candidates) is_candidate[v] = 0;
-    relin_candidates.clear();
-    check_all = true;
+    relinearization_check.consume();
+    relinearization_check.scanAll();
     decay.adoptedFresh(tree);
     updated.noteAll();
     marginals = bayestree::TreeMarginals<D>();
@@ -522,7 +534,7 @@ struct IncrementalSmoother<G>::Impl {
     shadow->fixed = fixed;
     shadow->mark.assign(static_cast<size_t>(n), 0);
     for (int v = 0; v < n; ++v) shadow->updated.addPose();
-    shadow->is_candidate.assign(static_cast<size_t>(n), 0);
+    for (int v = 0; v < n; ++v) shadow->relinearization_check.addPose();
     for (int v = 0; v < n; ++v) shadow->threads.addVariable();
     shadow->num_variables = num_variables;
     shadow->stamp = stamp;
@@ -674,40 +686,19 @@ struct IncrementalSmoother<G>::Impl {
     return out;
   }
 
-  bool exceedsThreshold(const Vec& dx) const {
-    return dx.template head<kTrans>().cwiseAbs().maxCoeff() >
-               opt.relinearize_threshold_translation ||
-           dx.template tail<D - kTrans>().cwiseAbs().maxCoeff() >
-               opt.relinearize_threshold_rotation;
-  }
-
-  // Alg. 5 steps 1–2 into `relin` (M): "Mark variables in Δ above threshold β:
-  // J = {Δ_j ∈ Δ | |Δ_j| ≥ β}" (|·|∞ on the translational and the rotational part, each against
-  // its β; relinearizeAll: every variable) and "Update linearization point for marked
-  // variables: Θ_J := Θ_J ⊕ Δ_J" (their Δ becomes zero).
+  // Alg. 5 steps 1–2 into `relin` (M): "Mark variables in Δ above threshold β"
+  // (bayestree/relinearization_check.h; relinearizeAll: every variable) and "Update
+  // linearization point for marked variables: Θ_J := Θ_J ⊕ Δ_J" (their Δ becomes zero).
   void relinearizeVariables(const StepOptions& pass, UpdateStats* st) {
     relin.clear();
-    const int n = numPoses();
     if (pass.relinearize_all) {
-      for (int v = 0; v < n; ++v)
+      for (int v = 0; v < numPoses(); ++v)
         if (!fixed[v]) relin.push_back(v);
-    } else if (pass.check_relinearization && check_all) {
-      for (int v = 0; v < n; ++v)
-        if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
-      st->variables_checked = n;
+      relinearization_check.consume();
     } else if (pass.check_relinearization) {
-      // Only a variable solved since the last check can have crossed β (every other one was
-      // below it then, or relinearised and solved since). In index order, as a scan of all
-      // would list them (the few that crossed sorted, not every candidate).
-      for (int v : relin_candidates)
-        if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
-      std::sort(relin.begin(), relin.end());
-      st->variables_checked = static_cast<int>(relin_candidates.size());
-    }
-    if (pass.relinearize_all || pass.check_relinearization) {
-      for (int v : relin_candidates) is_candidate[v] = 0;
-      relin_candidates.clear();
-      check_all = false;
+      st->variables_checked = relinearization_check.mark(
+          delta, fixed, tree.clique_of, opt.relinearize_threshold_translation,
+          opt.relinearize_threshold_rotation, &relin);
     }
     // RelinearizationMode::kAsync: a large M goes to the background job; this pass goes on
     // with the old linearisation point.
@@ -860,7 +851,7 @@ struct IncrementalSmoother<G>::Impl {
     if (opt.dogleg && tree_changed) {
       doglegStep();  // sets Δ everywhere
       updated.noteAll();
-      check_all = true;
+      relinearization_check.scanAll();
     }
   }
 
@@ -913,7 +904,7 @@ struct IncrementalSmoother<G>::Impl {
     async.dropBuffers();
     if (relinearizationPending()) {  // everything is relinearised below: the job is not needed
       async.abandon();
-      check_all = true;  // the snapshot's check consumed its candidates
+      relinearization_check.scanAll();  // the snapshot's check consumed its candidates
     }
     if (!queued.empty() || !new_vars.empty()) accumulate(&total, update());
     updated.begin();
@@ -947,7 +938,7 @@ struct IncrementalSmoother<G>::Impl {
       F_prev = F_new;
       if (change < opt.finalize_relative_tolerance) break;
     }
-    check_all = true;  // the halving set Δ outside the solve
+    relinearization_check.scanAll();  // the halving set Δ outside the solve
     updated.finish(fixed);
     total.time_s = secondsSince(t0);
     return total;
