@@ -1,12 +1,14 @@
-// The smoother: IJRR 2012 Alg. 6 (one step of iSAM2) over the units of bayestree/ — the Bayes
-// tree (bayes_tree.h), the linearised factors (linear_factors.h), the top elimination
-// (top_elimination.h), the fold-in (fold_in.h, our extension) and the partial state update
-// (partial_solve.h), with the threads they share (update_threads.h). Numbers are those of
-// Kaess et al., "iSAM2: Incremental smoothing and mapping using the Bayes tree", IJRR 31(2),
-// 2012 (the ICRA 2011 paper numbers its listings differently): Alg. 3 the Bayes-tree update with
-// new factors, Alg. 4 the same with fluid relinearisation, Alg. 5 fluid relinearisation, Alg. 6
-// one step of iSAM2, Alg. 7 the partial state update. Steps marked "Extension" are ours
-// (docs/design.md, "The update, step by step").
+// The smoother: IJRR 2012 Alg. 6 (one step of iSAM2) over the units of bayestree/ — the Bayes tree
+// (bayes_tree.h), the linearised factors (linear_factors.h), the top elimination
+// (top_elimination.h), the fold-in (fold_in.h, our extension), the partial state update
+// (partial_solve.h), Alg. 5's check (relinearization_check.h), the re-ordering decay watch
+// (ordering_decay.h), the asynchronous relinearisation's jobs and swap (relinearization_jobs.h,
+// relinearization_swap.h), and the updated poses (updated_poses.h), with the threads they share
+// (update_threads.h). Numbers are those of Kaess et al., "iSAM2: Incremental smoothing and mapping
+// using the Bayes tree", IJRR 31(2), 2012 (the ICRA 2011 paper numbers its listings differently):
+// Alg. 3 the Bayes-tree update with new factors, Alg. 4 the same with fluid relinearisation, Alg. 5
+// fluid relinearisation, Alg. 6 one step of iSAM2, Alg. 7 the partial state update. Steps marked
+// "Extension" are ours (docs/design.md, "The update, step by step").
 #include "arbor/bayestree/incremental_smoother.h"
 
 #include <algorithm>
