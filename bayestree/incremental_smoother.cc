@@ -1,12 +1,14 @@
-// The smoother: IJRR 2012 Alg. 6 (one step of iSAM2) over the units of bayestree/ — the Bayes
-// tree (bayes_tree.h), the linearised factors (linear_factors.h), the top elimination
-// (top_elimination.h), the fold-in (fold_in.h, our extension) and the partial state update
-// (partial_solve.h), with the threads they share (update_threads.h). Numbers are those of
-// Kaess et al., "iSAM2: Incremental smoothing and mapping using the Bayes tree", IJRR 31(2),
-// 2012 (the ICRA 2011 paper numbers its listings differently): Alg. 3 the Bayes-tree update with
-// new factors, Alg. 4 the same with fluid relinearisation, Alg. 5 fluid relinearisation, Alg. 6
-// one step of iSAM2, Alg. 7 the partial state update. Steps marked "Extension" are ours
-// (docs/design.md, "The update, step by step").
+// The smoother: IJRR 2012 Alg. 6 (one step of iSAM2) over the units of bayestree/ — the Bayes tree
+// (bayes_tree.h), the linearised factors (linear_factors.h), the top elimination
+// (top_elimination.h), the fold-in (fold_in.h, our extension), the partial state update
+// (partial_solve.h), Alg. 5's check (relinearization_check.h), the re-ordering decay watch
+// (ordering_decay.h), the asynchronous relinearisation's jobs and swap (relinearization_jobs.h,
+// relinearization_swap.h), and the updated poses (updated_poses.h), with the threads they share
+// (update_threads.h). Numbers are those of Kaess et al., "iSAM2: Incremental smoothing and mapping
+// using the Bayes tree", IJRR 31(2), 2012 (the ICRA 2011 paper numbers its listings differently):
+// Alg. 3 the Bayes-tree update with new factors, Alg. 4 the same with fluid relinearisation, Alg. 5
+// fluid relinearisation, Alg. 6 one step of iSAM2, Alg. 7 the partial state update. Steps marked
+// "Extension" are ours (docs/design.md, "The update, step by step").
 #include "arbor/bayestree/incremental_smoother.h"
 
 #include <algorithm>
@@ -23,17 +25,19 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/async_relinearization.h"
-#include "arbor/bayestree/background_job.h"
 #include "arbor/bayestree/bayes_tree.h"
 #include "arbor/bayestree/dogleg_step.h"
 #include "arbor/bayestree/fold_in.h"
 #include "arbor/bayestree/linear_factors.h"
 #include "arbor/bayestree/marginals.h"
+#include "arbor/bayestree/ordering_decay.h"
 #include "arbor/bayestree/partial_solve.h"
+#include "arbor/bayestree/relinearization_check.h"
+#include "arbor/bayestree/relinearization_jobs.h"
+#include "arbor/bayestree/relinearization_swap.h"
 #include "arbor/bayestree/top_elimination.h"
-#include "arbor/bayestree/tree_shape.h"
 #include "arbor/bayestree/update_threads.h"
+#include "arbor/bayestree/updated_poses.h"
 #include "arbor/core/blas_threads.h"
 #include "arbor/core/elapsed.h"
 #include "arbor/core/finite_pose.h"
@@ -132,6 +136,59 @@ void validate(const SmootherOptions& o) {
         "IncrementalSmoother: bad options: relinearize = async needs Gauss–Newton, not dogleg");
 }
 
+// The arguments of the smoother's calls, checked before anything changes.
+template <class G>
+void checkNewFactor(const Factor<G>& f, int num_poses) {
+  std::string where = "IncrementalSmoother::addFactor(" + f.name();
+  for (int k = 0; k < f.arity(); ++k) where += (k ? ", " : " ") + std::to_string(f.key(k));
+  where += "): ";
+  for (int k = 0; k < f.arity(); ++k)
+    if (f.key(k) < 0 || f.key(k) >= num_poses)
+      throw std::invalid_argument(where + "pose index out of range (" + std::to_string(num_poses) +
+                                  " poses)");
+  if (f.arity() == 2 && f.key(0) == f.key(1)) throw std::invalid_argument(where + "self-loop");
+  if (!f.isFinite()) throw std::invalid_argument(where + "measurement or information not finite");
+  const std::string problem =
+      std::visit([](const auto& x) { return informationProblem(x.information); }, f.variant());
+  if (!problem.empty()) throw std::invalid_argument(where + "information matrix " + problem);
+}
+
+template <class G>
+void checkMove(const std::vector<int>& poses, const G& T, int num_poses) {
+  if (!allFinite(T))
+    throw std::invalid_argument("IncrementalSmoother::transformPoses: transform not finite");
+  for (int v : poses)
+    if (v < 0 || v >= num_poses)
+      throw std::invalid_argument("IncrementalSmoother::transformPoses: index " +
+                                  std::to_string(v) + " out of range");
+}
+
+void checkWeight(int f, double w, int num_factors) {
+  if (f < 0 || f >= num_factors)
+    throw std::invalid_argument("IncrementalSmoother::setFactorWeight: factor " +
+                                std::to_string(f) + " out of range (" +
+                                std::to_string(num_factors) + " factors, queued included)");
+  if (!(w >= 0 && w <= 1))
+    throw std::invalid_argument("IncrementalSmoother::setFactorWeight(" + std::to_string(f) +
+                                "): weight " + std::to_string(w) + " not in [0, 1]");
+}
+
+// predictionCovariance's poses: in range and in the tree (or fixed).
+void checkPredictionPoseIndices(int a, int b, const std::vector<char>& fixed,
+                                const std::vector<int>& clique_of) {
+  const int num_poses = static_cast<int>(fixed.size());
+  for (int v : {a, b}) {
+    if (v < 0 || v >= num_poses)
+      throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
+                              std::to_string(v) + ": out of range (" + std::to_string(num_poses) +
+                              " poses)");
+    if (!fixed[v] && clique_of[v] < 0)
+      throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
+                             std::to_string(v) +
+                             ": not in the Bayes tree yet (call update() first)");
+  }
+}
+
 // 2D tops (SmootherOptions::nested_dissection_min automatic) whose CCOLAMD plan costs more than
 // this many flops per variable are ordered by nested dissection too, the cheaper plan kept. The
 // shared 2D sets stay below it (M3500 and manhattan whole: 2·10³ a variable, where nested
@@ -139,13 +196,8 @@ void validate(const SmootherOptions& o) {
 // whole graph: 1.1·10⁵ a variable under CCOLAMD, 3.4·10⁴ under nested dissection;
 // docs/benchmarks.md, "Nested dissection for heavy 2D tops").
 constexpr double kNestedDissectionTryFlops = 2e4;
-// The decay check (BatchSwitchOptions::reorder_decay) waits until the tree's factorisation
-// costs at least this many flops, or its matrices hold this many doubles (8 MB): below them a
-// re-ordering saves less than the check costs.
-constexpr double kMinDecayCheckFlops = 1e6;
 // The queue of factors keeps its storage between updates up to this many factors.
 constexpr size_t kKeptQueueCapacity = 4096;
-constexpr double kMinDecayCheckDoubles = 1e6;
 
 /// How one pass of Alg. 6 runs.
 struct StepOptions {
@@ -163,7 +215,6 @@ struct StepOptions {
 template <class G>
 struct IncrementalSmoother<G>::Impl {
   static constexpr int D = G::kDoF;
-  static constexpr int kTrans = G::kDim;  // the first kDim tangent entries are translational
   using Vec = Tangent;
 
   SmootherOptions opt;
@@ -195,51 +246,17 @@ struct IncrementalSmoother<G>::Impl {
   // A pass's lists (reused).
   std::vector<int> touched, relin, to_linearize, marked;
   typename bayestree::BayesTree<D>::Top top;
-  // updatedPoses(): the poses of the last update (each once: updated_stamp[v] == publish_stamp),
-  // every variable when updated_all; `moved` waits for the next update (transformPoses).
-  // Sorted when first asked for (updated_is_sorted), not by every update: a replay never asks, and
-  // sorting a few hundred solved poses an update was 4% of intel's update instructions.
-  mutable std::vector<int> updated;
-  std::vector<int> moved, updated_stamp;
-  int publish_stamp = 0;
-  bool updated_all = false;
-  mutable bool updated_is_sorted = true;
-  // Alg. 5's candidates: the variables solved since the last relinearisation check (each once:
-  // is_candidate), the only ones whose Δ can have crossed β; every variable when check_all
-  // (after a step that set Δ everywhere: dogleg, relinearizeAll).
-  std::vector<int> relin_candidates;
-  std::vector<char> is_candidate;
-  bool check_all = false;
-  // The batch switch (BatchSwitchOptions): the variables (not fixed), the tree's flops and
-  // doubles when its ordering was last compared with a fresh one (or made afresh), and a
-  // re-ordering found due.
+  bayestree::UpdatedPoses updated;  // updatedPoses()
+  // Alg. 5's check: the variables solved since the last one (bayestree/relinearization_check.h).
+  bayestree::RelinearizationCheck<G> relinearization_check;
+  // The batch switch (BatchSwitchOptions): the variables (not fixed), and the watch of the
+  // ordering's decay (bayestree/ordering_decay.h).
   int num_variables = 0;
-  double flops_reference = 0, doubles_reference = 0;
-  bool reorder_due = false;
-  // AsyncRelinearizationOptions::reorder_in_background: a decay found, its re-ordering left to
-  // a job (started at the next update's snapshot; cleared when a fresh tree comes in).
-  bool reorder_job_wanted = false;
-  bayestree::RowList fresh_rows;
-  std::vector<int> fresh_vars;
-  // RelinearizationMode::kAsync (bayestree/async_relinearization.h): the job in flight, what
-  // changed since its snapshot that the swap folds in besides the poses and factors added since
-  // (poses moved, factors reweighted, anchors released), and whether the second core is taken.
-  bayestree::AsyncRelinearization<G> async;
-  std::vector<int> moved_since_snapshot, reweighted_since_snapshot, released_since_snapshot;
-  // AsyncCatchUp::kInBackground: the catch-up in flight (a copy of this state that folds the
-  // job's tree up to the update that started it), that update's poses and factors, Θ then, and
-  // |M| of the job's snapshot.
-  bayestree::BackgroundJob<Impl> catch_up;
-  int catch_up_poses = 0, catch_up_factors = 0, catch_up_relinearized = 0, catch_up_rounds = 0;
-  std::vector<G> theta_at_catch_up;
-  // What the last swap replaced (its tree, linearisations, solve and Δ), freed by the next
-  // relinearisation job's thread before its work (AsyncRelinearization::start), or by
-  // relinearizeAll, which re-eliminates everything anyway (and frees snapshot_factors too).
-  bayestree::RelinearizedTree<G> replaced;
-  // The last snapshot's factor array, kept for the next snapshot to copy into.
-  std::vector<Factor<G>> snapshot_factors;
+  bayestree::OrderingDecay<G> decay;
+  // RelinearizationMode::kAsync (bayestree/relinearization_jobs.h): the job or catch-up in
+  // flight, what changed since its snapshot, the buffers kept between jobs.
+  bayestree::RelinearizationJobs<G, Impl> async;
   int pass_first_factor = 0;  // the first factor of the current pass (the snapshot's end)
-  bool second_core_busy = false;
 
   explicit Impl(const SmootherOptions& o)
       : opt(o), threads(threadCount(o.threads)), dogleg_radius(o.dogleg_initial_radius) {
@@ -248,21 +265,11 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   int numPoses() const { return static_cast<int>(theta.size()); }
-  // predictionCovariance's poses: in range and in the tree (or fixed).
   void checkPredictionPoses(int a, int b) const {
-    for (int v : {a, b}) {
-      if (v < 0 || v >= numPoses())
-        throw std::out_of_range("IncrementalSmoother: prediction covariance on pose index " +
-                                std::to_string(v) + ": out of range (" +
-                                std::to_string(numPoses()) + " poses)");
-      if (!fixed[v] && tree.clique_of[v] < 0)
-        throw std::logic_error("IncrementalSmoother: prediction covariance on pose index " +
-                               std::to_string(v) +
-                               ": not in the Bayes tree yet (call update() first)");
-    }
+    checkPredictionPoseIndices(a, b, fixed, tree.clique_of);
   }
   // A relinearisation job or its catch-up in flight (no check runs; changes are recorded).
-  bool relinearizationPending() const { return async.pending() || catch_up.pending(); }
+  bool relinearizationPending() const { return async.pending(); }
   // Per pose, 1 when it is not a variable of the tree: held fixed, or not in it (yet).
   std::vector<char> notInTree() const {
     std::vector<char> out(static_cast<size_t>(numPoses()));
@@ -281,8 +288,8 @@ struct IncrementalSmoother<G>::Impl {
     factors.addVariable();
     threads.addVariable();
     mark.push_back(0);
-    updated_stamp.push_back(0);
-    is_candidate.push_back(0);
+    updated.addPose();
+    relinearization_check.addPose();
     if (!is_fixed) {
       new_vars.push_back(index);
       ++num_variables;
@@ -291,18 +298,7 @@ struct IncrementalSmoother<G>::Impl {
   }
 
   void addFactor(const Factor<G>& f) {
-    std::string where = "IncrementalSmoother::addFactor(" + f.name();
-    for (int k = 0; k < f.arity(); ++k) where += (k ? ", " : " ") + std::to_string(f.key(k));
-    where += "): ";
-    for (int k = 0; k < f.arity(); ++k)
-      if (f.key(k) < 0 || f.key(k) >= numPoses())
-        throw std::invalid_argument(where + "pose index out of range (" +
-                                    std::to_string(numPoses()) + " poses)");
-    if (f.arity() == 2 && f.key(0) == f.key(1)) throw std::invalid_argument(where + "self-loop");
-    if (!f.isFinite()) throw std::invalid_argument(where + "measurement or information not finite");
-    const std::string problem =
-        std::visit([](const auto& x) { return informationProblem(x.information); }, f.variant());
-    if (!problem.empty()) throw std::invalid_argument(where + "information matrix " + problem);
+    checkNewFactor(f, numPoses());
     queued.push_back(f);
   }
 
@@ -316,7 +312,7 @@ struct IncrementalSmoother<G>::Impl {
     fixed[v] = 0;
     new_vars.push_back(v);
     ++num_variables;
-    if (relinearizationPending()) released_since_snapshot.push_back(v);
+    if (relinearizationPending()) async.since.released.push_back(v);
     for (int f : factors.var_factors[v]) {
       const Factor<G>& e = factors.factors[f];
       for (int k = 0; k < e.arity(); ++k)
@@ -327,16 +323,11 @@ struct IncrementalSmoother<G>::Impl {
   // Extension (the online layer's components): θ_v ← T θ_v; the factors not invariant under
   // the move are relinearised and their cliques re-eliminated by the next update.
   void transformPoses(const std::vector<int>& poses, const G& T) {
-    if (!allFinite(T))
-      throw std::invalid_argument("IncrementalSmoother::transformPoses: transform not finite");
-    for (int v : poses)
-      if (v < 0 || v >= numPoses())
-        throw std::invalid_argument("IncrementalSmoother::transformPoses: index " +
-                                    std::to_string(v) + " out of range");
+    checkMove(poses, T, numPoses());
     for (int v : poses) mark[v] = 1;
-    moved.insert(moved.end(), poses.begin(), poses.end());
+    updated.moved(poses);
     if (relinearizationPending())
-      moved_since_snapshot.insert(moved_since_snapshot.end(), poses.begin(), poses.end());
+      async.since.moved.insert(async.since.moved.end(), poses.begin(), poses.end());
     for (int v : poses) {
       theta[v] = T.compose(theta[v]);
       theta[v].normalize();
@@ -361,14 +352,7 @@ struct IncrementalSmoother<G>::Impl {
   // enters the structure).
   void setFactorWeight(int f, double w) {
     const int added = factors.numFactors();
-    const int all = added + static_cast<int>(queued.size());
-    if (f < 0 || f >= all)
-      throw std::invalid_argument("IncrementalSmoother::setFactorWeight: factor " +
-                                  std::to_string(f) + " out of range (" + std::to_string(all) +
-                                  " factors, queued included)");
-    if (!(w >= 0 && w <= 1))
-      throw std::invalid_argument("IncrementalSmoother::setFactorWeight(" + std::to_string(f) +
-                                  "): weight " + std::to_string(w) + " not in [0, 1]");
+    checkWeight(f, w, added + static_cast<int>(queued.size()));
     if (f >= added) {
       queued[static_cast<size_t>(f - added)].setInlierWeight(w);
       return;
@@ -376,7 +360,7 @@ struct IncrementalSmoother<G>::Impl {
     Factor<G>& e = factors.factors[f];
     if (e.inlierWeight() == w) return;
     e.setInlierWeight(w);
-    if (relinearizationPending()) reweighted_since_snapshot.push_back(f);
+    if (relinearizationPending()) async.since.reweighted.push_back(f);
     if (w > 0 && !factors.attached[f]) {
       readmitted.push_back(f);  // attached by the next update (addNewFactorsAndVariables)
       return;
@@ -403,82 +387,29 @@ struct IncrementalSmoother<G>::Impl {
 
   // ---- The update --------------------------------------------------------------------------
 
-  // One update: Alg. 6, in one pass, or (Extension: split) in two. When new poses arrive with
-  // factors a rank update could take (a pose with its loop closures, --step pose), the factors
-  // that bring the new poses into the tree go first (a pass of Alg. 6 without its solve) and
-  // the others are folded in by a second pass: the linear system, hence the step, is that of
-  // one update with all of them.
-  UpdateStats update() {
-    beginUpdated();
-    UpdateStats st = updatePasses();
-    finishUpdated();
-    return st;
-  }
-
-  // updatedPoses(): starts the list with the poses moved since the last update.
-  void beginUpdated() {
-    ++publish_stamp;
-    updated.clear();
-    updated_all = false;
-    for (int v : moved) noteUpdated(v);
-    moved.clear();
-  }
-  void noteUpdated(int v) {
-    if (updated_stamp[v] == publish_stamp) return;
-    updated_stamp[v] = publish_stamp;
-    updated.push_back(v);
-  }
-  void finishUpdated() {
-    if (updated_all) {
-      updated.clear();
-      for (int v = 0; v < numPoses(); ++v)
-        if (!fixed[v]) updated.push_back(v);
-    }
-    updated_is_sorted = updated_all;  // the loop above lists them in order
-  }
-  // The list updatedPoses() returns: `updated` in increasing order, sorted once per update.
-  const std::vector<int>& updatedInOrder() const {
-    if (!updated_is_sorted) {
-      std::sort(updated.begin(), updated.end());
-      updated_is_sorted = true;
-    }
-    return updated;
-  }
   // After a solve: its variables are updated and are the next relinearisation check's
   // candidates.
   void noteSolved() {
     for (int v : partial_solve.solved_variables) {
-      noteUpdated(v);
-      if (!is_candidate[v]) {
-        is_candidate[v] = 1;
-        relin_candidates.push_back(v);
-      }
+      updated.note(v);
+      relinearization_check.solved(v);
     }
   }
 
-  UpdateStats updatePasses() {
+  // One update, in three layers. (1) Extension, async: a tree relinearised in the background
+  // is swapped in, or handed to a catch-up (swapLayer). (2) Extension, split: when new poses
+  // arrive with factors a rank update could take (a pose with its loop closures, --step pose),
+  // the factors that bring the new poses into the tree go first (a pass without its solve) and
+  // the others are folded in by a second pass; the linear system, hence the step, is that of
+  // one update with all of them (runPasses). (3) The paper's pass, Alg. 6 (step).
+  UpdateStats update() {
+    updated.begin();
     ++update_count;
-    // RelinearizationMode::kAsync: a finished background relinearisation is swapped in first;
-    // while one is in flight, no check runs (its variables wait for the swap).
-    int swapped = -1;
-    bool caught_up = false;
     const auto t_swap = Clock::now();
-    if (async.pending() && asyncSwapDue()) {
-      if (opt.async.catch_up == AsyncCatchUp::kInBackground) {
-        startCatchUp();
-        caught_up = true;
-      } else {
-        swapped = swapInRelinearized();
-      }
-    } else if (catch_up.pending() && catchUpSwapDue()) {
-      if (catchUpAgain()) {
-        restartCatchUp();
-        caught_up = true;
-      } else {
-        swapped = swapInCaughtUp();
-      }
-    }
+    bool caught_up = false;
+    const int swapped = swapLayer(&caught_up);
     const double swap_s = swapped >= 0 || caught_up ? secondsSince(t_swap) : 0.0;
+    // While a job or catch-up is in flight, no check runs (its variables wait for the swap).
     StepOptions pass;
     pass.check_relinearization =
         update_count % opt.relinearize_skip == 0 && !relinearizationPending();
@@ -491,6 +422,7 @@ struct IncrementalSmoother<G>::Impl {
     }
     st.async_catch_up_started = caught_up ? 1 : 0;
     st.async_pending = relinearizationPending() ? 1 : 0;
+    updated.finish(fixed);
     return st;
   }
 
@@ -526,266 +458,76 @@ struct IncrementalSmoother<G>::Impl {
 
   // Whether background jobs may run: async mode, and the second core not taken.
   bool backgroundJobsAllowed() const {
-    return opt.relinearize == RelinearizationMode::kAsync && !second_core_busy;
+    return opt.relinearize == RelinearizationMode::kAsync && !async.second_core_busy;
   }
 
-  // At a check that marked M (`relin`, not yet applied): when M is large (or a re-ordering is
-  // wanted, reorder_job_wanted), the second core free and no job in flight, snapshots what the
+  // At a check that marked M (`relin`, not yet applied): when M is large (or the decay watch
+  // wants a re-ordering), the second core free and no job in flight, snapshots what the
   // re-elimination reads — the factors of the tree (those before this pass's), Θ with
   // Θ_M := Θ_M ⊕ Δ_M, the poses held fixed (the gauge poses and those not in the tree yet) — and
   // starts the background job. O(n + m) copies.
   bool startAsyncRelinearization(UpdateStats* st) {
     if (!backgroundJobsAllowed() || relinearizationPending() ||
-        (static_cast<int>(relin.size()) < opt.async.min_variables && !reorder_job_wanted))
+        (static_cast<int>(relin.size()) < opt.async.min_variables && !decay.jobWanted()))
       return false;
     bayestree::RelinearizationSnapshot<G> s;
     s.theta = theta;
     s.fixed = notInTree();
-    // Into the last snapshot's buffer: its pages are in memory already, where a fresh copy of
-    // the factors faults every page in on the update path (up to 117 ms at 200,000 poses,
-    // measured), and the old buffer is not unmapped on it either. A quarter of room to grow.
-    s.factors = std::move(snapshot_factors);
-    s.factors.clear();
-    const auto wanted = static_cast<size_t>(pass_first_factor);
-    if (s.factors.capacity() < wanted) s.factors.reserve(wanted + wanted / 4);
-    s.factors.insert(s.factors.end(), factors.factors.begin(),
-                     factors.factors.begin() + pass_first_factor);
     s.relinearized = relin;
-    std::sort(s.relinearized.begin(), s.relinearized.end());
-    for (int v : s.relinearized) {
-      s.theta_before.push_back(theta[v]);
-      s.theta[v] = theta[v].retract(delta[v]);
-      s.theta[v].normalize();
-    }
     s.update = update_count;
     s.nested_dissection_min = nestedDissectionMin();
     s.nested_dissection_try_flops = nestedDissectionTryFlops();
     s.cached_factors = opt.cached_factors;
     s.iterations = opt.async.job_iterations;
     s.relative_tolerance = opt.finalize_relative_tolerance;
-    moved_since_snapshot.clear();
-    reweighted_since_snapshot.clear();
-    released_since_snapshot.clear();
-    async.start(std::move(s), opt.async.synchronous, std::exchange(replaced, {}));
+    async.startJob(std::move(s), factors.factors, pass_first_factor, delta, opt.async.synchronous);
     st->async_started = 1;
     return true;
   }
 
-  // The swap's update: the job is done (or, with swap_after_updates, this is its update: wait).
-  bool asyncSwapDue() const {
-    if (opt.async.swap_after_updates > 0)
-      return update_count >= async.snapshot().update + opt.async.swap_after_updates;
-    return async.done();
+  // What the swap reads of this smoother (bayestree/relinearization_swap.h).
+  bayestree::SwapSource<G> swapSource(bool with_queued) const {
+    return {theta, fixed, factors, with_queued ? &queued : nullptr, to_relinearize, async.since};
   }
 
-  // A tree to swap in (the job's, or the catch-up's) and what it was built from: its first n
-  // poses and f factors at Θ = theta; `fixed`: per pose, not a variable of the tree (held fixed,
-  // or not in it); the poses whose Θ differs from the smoother's at the base's start
-  // (`relinearized`, increasing, or every pose when `all_relinearized`) with the smoother's Θ
-  // then (`theta_before`, parallel, or per pose).
-  struct SwapBase {
-    int n = 0, f = 0;
-    std::vector<char> fixed;
-    std::vector<G> theta;
-    std::vector<int> relinearized;
-    bool all_relinearized = false;
-    std::vector<G> theta_before;
-    bayestree::BayesTree<D> tree;
-    bayestree::LinearizedFactors<G> factors;
-    bayestree::PartialSolve<D> solve;
-    std::vector<Vec> delta;
-  };
-
-  static SwapBase baseOfJob(bayestree::RelinearizationSnapshot<G>&& snap,
-                            bayestree::RelinearizedTree<G>&& job) {
-    SwapBase b;
-    b.n = static_cast<int>(snap.theta.size());
-    b.f = static_cast<int>(snap.factors.size());
-    b.fixed = std::move(snap.fixed);
-    if (job.iterations > 1) {
-      // Every pose stepped: Θ before is the smoother's at the snapshot (M's before Θ_M ⊕ Δ_M).
-      std::vector<G> before = std::move(snap.theta);
-      for (size_t k = 0; k < snap.relinearized.size(); ++k)
-        before[static_cast<size_t>(snap.relinearized[k])] = snap.theta_before[k];
-      b.theta = std::move(job.theta);
-      b.all_relinearized = true;
-      b.theta_before = std::move(before);
-    } else {
-      b.theta = std::move(snap.theta);
-      b.relinearized = std::move(snap.relinearized);
-      b.theta_before = std::move(snap.theta_before);
-    }
-    b.tree = std::move(job.tree);
-    b.factors = std::move(job.factors);
-    b.solve = std::move(job.solve);
-    b.delta = std::move(job.delta);
-    return b;
-  }
-
-  // Replaces the tree, Θ, Δ and the linearisations with the base's, and queues for the next
-  // pass everything `src` (this smoother, or the owner of a catch-up) has that the base lacks,
-  // as one ordinary pass folds it in: the factors added since (they keep their indices; src's
-  // queue too when `with_queued`), the poses new to the base's graph (added since, or not in it,
-  // or released since: their neighbours' cliques are re-eliminated), the poses moved since
-  // (their Θ moved alike, their factors relinearised) and the factors reweighted since. Each
-  // factor is then linearised at the base's Θ, as relinearising at the snapshot and then
-  // applying the later updates inline would have it. Reads src before it writes this.
-  void adopt(SwapBase&& base, const Impl& src, bool with_queued) {
-    const int n = src.numPoses();
-    // Θ: the base's, moved since as src's poses were (θ ← T θ for every move, i.e.
-    // θ_now θ_then⁻¹ on the left; a pose not relinearised had θ_then = the base's).
-    std::vector<G> new_theta = std::move(base.theta);
-    std::vector<int> moved_poses = src.moved_since_snapshot;
-    std::sort(moved_poses.begin(), moved_poses.end());
-    moved_poses.erase(std::unique(moved_poses.begin(), moved_poses.end()), moved_poses.end());
-    for (int v : moved_poses) {
-      if (v >= base.n) continue;
-      const G* before = nullptr;
-      if (base.all_relinearized) {
-        before = &base.theta_before[v];
-      } else {
-        const auto it = std::lower_bound(base.relinearized.begin(), base.relinearized.end(), v);
-        if (it != base.relinearized.end() && *it == v)
-          before = &base.theta_before[static_cast<size_t>(it - base.relinearized.begin())];
-      }
-      if (!before) {
-        new_theta[v] = src.theta[v];
-        continue;
-      }
-      new_theta[v] = src.theta[v].compose(before->inverse()).compose(new_theta[v]);
-      new_theta[v].normalize();
-    }
-    for (int v = base.n; v < n; ++v) new_theta.push_back(src.theta[v]);
-    // The factors added since go first in the queue (their indices stay), with the weights
-    // they have now.
-    std::vector<Factor<G>> requeued(src.factors.factors.begin() + base.f,
-                                    src.factors.factors.end());
-    if (with_queued) requeued.insert(requeued.end(), src.queued.begin(), src.queued.end());
-    std::vector<std::pair<int, double>> weights;
-    for (int f : src.reweighted_since_snapshot)
-      if (f < base.f) weights.emplace_back(f, src.factors.factors[f].inlierWeight());
-    std::vector<int> pending_relinearize;
-    for (int f : src.to_relinearize)
-      if (f < base.f) pending_relinearize.push_back(f);
-    // The base's state becomes this smoother's; the old waits in `replaced` for the next job.
-    replaced.tree = std::move(tree);
-    replaced.factors = std::move(factors);
-    replaced.solve = std::move(partial_solve);
-    replaced.delta = std::move(delta);
-    theta = std::move(new_theta);
-    tree = std::move(base.tree);
-    factors = std::move(base.factors);
-    partial_solve = std::move(base.solve);
-    delta = std::move(base.delta);
-    for (int v = base.n; v < n; ++v) {
-      tree.addVariable();
-      factors.addVariable();
-      partial_solve.addVariable();
-      delta.push_back(Vec::Zero());
-    }
-    queued = std::move(requeued);
-    to_relinearize = std::move(pending_relinearize);
-    auto relinearizeFactor = [&](int f) {
-      to_relinearize.push_back(f);
-      const Factor<G>& e = factors.factors[f];
-      for (int k = 0; k < e.arity(); ++k)
-        if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
-    };
-    // A reweighting takes the base's factor in or out of the structure as setFactorWeight does
-    // (LinearizedFactors::attached follows the weight the base had).
-    for (const auto& [f, w] : weights) {
-      factors.factors[f].setInlierWeight(w);
-      if (w > 0 && !factors.attached[f]) {
-        readmitted.push_back(f);
-      } else if (w > 0) {
-        relinearizeFactor(f);
-      } else if (factors.attached[f]) {
-        factors.detach(f);
-        const Factor<G>& e = factors.factors[f];
-        for (int k = 0; k < e.arity(); ++k)
-          if (!fixed[e.key(k)]) to_touch.push_back(e.key(k));
-      }
-    }
-    for (int v : moved_poses)
-      if (v < base.n)
-        for (int f : factors.var_factors[v]) relinearizeFactor(f);
-    // The variables the base held fixed that are not (not in its tree, or released since),
-    // and every variable added since: new to the base's tree.
-    new_vars.clear();
-    for (int v = 0; v < base.n; ++v) {
-      if (!base.fixed[v] || fixed[v]) continue;
-      new_vars.push_back(v);
-      for (int f : factors.var_factors[v]) {
-        const Factor<G>& e = factors.factors[f];
-        for (int k = 0; k < e.arity(); ++k)
-          if (e.key(k) != v && !fixed[e.key(k)]) to_touch.push_back(e.key(k));
-      }
-    }
-    for (int v = base.n; v < n; ++v)
-      if (!fixed[v]) new_vars.push_back(v);
-    // Every Δ is the base's: the next check scans every variable; the ordering is fresh.
-    for (int v : relin_candidates) is_candidate[v] = 0;
-    relin_candidates.clear();
-    check_all = true;
-    flops_reference = tree.flops;
-    doubles_reference = tree.doubles;
-    reorder_due = false;
-    reorder_job_wanted = false;
-    updated_all = true;
+  // Installs a rebased state: the tree, Θ, Δ and linearisations become the base's (the old ones
+  // wait in async.replaced for the next job's thread to free), and the next pass folds in what
+  // came since. Every Δ is the base's: the next check scans every variable; the ordering is
+  // fresh.
+  void install(bayestree::Rebased<G>&& r) {
+    async.replaced.tree = std::move(tree);
+    async.replaced.factors = std::move(factors);
+    async.replaced.solve = std::move(partial_solve);
+    async.replaced.delta = std::move(delta);
+    theta = std::move(r.theta);
+    tree = std::move(r.tree);
+    factors = std::move(r.factors);
+    partial_solve = std::move(r.solve);
+    delta = std::move(r.delta);
+    queued = std::move(r.queued);
+    to_relinearize = std::move(r.to_relinearize);
+    to_touch.insert(to_touch.end(), r.touch.begin(), r.touch.end());
+    readmitted.insert(readmitted.end(), r.readmitted.begin(), r.readmitted.end());
+    new_vars = std::move(r.new_vars);
+    relinearization_check.consume();
+    relinearization_check.scanAll();
+    decay.adoptedFresh(tree);
+    updated.noteAll();
     marginals = bayestree::TreeMarginals<D>();
   }
 
-  void clearSinceSnapshot() {
-    moved_since_snapshot.clear();
-    reweighted_since_snapshot.clear();
-    released_since_snapshot.clear();
-  }
-
-  // AsyncCatchUp::kOnSwap: the job's tree, with everything since its snapshot queued for this
-  // update. Returns |M| of the job's snapshot.
-  int swapInRelinearized() {
-    bayestree::RelinearizationSnapshot<G> snap;
-    bayestree::RelinearizedTree<G> job;
-    async.take(&snap, &job);
-    const int relinearized = static_cast<int>(snap.relinearized.size());
-    adopt(baseOfJob(std::move(snap), std::move(job)), *this, /*with_queued=*/true);
-    snapshot_factors = std::move(snap.factors);  // baseOfJob reads its size only
-    clearSinceSnapshot();
-    return relinearized;
-  }
-
-  // AsyncCatchUp::kInBackground, the update that finds the job done: a copy of the smoother's
-  // state (Θ, the fixed poses, per-pose scratch; no tree) adopts the job's tree with what came
-  // since the snapshot — this update's queue excepted, which this update folds into the old
-  // tree — and runs one ordinary pass on it in the background. What changes from here on is
-  // recorded as since the snapshot was (moved, reweighted, released), against Θ as it is now.
-  void startCatchUp() {
-    bayestree::RelinearizationSnapshot<G> snap;
-    bayestree::RelinearizedTree<G> job;
-    async.take(&snap, &job);
-    catch_up_relinearized = static_cast<int>(snap.relinearized.size());
-    catch_up_rounds = 1;
-    launchCatchUp(baseOfJob(std::move(snap), std::move(job)));
-    snapshot_factors = std::move(snap.factors);  // baseOfJob reads its size only
-  }
-
-  // AsyncRelinearizationOptions::catch_up_max_factors: a finished catch-up whose swap would
-  // fold in more than that many factors hands its tree to another catch-up instead, which folds
-  // them in the background too (at most catch_up_max_rounds catch-ups a job).
-  bool catchUpAgain() const {
-    const int arrived = factors.numFactors() + static_cast<int>(queued.size()) - catch_up_factors;
-    return opt.async.catch_up_max_factors > 0 && arrived > opt.async.catch_up_max_factors &&
-           catch_up_rounds < opt.async.catch_up_max_rounds && backgroundJobsAllowed();
-  }
-  void restartCatchUp() {
-    ++catch_up_rounds;
-    launchCatchUp(baseOfCatchUp());
+  // The swap of a base (the job's tree, or the caught-up one), everything since its start and
+  // this update's queue queued for this update.
+  void swapIn(bayestree::SwapBase<G>&& base) {
+    install(bayestree::rebase(std::move(base), swapSource(/*with_queued=*/true)));
+    async.since.clear();
   }
 
   // The catch-up on `base` (a job's tree, or a finished catch-up's): a copy of the smoother's
-  // state adopts it with what came since the base's start — this update's queue excepted — and
-  // one ordinary pass folds that in on the background thread.
-  void launchCatchUp(SwapBase&& base) {
+  // state (Θ, the fixed poses, per-pose scratch; no tree) takes it with what came since the
+  // base's start — this update's queue excepted, which this update folds into the old tree —
+  // and one ordinary pass folds that in on the background thread.
+  void launchCatchUp(bayestree::SwapBase<G>&& base, int relinearized, bool first_round) {
     SmootherOptions shadow_options = opt;
     shadow_options.relinearize = RelinearizationMode::kInline;
     shadow_options.threads = 1;
@@ -793,75 +535,63 @@ struct IncrementalSmoother<G>::Impl {
     const int n = numPoses();
     shadow->fixed = fixed;
     shadow->mark.assign(static_cast<size_t>(n), 0);
-    shadow->updated_stamp.assign(static_cast<size_t>(n), 0);
-    shadow->is_candidate.assign(static_cast<size_t>(n), 0);
+    for (int v = 0; v < n; ++v) shadow->updated.addPose();
+    for (int v = 0; v < n; ++v) shadow->relinearization_check.addPose();
     for (int v = 0; v < n; ++v) shadow->threads.addVariable();
     shadow->num_variables = num_variables;
     shadow->stamp = stamp;
     shadow->to_touch = to_touch;
-    shadow->adopt(std::move(base), *this, /*with_queued=*/false);
-    // A pose with no factor among the shadow's (its edges wait in this update's queue) is not
-    // a variable there yet: held fixed, it is new to the tree at the swap.
-    std::vector<char> has_factor(static_cast<size_t>(n), 0);
-    for (const Factor<G>& e : shadow->queued)
-      if (e.inlierWeight() > 0)
-        for (int k = 0; k < e.arity(); ++k) has_factor[e.key(k)] = 1;
-    std::vector<int> kept;
-    for (int v : shadow->new_vars) {
-      bool attached = has_factor[v] != 0;
-      for (int f : shadow->factors.var_factors[v])
-        if (shadow->factors.attached[f] || shadow->factors.factors[f].inlierWeight() > 0)
-          attached = true;
-      if (attached) {
-        kept.push_back(v);
-      } else {
-        shadow->fixed[v] = 1;
-        --shadow->num_variables;
-      }
+    bayestree::Rebased<G> r = bayestree::rebase(std::move(base), swapSource(false));
+    for (int v : bayestree::holdUnattached(&r)) {
+      shadow->fixed[v] = 1;
+      --shadow->num_variables;
     }
-    shadow->new_vars = std::move(kept);
-    clearSinceSnapshot();
-    theta_at_catch_up = theta;
-    catch_up_poses = n;
-    catch_up_factors = factors.numFactors();
-    catch_up.start(
-        std::move(shadow), [](Impl& s) { s.runPasses(StepOptions{}); }, opt.async.synchronous,
-        update_count);
+    shadow->install(std::move(r));
+    async.startCatchUp(
+        std::move(shadow), [](Impl& s) { s.runPasses(StepOptions{}); }, theta, factors.numFactors(),
+        relinearized, first_round, opt.async.synchronous, update_count);
   }
 
-  // The catch-up's swap: due when it is done (or, with swap_after_updates, at the update after
-  // its start).
-  bool catchUpSwapDue() const {
-    if (opt.async.swap_after_updates > 0) return update_count >= catch_up.startedAt() + 1;
-    return catch_up.done();
-  }
-
-  // The caught-up tree, with what arrived during the catch-up queued for this update (its
-  // base: every pose's Θ the shadow's, the smoother's Θ then in theta_at_catch_up). Returns |M|
-  // of the job's snapshot.
-  int swapInCaughtUp() {
-    adopt(baseOfCatchUp(), *this, /*with_queued=*/true);
-    clearSinceSnapshot();
-    theta_at_catch_up.clear();
-    return catch_up_relinearized;
-  }
-
-  // The finished catch-up's tree as a base (its Θ for every pose; the smoother's Θ when it
-  // started in theta_at_catch_up, moved out).
-  SwapBase baseOfCatchUp() {
-    std::unique_ptr<Impl> shadow = catch_up.take();
-    SwapBase b;
-    b.n = catch_up_poses;
-    b.f = catch_up_factors;
+  // The finished catch-up's tree as a base (its Θ for every pose).
+  bayestree::SwapBase<G> baseOfCatchUp() {
+    bayestree::SwapBase<G> b;
+    std::unique_ptr<Impl> shadow = async.takeCatchUp(&b);
     b.fixed = shadow->notInTree();
     b.theta = std::move(shadow->theta);
-    b.all_relinearized = true;
-    b.theta_before = std::move(theta_at_catch_up);
     b.tree = std::move(shadow->tree);
     b.factors = std::move(shadow->factors);
     b.solve = std::move(shadow->partial_solve);
     b.delta = std::move(shadow->delta);
     return b;
+  }
+
+  // Layer 1 of an update: a finished job's tree is swapped in (AsyncCatchUp::kOnSwap) or handed
+  // to a catch-up (kInBackground); a finished catch-up's tree is swapped in, or handed to
+  // another catch-up when too much arrived meanwhile (catch_up_max_factors). Returns |M| of the
+  // job's snapshot when a tree was swapped in (else −1); *caught_up: a catch-up started.
+  int swapLayer(bool* caught_up) {
+    int relinearized = -1;
+    if (async.jobSwapDue(update_count, opt.async)) {
+      bayestree::SwapBase<G> base = async.takeJob(&relinearized);
+      if (opt.async.catch_up == AsyncCatchUp::kInBackground) {
+        launchCatchUp(std::move(base), relinearized, /*first_round=*/true);
+        *caught_up = true;
+        return -1;
+      }
+      swapIn(std::move(base));
+      return relinearized;
+    }
+    if (async.catchUpSwapDue(update_count, opt.async)) {
+      const int factors_now = factors.numFactors() + static_cast<int>(queued.size());
+      if (async.catchUpAgain(factors_now, opt.async, backgroundJobsAllowed())) {
+        launchCatchUp(baseOfCatchUp(), 0, /*first_round=*/false);
+        *caught_up = true;
+        return -1;
+      }
+      relinearized = async.catchUpRelinearized();
+      swapIn(baseOfCatchUp());
+    }
+    return relinearized;
   }
 
   // One pass of IJRR 2012 Alg. 6, "One step of the iSAM2 algorithm".
@@ -958,40 +688,19 @@ struct IncrementalSmoother<G>::Impl {
     return out;
   }
 
-  bool exceedsThreshold(const Vec& dx) const {
-    return dx.template head<kTrans>().cwiseAbs().maxCoeff() >
-               opt.relinearize_threshold_translation ||
-           dx.template tail<D - kTrans>().cwiseAbs().maxCoeff() >
-               opt.relinearize_threshold_rotation;
-  }
-
-  // Alg. 5 steps 1–2 into `relin` (M): "Mark variables in Δ above threshold β:
-  // J = {Δ_j ∈ Δ | |Δ_j| ≥ β}" (|·|∞ on the translational and the rotational part, each against
-  // its β; relinearizeAll: every variable) and "Update linearization point for marked
-  // variables: Θ_J := Θ_J ⊕ Δ_J" (their Δ becomes zero).
+  // Alg. 5 steps 1–2 into `relin` (M): "Mark variables in Δ above threshold β"
+  // (bayestree/relinearization_check.h; relinearizeAll: every variable) and "Update
+  // linearization point for marked variables: Θ_J := Θ_J ⊕ Δ_J" (their Δ becomes zero).
   void relinearizeVariables(const StepOptions& pass, UpdateStats* st) {
     relin.clear();
-    const int n = numPoses();
     if (pass.relinearize_all) {
-      for (int v = 0; v < n; ++v)
+      for (int v = 0; v < numPoses(); ++v)
         if (!fixed[v]) relin.push_back(v);
-    } else if (pass.check_relinearization && check_all) {
-      for (int v = 0; v < n; ++v)
-        if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
-      st->variables_checked = n;
+      relinearization_check.consume();
     } else if (pass.check_relinearization) {
-      // Only a variable solved since the last check can have crossed β (every other one was
-      // below it then, or relinearised and solved since). In index order, as a scan of all
-      // would list them (the few that crossed sorted, not every candidate).
-      for (int v : relin_candidates)
-        if (!fixed[v] && tree.clique_of[v] >= 0 && exceedsThreshold(delta[v])) relin.push_back(v);
-      std::sort(relin.begin(), relin.end());
-      st->variables_checked = static_cast<int>(relin_candidates.size());
-    }
-    if (pass.relinearize_all || pass.check_relinearization) {
-      for (int v : relin_candidates) is_candidate[v] = 0;
-      relin_candidates.clear();
-      check_all = false;
+      st->variables_checked = relinearization_check.mark(
+          delta, fixed, tree.clique_of, opt.relinearize_threshold_translation,
+          opt.relinearize_threshold_rotation, &relin);
     }
     // RelinearizationMode::kAsync: a large M goes to the background job; this pass goes on
     // with the old linearisation point.
@@ -1029,9 +738,9 @@ struct IncrementalSmoother<G>::Impl {
   // Extension (fold-in): the entering factors, folded in when every one of them can be; false
   // (nothing changed) otherwise.
   bool foldInNewFactors(const std::vector<int>& entering, UpdateStats* st) {
-    const int updated = fold_in.foldInAll(entering, foldInContext(), &tree);
-    if (updated < 0) return false;
-    st->cliques_updated += updated;
+    const int cliques = fold_in.foldInAll(entering, foldInContext(), &tree);
+    if (cliques < 0) return false;
+    st->cliques_updated += cliques;
     return true;
   }
 
@@ -1064,7 +773,7 @@ struct IncrementalSmoother<G>::Impl {
     const double top_size = static_cast<double>(top.variables.size());
     const bool batch =
         !relinearize_all && !top.variables.empty() &&
-        (reorder_due || top_size > opt.batch.top_share * static_cast<double>(num_variables));
+        (decay.reorderDue() || top_size > opt.batch.top_share * static_cast<double>(num_variables));
     // A top of every variable is ordered afresh all the same: the decay watch measures from it.
     const bool whole_graph = top_size >= static_cast<double>(num_variables);
     if (batch) {
@@ -1075,7 +784,7 @@ struct IncrementalSmoother<G>::Impl {
       top.orphans.clear();  // every orphan is removed with the rest
       tree.removeTop(marked, &top);
       st->batch_reeliminations = 1;
-      reorder_due = false;
+      decay.reorderingStarted();
     }
     // Alg. 4 steps 2–6: linearise (what is left of step 2), add the orphans' cached factors,
     // re-order (constrained: the touched variables last, unless everything is re-eliminated or
@@ -1101,79 +810,22 @@ struct IncrementalSmoother<G>::Impl {
     if (newest_marked) mark[newest] = 0;
     tree.releaseFreeStorage();                      // cliques not recycled hold no memory
     if (relinearize_all || batch || whole_graph) {  // a fresh ordering
-      flops_reference = tree.flops;
-      doubles_reference = tree.doubles;
-      if (!relinearizationPending()) reorder_job_wanted = false;
+      decay.orderedAfresh(tree, relinearizationPending());
     } else {
       maybeCheckOrderingDecay();
     }
     return !top.variables.empty();
   }
 
-  // BatchSwitchOptions::reorder_decay: once the tree's flops or its doubles have grown by the
-  // decay factor since the last comparison, compares both with those of the whole graph in a
-  // fresh ordering; the next re-elimination re-orders when either exceeds decay × fresh. The
-  // doubles matter on their own: an incremental ordering's cliques of few frontals under a
-  // separator of thousands of dimensions cost little to factorise but hold S² doubles each (a
-  // dense world revisited, docs/benchmarks.md "Memory of a dense world").
+  // BatchSwitchOptions::reorder_decay (bayestree/ordering_decay.h). With async, a job
+  // re-orders (the next update's snapshot), from the sooner decay of
+  // AsyncRelinearizationOptions::reorder_decay; without a second core, the update re-orders.
   void maybeCheckOrderingDecay() {
-    const double inline_decay = opt.batch.reorder_decay;
-    if (inline_decay <= 0) return;
-    // With async, a job re-orders (the next update's snapshot), from the sooner decay of
-    // AsyncRelinearizationOptions::reorder_decay; a decay past the inline one while a job is
-    // wanted already (found again before its tree is swapped in), or no second core, re-orders
-    // inline.
-    const bool in_background = backgroundJobsAllowed() && opt.async.reorder_in_background;
-    const double decay =
-        in_background ? std::min(inline_decay, opt.async.reorder_decay) : inline_decay;
-    if (tree.flops <= decay * std::max(flops_reference, kMinDecayCheckFlops) &&
-        tree.doubles <= decay * std::max(doubles_reference, kMinDecayCheckDoubles))
-      return;
-    double fresh_doubles = 0;
-    const double fresh_flops = freshOrderingCost(&fresh_doubles);
-    const auto past = [&](double d) {
-      return tree.flops > d * fresh_flops || tree.doubles > d * fresh_doubles;
-    };
-    if (in_background && !reorder_job_wanted && past(decay))
-      reorder_job_wanted = true;
-    else if (past(inline_decay))
-      reorder_due = true;
-    flops_reference = tree.flops;
-    doubles_reference = tree.doubles;
-  }
-
-  // Flops of factorising every variable in the tree in a fresh ordering (the one the top
-  // elimination would choose for a top of all of them, unconstrained), and in *doubles the
-  // doubles its cliques would hold. O(n + m).
-  double freshOrderingCost(double* doubles) {
-    std::vector<int>& slot = threads.lanes[0].slot;
-    std::vector<int>& vars = fresh_vars;
-    vars.clear();
-    for (int v = 0; v < numPoses(); ++v)
-      if (!fixed[v] && tree.clique_of[v] >= 0) {
-        slot[v] = static_cast<int>(vars.size());
-        vars.push_back(v);
-      }
-    const int n = static_cast<int>(vars.size());
-    fresh_rows.clear();
-    for (int f = 0; f < factors.numFactors(); ++f) {
-      if (!factors.attached[f]) continue;  // weight 0: not in the structure
-      const Factor<G>& e = factors.factors[f];
-      int keys = 0;
-      for (int k = 0; k < e.arity(); ++k) keys += slot[e.key(k)] >= 0 ? 1 : 0;
-      if (keys < 2) continue;
-      for (int k = 0; k < e.arity(); ++k)
-        if (slot[e.key(k)] >= 0) fresh_rows.add(slot[e.key(k)]);
-      fresh_rows.endRow();
-    }
-    for (int v : vars) slot[v] = -1;
-    const std::vector<int> group(static_cast<size_t>(n), 0);
-    const bayestree::EliminationPlan plan = bayestree::planTop<D>(
-        n, fresh_rows, group, nestedDissectionMin(), nestedDissectionTryFlops());
-    const bayestree::TreeShape shape = bayestree::treeShape<D>(plan, tree.cached_factors.max_ratio);
-    *doubles =
-        tree.dropsCachedFactors(shape.allKeptDoubles()) ? shape.doubles() : shape.allKeptDoubles();
-    return shape.flops;
+    decay.check(
+        tree,
+        {factors, fixed, nestedDissectionMin(), nestedDissectionTryFlops(), &threads.lanes[0].slot},
+        {opt.batch.reorder_decay, backgroundJobsAllowed() && opt.async.reorder_in_background,
+         opt.async.reorder_decay});
   }
 
   // Tops of at least this many variables are ordered by nested dissection
@@ -1200,8 +852,8 @@ struct IncrementalSmoother<G>::Impl {
     noteSolved();
     if (opt.dogleg && tree_changed) {
       doglegStep();  // sets Δ everywhere
-      updated_all = true;
-      check_all = true;
+      updated.noteAll();
+      relinearization_check.scanAll();
     }
   }
 
@@ -1216,13 +868,13 @@ struct IncrementalSmoother<G>::Impl {
       throw std::invalid_argument("IncrementalSmoother::solveDeferred: bad budget_mb " +
                                   std::to_string(budget_mb) + " (must be finite and ≥ 0)");
     const auto t0 = Clock::now();
-    beginUpdated();
+    updated.begin();
     const auto out = partial_solve.run(&tree, false, opt.wildfire_threshold, entriesOf(budget_mb),
                                        &delta, &threads);
     st.cliques_solved = out.solved;
     st.cliques_deferred = out.deferred;
     noteSolved();
-    finishUpdated();
+    updated.finish(fixed);
     st.solve_s = st.time_s = secondsSince(t0);
     return st;
   }
@@ -1251,18 +903,14 @@ struct IncrementalSmoother<G>::Impl {
   UpdateStats relinearizeAll(const CancellationToken* cancel) {
     const auto t0 = Clock::now();
     UpdateStats total;
-    replaced = bayestree::RelinearizedTree<G>();
-    std::vector<Factor<G>>().swap(snapshot_factors);
+    async.dropBuffers();
     if (relinearizationPending()) {  // everything is relinearised below: the job is not needed
       async.abandon();
-      catch_up.abandon();
-      theta_at_catch_up.clear();
-      clearSinceSnapshot();
-      check_all = true;  // the snapshot's check consumed its candidates
+      relinearization_check.scanAll();  // the snapshot's check consumed its candidates
     }
     if (!queued.empty() || !new_vars.empty()) accumulate(&total, update());
-    beginUpdated();
-    updated_all = true;  // every Δ is set (and may be halved) below
+    updated.begin();
+    updated.noteAll();  // every Δ is set (and may be halved) below
     double F_prev = objectiveAt(delta);
     StepOptions everything;
     everything.relinearize_all = true;
@@ -1292,8 +940,8 @@ struct IncrementalSmoother<G>::Impl {
       F_prev = F_new;
       if (change < opt.finalize_relative_tolerance) break;
     }
-    check_all = true;  // the halving set Δ outside the solve
-    finishUpdated();
+    relinearization_check.scanAll();  // the halving set Δ outside the solve
+    updated.finish(fixed);
     total.time_s = secondsSince(t0);
     return total;
   }
@@ -1371,7 +1019,7 @@ bool IncrementalSmoother<G>::relinearizationPending() const {
 }
 template <class G>
 void IncrementalSmoother<G>::setSecondCoreBusy(bool busy) {
-  impl_->second_core_busy = busy;
+  impl_->async.second_core_busy = busy;
 }
 template <class G>
 std::vector<G> IncrementalSmoother<G>::estimate() const {
@@ -1389,7 +1037,7 @@ G IncrementalSmoother<G>::estimate(int index) const {
 }
 template <class G>
 const std::vector<int>& IncrementalSmoother<G>::updatedPoses() const {
-  return impl_->updatedInOrder();
+  return impl_->updated.inOrder();
 }
 template <class G>
 double IncrementalSmoother<G>::factorizationFlops() const {

@@ -315,7 +315,7 @@ TEST(RobustBench, GoalsCountTheRowsThatMeetThemAndNameTheOthers) {
     f.score.precision = precision;
     f.score.recall = recall;
     f.total_s = total_s;
-    f.latency = cli::LatencySummary{};
+    f.latency = LatencySummary{};
     f.latency->p99 = p99;
     return f;
   };
@@ -388,7 +388,7 @@ TEST(RobustBench, GeneratedRowsGoThroughBatchAndTheReplayHooks) {
     e.rejected.assign(g.edges.size(), 0);
     for (int k = base.numEdges(); k < g.numEdges(); ++k) e.rejected[k] = 1;
     e.total_s = 2.0;
-    e.latency = cli::LatencySummary{1, 2, 3, 4};
+    e.latency = LatencySummary{1, 2, 3, 4};
     return e;
   };
   hooks.clean2 = [&](const PoseGraph2& g) {

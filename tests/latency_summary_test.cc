@@ -1,12 +1,12 @@
-// Per-update latency figures (tools/cli/latency.h): nearest-rank percentiles, and the first and
+// Per-update latency figures (core/latency_summary.h): nearest-rank percentiles, and the first and
 // last tenth of a run in its order (issue 17's flatness figure).
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "arbor/tools/cli/latency.h"
+#include "arbor/core/latency_summary.h"
 
-namespace arbor::cli {
+namespace arbor {
 namespace {
 
 TEST(LatencySummary, NearestRankPercentiles) {
@@ -40,4 +40,4 @@ TEST(LatencySummary, TenthsFollowTheRunsOrder) {
 }
 
 }  // namespace
-}  // namespace arbor::cli
+}  // namespace arbor

@@ -300,7 +300,7 @@ void benchCovariance(const std::string& name, const PoseGraph<G>& graph,
     last = now();
   };
   const cli::ReplayResult<G> r = cli::replayInto(graph, settings, online, hooks);
-  const double update_p50 = cli::summarizeLatency(steps).p50;
+  const double update_p50 = summarizeLatency(steps).p50;
   const IncrementalSmoother<G>& s = online.smoother();
   const int n = s.numPoses();
   // Cold: each sample on a copy of the smoother (a copy starts with empty scratch), poses
@@ -325,8 +325,8 @@ void benchCovariance(const std::string& name, const PoseGraph<G>& graph,
   auto t0 = now();
   const auto all = s.marginalCovariances();
   const double all_ms = ms(t0);
-  const auto c = cli::summarizeLatency(cold), wm = cli::summarizeLatency(warm),
-             j = cli::summarizeLatency(joint), lv = cli::summarizeLatency(live);
+  const auto c = summarizeLatency(cold), wm = summarizeLatency(warm), j = summarizeLatency(joint),
+             lv = summarizeLatency(live);
   const TreeMemory mem = s.memory();
   std::cout << "| " << name << " | " << n << " | " << fmt("%.4f", update_p50) << " | "
             << fmt("%.4f", c.p50) << " | " << fmt("%.3f", c.max) << " | "

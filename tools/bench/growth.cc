@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "arbor/core/latency_summary.h"
 #include "arbor/core/normal_equations.h"
 #include "arbor/tools/bench/format.h"
 #include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/latency.h"
 #include "arbor/tools/cli/replay_order.h"
 
 namespace arbor::bench {
@@ -98,14 +98,14 @@ std::vector<GrowthSlice> growthSlices(const PoseGraph<G>& graph, const cli::Repl
     slice.rss_per_pose_kb = known > 0 ? 1024 * slice.peak_rss_mb / known : 0;
     slice.relin_updates = static_cast<int>(relin_ms.size());
     if (!relin_ms.empty()) {
-      const cli::LatencySummary l = cli::summarizeLatency(relin_ms);
+      const LatencySummary l = summarizeLatency(relin_ms);
       slice.relin_p50_ms = l.p50;
       slice.relin_max_ms = l.max;
       slice.relin_share = share / static_cast<double>(relin_ms.size());
     }
     slice.other_updates = static_cast<int>(other_ms.size());
     if (!other_ms.empty()) {
-      const cli::LatencySummary l = cli::summarizeLatency(other_ms);
+      const LatencySummary l = summarizeLatency(other_ms);
       slice.other_p50_ms = l.p50;
       slice.other_p99_ms = l.p99;
     }

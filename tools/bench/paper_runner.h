@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "arbor/core/latency_summary.h"
 #include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/latency.h"
 #include "arbor/tools/cli/replay_runner.h"
 
 namespace arbor::bench {
@@ -49,7 +49,7 @@ struct DatasetReport {
   int dim = 0, poses = 0, edges = 0;
   double F_star = std::numeric_limits<double>::quiet_NaN();  ///< optimum.tsv; NaN if absent
   std::vector<SolverRun> runs;                               ///< in the order they ran
-  cli::LatencySummary latency;                               ///< replay's per-update latency
+  LatencySummary latency;                                    ///< replay's per-update latency
   std::string latency_file;                                  ///< replay's latency CSV
 };
 

@@ -38,11 +38,11 @@
 #include <vector>
 
 #include "arbor/core/gnc_solver.h"
+#include "arbor/core/latency_summary.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/io/labels_file.h"
 #include "arbor/tools/bench/robust_metrics.h"
 #include "arbor/tools/bench/shared_data.h"
-#include "arbor/tools/cli/latency.h"
 #include "arbor/tools/generator/false_closures.h"
 
 namespace arbor::bench {
@@ -103,12 +103,12 @@ std::vector<RobustCase> selectCases(const std::vector<RobustCase>& cases, const 
 /// What a robust method returned on a graph.
 template <class G>
 struct RobustEstimate {
-  std::vector<G> poses;        ///< one per pose of the graph, its dense order
-  std::vector<char> rejected;  ///< one per edge: classified a false closure
-  double total_s = 0;          ///< the whole run, its start included
-  int steps = 0;               ///< batch: GNC steps over all rounds; replay: updates
-  std::optional<cli::LatencySummary> latency;  ///< replay: per-update latency
-  std::string note;                            ///< e.g. "certified", a stop message
+  std::vector<G> poses;                   ///< one per pose of the graph, its dense order
+  std::vector<char> rejected;             ///< one per edge: classified a false closure
+  double total_s = 0;                     ///< the whole run, its start included
+  int steps = 0;                          ///< batch: GNC steps over all rounds; replay: updates
+  std::optional<LatencySummary> latency;  ///< replay: per-update latency
+  std::string note;                       ///< e.g. "certified", a stop message
 };
 
 /// An estimate judged (robust_metrics.h).
@@ -121,14 +121,14 @@ struct RobustFigures {
   RejectionScore score;
   double total_s = std::numeric_limits<double>::quiet_NaN();
   int steps = 0;
-  std::optional<cli::LatencySummary> latency;
+  std::optional<LatencySummary> latency;
   std::string note;
 };
 
 /// A clean replay of the base file, the denominator of the cost goals.
 struct CleanReplayFigures {
   double total_s = std::numeric_limits<double>::quiet_NaN();
-  cli::LatencySummary latency;
+  LatencySummary latency;
 };
 
 /// The extension point for replay rows (header comment). Each hook runs its method on the graph

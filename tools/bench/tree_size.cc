@@ -80,13 +80,13 @@ PathCostRow pathCosts(const PoseGraph<G>& graph, const WholeGraph& w,
     all_rank_update.push_back(rank_update.back());
     all_rewritten.push_back(rewritten.back());
   }
-  row.cliques = cli::summarizeLatency(std::move(cliques));
-  row.reelimination_mflop = cli::summarizeLatency(std::move(reelimination));
-  row.rank_update_mflop = cli::summarizeLatency(std::move(rank_update));
-  row.rewritten_mb = cli::summarizeLatency(std::move(rewritten));
-  row.updates_reelimination_mflop = cli::summarizeLatency(std::move(all_reelimination));
-  row.updates_rank_update_mflop = cli::summarizeLatency(std::move(all_rank_update));
-  row.updates_rewritten_mb = cli::summarizeLatency(std::move(all_rewritten));
+  row.cliques = summarizeLatency(std::move(cliques));
+  row.reelimination_mflop = summarizeLatency(std::move(reelimination));
+  row.rank_update_mflop = summarizeLatency(std::move(rank_update));
+  row.rewritten_mb = summarizeLatency(std::move(rewritten));
+  row.updates_reelimination_mflop = summarizeLatency(std::move(all_reelimination));
+  row.updates_rank_update_mflop = summarizeLatency(std::move(all_rank_update));
+  row.updates_rewritten_mb = summarizeLatency(std::move(all_rewritten));
   return row;
 }
 
@@ -136,7 +136,7 @@ void printTreeSizeTable(std::ostream& out, const std::vector<TreeSizeRow>& rows,
 }
 
 void printPathCostTable(std::ostream& out, const std::vector<PathCostRow>& rows) {
-  auto threePercentiles = [](const cli::LatencySummary& l) {
+  auto threePercentiles = [](const LatencySummary& l) {
     return fmt("%.2f", l.p50) + " / " + fmt("%.2f", l.p99) + " / " + fmt("%.2f", l.max);
   };
   out << "| ordering | updates | loop closures | cliques reached p50 / max | re-elimination MFlop "

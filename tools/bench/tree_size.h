@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "arbor/bayestree/tree_shape.h"
+#include "arbor/core/latency_summary.h"
 #include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/latency.h"
 
 namespace arbor::bench {
 
@@ -36,12 +36,12 @@ struct PathCostRow {
   std::string ordering;  ///< as TreeSizeRow
   int updates = 0;       ///< edges in the last tenth
   int closures = 0;      ///< of them loop closures
-  /// Over the loop closures: percentiles (nearest rank, cli::summarizeLatency, here of counts,
+  /// Over the loop closures: percentiles (nearest rank, summarizeLatency, here of counts,
   /// MFlop and MB of 8-byte doubles) of the cliques reached and of each estimate.
-  cli::LatencySummary cliques, reelimination_mflop, rank_update_mflop, rewritten_mb;
+  LatencySummary cliques, reelimination_mflop, rank_update_mflop, rewritten_mb;
   /// Over every update of the last tenth (odometry free): the same estimates, whose p99 is the
   /// floor the updates' p99 latency stands on.
-  cli::LatencySummary updates_reelimination_mflop, updates_rank_update_mflop, updates_rewritten_mb;
+  LatencySummary updates_reelimination_mflop, updates_rank_update_mflop, updates_rewritten_mb;
 };
 
 /// Both tables of one graph, each ordering computed once.

@@ -14,12 +14,12 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
+#include "arbor/core/latency_summary.h"
 #include "arbor/io/edge_choice_file.h"
 #include "arbor/io/lcm_messages.h"
 #include "arbor/io/pose_graph_file.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/latency.h"
 #include "arbor/tools/cli/publish_stream.h"
 #include "arbor/tools/serve/lcm_tuning.h"
 #include "arbor/tools/serve/serve_service.h"

@@ -11,9 +11,9 @@
 #include "arbor/bayestree/incremental_smoother.h"
 #include "arbor/bayestree/online_smoother.h"
 #include "arbor/core/batch_solver.h"
+#include "arbor/core/latency_summary.h"
 #include "arbor/core/pose_graph.h"
 #include "arbor/io/edge_choice_file.h"
-#include "arbor/tools/cli/latency.h"
 
 namespace arbor::cli {
 

@@ -170,8 +170,8 @@ void StreamingCore::stop() {
   summary_.batches_skipped = s.batches_skipped;
   summary_.reseeds = s.reseeds;
   summary_.journal_reseeds = s.journal_reseeds;
-  summary_.latency = cli::summarizeLatency(latencies_ms_);
-  summary_.transport = cli::summarizeLatency(transport_ms_);
+  summary_.latency = summarizeLatency(latencies_ms_);
+  summary_.transport = summarizeLatency(transport_ms_);
 }
 
 bool StreamingCore::writeEstimate(const std::string& path, TrajectoryFormat format) const {
@@ -838,7 +838,7 @@ CoreStatus StreamingCore::status() const {
     if (!batch_runs_.empty()) s.last_batch = batch_runs_.back();
     const size_t n = latencies_ms_.size();
     const size_t window = std::min(n, static_cast<size_t>(std::max(1, options_.latency_window)));
-    s.latency = cli::summarizeLatency(std::vector<double>(
+    s.latency = summarizeLatency(std::vector<double>(
         latencies_ms_.end() - static_cast<std::ptrdiff_t>(window), latencies_ms_.end()));
     s.latency_window = static_cast<int>(window);
   }

@@ -32,7 +32,7 @@
 #include <thread>
 #include <vector>
 
-#include "arbor/tools/cli/latency.h"
+#include "arbor/core/latency_summary.h"
 #include "arbor/tools/serve/edge_intake.h"
 #include "arbor/tools/serve/journal_sink.h"
 #include "arbor/tools/serve/log_limiter.h"
@@ -85,8 +85,8 @@ struct CoreStatus {
   int batches = 0, batches_skipped = 0, reseeds = 0, journal_reseeds = 0;
   refine::BatchRun last_batch;  ///< the last run (default before any)
   double F = 0;
-  int latency_window = 0;       ///< edges the latency figures cover
-  cli::LatencySummary latency;  ///< receipt → estimate published, over that window
+  int latency_window = 0;  ///< edges the latency figures cover
+  LatencySummary latency;  ///< receipt → estimate published, over that window
   TransportState transport;
 };
 
@@ -170,8 +170,8 @@ struct ServeSummary {
   /// With robust smoothing: every loop closure at the end, the threshold c² in use.
   std::vector<ClosureReport> closures;
   double inlier_threshold = 0;
-  cli::LatencySummary latency;       ///< receipt → estimate published, every edge applied
-  cli::LatencySummary transport;     ///< edge utime → receipt (meaningful when clocks agree)
+  LatencySummary latency;            ///< receipt → estimate published, every edge applied
+  LatencySummary transport;          ///< edge utime → receipt (meaningful when clocks agree)
   Estimate final_estimate;           ///< full
   std::int64_t journal_refused = 0;  ///< measurements refused: the journal could not take them
   std::int64_t held_at_stop = 0;     ///< journaled, not applied: their update mark did not fit

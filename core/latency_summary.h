@@ -1,11 +1,12 @@
-// Per-update latency figures (percentiles of a sample of durations).
+// Per-update latency figures: nearest-rank percentiles of a sample of durations (or of any
+// counts). Shared by the replay, the streaming service and the benchmarks.
 #pragma once
 
 #include <algorithm>
 #include <cmath>
 #include <vector>
 
-namespace arbor::cli {
+namespace arbor {
 
 struct LatencySummary {
   double p50 = 0, p90 = 0, p99 = 0, max = 0;  ///< milliseconds
@@ -38,4 +39,4 @@ inline TenthsSummary summarizeTenths(const std::vector<double>& ms) {
           summarizeLatency(std::vector<double>(ms.end() - tenth, ms.end()))};
 }
 
-}  // namespace arbor::cli
+}  // namespace arbor
