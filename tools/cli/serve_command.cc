@@ -21,6 +21,7 @@
 
 #include "arbor/core/heap_policy.h"
 #include "arbor/tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/bus_key_flag.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/output_files.h"
@@ -100,6 +101,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   bool no_refine = false;
   std::string exit_budget = "1";
   long long max_senders = static_cast<long long>(options.max_senders);
+  std::string key_file;
   po::options_description desc("arbor serve [options]");
   desc.add_options()("help,h", "show this help")(
       "lcm-url", po::value(&line.url),
@@ -130,6 +132,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "recv-buf", po::value(&line.recv_buf_bytes),
       "udpm: the receive buffer in bytes (LCM's recv_buf_size; capped by net.core.rmem_max; "
       "default 4194304 unless the URL names recv_buf_size, which this flag replaces; docs/lcm.md)");
+  addBusKeyFlag(desc, &key_file);
   addSmootherFlags(desc);
   desc.add_options()("status-period", po::value(&options.status_period_s)->default_value(1.0),
                      "seconds between status messages")(
@@ -165,6 +168,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   if (helpRequested(args, desc)) return std::nullopt;
   const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
   options.smoother = readSmootherFlags(vm);
+  options.bus_keys = readBusKeyFlag(key_file);
   if (options.dim != 0 && options.dim != 2 && options.dim != 3) {
     throw UsageError("--dim must be 0, 2 or 3, not '" + std::to_string(options.dim) + "'");
   }
@@ -286,6 +290,7 @@ int serveCommand(const std::vector<std::string>& args) {
     serve::DatagramLimits limits;
     limits.max_message_bytes =
         static_cast<std::uint32_t>(std::max({m.edge, m.prior, m.edge_command, m.command}));
+    if (!options.bus_keys.empty()) limits.max_message_bytes += serve::kEnvelopeOverhead;
     datagrams = std::make_unique<serve::UdpmReceiver>(
         url,
         std::set<std::string>{channels.edges, channels.priors, channels.edge_commands,
@@ -410,6 +415,7 @@ int serveCommand(const std::vector<std::string>& args) {
         {"control_refused", control},
         {"datagrams_refused", s.datagrams_refused},
         {"datagram_partials_dropped", s.datagram_partials_dropped},
+        {"auth_refused", s.auth_refused},
     };
     j["edges_disabled"] = s.edges_disabled;
     j["pairs_disabled"] = s.pairs_disabled;
