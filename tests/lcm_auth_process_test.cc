@@ -135,7 +135,7 @@ TEST_F(LcmAuthProcess, OnlyKeyedMessagesAreAppliedAndAnsweredAcrossProcesses) {
   r = arbor({"command", "covariance", "5", "--lcm-url", url(), "--key", key, "--json"},
             "covariance");
   EXPECT_EQ(r.status, 0) << r.err;
-  EXPECT_EQ(nlohmann::json::parse(r.out).at("error").get<std::string>(), "");
+  EXPECT_FALSE(nlohmann::json::parse(r.out).contains("error")) << r.out;
   r = arbor({"command", "covariance", "5", "--lcm-url", url(), "--timeout", "2"},
             "covariance_unkeyed");
   EXPECT_EQ(r.status, 1);
