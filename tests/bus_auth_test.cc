@@ -148,6 +148,22 @@ TEST(BusAuth, RotationWithACurrentAndANextKey) {
   EXPECT_EQ(rotated.signingKeyId(), next.id);
 }
 
+TEST(BusAuth, NewKeysTakeEffectAtOnceAndTheReplayWindowsStay) {
+  const BusKey current = keyOf(1), next = keyOf(2);
+  BusAuth old_sender({current}), new_sender({next}), receiver({current});
+  const std::vector<std::uint8_t> seen = sealAt(old_sender, "C");
+  ASSERT_EQ(openAt(receiver, "C", seen).problem, AuthProblem::kNone);
+  EXPECT_EQ(openAt(receiver, "C", sealAt(new_sender, "C")).problem, AuthProblem::kUnknownKey);
+  receiver.setKeys({next, current});
+  EXPECT_EQ(receiver.signingKeyId(), next.id);
+  EXPECT_EQ(openAt(receiver, "C", sealAt(new_sender, "C")).problem, AuthProblem::kNone);
+  EXPECT_EQ(openAt(receiver, "C", seen).problem, AuthProblem::kReplay);
+  receiver.setKeys({next});
+  EXPECT_EQ(openAt(receiver, "C", sealAt(old_sender, "C")).problem, AuthProblem::kUnknownKey);
+  EXPECT_THROW(receiver.setKeys({}), std::invalid_argument);
+  EXPECT_EQ(openAt(receiver, "C", sealAt(new_sender, "C")).problem, AuthProblem::kNone);
+}
+
 class BusKeyFile : public ::testing::Test {
  protected:
   void SetUp() override {

@@ -8,6 +8,7 @@
 // stopped, pass or fail.
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <memory>
 #include <string>
@@ -77,7 +78,9 @@ TEST_F(LcmAuthProcess, OnlyKeyedMessagesAreAppliedAndAnsweredAcrossProcesses) {
   RunResult r = arbor({"keygen", key}, "keygen1");
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.out.find("written to " + key), std::string::npos) << r.out;
-  ASSERT_EQ(arbor({"keygen", other}, "keygen2").status, 0);
+  r = arbor({"keygen", other}, "keygen2");
+  ASSERT_EQ(r.status, 0);
+  const std::string other_id = r.out.substr(4, 16);  // "key ID written to FILE"
   EXPECT_EQ(arbor({"keygen", key}, "keygen3").status, 1) << "never over an existing key";
 
   // A key file other users can read: refused by every program, naming the file and the fix.
@@ -139,6 +142,20 @@ TEST_F(LcmAuthProcess, OnlyKeyedMessagesAreAppliedAndAnsweredAcrossProcesses) {
   r = arbor({"command", "covariance", "5", "--lcm-url", url(), "--timeout", "2"},
             "covariance_unkeyed");
   EXPECT_EQ(r.status, 1);
+
+  // Rotation without a restart: the key file rewritten with the other key first, then SIGHUP;
+  // a client that holds only the other key is answered.
+  {
+    const std::string ring = testing::readFile(other) + testing::readFile(key);
+    std::ofstream(key, std::ios::trunc) << ring;
+  }
+  serve.signal(SIGHUP);
+  ASSERT_TRUE(waitUntil([&] {
+    return serve.err().find("keys reloaded: signing with key " + other_id) != std::string::npos;
+  })) << serve.err();
+  r = arbor({"command", "covariance", "5", "--lcm-url", url(), "--key", other, "--json"},
+            "covariance_rotated");
+  EXPECT_EQ(r.status, 0) << r.err;
 
   serve.signal(SIGTERM);
   ASSERT_EQ(serve.wait(kGuard), 0) << serve.err();

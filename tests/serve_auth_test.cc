@@ -132,6 +132,12 @@ class ServeAuth : public ::testing::Test {
   std::vector<std::uint8_t> edge(std::size_t k, std::int64_t seq, std::int64_t sender = 1) const {
     return edgeBytes(streamEdge(graph_, order_[k], seq, sender));
   }
+  // A measurement of its own (the first edge's, moved 1 cm): applied as an extra factor.
+  std::vector<std::uint8_t> extraEdge(std::int64_t seq, std::int64_t sender) const {
+    StreamEdge<SE2> e = streamEdge(graph_, order_[0], seq, sender);
+    e.z = e.z.compose(SE2(0.01, 0.0, 0.0));
+    return edgeBytes(e);
+  }
   PoseGraph2 graph_;
   std::vector<int> order_;
 };
@@ -167,9 +173,7 @@ TEST_F(ServeAuth, OnlyVerifiedMessagesAreAppliedAndEveryRefusalIsCounted) {
     publishPlain(lcm, ch.edges, front_end.seal(ch.priors, bytes.data(), bytes.size()));  // mac
   }
   // A replay: a keyed edge of a sender of its own, accepted once; two copies of its envelope.
-  StreamEdge<SE2> extra = streamEdge(graph_, order_[0], 1, 200);  // a measurement of its own
-  extra.z = extra.z.compose(SE2(0.01, 0.0, 0.0));
-  const std::vector<std::uint8_t> b = edgeBytes(extra);
+  const std::vector<std::uint8_t> b = extraEdge(1, 200);
   const std::vector<std::uint8_t> recorded = front_end.seal(ch.edges, b.data(), b.size());
   for (int i = 0; i < 3; ++i) publishPlain(lcm, ch.edges, recorded);
 
@@ -221,9 +225,14 @@ TEST_F(ServeAuth, RotationAcceptsTheCurrentAndTheNextKeyAndRefusesARetiredOne) {
     if (k == n / 2) publishSealed(lcm, retired, ch.edges, edge(k, 1, 300));
   }
   ASSERT_TRUE(old_client.waitCovered(static_cast<std::int64_t>(n)));
+  // The last step, without a restart (SIGHUP in `arbor serve`): the current key is retired.
+  service.setBusKeys({next});
+  publishSealed(lcm, not_yet_rekeyed, ch.edges, edge(0, 1, 301));
+  publishSealed(lcm, rekeyed, ch.edges, extraEdge(static_cast<std::int64_t>(n) + 1, 1));
+  ASSERT_TRUE(old_client.waitCovered(static_cast<std::int64_t>(n) + 1));
   service.stop();
-  EXPECT_EQ(service.summary().applied, static_cast<std::int64_t>(n));
-  EXPECT_EQ(service.summary().auth_refused.at("unknown key"), 1);
+  EXPECT_EQ(service.summary().applied, static_cast<std::int64_t>(n) + 1);
+  EXPECT_EQ(service.summary().auth_refused.at("unknown key"), 2);
   EXPECT_EQ(old_client.unverified(), 0);
 }
 

@@ -101,7 +101,6 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   bool no_refine = false;
   std::string exit_budget = "1";
   long long max_senders = static_cast<long long>(options.max_senders);
-  std::string key_file;
   po::options_description desc("arbor serve [options]");
   desc.add_options()("help,h", "show this help")(
       "lcm-url", po::value(&line.url),
@@ -132,7 +131,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
       "recv-buf", po::value(&line.recv_buf_bytes),
       "udpm: the receive buffer in bytes (LCM's recv_buf_size; capped by net.core.rmem_max; "
       "default 4194304 unless the URL names recv_buf_size, which this flag replaces; docs/lcm.md)");
-  addBusKeyFlag(desc, &key_file);
+  addBusKeyFlag(desc, &line.key_file);
   addSmootherFlags(desc);
   desc.add_options()("status-period", po::value(&options.status_period_s)->default_value(1.0),
                      "seconds between status messages")(
@@ -168,7 +167,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   if (helpRequested(args, desc)) return std::nullopt;
   const po::variables_map vm = parseArguments(args, desc, po::positional_options_description());
   options.smoother = readSmootherFlags(vm);
-  options.bus_keys = readBusKeyFlag(key_file);
+  options.bus_keys = readBusKeyFlag(line.key_file);
   if (options.dim != 0 && options.dim != 2 && options.dim != 3) {
     throw UsageError("--dim must be 0, 2 or 3, not '" + std::to_string(options.dim) + "'");
   }
@@ -256,7 +255,10 @@ int serveCommand(const std::vector<std::string>& args) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  // With --key, SIGHUP reads the key file again (rotation without a restart).
+  sigset_t waited = signals;
+  if (!line->key_file.empty()) sigaddset(&waited, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &waited, nullptr);
 
   // Two links, one to receive and one to publish (see serve::Service), each re-created after a
   // transport fault (serve::LinkWatch); memq:// is private to an instance, so there one serves
@@ -309,7 +311,13 @@ int serveCommand(const std::vector<std::string>& args) {
   service.start();
   std::cerr << "arbor serve: listening on " << service.channels().edges << std::endl;
   int signal = 0;
-  sigwait(&signals, &signal);
+  while (sigwait(&waited, &signal) == 0 && signal == SIGHUP) {
+    try {
+      service.setBusKeys(serve::readBusKeyFile(line->key_file));
+    } catch (const std::exception& e) {
+      std::cerr << "arbor serve: SIGHUP: " << e.what() << "; keeping the keys in use" << std::endl;
+    }
+  }
   std::cerr << "arbor serve: " << (signal == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
             << std::endl;
   // A second signal while stopping cuts the exit refinement (and a batch) at its next check.

@@ -103,6 +103,7 @@ struct BusAuth::State {
     std::uint64_t id;
     crypto_auth_hmacsha512256_state keyed;  // HMAC's inner and outer pads, hashed once
   };
+  std::mutex keys_mutex;  // keys (replaced by setKeys)
   std::vector<Key> keys;
   BusAuthOptions options;
   std::atomic<std::uint64_t> counter{0};
@@ -110,15 +111,34 @@ struct BusAuth::State {
   std::map<std::uint64_t, ReplayWindow> windows;
   std::uint64_t tick = 0;
 
-  const Key* find(std::uint64_t id) const {
+  // A copy of key `id`, or of the signing key; false when there is none.
+  bool copyKey(std::uint64_t id, bool signing, Key* out) {
+    std::lock_guard<std::mutex> lock(keys_mutex);
     for (const Key& k : keys) {
-      if (k.id == id) return &k;
+      if (signing || k.id == id) {
+        *out = k;
+        return true;
+      }
     }
-    return nullptr;
+    return false;
   }
-  static void mac(const Key& key, const std::string& channel, const std::uint8_t* bytes,
-                  std::size_t size, std::uint8_t out[kEnvelopeMacBytes]) {
-    crypto_auth_hmacsha512256_state s = key.keyed;
+  static std::vector<Key> keyed(const BusKeyring& ring) {
+    if (ring.empty()) throw std::invalid_argument("BusAuth: no key");
+    std::vector<Key> out;
+    for (const BusKey& k : ring) {
+      Key key{k.id, {}};
+      crypto_auth_hmacsha512256_init(&key.keyed, k.secret.data(), k.secret.size());
+      out.push_back(key);
+    }
+    return out;
+  }
+  static void forget(std::vector<Key>* keys) {
+    for (Key& k : *keys) sodium_memzero(&k.keyed, sizeof k.keyed);
+  }
+  // The MAC of `bytes` on `channel` under `key`; leaves `key`'s state used up (and zeroed).
+  static void mac(Key& key, const std::string& channel, const std::uint8_t* bytes, std::size_t size,
+                  std::uint8_t out[kEnvelopeMacBytes]) {
+    crypto_auth_hmacsha512256_state& s = key.keyed;
     crypto_auth_hmacsha512256_update(&s, reinterpret_cast<const unsigned char*>(kDomain),
                                      sizeof kDomain - 1);
     const std::uint8_t length =
@@ -134,33 +154,39 @@ struct BusAuth::State {
 
 BusAuth::BusAuth(const BusKeyring& keys, BusAuthOptions options)
     : state_(std::make_unique<State>()) {
-  if (keys.empty()) throw std::invalid_argument("BusAuth: no key");
   if (sodium_init() < 0) throw std::runtime_error("libsodium could not be initialised");
-  for (const BusKey& k : keys) {
-    State::Key key{k.id, {}};
-    crypto_auth_hmacsha512256_init(&key.keyed, k.secret.data(), k.secret.size());
-    state_->keys.push_back(key);
-  }
+  state_->keys = State::keyed(keys);
   while (options.sender == 0) randombytes_buf(&options.sender, sizeof options.sender);
   if (options.epoch == 0) options.epoch = static_cast<std::uint64_t>(wallMicros());
   if (options.max_senders < 1) options.max_senders = 1;
   state_->options = options;
 }
 
-BusAuth::~BusAuth() {
-  for (State::Key& k : state_->keys) sodium_memzero(&k.keyed, sizeof k.keyed);
+BusAuth::~BusAuth() { State::forget(&state_->keys); }
+
+void BusAuth::setKeys(const BusKeyring& keys) {
+  std::vector<State::Key> fresh = State::keyed(keys);
+  {
+    std::lock_guard<std::mutex> lock(state_->keys_mutex);
+    state_->keys.swap(fresh);
+  }
+  State::forget(&fresh);
 }
 
 std::uint64_t BusAuth::sender() const { return state_->options.sender; }
 std::uint64_t BusAuth::epoch() const { return state_->options.epoch; }
-std::uint64_t BusAuth::signingKeyId() const { return state_->keys.front().id; }
+std::uint64_t BusAuth::signingKeyId() const {
+  std::lock_guard<std::mutex> lock(state_->keys_mutex);
+  return state_->keys.front().id;
+}
 
 std::vector<std::uint8_t> BusAuth::seal(const std::string& channel, const std::uint8_t* data,
                                         std::size_t size, std::int64_t now_us) {
   std::vector<std::uint8_t> out(kEnvelopeOverhead + size);
   std::uint8_t* h = out.data();
   std::memcpy(h, kMagic, 4);
-  const State::Key& key = state_->keys.front();
+  State::Key key{};
+  state_->copyKey(0, /*signing=*/true, &key);
   putBig(h + 4, key.id);
   putBig(h + 12, state_->options.sender);
   putBig(h + 20, state_->options.epoch);
@@ -181,10 +207,11 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
     return m;
   }
   const Header h = readHeader(data);
-  const State::Key* key = state_->find(h.key_id);
+  State::Key key{};
+  const bool known = state_->copyKey(h.key_id, /*signing=*/false, &key);
   const std::string who = "sender " + hex16(h.sender) + " epoch " + std::to_string(h.epoch) +
                           " counter " + std::to_string(h.counter);
-  if (key == nullptr) {
+  if (!known) {
     m.problem = AuthProblem::kUnknownKey;
     m.detail = "on " + channel + ": key " + hex16(h.key_id) + " is not in the key file (" + who +
                ", unverified)";
@@ -192,7 +219,7 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
   }
   const std::size_t signed_size = size - kEnvelopeMacBytes;
   std::uint8_t expected[kEnvelopeMacBytes];
-  State::mac(*key, channel, data, signed_size, expected);
+  State::mac(key, channel, data, signed_size, expected);
   if (crypto_verify_32(expected, data + signed_size) != 0) {
     m.problem = AuthProblem::kMac;
     m.detail = "on " + channel + ": the MAC does not verify under key " + hex16(h.key_id) +

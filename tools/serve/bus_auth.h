@@ -69,6 +69,10 @@ class BusAuth {
   OpenedMessage open(const std::string& channel, const std::uint8_t* data, std::size_t size,
                      std::int64_t now_us = wallMicros());
 
+  /// Replaces the keys (a key file read again: rotation without a restart); the replay windows
+  /// stay. Throws std::invalid_argument when `keys` is empty, keeping the keys in use.
+  void setKeys(const BusKeyring& keys);
+
   std::uint64_t sender() const;
   std::uint64_t epoch() const;
   std::uint64_t signingKeyId() const;

@@ -81,6 +81,10 @@ void LcmService::start() {
     recv_buf_at_start_ = bytes;
     core_->logLine("udpm receive buffer " + std::to_string(bytes) + " bytes (SO_RCVBUF)");
   }
+  if (auth_) {
+    core_->logLine("authenticated bus: signing with key " + busKeyIdText(auth_->signingKeyId()) +
+                   ", every message received must verify");
+  }
   receive_stop_ = false;
   receive_thread_ = std::thread(&LcmService::receiveLoop, this);
   running_ = true;
@@ -170,6 +174,18 @@ void LcmService::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& ch
   } catch (const std::exception& e) {
     core_->logLine(std::string("error while receiving a command: ") + e.what());
   }
+}
+
+void LcmService::setBusKeys(const BusKeyring& keys) {
+  if (!auth_) {
+    core_->logLine("keys: this service was started without --key; a key takes a restart");
+    return;
+  }
+  auth_->setKeys(keys);
+  std::string ids;
+  for (std::size_t k = 1; k < keys.size(); ++k)
+    ids += ", verifying with " + busKeyIdText(keys[k].id);
+  core_->logLine("keys reloaded: signing with key " + busKeyIdText(keys.front().id) + ids);
 }
 
 bool LcmService::openReceived(const std::string& channel, const std::uint8_t** data, int* size) {

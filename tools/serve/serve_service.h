@@ -91,6 +91,10 @@ class LcmService final : public Publisher {
   /// Cuts the exit refinement of a stop() in progress at its next check and cancels a batch in
   /// flight (StreamingCore::cancelExit; a second SIGINT/SIGTERM). Any thread.
   void cancelExit() { core_->cancelExit(); }
+  /// With a key: replaces the keys (the key file read again; tools/serve/bus_key.h) and logs
+  /// their ids; the replay windows stay. Without one: logs that keys need --key at start. Any
+  /// thread.
+  void setBusKeys(const BusKeyring& keys);
   /// Counters and figures so far (thread-safe).
   status_t status() const;
   /// After stop(): the whole run.
