@@ -101,7 +101,7 @@ std::int64_t wallMicros() {
 struct BusAuth::State {
   struct Key {
     std::uint64_t id;
-    crypto_auth_hmacsha512256_state keyed;  // HMAC's inner and outer pads, hashed once
+    crypto_generichash_blake2b_state keyed;  // BLAKE2b with the key block hashed, once
   };
   std::mutex keys_mutex;  // keys (replaced by setKeys)
   std::vector<Key> keys;
@@ -127,7 +127,10 @@ struct BusAuth::State {
     std::vector<Key> out;
     for (const BusKey& k : ring) {
       Key key{k.id, {}};
-      crypto_auth_hmacsha512256_init(&key.keyed, k.secret.data(), k.secret.size());
+      if (crypto_generichash_blake2b_init(&key.keyed, k.secret.data(), k.secret.size(),
+                                          kEnvelopeMacBytes) != 0) {
+        throw std::runtime_error("BusAuth: BLAKE2b refused a key");
+      }
       out.push_back(key);
     }
     return out;
@@ -138,16 +141,16 @@ struct BusAuth::State {
   // The MAC of `bytes` on `channel` under `key`; leaves `key`'s state used up (and zeroed).
   static void mac(Key& key, const std::string& channel, const std::uint8_t* bytes, std::size_t size,
                   std::uint8_t out[kEnvelopeMacBytes]) {
-    crypto_auth_hmacsha512256_state& s = key.keyed;
-    crypto_auth_hmacsha512256_update(&s, reinterpret_cast<const unsigned char*>(kDomain),
-                                     sizeof kDomain - 1);
+    crypto_generichash_blake2b_state& s = key.keyed;
+    crypto_generichash_blake2b_update(&s, reinterpret_cast<const unsigned char*>(kDomain),
+                                      sizeof kDomain - 1);
     const std::uint8_t length =
         static_cast<std::uint8_t>(std::min<std::size_t>(channel.size(), 255));
-    crypto_auth_hmacsha512256_update(&s, &length, 1);
-    crypto_auth_hmacsha512256_update(&s, reinterpret_cast<const unsigned char*>(channel.data()),
-                                     length);
-    crypto_auth_hmacsha512256_update(&s, bytes, size);
-    crypto_auth_hmacsha512256_final(&s, out);
+    crypto_generichash_blake2b_update(&s, &length, 1);
+    crypto_generichash_blake2b_update(&s, reinterpret_cast<const unsigned char*>(channel.data()),
+                                      length);
+    crypto_generichash_blake2b_update(&s, bytes, size);
+    crypto_generichash_blake2b_final(&s, out, kEnvelopeMacBytes);
     sodium_memzero(&s, sizeof s);
   }
 };
@@ -209,11 +212,13 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
   const Header h = readHeader(data);
   State::Key key{};
   const bool known = state_->copyKey(h.key_id, /*signing=*/false, &key);
-  const std::string who = "sender " + hex16(h.sender) + " epoch " + std::to_string(h.epoch) +
-                          " counter " + std::to_string(h.counter);
+  const auto who = [&h] {
+    return "sender " + hex16(h.sender) + " epoch " + std::to_string(h.epoch) + " counter " +
+           std::to_string(h.counter);
+  };
   if (!known) {
     m.problem = AuthProblem::kUnknownKey;
-    m.detail = "on " + channel + ": key " + hex16(h.key_id) + " is not in the key file (" + who +
+    m.detail = "on " + channel + ": key " + hex16(h.key_id) + " is not in the key file (" + who() +
                ", unverified)";
     return m;
   }
@@ -223,7 +228,7 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
   if (crypto_verify_32(expected, data + signed_size) != 0) {
     m.problem = AuthProblem::kMac;
     m.detail = "on " + channel + ": the MAC does not verify under key " + hex16(h.key_id) +
-               " (changed on the way, or sent on another channel; " + who + ", unverified)";
+               " (changed on the way, or sent on another channel; " + who() + ", unverified)";
     return m;
   }
   m.sender = h.sender;
@@ -231,8 +236,8 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
   if (skew > state_->options.clock_window_us || -skew > state_->options.clock_window_us) {
     m.problem = AuthProblem::kClock;
     std::ostringstream d;
-    d << "on " << channel << ": " << who << " was sent " << (skew < 0 ? -skew : skew) / 1e6 << " s "
-      << (skew < 0 ? "before" : "after") << " this clock's now (window "
+    d << "on " << channel << ": " << who() << " was sent " << (skew < 0 ? -skew : skew) / 1e6
+      << " s " << (skew < 0 ? "before" : "after") << " this clock's now (window "
       << state_->options.clock_window_us / 1e6 << " s): a replay, or clocks that disagree";
     m.detail = d.str();
     return m;
@@ -255,11 +260,11 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
       it->second.start(h.epoch, h.counter);
     } else if (h.epoch < it->second.epoch) {
       fresh = false;
-      m.detail = "on " + channel + ": " + who + ": an epoch older than the sender's " +
+      m.detail = "on " + channel + ": " + who() + ": an epoch older than the sender's " +
                  std::to_string(it->second.epoch);
     } else if (!it->second.accept(h.counter)) {
       fresh = false;
-      m.detail = "on " + channel + ": " + who + ": seen already, or more than " +
+      m.detail = "on " + channel + ": " + who() + ": seen already, or more than " +
                  std::to_string(kReplayWindow) + " below the highest (" +
                  std::to_string(it->second.highest) + ")";
     }

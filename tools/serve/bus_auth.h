@@ -1,11 +1,11 @@
 // An authenticated bus (docs/lcm.md, "An authenticated bus"): with a deployment key every
 // message on an Arbor channel travels in an envelope — magic, key id, sender, epoch, counter,
-// send time, the LCM message's bytes, and an HMAC-SHA-512-256 (libsodium's crypto_auth) over the
-// channel name and all of that. open() checks the envelope before anything decodes the message
-// inside: its key, its MAC (constant-time), the send time against the receiver's clock, and the
-// counter against the sender's window of counters seen, so a message that is unsigned, signed
-// with another key, changed in one byte, moved to another channel or sent twice is refused.
-// Bytes only; LCM never appears here.
+// send time, the LCM message's bytes, and a keyed BLAKE2b-256 MAC (libsodium's
+// crypto_generichash_blake2b) over the channel name and all of that. open() checks the envelope
+// before anything decodes the message inside: its key, its MAC (constant-time), the send time
+// against the receiver's clock, and the counter against the sender's window of counters seen, so a
+// message that is unsigned, signed with another key, changed in one byte, moved to another channel
+// or sent twice is refused. Bytes only; LCM never appears here.
 #pragma once
 
 #include <cstddef>

@@ -1,5 +1,5 @@
 // Microbenchmarks of the authenticated bus (tools/serve/bus_auth.h): what verifying a received
-// message costs (open: header, key, HMAC-SHA-512-256, clock, replay window) and what sealing one
+// message costs (open: header, key, keyed BLAKE2b, clock, replay window) and what sealing one
 // costs, for a 3D edge_t (the largest measurement a front-end sends at rate), a small
 // edge_command_t-sized message and a message at the 4 KiB channel limit. docs/lcm.md quotes them.
 #include <array>
