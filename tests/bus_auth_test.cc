@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -131,6 +132,11 @@ TEST(BusAuth, AMessageOutsideTheClockWindowIsRefused) {
   EXPECT_EQ(openAt(receiver, "C", sealAt(sender, "C", kNow + window + 1)).problem,
             AuthProblem::kClock);
   EXPECT_EQ(openAt(receiver, "C", sealAt(sender, "C", kNow - window)).problem, AuthProblem::kNone);
+  // Any time the sender writes, however far off, is refused without overflowing.
+  for (std::int64_t t : {std::numeric_limits<std::int64_t>::min(),
+                         std::numeric_limits<std::int64_t>::max(), std::int64_t{0}}) {
+    EXPECT_EQ(openAt(receiver, "C", sealAt(sender, "C", t)).problem, AuthProblem::kClock) << t;
+  }
 }
 
 TEST(BusAuth, RotationWithACurrentAndANextKey) {

@@ -232,12 +232,16 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
     return m;
   }
   m.sender = h.sender;
-  const std::int64_t skew = h.time_us - now_us;
-  if (skew > state_->options.clock_window_us || -skew > state_->options.clock_window_us) {
+  // |time − now| without overflow, whatever time the sender wrote.
+  const bool ahead = h.time_us > now_us;
+  const std::uint64_t distance =
+      ahead ? static_cast<std::uint64_t>(h.time_us) - static_cast<std::uint64_t>(now_us)
+            : static_cast<std::uint64_t>(now_us) - static_cast<std::uint64_t>(h.time_us);
+  if (distance > static_cast<std::uint64_t>(state_->options.clock_window_us)) {
     m.problem = AuthProblem::kClock;
     std::ostringstream d;
-    d << "on " << channel << ": " << who() << " was sent " << (skew < 0 ? -skew : skew) / 1e6
-      << " s " << (skew < 0 ? "before" : "after") << " this clock's now (window "
+    d << "on " << channel << ": " << who() << " was sent " << static_cast<double>(distance) / 1e6
+      << " s " << (ahead ? "after" : "before") << " this clock's now (window "
       << state_->options.clock_window_us / 1e6 << " s): a replay, or clocks that disagree";
     m.detail = d.str();
     return m;
@@ -264,8 +268,8 @@ OpenedMessage BusAuth::open(const std::string& channel, const std::uint8_t* data
                  std::to_string(it->second.epoch);
     } else if (!it->second.accept(h.counter)) {
       fresh = false;
-      m.detail = "on " + channel + ": " + who() + ": seen already, or more than " +
-                 std::to_string(kReplayWindow) + " below the highest (" +
+      m.detail = "on " + channel + ": " + who() + ": seen already, or " +
+                 std::to_string(kReplayWindow) + " or more below the highest (" +
                  std::to_string(it->second.highest) + ")";
     }
     it->second.heard = ++state_->tick;
