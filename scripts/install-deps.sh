@@ -9,7 +9,7 @@ packages=(
   liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless zlib1g-dev
   default-jdk-headless libjchart2d-java
   libgtest-dev libgmock-dev libbenchmark-dev libspectra-dev
-  libceres-dev nlohmann-json3-dev
+  libceres-dev nlohmann-json3-dev libsodium-dev
   libopenblas0-pthread libopenblas-pthread-dev
   python3-matplotlib python3-numpy python3-pytest python3-dev python3-pybind11 pybind11-dev
 )

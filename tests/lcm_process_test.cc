@@ -765,6 +765,44 @@ TEST_P(LcmProcess, BurstLossIsAllReportedAsGaps) {
   }
 }
 
+// With a deployment key (docs/lcm.md, "An authenticated bus"), over each transport: an unkeyed
+// publisher's edges are refused before decoding and counted, the keyed stream is acknowledged
+// through serve's sealed estimates, and the estimate is `arbor replay`'s.
+TEST_P(LcmProcess, WithAKeyOnlyTheKeyedStreamIsApplied) {
+  const std::string file = smallGraph();
+  const int edges = edgesOf(file);
+  const std::string key = path("PK_bus.key");
+  fs::remove(key);
+  const RunResult made = run({ARBOR_EXE, "keygen", key}, path("PK_keygen"));
+  ASSERT_EQ(made.status, 0) << made.err;
+  std::vector<std::string> args = serveArgs("PK_");
+  args.insert(args.end(), {"--key", key});
+  Process serve(args, path("servek.out"), path("servek.err"));
+  // Wait until serve is subscribed (its link's probe came back), or the plain edges are lost.
+  const auto end = Clock::now() + std::chrono::seconds(30);
+  const auto waitFor = [&](const std::string& line) {
+    while (serve.err().find(line) == std::string::npos && Clock::now() < end) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return serve.err().find(line) != std::string::npos;
+  };
+  ASSERT_TRUE(waitFor("receive link up")) << serve.err();
+  const RunResult plain = run({ARBOR_EXE, "publish", file, "--lcm-url", url(), "--channel-prefix",
+                               "PK_", "--count", "20", "--sender", "7"},
+                              path("PK_plain"));
+  ASSERT_EQ(plain.status, 0) << plain.err;
+  ASSERT_TRUE(waitFor("auth unsigned")) << serve.err();
+  const RunResult pub = publish(file, "PK_", {"--key", key});
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out;
+  EXPECT_EQ(nlohmann::json::parse(pub.out).at("acknowledged").get<int>(), edges);
+  const nlohmann::json j = stopServe(serve);
+  EXPECT_EQ(j.at("received").get<int>(), edges);
+  EXPECT_EQ(j.at("applied").get<int>(), edges);
+  EXPECT_EQ(j.at("faults").at("auth_refused").at("unsigned").get<int>(), 20);
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+}
+
 INSTANTIATE_TEST_SUITE_P(Transports, LcmProcess,
                          ::testing::Values(Transport::kTcpq, Transport::kUdpm), transportName);
 

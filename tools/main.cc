@@ -30,6 +30,8 @@ const std::map<std::string, std::pair<Command, const char*>>& commands() {
       {"plot",
        {arbor::cli::plotCommand,
         "draw an estimate as a PNG; with a reference, its ATE and RPE (evo's definitions)"}},
+      {"keygen",
+       {arbor::cli::keygenCommand, "write a new deployment key for an authenticated bus (--key)"}},
       {"spy", {arbor::cli::spyCommand, "lcm-spy with Arbor's message types (a GUI)"}},
       {"command",
        {arbor::cli::commandCommand,

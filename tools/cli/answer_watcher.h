@@ -1,7 +1,8 @@
 // A command's answer on the bus: listens on one channel (its own handle thread on the LCM
 // instance it is given) for messages of type Msg, and keeps the first one `matches` accepts.
 // waitAny() waits for any well-formed message (the service is up and subscribed at the hub),
-// waitAnswer() for the match. Messages that do not decode are ignored.
+// waitAnswer() for the match. Messages that do not decode are ignored, and with a key
+// (tools/cli/bus_key_flag.h) so are those whose envelope does not verify.
 #pragma once
 
 #include <chrono>
@@ -15,6 +16,7 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include "arbor/io/lcm_messages.h"
+#include "arbor/tools/cli/bus_key_flag.h"
 #include "arbor/tools/serve/lcm_tuning.h"
 
 namespace arbor::cli {
@@ -22,8 +24,9 @@ namespace arbor::cli {
 template <class Msg>
 class AnswerWatcher {
  public:
-  AnswerWatcher(lcm::LCM& lcm, const std::string& channel, std::function<bool(const Msg&)> matches)
-      : lcm_(lcm), matches_(std::move(matches)) {
+  AnswerWatcher(lcm::LCM& lcm, const std::string& channel, std::function<bool(const Msg&)> matches,
+                serve::BusAuth* auth = nullptr)
+      : lcm_(lcm), matches_(std::move(matches)), auth_(auth) {
     sub_ = lcm_.subscribe(channel, &AnswerWatcher::onMessage, this);
     sub_->setQueueCapacity(0);
     thread_ = std::thread([this] {
@@ -54,10 +57,12 @@ class AnswerWatcher {
   }
 
  private:
-  void onMessage(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  void onMessage(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+    const std::uint8_t* data = nullptr;
+    int size = 0;
+    if (!openFromBus(auth_, channel, rbuf, &data, &size)) return;
     Msg m;
-    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &m) != MessageProblem::kNone)
-      return;
+    if (decodeMessage(data, size, &m) != MessageProblem::kNone) return;
     std::lock_guard<std::mutex> lock(mutex_);
     seen_ = true;
     if (!answered_ && matches_(m)) {
@@ -69,6 +74,7 @@ class AnswerWatcher {
 
   lcm::LCM& lcm_;
   std::function<bool(const Msg&)> matches_;
+  serve::BusAuth* auth_;  // with a key (else null)
   lcm::Subscription* sub_ = nullptr;
   std::mutex mutex_;
   std::condition_variable cv_;

@@ -19,5 +19,7 @@ int plotCommand(const std::vector<std::string>& args);
 int commandCommand(const std::vector<std::string>& args);
 /// `arbor command covariance ID [ID2]` (commandCommand hands it over).
 int covarianceCommand(const std::vector<std::string>& args);
+/// `arbor keygen FILE`: a new deployment key for the authenticated bus (tools/cli/bus_key_flag.h).
+int keygenCommand(const std::vector<std::string>& args);
 
 }  // namespace arbor::cli

@@ -13,6 +13,7 @@
 
 #include "arbor/io/lcm_messages.h"
 #include "arbor/tools/cli/answer_watcher.h"
+#include "arbor/tools/cli/bus_key_flag.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/serve/lcm_tuning.h"
@@ -23,7 +24,7 @@ namespace po = boost::program_options;
 
 int covarianceCommand(const std::vector<std::string>& args) {
   std::vector<Key> ids;
-  std::string url, prefix;
+  std::string url, prefix, key_file;
   bool json = false;
   double timeout_s = 10;
   po::options_description desc("arbor command covariance ID [ID2] [options]");
@@ -34,6 +35,7 @@ int covarianceCommand(const std::vector<std::string>& args) {
       "channel-prefix", po::value(&prefix), "prefix of the ARBOR_* channels")(
       "timeout", po::value(&timeout_s)->default_value(10), "seconds to wait for the answer")(
       "json", po::bool_switch(&json), "print one JSON object");
+  addBusKeyFlag(desc, &key_file);
   po::positional_options_description positional;
   positional.add("id", -1);
   if (helpRequested(args, desc)) return 0;
@@ -50,6 +52,7 @@ int covarianceCommand(const std::vector<std::string>& args) {
   c.path = std::to_string(ids[0]) + (ids.size() == 2 ? " " + std::to_string(ids[1]) : "");
   const std::int64_t request = c.utime;
 
+  const std::unique_ptr<serve::BusAuth> auth = busAuthFromFlag(key_file);
   lcm::LCM lcm(url);
   if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
   serve::tuneLcmTransport(lcm, url);
@@ -59,7 +62,7 @@ int covarianceCommand(const std::vector<std::string>& args) {
   const serve::Channels channels = serve::Channels::withPrefix(prefix);
   AnswerWatcher<covariance_t> watcher(
       listen, channels.covariance,
-      [request](const covariance_t& m) { return m.request == request; });
+      [request](const covariance_t& m) { return m.request == request; }, auth.get());
   // Over a hub (tcpq) a subscription reaches the hub some time after subscribe() returns, and
   // an answer published before then is not forwarded to us: asked at once, 2 of 6 requests went
   // unanswered. So the command first sees a probe of its own (a covariance_t answering no
@@ -75,8 +78,7 @@ int covarianceCommand(const std::vector<std::string>& args) {
   const auto probe_bytes = encodeMessage(probe);
   bool subscribed = false;
   while (!subscribed && std::chrono::steady_clock::now() < deadline) {
-    if (lcm.publish(channels.covariance, probe_bytes.data(),
-                    static_cast<unsigned>(probe_bytes.size())) != 0)
+    if (publishOnBus(lcm, auth.get(), channels.covariance, probe_bytes) != 0)
       throw std::runtime_error("LCM publish failed on " + channels.covariance);
     subscribed = watcher.waitAny(0.05);
   }
@@ -86,7 +88,7 @@ int covarianceCommand(const std::vector<std::string>& args) {
     return 1;
   }
   const auto bytes = encodeMessage(c);
-  if (lcm.publish(channels.command, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
+  if (publishOnBus(lcm, auth.get(), channels.command, bytes) != 0)
     throw std::runtime_error("LCM publish failed on " + channels.command);
   covariance_t answer;
   const double left_s =

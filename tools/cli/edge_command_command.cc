@@ -9,6 +9,7 @@
 
 #include "arbor/io/lcm_messages.h"
 #include "arbor/tools/cli/answer_watcher.h"
+#include "arbor/tools/cli/bus_key_flag.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/serve/lcm_tuning.h"
@@ -20,7 +21,7 @@ namespace po = boost::program_options;
 int commandCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "covariance")
     return covarianceCommand(std::vector<std::string>(args.begin() + 1, args.end()));
-  std::string kind, url, prefix;
+  std::string kind, url, prefix, key_file;
   Key from = 0, to = 0;
   std::int64_t sender = 1, seq = 0;
   bool wait = false, json = false;
@@ -41,6 +42,7 @@ int commandCommand(const std::vector<std::string>& args) {
       "wait for the service's status naming this command; print its result, exit 1 if refused")(
       "timeout", po::value(&timeout_s)->default_value(10), "seconds for --wait")(
       "json", po::bool_switch(&json), "print one JSON object");
+  addBusKeyFlag(desc, &key_file);
   po::positional_options_description positional;
   positional.add("kind", 1).add("from", 1).add("to", 1);
   if (helpRequested(args, desc)) return 0;
@@ -64,6 +66,7 @@ int commandCommand(const std::vector<std::string>& args) {
   c.from = from;
   c.to = to;
 
+  const std::unique_ptr<serve::BusAuth> auth = busAuthFromFlag(key_file);
   lcm::LCM lcm(url);
   if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
   serve::tuneLcmTransport(lcm, url);
@@ -78,9 +81,11 @@ int commandCommand(const std::vector<std::string>& args) {
     serve::tuneLcmTransport(*listen, url);
     // The status whose last command is (sender, seq) answers it.
     watcher = std::make_unique<AnswerWatcher<status_t>>(
-        *listen, channels.status, [sender, seq](const status_t& s) {
+        *listen, channels.status,
+        [sender, seq](const status_t& s) {
           return s.last_command_sender == sender && s.last_command_seq == seq;
-        });
+        },
+        auth.get());
     if (!watcher->waitAny(timeout_s)) {
       std::cerr << "arbor command: no status from a server on " << channels.status << " within "
                 << timeout_s << " s\n";
@@ -88,7 +93,7 @@ int commandCommand(const std::vector<std::string>& args) {
     }
   }
   const auto bytes = encodeMessage(makeEdgeCommandMessage(c));
-  if (lcm.publish(channels.edge_commands, bytes.data(), static_cast<unsigned>(bytes.size())) != 0)
+  if (publishOnBus(lcm, auth.get(), channels.edge_commands, bytes) != 0)
     throw std::runtime_error("LCM publish failed on " + channels.edge_commands);
   status_t answer;
   const bool answered = wait && watcher->waitAnswer(timeout_s, &answer);

@@ -18,6 +18,7 @@
 #include "arbor/io/edge_choice_file.h"
 #include "arbor/io/lcm_messages.h"
 #include "arbor/io/pose_graph_file.h"
+#include "arbor/tools/cli/bus_key_flag.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/publish_stream.h"
@@ -39,6 +40,8 @@ struct PublishRun {
   double timeout_s = 60;
   ReadOptions read;
   std::string edge_choices;  // --edge-choices FILE (io/edge_choice_file.h)
+  std::string key_file;      // --key FILE (tools/cli/bus_key_flag.h)
+  serve::BusKeyring keys;    // its keys (none without --key)
 };
 
 // Listens on ARBOR_ESTIMATE / ARBOR_STATUS while edges go out: which seq numbers of our sender
@@ -46,8 +49,13 @@ struct PublishRun {
 class Listener {
  public:
   Listener(lcm::LCM& lcm, const serve::Channels& channels, std::int64_t sender, size_t slots,
-           std::int64_t first_seq)
-      : lcm_(lcm), sender_(sender), first_seq_(first_seq), sent_(slots), latency_ms_(slots, -1) {
+           std::int64_t first_seq, serve::BusAuth* auth)
+      : lcm_(lcm),
+        auth_(auth),
+        sender_(sender),
+        first_seq_(first_seq),
+        sent_(slots),
+        latency_ms_(slots, -1) {
     subs_.push_back(lcm_.subscribe(channels.estimate, &Listener::onEstimate, this));
     subs_.push_back(lcm_.subscribe(channels.status, &Listener::onStatus, this));
     for (auto* s : subs_) s->setQueueCapacity(0);
@@ -91,12 +99,13 @@ class Listener {
   }
 
  private:
-  void onEstimate(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  void onEstimate(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
     const auto now = Clock::now();
+    const std::uint8_t* data = nullptr;
+    int size = 0;
+    if (!openFromBus(auth_, channel, rbuf, &data, &size)) return;
     estimate_t m;
-    if (decodeMessage(rbuf->data, static_cast<int>(rbuf->data_size), &m) != MessageProblem::kNone) {
-      return;
-    }
+    if (decodeMessage(data, size, &m) != MessageProblem::kNone) return;
     std::lock_guard<std::mutex> lock(mutex_);
     last_ = m;
     if (m.last_sender != sender_ || m.last_seq <= covered_) return;
@@ -108,13 +117,17 @@ class Listener {
     covered_ = m.last_seq;
     cv_.notify_all();
   }
-  void onStatus(const lcm::ReceiveBuffer*, const std::string&) {
+  void onStatus(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+    const std::uint8_t* data = nullptr;
+    int size = 0;
+    if (!openFromBus(auth_, channel, rbuf, &data, &size)) return;
     std::lock_guard<std::mutex> lock(mutex_);
     status_seen_ = true;
     cv_.notify_all();
   }
 
   lcm::LCM& lcm_;
+  serve::BusAuth* auth_;  // with --key (else null)
   std::int64_t sender_, first_seq_;
   std::mutex mutex_;
   std::condition_variable cv_;
@@ -154,6 +167,8 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + run.url + "'");
   serve::tuneLcmTransport(lcm, run.url);
   const serve::Channels channels = serve::Channels::withPrefix(run.prefix);
+  const std::unique_ptr<serve::BusAuth> auth =
+      run.keys.empty() ? nullptr : std::make_unique<serve::BusAuth>(run.keys);
   // The listener has its own instance: liblcm 1.3 delays what an instance receives while
   // another thread publishes on it.
   std::unique_ptr<lcm::LCM> listen_lcm;
@@ -162,7 +177,8 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     listen_lcm = std::make_unique<lcm::LCM>(run.url);
     if (!listen_lcm->good()) throw std::runtime_error("cannot open LCM at '" + run.url + "'");
     serve::tuneLcmTransport(*listen_lcm, run.url);
-    listener = std::make_unique<Listener>(*listen_lcm, channels, run.sender, n, run.skip + 1);
+    listener =
+        std::make_unique<Listener>(*listen_lcm, channels, run.sender, n, run.skip + 1, auth.get());
   }
   if (run.wait_ready && !listener->waitStatus(run.timeout_s)) {
     std::cerr << "arbor publish: no status from a server on " << channels.status << " within "
@@ -180,7 +196,7 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     const auto bytes = encodeStreamMessage(m, serve::nowMicros());
     if (!m.is_prior && listener) listener->sent(k);
     const std::string& channel = m.is_prior ? channels.priors : channels.edges;
-    if (lcm.publish(channel, bytes.data(), static_cast<unsigned>(bytes.size())) != 0) {
+    if (publishOnBus(lcm, auth.get(), channel, bytes) != 0) {
       const std::int64_t seq =
           m.is_prior ? std::visit([](const auto& p) { return p.seq; }, m.prior) : m.edge.seq;
       throw std::runtime_error(std::string("LCM publish failed at ") +
@@ -257,6 +273,7 @@ int publishCommand(const std::vector<std::string>& args) {
       "edge-choices", po::value(&run.edge_choices),
       "per-edge trust and kernel into edge_t, 'FROM TO default|trusted|robust [KERNEL]' a line "
       "(docs/files.md)");
+  addBusKeyFlag(desc, &run.key_file);
   po::positional_options_description positional;
   positional.add("file", 1);
   if (helpRequested(args, desc)) return 0;
@@ -267,6 +284,7 @@ int publishCommand(const std::vector<std::string>& args) {
   if (run.count < -1) throw UsageError("--count must be >= 0 (or -1: all)");
   if (!(run.timeout_s > 0)) throw UsageError("--timeout must be > 0");
   run.read.information = parseInformationPolicy(information);
+  run.keys = readBusKeyFlag(run.key_file);  // before anything is read or opened
   const AnyPoseGraph any = readGraphFile(run.file, run.read);
   return std::visit([&](const auto& graph) { return publish(run, graph); }, any);
 }

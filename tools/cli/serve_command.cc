@@ -21,6 +21,7 @@
 
 #include "arbor/core/heap_policy.h"
 #include "arbor/tools/cli/batch_refinement.h"
+#include "arbor/tools/cli/bus_key_flag.h"
 #include "arbor/tools/cli/cli_common.h"
 #include "arbor/tools/cli/commands.h"
 #include "arbor/tools/cli/flag_set.h"
@@ -122,6 +123,7 @@ FlagSet serveFlagSet(ServeFlagValues& v) {
       "directory of the journal (journal.lcmlog); replayed on start")(
       "publish", po::value(&v.publish)->default_value("changed")->value_name("changed|full|N"),
       "estimates: changed (poses that changed), full, or N (full every N updates)");
+  addBusKeyFlag(flags.add(Tier::kCommon, kService), &line.key_file);
   flags.add(Tier::kAdvanced, kService)(
       "channel-prefix", po::value(&options.channel_prefix),
       "prefix of ARBOR_EDGES, ARBOR_PRIORS, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND")(
@@ -207,6 +209,7 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
   const bool no_refine = v.no_refine;
   const long long max_senders = v.max_senders;
   options.smoother = readSmootherFlags(vm);
+  options.bus_keys = readBusKeyFlag(line.key_file);
   if (options.dim != 0 && options.dim != 2 && options.dim != 3) {
     throw UsageError("--dim must be 0, 2 or 3, not '" + std::to_string(options.dim) + "'");
   }
@@ -295,7 +298,10 @@ int serveCommand(const std::vector<std::string>& args) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  // With --key, SIGHUP reads the key file again (rotation without a restart).
+  sigset_t waited = signals;
+  if (!line->key_file.empty()) sigaddset(&waited, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &waited, nullptr);
 
   // Two links, one to receive and one to publish (see serve::Service), each re-created after a
   // transport fault (serve::LinkWatch); memq:// is private to an instance, so there one serves
@@ -329,6 +335,7 @@ int serveCommand(const std::vector<std::string>& args) {
     serve::DatagramLimits limits;
     limits.max_message_bytes =
         static_cast<std::uint32_t>(std::max({m.edge, m.prior, m.edge_command, m.command}));
+    if (!options.bus_keys.empty()) limits.max_message_bytes += serve::kEnvelopeOverhead;
     datagrams = std::make_unique<serve::UdpmReceiver>(
         url,
         std::set<std::string>{channels.edges, channels.priors, channels.edge_commands,
@@ -347,7 +354,13 @@ int serveCommand(const std::vector<std::string>& args) {
   service.start();
   std::cerr << "arbor serve: listening on " << service.channels().edges << std::endl;
   int signal = 0;
-  sigwait(&signals, &signal);
+  while (sigwait(&waited, &signal) == 0 && signal == SIGHUP) {
+    try {
+      service.setBusKeys(serve::readBusKeyFile(line->key_file));
+    } catch (const std::exception& e) {
+      std::cerr << "arbor serve: SIGHUP: " << e.what() << "; keeping the keys in use" << std::endl;
+    }
+  }
   std::cerr << "arbor serve: " << (signal == SIGINT ? "SIGINT" : "SIGTERM") << ", stopping"
             << std::endl;
   // A second signal while stopping cuts the exit refinement (and a batch) at its next check.
@@ -453,6 +466,7 @@ int serveCommand(const std::vector<std::string>& args) {
         {"control_refused", control},
         {"datagrams_refused", s.datagrams_refused},
         {"datagram_partials_dropped", s.datagram_partials_dropped},
+        {"auth_refused", s.auth_refused},
     };
     j["edges_disabled"] = s.edges_disabled;
     j["pairs_disabled"] = s.pairs_disabled;

@@ -26,6 +26,8 @@ struct ServeCommandLine {
   /// --recv-buf: udpm's receive buffer request in bytes; url then carries it as recv_buf_size
   /// (replacing the URL's own). 0: kDefaultRecvBufBytes, unless the URL names its own.
   std::int64_t recv_buf_bytes = 0;
+  /// --key: the deployment key file (options.bus_keys holds its keys); SIGHUP reads it again.
+  std::string key_file;
   static constexpr std::int64_t kDefaultRecvBufBytes = 4 << 20;
   /// Everything the service takes (the smoother's by tools/cli/smoother_flags.h), but `log`.
   serve::ServeOptions options;

@@ -182,6 +182,12 @@ status_t toMessage(const CoreStatus& k) {
     s.reason_count.push_back(count);
     s.datagrams_refused += count;
   }
+  s.auth_refused = 0;
+  for (const auto& [reason, count] : k.transport.auth_refused) {
+    s.reason.push_back("auth " + reason);
+    s.reason_count.push_back(count);
+    s.auth_refused += count;
+  }
   s.refused_senders = by(c, "sender limit") + by(p, "sender limit") + by(c2, "sender limit");
   s.refused_oversize = by(c, "oversize") + by(p, "oversize") + by(c2, "oversize");
   if (const auto it = k.control_refused.find("oversize"); it != k.control_refused.end()) {

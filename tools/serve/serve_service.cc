@@ -47,6 +47,7 @@ LcmService::LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions opti
   }
   core_ = std::make_unique<StreamingCore>(*this, std::move(journal),
                                           static_cast<const StreamingOptions&>(options_));
+  if (!options_.bus_keys.empty()) auth_ = std::make_unique<BusAuth>(options_.bus_keys);
 }
 
 LcmService::~LcmService() {
@@ -79,6 +80,10 @@ void LcmService::start() {
     const std::int64_t bytes = udpReceiveBufferBytes(options_.udpm_port);
     recv_buf_at_start_ = bytes;
     core_->logLine("udpm receive buffer " + std::to_string(bytes) + " bytes (SO_RCVBUF)");
+  }
+  if (auth_) {
+    core_->logLine("authenticated bus: signing with key " + busKeyIdText(auth_->signingKeyId()) +
+                   ", every message received must verify");
   }
   receive_stop_ = false;
   receive_thread_ = std::thread(&LcmService::receiveLoop, this);
@@ -128,14 +133,18 @@ void LcmService::onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string
                      : kind == MeasurementKind::kPrior ? "a prior"
                                                        : "an edge";
   try {
-    const int size = static_cast<int>(rbuf->data_size);
-    if (size > limit) {
+    const std::uint8_t* data = static_cast<const std::uint8_t*>(rbuf->data);
+    int size = static_cast<int>(rbuf->data_size);
+    const int envelope = auth_ ? static_cast<int>(kEnvelopeOverhead) : 0;
+    if (size > limit + envelope) {
       core_->refuse(kind, "oversize", "oversize " + channel,
                     "refused a message of " + std::to_string(size) + " bytes on " + channel +
-                        ": over its limit of " + std::to_string(limit) + " bytes (not decoded)");
+                        ": over its limit of " + std::to_string(limit + envelope) +
+                        " bytes (not decoded)");
       return;
     }
-    core_->receive(arrivalFromBytes(kind, rbuf->data, size));
+    if (!openReceived(channel, &data, &size)) return;
+    core_->receive(arrivalFromBytes(kind, data, size));
   } catch (const std::exception& e) {
     core_->logLine(std::string("error while receiving ") + what + ": " + e.what());
   }
@@ -143,17 +152,20 @@ void LcmService::onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string
 
 void LcmService::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
   try {
-    const int size = static_cast<int>(rbuf->data_size);
-    if (size > options_.message_limits.command) {
+    const std::uint8_t* data = static_cast<const std::uint8_t*>(rbuf->data);
+    int size = static_cast<int>(rbuf->data_size);
+    const int limit =
+        options_.message_limits.command + (auth_ ? static_cast<int>(kEnvelopeOverhead) : 0);
+    if (size > limit) {
       core_->refuseControl("oversize", "a message of " + std::to_string(size) + " bytes on " +
                                            channel + ": over its limit of " +
-                                           std::to_string(options_.message_limits.command) +
-                                           " bytes (not decoded)");
+                                           std::to_string(limit) + " bytes (not decoded)");
       return;
     }
+    if (!openReceived(channel, &data, &size)) return;
     command_t c;
     std::string detail;
-    const MessageProblem p = decodeMessage(rbuf->data, size, &c, &detail);
+    const MessageProblem p = decodeMessage(data, size, &c, &detail);
     if (p != MessageProblem::kNone) {
       core_->refuseControl(toString(p), std::string(toString(p)) + ": " + detail);
       return;
@@ -164,7 +176,45 @@ void LcmService::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& ch
   }
 }
 
+void LcmService::setBusKeys(const BusKeyring& keys) {
+  if (!auth_) {
+    core_->logLine("keys: this service was started without --key; a key takes a restart");
+    return;
+  }
+  auth_->setKeys(keys);
+  std::string ids;
+  for (std::size_t k = 1; k < keys.size(); ++k)
+    ids += ", verifying with " + busKeyIdText(keys[k].id);
+  core_->logLine("keys reloaded: signing with key " + busKeyIdText(keys.front().id) + ids);
+}
+
+bool LcmService::openReceived(const std::string& channel, const std::uint8_t** data, int* size) {
+  if (!auth_) return true;
+  const OpenedMessage opened = auth_->open(channel, *data, static_cast<std::size_t>(*size));
+  if (opened.problem == AuthProblem::kNone) {
+    *data = opened.data;
+    *size = static_cast<int>(opened.size);
+    return true;
+  }
+  const std::string reason = toString(opened.problem);
+  {
+    std::lock_guard<std::mutex> lock(auth_mutex_);
+    ++auth_refused_[reason];
+  }
+  std::int64_t suppressed = 0;
+  if (auth_log_.allow("auth " + reason, &suppressed)) {
+    core_->logLine(LogLimiter::withSuppressed(
+        "refused a message: auth " + reason + ": " + opened.detail + " (not decoded)", suppressed));
+  }
+  return false;
+}
+
 void LcmService::publishBytes(const std::string& channel, const std::vector<std::uint8_t>& bytes) {
+  if (auth_) {
+    const std::vector<std::uint8_t> sealed = auth_->seal(channel, bytes.data(), bytes.size());
+    publish_->publish(channel, sealed.data(), static_cast<unsigned>(sealed.size()));
+    return;
+  }
   publish_->publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
 }
 
@@ -195,6 +245,8 @@ TransportState LcmService::transportState() const {
     t.datagrams_refused = datagrams_->refusedByReason();
     t.datagram_partials_dropped = datagrams_->droppedPartials();
   }
+  std::lock_guard<std::mutex> lock(auth_mutex_);
+  t.auth_refused = auth_refused_;
   return t;
 }
 

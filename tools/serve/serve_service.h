@@ -13,7 +13,9 @@
 
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -21,8 +23,10 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include "arbor/io/lcm_messages.h"
+#include "arbor/tools/serve/bus_auth.h"
 #include "arbor/tools/serve/lcm_channels.h"
 #include "arbor/tools/serve/link_watch.h"
+#include "arbor/tools/serve/log_limiter.h"
 #include "arbor/tools/serve/streaming_core.h"
 #include "arbor/tools/serve/udpm_receiver.h"
 
@@ -51,6 +55,10 @@ struct ServeOptions : StreamingOptions {
   /// udpm: the port the receive instance listens on; start() reads that socket's SO_RCVBUF for
   /// status_t's recv_buf_bytes (serve::udpReceiveBufferBytes). <= 0: not udpm.
   int udpm_port = -1;
+  /// The deployment key (tools/serve/bus_key.h; empty: none). With it every message received is
+  /// an envelope checked before it is decoded (refusals counted by reason, "auth ..."), and every
+  /// message published is sealed (tools/serve/bus_auth.h).
+  BusKeyring bus_keys;
 };
 
 class LcmService final : public Publisher {
@@ -83,6 +91,10 @@ class LcmService final : public Publisher {
   /// Cuts the exit refinement of a stop() in progress at its next check and cancels a batch in
   /// flight (StreamingCore::cancelExit; a second SIGINT/SIGTERM). Any thread.
   void cancelExit() { core_->cancelExit(); }
+  /// With a key: replaces the keys (the key file read again; tools/serve/bus_key.h) and logs
+  /// their ids; the replay windows stay. Without one: logs that keys need --key at start. Any
+  /// thread.
+  void setBusKeys(const BusKeyring& keys);
   /// Counters and figures so far (thread-safe).
   status_t status() const;
   /// After stop(): the whole run.
@@ -107,6 +119,9 @@ class LcmService final : public Publisher {
   void onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void receiveLoop();
   void publishBytes(const std::string& channel, const std::vector<std::uint8_t>& bytes);
+  /// With a key: opens the envelope of a message received on `channel` (true, `*data` and
+  /// `*size` then the message inside), else counts and logs the refusal (false).
+  bool openReceived(const std::string& channel, const std::uint8_t** data, int* size);
 
   std::unique_ptr<LinkWatch> owned_receive_, owned_publish_;  ///< over borrowed instances
   LinkWatch* receive_;                                        ///< receive (subscriptions, handle)
@@ -120,6 +135,10 @@ class LcmService final : public Publisher {
   std::atomic<std::int64_t> recv_buf_at_start_{0};
   bool running_ = false;
   ServeSummary summary_;
+  std::unique_ptr<BusAuth> auth_;  ///< with a key (else null)
+  mutable std::mutex auth_mutex_;
+  std::map<std::string, std::int64_t> auth_refused_;  ///< by reason (under auth_mutex_)
+  LogLimiter auth_log_;
 };
 
 /// `arbor serve`'s service: the streaming core over LCM.

@@ -138,6 +138,7 @@ void StreamingCore::stop() {
   summary_.recv_buf_bytes = transport.recv_buf_bytes;
   summary_.datagrams_refused = transport.datagrams_refused;
   summary_.datagram_partials_dropped = transport.datagram_partials_dropped;
+  summary_.auth_refused = transport.auth_refused;
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     summary_.held_at_stop = static_cast<std::int64_t>(queue_.size());

@@ -52,6 +52,8 @@ struct TransportState {
   /// (udpm: tools/serve/lcm_datagram.h), and the fragmented messages it dropped unfinished.
   std::map<std::string, std::int64_t> datagrams_refused;
   std::int64_t datagram_partials_dropped = 0;
+  /// Messages refused by the authenticated bus before decoding, by reason (bus_auth.h).
+  std::map<std::string, std::int64_t> auth_refused;
 };
 
 /// The core's counters and figures at one moment (status()); a transport maps them onto its
@@ -181,6 +183,7 @@ struct ServeSummary {
   std::int64_t recv_buf_bytes = 0;  ///< the transport's receive buffer (TransportState)
   std::map<std::string, std::int64_t> datagrams_refused;  ///< by reason (TransportState)
   std::int64_t datagram_partials_dropped = 0;             ///< (TransportState)
+  std::map<std::string, std::int64_t> auth_refused;       ///< by reason (TransportState)
 };
 
 class StreamingCore {

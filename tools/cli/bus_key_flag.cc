@@ -1,0 +1,70 @@
+#include "arbor/tools/cli/bus_key_flag.h"
+
+#include <iostream>
+
+#include "arbor/tools/cli/cli_common.h"
+#include "arbor/tools/cli/commands.h"
+
+namespace arbor::cli {
+
+namespace po = boost::program_options;
+
+const char* const kBusKeyHelp =
+    "deployment key file (arbor keygen): every message sent is signed, every message received "
+    "must verify (docs/lcm.md, \"An authenticated bus\")";
+
+void addBusKeyFlag(po::options_description& desc, std::string* path) {
+  addBusKeyFlag(desc.add_options(), path);
+}
+
+void addBusKeyFlag(po::options_description_easy_init add, std::string* path) {
+  add("key", po::value(path)->value_name("FILE"), kBusKeyHelp);
+}
+
+serve::BusKeyring readBusKeyFlag(const std::string& path) {
+  if (path.empty()) return {};
+  return serve::readBusKeyFile(path);
+}
+
+std::unique_ptr<serve::BusAuth> busAuthFromFlag(const std::string& path) {
+  if (path.empty()) return nullptr;
+  return std::make_unique<serve::BusAuth>(serve::readBusKeyFile(path));
+}
+
+int publishOnBus(lcm::LCM& lcm, serve::BusAuth* auth, const std::string& channel,
+                 const std::vector<std::uint8_t>& bytes) {
+  if (auth == nullptr)
+    return lcm.publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
+  const std::vector<std::uint8_t> sealed = auth->seal(channel, bytes.data(), bytes.size());
+  return lcm.publish(channel, sealed.data(), static_cast<unsigned>(sealed.size()));
+}
+
+bool openFromBus(serve::BusAuth* auth, const std::string& channel, const lcm::ReceiveBuffer* rbuf,
+                 const std::uint8_t** data, int* size) {
+  *data = static_cast<const std::uint8_t*>(rbuf->data);
+  *size = static_cast<int>(rbuf->data_size);
+  if (auth == nullptr) return true;
+  const serve::OpenedMessage opened = auth->open(channel, *data, rbuf->data_size);
+  if (opened.problem != serve::AuthProblem::kNone) return false;
+  *data = opened.data;
+  *size = static_cast<int>(opened.size);
+  return true;
+}
+
+int keygenCommand(const std::vector<std::string>& args) {
+  std::string path;
+  po::options_description desc(
+      "arbor keygen FILE: write a new deployment key (32 random bytes, hex) into FILE, mode 0600, "
+      "never over an existing file; prints its id");
+  desc.add_options()("help,h", "show this help")("file", po::value(&path)->required(),
+                                                 "the key file to create");
+  po::positional_options_description positional;
+  positional.add("file", 1);
+  if (helpRequested(args, desc)) return 0;
+  parseArguments(args, desc, positional);
+  const serve::BusKey key = serve::writeNewBusKeyFile(path);
+  std::cout << "key " << serve::busKeyIdText(key.id) << " written to " << path << "\n";
+  return 0;
+}
+
+}  // namespace arbor::cli
