@@ -17,7 +17,8 @@ PYBIND11_MODULE(arbor, m) {
   namespace py = pybind11;
   m.doc() = "Arbor: an incremental pose-graph smoother (iSAM2 style) and batch solvers";
   m.attr("__version__") = ARBOR_VERSION;
-  py::register_exception<arbor::FileError>(m, "FileError", PyExc_RuntimeError);
+  py::register_exception<arbor::FileError>(m, "FileError", PyExc_RuntimeError).attr("__doc__") =
+      "A malformed or unreadable file: the message is `path:line: what was wrong`.";
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
@@ -29,5 +30,6 @@ PYBIND11_MODULE(arbor, m) {
   arbor::python::defineCustomFactors(m);
   arbor::python::defineGraphs(m);
   arbor::python::defineSolve(m);
+  arbor::python::defineSmootherResults(m);
   arbor::python::defineSmoother(m);
 }

@@ -31,6 +31,8 @@ void definePoses(pybind11::module_& m);          ///< SE2, SE3
 void defineCustomFactors(pybind11::module_& m);  ///< CustomFactor2, CustomFactor3
 void defineGraphs(pybind11::module_& m);         ///< Graph2, Graph3, read()
 void defineSolve(pybind11::module_& m);          ///< RobustOptions, SolveResult, solve()
-void defineSmoother(pybind11::module_& m);       ///< OnlineSmoother2, OnlineSmoother3
+/// UpdateStats, OnlineStats, AddGraphResult, Closure, RefineResult
+void defineSmootherResults(pybind11::module_& m);
+void defineSmoother(pybind11::module_& m);  ///< OnlineSmoother2, OnlineSmoother3
 
 }  // namespace arbor::python

@@ -16,61 +16,10 @@
 #include "custom_factor_object.h"
 #include "graph_object.h"
 #include "option_keywords.h"
+#include "smoother_results.h"
 
 namespace arbor::python {
 namespace {
-
-py::dict statsDict(const UpdateStats& s) {
-  py::dict d;
-  d["new_factors"] = s.new_factors;
-  d["new_variables"] = s.new_variables;
-  d["cliques_reeliminated"] = s.cliques_reeliminated;
-  d["variables_reeliminated"] = s.variables_reeliminated;
-  d["cliques_updated"] = s.cliques_updated;
-  d["variables_relinearized"] = s.variables_relinearized;
-  d["indeterminate_cliques"] = s.indeterminate_cliques;
-  d["cliques_solved"] = s.cliques_solved;
-  d["cliques_deferred"] = s.cliques_deferred;
-  d["time_s"] = s.time_s;
-  return d;
-}
-
-py::dict statsDict(const OnlineStats& s) {
-  py::dict d;
-  d["poses"] = s.poses;
-  d["edges_accepted"] = s.edges_accepted;
-  d["edges_duplicate"] = s.edges_duplicate;
-  d["edges_rejected"] = s.edges_rejected;
-  d["priors_accepted"] = s.priors_accepted;
-  d["priors_rejected"] = s.priors_rejected;
-  d["components"] = s.components;
-  d["joins"] = s.joins;
-  d["anchors_released"] = s.anchors_released;
-  d["updates"] = s.updates;
-  d["total_update_time_s"] = s.total_update_time_s;
-  d["edges_disabled"] = s.edges_disabled;
-  d["pairs_disabled"] = s.pairs_disabled;
-  d["closures_inlier"] = s.closures_inlier;
-  d["closures_outlier"] = s.closures_outlier;
-  d["closures_trusted"] = s.closures_trusted;
-  d["closures_excluded"] = s.closures_excluded;
-  d["closures_graduating"] = s.closures_graduating;
-  d["closures_unconfirmed"] = s.closures_unconfirmed;
-  d["rechecks_bounded"] = s.rechecks_bounded;
-  d["closures_kept_at_word"] = s.closures_kept_at_word;
-  d["graduation_steps"] = s.graduation_steps;
-  d["graduation_updates"] = s.graduation_updates;
-  d["warm_up_relinearizations"] = s.warm_up_relinearizations;
-  d["closure_threshold"] = s.closure_threshold;
-  d["closure_threshold_at_end"] = s.closure_threshold_at_end;
-  d["noise_scale"] = s.noise_scale;
-  d["noise_samples"] = s.noise_samples;
-  d["noise_scale_estimated"] = s.noise_scale_estimated;
-  d["reseeds"] = s.reseeds;
-  d["total_reseed_time_s"] = s.total_reseed_time_s;
-  d["last_update"] = statsDict(s.last_update);
-  return d;
-}
 
 /// "accepted" or "duplicate"; a rejected edge or prior raises ValueError with its reason.
 std::string statusOrThrow(const EdgeResult& r) {
@@ -82,31 +31,33 @@ void throwUnlessApplied(const EdgeSwitchResult& r) {
   if (!r.applied()) throw std::invalid_argument(r.reason);
 }
 
-// A batch refinement's figures (tools/refine/batch_refiner.h BatchRun), robust ones as Σρ.
-py::dict runDict(const refine::BatchRun& b) {
-  py::dict d;
-  d["poses"] = b.poses;
-  d["edges"] = b.edges;
-  d["F_incremental"] = b.F_incremental;
-  d["F_batch"] = b.F_batch;
-  d["relative_gap"] = b.relative_gap;
-  d["winner"] = b.winner;
-  d["margin"] = b.margin;
-  d["max_translation_diff"] = b.max_translation_diff;
-  d["max_rotation_diff"] = b.max_rotation_diff;
-  d["iterations"] = b.iterations;
-  d["time_s"] = b.time_s;
-  d["certified"] = b.rank > 0 ? py::object(py::bool_(b.certified)) : py::none();
-  d["rank"] = b.rank > 0 ? py::object(py::int_(b.rank)) : py::none();
-  d["lambda_min"] = b.rank > 0 ? py::object(py::float_(b.lambda_min)) : py::none();
-  d["robust"] = b.robust;
-  d["judged"] = b.judged;
-  d["rejected"] = b.rejected;
-  d["inlier_threshold"] = b.threshold;
-  d["rtr_skipped"] = b.rtr_skipped;
-  d["reseeded"] = b.reseeded;
-  d["reseed_rejected"] = b.reseed_rejected;
-  return d;
+// A batch refinement's figures, robust ones as Σρ; the rtr ones None for lm.
+RefineResult refineResultOf(const refine::BatchRun& b) {
+  RefineResult r;
+  r.poses = b.poses;
+  r.edges = b.edges;
+  r.F_incremental = b.F_incremental;
+  r.F_batch = b.F_batch;
+  r.relative_gap = b.relative_gap;
+  r.winner = b.winner;
+  r.margin = b.margin;
+  r.max_translation_diff = b.max_translation_diff;
+  r.max_rotation_diff = b.max_rotation_diff;
+  r.iterations = b.iterations;
+  r.time_s = b.time_s;
+  if (b.rank > 0) {
+    r.certified = b.certified;
+    r.rank = b.rank;
+    r.lambda_min = b.lambda_min;
+  }
+  r.robust = b.robust;
+  r.judged = b.judged;
+  r.rejected = b.rejected;
+  r.inlier_threshold = b.threshold;
+  r.rtr_skipped = b.rtr_skipped;
+  r.reseeded = b.reseeded;
+  r.reseed_rejected = b.reseed_rejected;
+  return r;
 }
 
 template <class G>
@@ -230,10 +181,7 @@ void defineSmootherOf(py::module_& m, const char* name) {
               count(s.addFactor(c, graph.ids[c.i], id2),
                     "custom factor '" + c.name() + "' on " + std::to_string(graph.ids[c.i]));
             }
-            py::dict out;
-            out["accepted"] = accepted;
-            out["duplicate"] = duplicate;
-            return out;
+            return AddGraphResult{accepted, duplicate};
           },
           py::arg("graph"), py::arg("initial_guesses") = true,
           "Adds every edge and prior of a Graph2/Graph3 (read or built in memory): edges in "
@@ -241,7 +189,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "initial_guesses (and a graph with "
           "poses) each new pose starts at the graph's value. `fixed` poses are not held (the "
           "smoother's gauge is its first pose or the priors). Call update() after. Returns "
-          "{'accepted': n, 'duplicate': n}; ValueError naming the first rejected one.")
+          "an arbor.AddGraphResult (accepted, duplicate); ValueError naming the first rejected "
+          "one.")
       .def(
           "add_factor",
           [](Smoother& s, const CustomFactorObject<G>& f) {
@@ -284,10 +233,10 @@ void defineSmootherOf(py::module_& m, const char* name) {
               py::gil_scoped_release release;
               st = s.update();
             }
-            return statsDict(st);
+            return st;
           },
           "One incremental update over the edges and priors added since the last; returns its "
-          "statistics.")
+          "statistics (an arbor.UpdateStats).")
       .def(
           "finalize",
           [](Smoother& s) {
@@ -296,9 +245,10 @@ void defineSmootherOf(py::module_& m, const char* name) {
               py::gil_scoped_release release;
               st = s.finalize();
             }
-            return statsDict(st);
+            return st;
           },
-          "Relinearises everything and iterates to convergence (the end of a replay).")
+          "Relinearises everything and iterates to convergence (the end of a replay); returns "
+          "its statistics (an arbor.UpdateStats).")
       .def(
           "refine",
           [](Smoother& s, const std::string& solver, bool reseed) {
@@ -318,10 +268,10 @@ void defineSmootherOf(py::module_& m, const char* name) {
               out = refiner.collect(true);
               if (reseed) refiner.reseed(s, &*out, updates);
             }
-            py::dict d = runDict(out->run);
-            d["ids"] = idsToArray(snapshot.ids);
-            d["estimate"] = posesToArray(out->batch);
-            return d;
+            RefineResult r = refineResultOf(out->run);
+            r.ids = snapshot.ids;
+            r.estimate = posesToArray(out->batch);
+            return r;
           },
           py::arg("solver") = "lm", py::arg("reseed") = false,
           "A batch refinement of everything updated so far, on request (as `arbor replay "
@@ -330,7 +280,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "smoother's classification (what it does not hold as settled inliers held out, taken "
           "back within its end's bound), for rtr certifying the inlier problem. reseed: the "
           "winner's estimate becomes the linearisation point when it lowers the cost. Returns "
-          "the run's figures (F_* are Σρ when robust), ids and the batch estimate.")
+          "an arbor.RefineResult: the run's figures (F_* are Σρ when robust), ids and the batch "
+          "estimate.")
       .def(
           "solve_deferred",
           [](Smoother& s, double budget_mb) {
@@ -339,7 +290,7 @@ void defineSmootherOf(py::module_& m, const char* name) {
               py::gil_scoped_release release;
               st = s.solveDeferred(budget_mb);
             }
-            return statsDict(st);
+            return st;
           },
           py::arg("budget_mb") = 0.0,
           "With solve_budget_mb: solves the cliques the budget deferred (all, or about "
@@ -370,8 +321,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           },
           "(ids ascending, poses one row each: n×3 [x y θ] or n×7 [x y z qx qy qz qw])")
       .def(
-          "stats", [](const Smoother& s) { return statsDict(s.stats()); },
-          "The online layer's counts and the last update's statistics.")
+          "stats", [](const Smoother& s) { return s.stats(); },
+          "The online layer's counts and the last update's statistics (an arbor.OnlineStats).")
       .def(
           "marginal_covariance",
           [](const Smoother& s, Key id) {
@@ -401,17 +352,9 @@ void defineSmootherOf(py::module_& m, const char* name) {
       .def(
           "closures",
           [](const Smoother& s) {
-            py::list out;
-            for (const ClosureReport& c : s.closures()) {
-              py::dict r;
-              r["from_id"] = c.from;
-              r["to_id"] = c.to;
-              r["weight"] = c.weight;
-              r["residual"] = c.residual;
-              r["status"] = toString(c.status);
-              r["graduating"] = c.graduating;
-              out.append(r);
-            }
+            std::vector<Closure> out;
+            for (const ClosureReport& c : s.closures())
+              out.push_back({c.from, c.to, c.weight, c.residual, toString(c.status), c.graduating});
             return out;
           },
           "With robust options: every loop closure's weight and status (inlier, outlier, "

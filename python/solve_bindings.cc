@@ -17,6 +17,7 @@
 #include "conversions.h"
 #include "graph_object.h"
 #include "option_keywords.h"
+#include "record.h"
 
 namespace arbor::python {
 namespace {
@@ -89,6 +90,72 @@ RobustOptions onlineOptions(const py::kwargs& keywords) {
   const std::string problem = o.problem();
   if (!problem.empty()) throw std::invalid_argument(problem);
   return o;
+}
+
+constexpr const char* kOnlineDoc =
+    "an online option: `arbor replay`'s flag of this name ('_' for '-')";
+
+RobustSettings robustSettingsOf(const std::string& kernel, double threshold, double confidence,
+                                bool estimate_scale, const py::kwargs& online) {
+  RobustSettings s;
+  s.kernel = parseKernelKind(kernel);
+  if (s.kernel == KernelKind::kNone)
+    throw std::invalid_argument("kernel must be tls, gm, cauchy or huber, not 'none'");
+  if (!(threshold >= 0))
+    throw std::invalid_argument("threshold must be >= 0 (0: the chi2 quantile), not " +
+                                std::to_string(threshold));
+  if (!(confidence > 0 && confidence < 1))
+    throw std::invalid_argument("confidence must be in (0, 1), not " + std::to_string(confidence));
+  s.threshold = threshold;
+  s.confidence = confidence;
+  s.estimate_scale = estimate_scale;
+  s.online = onlineOptions(online);
+  return s;
+}
+
+// Every option by its keyword, in the constructor's order, the online ones by the table
+// (to_dict, pickle, ==, repr).
+py::dict robustDict(const RobustSettings& s) {
+  py::dict d;
+  d["kernel"] = toString(s.kernel);
+  d["threshold"] = s.threshold;
+  d["confidence"] = s.confidence;
+  d["estimate_scale"] = s.estimate_scale;
+  for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable())
+    d[row.keyword.c_str()] = keywordValue(row, s.online);
+  return d;
+}
+
+// The options a dict of robustDict's keywords names (pickle's state), checked as the
+// constructor checks them.
+RobustSettings robustFromDict(const py::dict& state) {
+  py::dict d = py::reinterpret_steal<py::dict>(PyDict_Copy(state.ptr()));
+  const auto take = [&](const char* key, py::object fallback) {
+    py::object v = d.contains(key) ? py::object(d[key]) : fallback;
+    if (d.contains(key)) PyDict_DelItemString(d.ptr(), key);
+    return v;
+  };
+  const auto kernel = take("kernel", py::str("tls")).cast<std::string>();
+  const double threshold = take("threshold", py::float_(0.0)).cast<double>();
+  const double confidence = take("confidence", py::float_(0.99)).cast<double>();
+  const bool estimate_scale = take("estimate_scale", py::bool_(false)).cast<bool>();
+  return robustSettingsOf(kernel, threshold, confidence, estimate_scale, py::kwargs(d));
+}
+
+// RobustOptions(kernel=..., threshold=..., confidence=..., estimate_scale=...) and the online
+// options that differ from their defaults: it evaluates back to equal options.
+std::string robustRepr(const RobustSettings& s) {
+  const py::dict mine = robustDict(s);
+  const py::dict defaults = robustDict(RobustSettings{});
+  std::string out = "RobustOptions(";
+  int k = 0;
+  for (const auto& [key, value] : mine) {
+    const bool core = k++ < 4;
+    if (core || !value.equal(defaults[key]))
+      out += (core && k == 1 ? "" : ", ") + std::string(py::str(key)) + "=" +
+             std::string(py::repr(value));
+  }
+  return out + ")";
 }
 
 // Whether any online option differs from RobustOptions' default (solve() refuses them).
@@ -227,68 +294,53 @@ void defineSolve(py::module_& m) {
       py::class_<RobustSettings>(m, "RobustOptions",
                                  "Robustness against false loop closures (the robust flags of "
                                  "`arbor batch` and `arbor replay`).")
-          .def(py::init([](const std::string& kernel, double threshold, double confidence,
-                           bool estimate_scale, const py::kwargs& online) {
-                 RobustSettings s;
-                 s.kernel = parseKernelKind(kernel);
-                 if (s.kernel == KernelKind::kNone)
-                   throw std::invalid_argument(
-                       "kernel must be tls, gm, cauchy or huber, not 'none'");
-                 if (!(threshold >= 0))
-                   throw std::invalid_argument(
-                       "threshold must be >= 0 (0: the chi2 quantile), not " +
-                       std::to_string(threshold));
-                 if (!(confidence > 0 && confidence < 1))
-                   throw std::invalid_argument("confidence must be in (0, 1), not " +
-                                               std::to_string(confidence));
-                 s.threshold = threshold;
-                 s.confidence = confidence;
-                 s.estimate_scale = estimate_scale;
-                 s.online = onlineOptions(online);
-                 return s;
-               }),
-               py::arg("kernel") = "tls", py::arg("threshold") = 0.0, py::arg("confidence") = 0.99,
-               py::arg("estimate_scale") = false, robustOptionsDoc().c_str())
-          .def_property_readonly("kernel",
-                                 [](const RobustSettings& s) { return toString(s.kernel); })
-          .def_readonly("threshold", &RobustSettings::threshold)
-          .def_readonly("confidence", &RobustSettings::confidence)
-          .def_readonly("estimate_scale", &RobustSettings::estimate_scale)
-          .def("__repr__", [](const RobustSettings& s) {
-            return "<arbor.RobustOptions kernel=" + toString(s.kernel) +
-                   " threshold=" + std::to_string(s.threshold) +
-                   " noise_scale=" + toString(s.online.scale) + ">";
-          });
+          .def(py::init(&robustSettingsOf), py::arg("kernel") = "tls", py::arg("threshold") = 0.0,
+               py::arg("confidence") = 0.99, py::arg("estimate_scale") = false,
+               robustOptionsDoc().c_str())
+          .def_property_readonly(
+              "kernel", [](const RobustSettings& s) { return toString(s.kernel); },
+              "tls | gm | cauchy | huber")
+          .def_readonly("threshold", &RobustSettings::threshold, "c² on eᵀΩe (0: the χ² quantile)")
+          .def_readonly("confidence", &RobustSettings::confidence, "the χ² quantile's confidence")
+          .def_readonly("estimate_scale", &RobustSettings::estimate_scale,
+                        "batch only: the quantile scaled by the estimated variance factor")
+          .def("__repr__", &robustRepr, "The options that evaluate back to these.")
+          .def("to_dict", &robustDict, "Every option by its keyword (RobustOptions(**d) makes it).")
+          .def(
+              "__eq__",
+              [](const RobustSettings& a, const py::object& b) -> py::object {
+                if (!py::isinstance<RobustSettings>(b))
+                  return py::reinterpret_borrow<py::object>(Py_NotImplemented);
+                return py::bool_(robustDict(a).equal(robustDict(b.cast<const RobustSettings&>())));
+              },
+              py::is_operator(), "Every option the same.")
+          .def(py::pickle(&robustDict, &robustFromDict));
   // The online options, read-only, by the table: a str, an int or a float each.
   for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
-    options.def_property_readonly(row.keyword.c_str(), [row](const RobustSettings& s) {
-      return keywordValue(row, s.online);
-    });
+    options.def_property_readonly(
+        row.keyword.c_str(),
+        [row](const RobustSettings& s) { return keywordValue(row, s.online); }, kOnlineDoc);
   }
 
-  py::class_<SolveOutcome>(m, "SolveResult", "What arbor.solve returns.")
-      .def_readonly("solver", &SolveOutcome::solver)
-      .def_readonly("init", &SolveOutcome::init)
-      .def_readonly("F_initial", &SolveOutcome::F_initial)
-      .def_readonly("F_final", &SolveOutcome::F_final)
-      .def_readonly("iterations", &SolveOutcome::iterations)
-      .def_readonly("termination", &SolveOutcome::termination)
-      .def_readonly("message", &SolveOutcome::message)
-      .def_readonly("time_s", &SolveOutcome::time_s)
-      .def_readonly("certified", &SolveOutcome::certified, "rtr: certified optimal; else None")
-      .def_readonly("rank", &SolveOutcome::rank, "rtr: the staircase's rank; else None")
-      .def_readonly("lambda_min", &SolveOutcome::lambda_min, "rtr: the certificate's λ_min")
-      .def_readonly("robust", &SolveOutcome::robust)
-      .def_readonly("threshold", &SolveOutcome::threshold, "robust: c² used")
-      .def_readonly("F_inliers", &SolveOutcome::F_inliers, "robust: F over the edges kept")
-      .def_readonly("rejected", &SolveOutcome::rejected, "robust: (from, to) of rejected edges")
-      .def_property_readonly("ids", [](const SolveOutcome& s) { return idsToArray(s.ids); })
-      .def_readonly("estimate", &SolveOutcome::estimate,
-                    "the estimate, one row per id (n×3 [x y θ] or n×7 [x y z qx qy qz qw])")
-      .def("__repr__", [](const SolveOutcome& s) {
-        return "<arbor.SolveResult " + s.solver + " F_final=" + std::to_string(s.F_final) + " " +
-               s.termination + ">";
-      });
+  Record<SolveOutcome>(m, "SolveResult", "What arbor.solve returns (docs/python.md, \"Results\").")
+      .field("solver", &SolveOutcome::solver, "lm | gn | dogleg | rtr")
+      .field("init", &SolveOutcome::init, "the initialisation: odometry | spanning-tree | ...")
+      .field("F_initial", &SolveOutcome::F_initial, "F = Σ eᵀΩe at the start")
+      .field("F_final", &SolveOutcome::F_final, "F at the estimate (robust: over every edge)")
+      .field("iterations", &SolveOutcome::iterations, "the solver's iterations")
+      .field("termination", &SolveOutcome::termination, "why it stopped")
+      .field("message", &SolveOutcome::message, "the solver's message")
+      .field("time_s", &SolveOutcome::time_s, "wall time of the solve")
+      .field("certified", &SolveOutcome::certified, "rtr: certified optimal; else None")
+      .field("rank", &SolveOutcome::rank, "rtr: the staircase's rank; else None")
+      .field("lambda_min", &SolveOutcome::lambda_min, "rtr: the certificate's λ_min; else None")
+      .field("robust", &SolveOutcome::robust, "solved with RobustOptions (GNC)")
+      .field("threshold", &SolveOutcome::threshold, "robust: c² used")
+      .field("F_inliers", &SolveOutcome::F_inliers, "robust: F over the edges kept")
+      .field("rejected", &SolveOutcome::rejected, "robust: (from, to) of rejected edges")
+      .field("ids", &SolveOutcome::ids, "the pose ids (int64, ascending)")
+      .field("estimate", &SolveOutcome::estimate,
+             "the estimate, one row per id (n×3 [x y θ] or n×7 [x y z qx qy qz qw])");
   defineSolveOf<SE2>(m);
   defineSolveOf<SE3>(m);
 }

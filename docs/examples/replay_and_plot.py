@@ -22,7 +22,8 @@ import arbor  # noqa: E402
 
 
 def replay(graph):
-    smoother = arbor.OnlineSmoother2() if graph.dimension == 2 else arbor.OnlineSmoother3()
+    smoother: arbor.OnlineSmoother2 | arbor.OnlineSmoother3 = (
+        arbor.OnlineSmoother2() if graph.dimension == 2 else arbor.OnlineSmoother3())
     index = {int(i): k for k, i in enumerate(graph.ids)}
     edges, z, omega = graph.edges, graph.measurements, graph.information
     order = sorted(range(len(edges)),

@@ -17,9 +17,9 @@ def test_replay_matches_the_cli(name, data_dir, arbor_cli):
     assert F == pytest.approx(expected["F_final"], rel=1e-9)
     assert smoother.objective() == pytest.approx(F, rel=1e-9)
     stats = smoother.stats()
-    assert stats["poses"] == graph.num_poses == expected["nodes"]
-    assert stats["edges_accepted"] == graph.num_edges
-    assert stats["updates"] == graph.num_edges + 1  # one per edge, then finalize
+    assert stats.poses == graph.num_poses == expected["nodes"]
+    assert stats.edges_accepted == graph.num_edges
+    assert stats.updates == graph.num_edges + 1  # one per edge, then finalize
 
 
 def test_estimate_rows(data_dir):
@@ -39,9 +39,9 @@ def test_robust_replay_rejects_false_closures(data_dir):
     smoother, _ = replay(graph, robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
     closures = smoother.closures()
     assert closures
-    statuses = {c["status"] for c in closures}
+    statuses = {c.status for c in closures}
     assert statuses <= {"inlier", "outlier", "trusted", "excluded"}
-    assert smoother.stats()["closures_outlier"] == sum(c["status"] == "outlier" for c in closures)
+    assert smoother.stats().closures_outlier == sum(c.status == "outlier" for c in closures)
 
 
 def test_robust_stats_match_the_cli(data_dir, arbor_cli):
@@ -54,11 +54,11 @@ def test_robust_stats_match_the_cli(data_dir, arbor_cli):
                 "graduation_steps",
                 "graduation_updates", "warm_up_relinearizations", "noise_samples",
                 "noise_scale_estimated"]:
-        assert stats[key] == expected[key], key
-    assert stats["graduation_steps"] > 0
-    assert stats["noise_scale"] == pytest.approx(expected["noise_scale"], rel=1e-12)
-    assert stats["closure_threshold"] == pytest.approx(expected["threshold_in_use"], rel=1e-12)
-    assert stats["closure_threshold_at_end"] == pytest.approx(expected["threshold_at_end"],
+        assert getattr(stats, key) == expected[key], key
+    assert stats.graduation_steps > 0
+    assert stats.noise_scale == pytest.approx(expected["noise_scale"], rel=1e-12)
+    assert stats.closure_threshold == pytest.approx(expected["threshold_in_use"], rel=1e-12)
+    assert stats.closure_threshold_at_end == pytest.approx(expected["threshold_at_end"],
                                                               rel=1e-12)
 
 
@@ -78,11 +78,11 @@ def test_online_robust_options_match_the_cli(data_dir, arbor_cli):
     assert F == pytest.approx(expected["F_final"], rel=1e-9)
     stats = smoother.stats()
     for key in ["closures_inlier", "closures_outlier", "noise_scale_estimated"]:
-        assert stats[key] == expected["robust"][key], key
+        assert getattr(stats, key) == expected["robust"][key], key
     # Ω at its word: no scale is estimated, where the default estimates one.
-    assert not stats["noise_scale_estimated"] and stats["noise_scale"] == 1.0
+    assert not stats.noise_scale_estimated and stats.noise_scale == 1.0
     default, _ = replay(arbor.read(path), robust=arbor.RobustOptions())
-    assert default.stats()["noise_scale_estimated"]
+    assert default.stats().noise_scale_estimated
 
 
 @pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
@@ -134,13 +134,13 @@ def test_solve_budget_defers_and_solve_deferred_catches_up(data_dir):
         smoother.add_edge(int(edges[e, 0]), int(edges[e, 1]), graph.measurements[e],
                           graph.information[e])
         stats = smoother.update()
-        assert stats["cliques_deferred"] == smoother.cliques_deferred
-        deferring += stats["cliques_deferred"] > 0
+        assert stats.cliques_deferred == smoother.cliques_deferred
+        deferring += stats.cliques_deferred > 0
     assert deferring > len(order) // 4
     assert smoother.cliques_deferred > 0
     drained = smoother.solve_deferred()
-    assert drained["cliques_solved"] > 0
-    assert drained["cliques_deferred"] == smoother.cliques_deferred == 0
+    assert drained.cliques_solved > 0
+    assert drained.cliques_deferred == smoother.cliques_deferred == 0
     smoother.finalize()
     assert smoother.objective() == pytest.approx(F, rel=1e-7)
 
@@ -166,18 +166,18 @@ def test_refine_on_request_matches_the_replays_final_batch(solver, data_dir, arb
                          "--batch", solver)["batches"][-1]
     assert expected["final"]
     for key in ["poses", "edges", "judged", "rejected", "winner"]:
-        assert run[key] == expected[key], key
+        assert getattr(run, key) == expected[key], key
     for key in ["F_incremental", "F_batch", "inlier_threshold"]:
-        assert run[key] == pytest.approx(expected[key], rel=1e-9), key
-    assert run["robust"]
-    assert run["rejected"] >= smoother.stats()["closures_outlier"]  # none taken back here
-    assert run["estimate"].shape == (graph.num_poses, 3)
-    assert sorted(run["ids"]) == sorted(graph.ids)
+        assert getattr(run, key) == pytest.approx(expected[key], rel=1e-9), key
+    assert run.robust
+    assert run.rejected >= smoother.stats().closures_outlier  # none taken back here
+    assert run.estimate.shape == (graph.num_poses, 3)
+    assert sorted(run.ids) == sorted(graph.ids)
     if solver == "rtr":
-        assert run["certified"] is True and run["rank"] >= 2
+        assert run.certified is True and run.rank >= 2
     else:
-        assert run["certified"] is None
-    assert not run["reseeded"]  # not asked
+        assert run.certified is None
+    assert not run.reseeded  # not asked
 
 
 def test_refine_reseeds_only_when_the_cost_falls(data_dir):
@@ -193,9 +193,9 @@ def test_refine_reseeds_only_when_the_cost_falls(data_dir):
         smoother.update()
     before = smoother.objective()
     run = smoother.refine(solver="lm", reseed=True)
-    assert not run["robust"]
-    assert run["F_incremental"] == pytest.approx(before, rel=1e-9)
-    if run["reseeded"]:
+    assert not run.robust
+    assert run.F_incremental == pytest.approx(before, rel=1e-9)
+    if run.reseeded:
         assert smoother.objective() < before
     else:
         assert smoother.objective() == before
@@ -224,8 +224,8 @@ def test_refine_starts_from_the_classification_only_once_finalized(data_dir):
                           graph.information[e])
         smoother.update()
     before = smoother.refine()
-    assert before["inlier_threshold"] == pytest.approx(smoother.stats()["closure_threshold"])
+    assert before.inlier_threshold == pytest.approx(smoother.stats().closure_threshold)
     smoother.finalize()
     after = smoother.refine()
-    assert after["inlier_threshold"] == pytest.approx(2 * smoother.stats()["closure_threshold"])
-    assert after["rejected"] >= smoother.stats()["closures_outlier"]
+    assert after.inlier_threshold == pytest.approx(2 * smoother.stats().closure_threshold)
+    assert after.rejected >= smoother.stats().closures_outlier
