@@ -1,4 +1,4 @@
-// arbor.OnlineSmoother2 / OnlineSmoother3: the online smoother (bayestree/online_smoother.h)
+// arbor_slam.OnlineSmoother2 / OnlineSmoother3: the online smoother (bayestree/online_smoother.h)
 // with poses named by ids, edges and priors in any order, updates, the estimate and statistics
 // as numpy arrays and dicts, and marginal and joint covariances from the Bayes tree.
 #include <algorithm>
@@ -8,8 +8,8 @@
 
 #include <pybind11/stl.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/tools/refine/batch_refiner.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "custom_factor_object.h"
@@ -172,7 +172,7 @@ void defineSmootherOf(py::module_& m, const char* name) {
           py::arg("wildfire_threshold") = defaults.wildfire_threshold,
           py::arg("dogleg") = defaults.dogleg,
           py::arg("solve_budget_mb") = defaults.solve_budget_mb,
-          "robust: an arbor.RobustOptions (online GNC per loop closure, as `arbor replay "
+          "robust: an arbor_slam.RobustOptions (online GNC per loop closure, as `arbor replay "
           "--robust`); the rest as `arbor replay`'s smoother flags (threads 0: one per core, "
           "at most 4; the estimate does not depend on it; solve_budget_mb as "
           "--solve-budget-mb).")
@@ -276,7 +276,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
             return statusOrThrow(s.addFactor(factor, f.keys[0], id2));
           },
           py::arg("factor"),
-          "Adds a factor of your own (an arbor.CustomFactor2/CustomFactor3) on poses an edge or a "
+          "Adds a factor of your own (an arbor_slam.CustomFactor2/CustomFactor3) on poses an edge "
+          "or a "
           "prior created already (a binary one's in one component); returns 'accepted', raises "
           "ValueError with the reason if rejected. Its functions run during update() and "
           "finalize(), under the GIL, from the smoother's threads; an exception they raise is "
@@ -433,8 +434,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "With robust options: every loop closure's weight and status (inlier, outlier, "
           "trusted, excluded).")
       .def("__repr__", [name](const Smoother& s) {
-        return std::string("<arbor.") + name + ": " + std::to_string(s.stats().poses) + " poses, " +
-               std::to_string(s.stats().updates) + " updates>";
+        return std::string("<arbor_slam.") + name + ": " + std::to_string(s.stats().poses) +
+               " poses, " + std::to_string(s.stats().updates) + " updates>";
       });
 }
 

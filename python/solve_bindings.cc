@@ -1,6 +1,6 @@
-// arbor.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
+// arbor_slam.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
 // (tools/refine/batch_solvers.h: lm, gn, dogleg, rtr) from any initialisation, optionally
-// robust (GNC, as `arbor batch --robust`), and arbor.RobustOptions.
+// robust (GNC, as `arbor batch --robust`), and arbor_slam.RobustOptions.
 #include <optional>
 #include <string>
 #include <utility>
@@ -8,9 +8,9 @@
 
 #include <pybind11/stl.h>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "graph_object.h"
@@ -20,7 +20,7 @@ namespace {
 
 using refine::BatchSolver;
 
-/// What solve() returns (arbor.SolveResult).
+/// What solve() returns (arbor_slam.SolveResult).
 struct SolveOutcome {
   std::string solver, init, termination, message;
   double F_initial = 0, F_final = 0, time_s = 0;
@@ -260,8 +260,8 @@ void defineSolveOf(py::module_& m) {
       py::arg("robust") = py::none(), py::arg("verbose") = false,
       "Solves the graph in batch. solver: lm | gn | dogleg | rtr (rtr: the certifiable solver, "
       "from its own chordal relaxation); init: odometry | spanning-tree | chordal | file "
-      "(default: file when the file has poses, else odometry); robust: an arbor.RobustOptions "
-      "(GNC as `arbor batch --robust`). Returns an arbor.SolveResult.");
+      "(default: file when the file has poses, else odometry); robust: an arbor_slam.RobustOptions "
+      "(GNC as `arbor batch --robust`). Returns an arbor_slam.SolveResult.");
 }
 
 }  // namespace
@@ -321,7 +321,7 @@ void defineSolve(py::module_& m) {
               "first_recheck",
               [](const RobustSettings& s) { return toString(s.online.first_recheck); })
           .def("__repr__", [](const RobustSettings& s) {
-            return "<arbor.RobustOptions kernel=" + toString(s.kernel) +
+            return "<arbor_slam.RobustOptions kernel=" + toString(s.kernel) +
                    " threshold=" + std::to_string(s.threshold) +
                    " noise_scale=" + toString(s.online.scale) + ">";
           });
@@ -332,7 +332,7 @@ void defineSolve(py::module_& m) {
     options.def_property_readonly(
         field, [member = member](const RobustSettings& s) { return s.online.*member; });
 
-  py::class_<SolveOutcome>(m, "SolveResult", "What arbor.solve returns.")
+  py::class_<SolveOutcome>(m, "SolveResult", "What arbor_slam.solve returns.")
       .def_readonly("solver", &SolveOutcome::solver)
       .def_readonly("init", &SolveOutcome::init)
       .def_readonly("F_initial", &SolveOutcome::F_initial)
@@ -352,8 +352,8 @@ void defineSolve(py::module_& m) {
       .def_readonly("estimate", &SolveOutcome::estimate,
                     "the estimate, one row per id (n×3 [x y θ] or n×7 [x y z qx qy qz qw])")
       .def("__repr__", [](const SolveOutcome& s) {
-        return "<arbor.SolveResult " + s.solver + " F_final=" + std::to_string(s.F_final) + " " +
-               s.termination + ">";
+        return "<arbor_slam.SolveResult " + s.solver + " F_final=" + std::to_string(s.F_final) +
+               " " + s.termination + ">";
       });
   defineSolveOf<SE2>(m);
   defineSolveOf<SE3>(m);

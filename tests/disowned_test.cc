@@ -7,8 +7,8 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/pose_graph.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 

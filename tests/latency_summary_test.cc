@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/tools/cli/latency.h"
+#include "arbor_slam/tools/cli/latency.h"
 
 namespace arbor::cli {
 namespace {

@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/tree_shape.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/latency.h"
+#include "arbor_slam/bayestree/tree_shape.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/cli/latency.h"
 
 namespace arbor::bench {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/robust_flags.h"
+#include "arbor_slam/tools/cli/robust_flags.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

@@ -7,10 +7,10 @@
 
 #include <boost/program_options.hpp>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor::cli {
 

@@ -1,9 +1,9 @@
-#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor_slam/tools/cli/smoother_flags.h"
 
 #include <cmath>
 #include <sstream>
 
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

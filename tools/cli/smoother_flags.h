@@ -7,7 +7,7 @@
 
 #include <boost/program_options.hpp>
 
-#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
 
 namespace arbor::cli {
 
