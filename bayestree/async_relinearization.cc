@@ -1,11 +1,11 @@
-#include "arbor/bayestree/async_relinearization.h"
+#include "arbor_slam/bayestree/async_relinearization.h"
 
 #include <ctime>
 #include <utility>
 
-#include "arbor/bayestree/top_elimination.h"
-#include "arbor/bayestree/update_threads.h"
-#include "arbor/core/thread_priority.h"
+#include "arbor_slam/bayestree/top_elimination.h"
+#include "arbor_slam/bayestree/update_threads.h"
+#include "arbor_slam/core/thread_priority.h"
 
 namespace arbor::bayestree {
 namespace {

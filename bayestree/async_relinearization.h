@@ -13,10 +13,10 @@
 #include <thread>
 #include <vector>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/linear_factors.h"
-#include "arbor/bayestree/partial_solve.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/linear_factors.h"
+#include "arbor_slam/bayestree/partial_solve.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor::bayestree {
 

@@ -14,7 +14,7 @@
 #include <thread>
 #include <utility>
 
-#include "arbor/core/thread_priority.h"
+#include "arbor_slam/core/thread_priority.h"
 
 namespace arbor::bayestree {
 

@@ -1,11 +1,11 @@
-#include "arbor/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
 
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
 
-#include "arbor/core/factor.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor::bayestree {
 

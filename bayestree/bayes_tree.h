@@ -7,8 +7,8 @@
 #include <functional>
 #include <vector>
 
-#include "arbor/bayestree/clique.h"
-#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/clique.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
 
 namespace arbor::bayestree {
 

@@ -13,7 +13,7 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
 

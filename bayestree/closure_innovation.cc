@@ -1,4 +1,4 @@
-#include "arbor/bayestree/closure_innovation.h"
+#include "arbor_slam/bayestree/closure_innovation.h"
 
 #include <cmath>
 #include <stdexcept>

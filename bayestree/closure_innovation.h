@@ -24,8 +24,8 @@
 
 #include <optional>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor {
 

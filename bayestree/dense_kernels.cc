@@ -1,4 +1,4 @@
-#include "arbor/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
 
 #include <cmath>
 

@@ -11,7 +11,7 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/clique.h"
+#include "arbor_slam/bayestree/clique.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "arbor/bayestree/elimination_plan.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
 
 #include <cholmod.h>
 

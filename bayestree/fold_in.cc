@@ -1,4 +1,4 @@
-#include "arbor/bayestree/fold_in.h"
+#include "arbor_slam/bayestree/fold_in.h"
 
 #include <algorithm>
 

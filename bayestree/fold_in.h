@@ -10,10 +10,10 @@
 
 #include <vector>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/dense_kernels.h"
-#include "arbor/bayestree/linear_factors.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/linear_factors.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor::bayestree {
 

@@ -9,7 +9,7 @@
 // Alg. 3 the Bayes-tree update with new factors, Alg. 4 the same with fluid relinearisation, Alg. 5
 // fluid relinearisation, Alg. 6 one step of iSAM2, Alg. 7 the partial state update. Steps marked
 // "Extension" are ours (docs/design.md, "The update, step by step").
-#include "arbor/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
 
 #include <algorithm>
 #include <chrono>
@@ -25,23 +25,23 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/dogleg_step.h"
-#include "arbor/bayestree/fold_in.h"
-#include "arbor/bayestree/linear_factors.h"
-#include "arbor/bayestree/marginals.h"
-#include "arbor/bayestree/ordering_decay.h"
-#include "arbor/bayestree/partial_solve.h"
-#include "arbor/bayestree/relinearization_check.h"
-#include "arbor/bayestree/relinearization_jobs.h"
-#include "arbor/bayestree/relinearization_swap.h"
-#include "arbor/bayestree/top_elimination.h"
-#include "arbor/bayestree/update_threads.h"
-#include "arbor/bayestree/updated_poses.h"
-#include "arbor/core/blas_threads.h"
-#include "arbor/core/elapsed.h"
-#include "arbor/core/finite_pose.h"
-#include "arbor/core/information.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/dogleg_step.h"
+#include "arbor_slam/bayestree/fold_in.h"
+#include "arbor_slam/bayestree/linear_factors.h"
+#include "arbor_slam/bayestree/marginals.h"
+#include "arbor_slam/bayestree/ordering_decay.h"
+#include "arbor_slam/bayestree/partial_solve.h"
+#include "arbor_slam/bayestree/relinearization_check.h"
+#include "arbor_slam/bayestree/relinearization_jobs.h"
+#include "arbor_slam/bayestree/relinearization_swap.h"
+#include "arbor_slam/bayestree/top_elimination.h"
+#include "arbor_slam/bayestree/update_threads.h"
+#include "arbor_slam/bayestree/updated_poses.h"
+#include "arbor_slam/core/blas_threads.h"
+#include "arbor_slam/core/elapsed.h"
+#include "arbor_slam/core/finite_pose.h"
+#include "arbor_slam/core/information.h"
 
 namespace arbor {
 

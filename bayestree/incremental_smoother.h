@@ -18,10 +18,10 @@
 #include <memory>
 #include <vector>
 
-#include "arbor/core/cancellation.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/relative_pose_factor.h"
+#include "arbor_slam/core/cancellation.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/relative_pose_factor.h"
 
 namespace arbor {
 

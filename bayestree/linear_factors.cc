@@ -1,4 +1,4 @@
-#include "arbor/bayestree/linear_factors.h"
+#include "arbor_slam/bayestree/linear_factors.h"
 
 #include <algorithm>
 

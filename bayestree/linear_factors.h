@@ -11,8 +11,8 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/update_threads.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/bayestree/update_threads.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "arbor/bayestree/marginals.h"
+#include "arbor_slam/bayestree/marginals.h"
 
 #include <algorithm>
 #include <atomic>
@@ -12,7 +12,7 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
 

@@ -38,8 +38,8 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/work_lanes.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/work_lanes.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "arbor/bayestree/noise_scale.h"
+#include "arbor_slam/bayestree/noise_scale.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "arbor/bayestree/online_gnc.h"
+#include "arbor_slam/bayestree/online_gnc.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,7 +14,7 @@
 
 #include <boost/math/distributions/chi_squared.hpp>
 
-#include "arbor/bayestree/closure_innovation.h"
+#include "arbor_slam/bayestree/closure_innovation.h"
 
 namespace arbor {
 namespace {

@@ -257,13 +257,13 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/noise_scale.h"
-#include "arbor/bayestree/robust_options.h"
-#include "arbor/core/edge_trust.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/noise_scale.h"
+#include "arbor_slam/bayestree/robust_options.h"
+#include "arbor_slam/core/edge_trust.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor {
 

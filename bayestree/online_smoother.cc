@@ -1,13 +1,13 @@
-#include "arbor/bayestree/online_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
 
 #include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
 
-#include "arbor/core/finite_pose.h"
-#include "arbor/core/information.h"
-#include "arbor/core/rigid_alignment.h"
+#include "arbor_slam/core/finite_pose.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/core/rigid_alignment.h"
 
 namespace arbor {
 namespace {

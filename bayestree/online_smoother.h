@@ -46,11 +46,11 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/gauge.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/gauge.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor {
 

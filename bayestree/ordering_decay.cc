@@ -1,8 +1,8 @@
-#include "arbor/bayestree/ordering_decay.h"
+#include "arbor_slam/bayestree/ordering_decay.h"
 
 #include <algorithm>
 
-#include "arbor/bayestree/tree_shape.h"
+#include "arbor_slam/bayestree/tree_shape.h"
 
 namespace arbor::bayestree {
 

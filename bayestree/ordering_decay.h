@@ -14,9 +14,9 @@
 #include <algorithm>
 #include <vector>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/elimination_plan.h"
-#include "arbor/bayestree/linear_factors.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
+#include "arbor_slam/bayestree/linear_factors.h"
 
 namespace arbor::bayestree {
 

@@ -1,9 +1,9 @@
-#include "arbor/bayestree/partial_solve.h"
+#include "arbor_slam/bayestree/partial_solve.h"
 
 #include <deque>
 #include <limits>
 
-#include "arbor/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
 namespace {

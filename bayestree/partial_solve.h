@@ -14,8 +14,8 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/update_threads.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/update_threads.h"
 
 namespace arbor::bayestree {
 

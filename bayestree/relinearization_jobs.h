@@ -18,10 +18,10 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/bayestree/async_relinearization.h"
-#include "arbor/bayestree/background_job.h"
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/relinearization_swap.h"
+#include "arbor_slam/bayestree/async_relinearization.h"
+#include "arbor_slam/bayestree/background_job.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/relinearization_swap.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "arbor/bayestree/relinearization_swap.h"
+#include "arbor_slam/bayestree/relinearization_swap.h"
 
 #include <algorithm>
 #include <utility>

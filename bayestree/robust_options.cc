@@ -1,4 +1,4 @@
-#include "arbor/bayestree/robust_options.h"
+#include "arbor_slam/bayestree/robust_options.h"
 
 #include <cmath>
 #include <initializer_list>

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor {
 

@@ -1,11 +1,11 @@
-#include "arbor/bayestree/top_elimination.h"
+#include "arbor_slam/bayestree/top_elimination.h"
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <memory>
 
-#include "arbor/bayestree/tree_shape.h"
+#include "arbor_slam/bayestree/tree_shape.h"
 
 namespace arbor::bayestree {
 namespace {

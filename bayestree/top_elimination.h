@@ -8,11 +8,11 @@
 
 #include <vector>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/dense_kernels.h"
-#include "arbor/bayestree/elimination_plan.h"
-#include "arbor/bayestree/linear_factors.h"
-#include "arbor/bayestree/update_threads.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
+#include "arbor_slam/bayestree/linear_factors.h"
+#include "arbor_slam/bayestree/update_threads.h"
 
 namespace arbor::bayestree {
 

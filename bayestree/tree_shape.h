@@ -8,8 +8,8 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/elimination_plan.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
 
 namespace arbor::bayestree {
 

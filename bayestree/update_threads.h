@@ -9,8 +9,8 @@
 #include <deque>
 #include <vector>
 
-#include "arbor/bayestree/dense_kernels.h"
-#include "arbor/bayestree/work_lanes.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/work_lanes.h"
 
 namespace arbor::bayestree {
 

@@ -1,4 +1,4 @@
-#include "arbor/bayestree/work_lanes.h"
+#include "arbor_slam/bayestree/work_lanes.h"
 
 #include <chrono>
 #include <stdexcept>

@@ -1,4 +1,4 @@
-# The Python module `arbor` (python/, pybind11): ARBOR_PYTHON, ON when pybind11 and a Python 3
+# The Python module `arbor_slam` (python/, pybind11): ARBOR_PYTHON, ON when pybind11 and a Python 3
 # interpreter with numpy are found. The interpreter: Python3_EXECUTABLE when given, else the
 # first of /usr/bin/python3 and the python3 on PATH that imports numpy (a pyenv python3 on PATH
 # often lacks Debian's numpy). Installed into ARBOR_PYTHON_INSTALL_DIR (relative to the prefix:
@@ -11,7 +11,7 @@ if(NOT Python3_EXECUTABLE)
       execute_process(COMMAND "${candidate}" -c "import numpy"
                       RESULT_VARIABLE arbor_numpy_missing OUTPUT_QUIET ERROR_QUIET)
       if(arbor_numpy_missing EQUAL 0)
-        set(Python3_EXECUTABLE "${candidate}" CACHE FILEPATH "Python 3 for the arbor module")
+        set(Python3_EXECUTABLE "${candidate}" CACHE FILEPATH "Python 3 for the arbor_slam module")
         break()
       endif()
     endif()
@@ -29,7 +29,7 @@ if(Python3_EXECUTABLE)
   endif()
 endif()
 
-option(ARBOR_PYTHON "Build the Python module arbor (pybind11)" ${arbor_python_found})
+option(ARBOR_PYTHON "Build the Python module arbor_slam (pybind11)" ${arbor_python_found})
 set(ARBOR_PYTHON_INSTALL_DIR "lib/python3/dist-packages" CACHE STRING
     "Where cmake --install puts the Python module (relative to the prefix, or absolute)")
 
@@ -44,6 +44,6 @@ if(ARBOR_PYTHON)
   if(arbor_pytest_missing EQUAL 0)
     set(ARBOR_PYTEST_FOUND ON)
   endif()
-  message(STATUS "Python module arbor: ${Python3_EXECUTABLE} (pybind11 ${pybind11_VERSION})")
+  message(STATUS "Python module arbor_slam: ${Python3_EXECUTABLE} (pybind11 ${pybind11_VERSION})")
   add_subdirectory(python)
 endif()

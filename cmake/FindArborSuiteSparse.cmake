@@ -1,10 +1,10 @@
 # FindArborSuiteSparse: the parts of SuiteSparse Arbor links (CHOLMOD, CCOLAMD and
-# SuiteSparse_config), as the imported target Arbor::SuiteSparse. Debian 12's SuiteSparse 5.12
+# SuiteSparse_config), as the imported target ArborSLAM::SuiteSparse. Debian 12's SuiteSparse 5.12
 # ships no CMake package, so Arbor brings this module: the build uses it, and the installed
-# package (ArborConfig.cmake) finds it with find_dependency beside itself.
+# package (ArborSLAMConfig.cmake) finds it with find_dependency beside itself.
 #
 # Result: ArborSuiteSparse_FOUND, ArborSuiteSparse_INCLUDE_DIR, ArborSuiteSparse_LIBRARIES and
-# the target Arbor::SuiteSparse (include directory and libraries).
+# the target ArborSLAM::SuiteSparse (include directory and libraries).
 include(FindPackageHandleStandardArgs)
 find_path(ArborSuiteSparse_INCLUDE_DIR cholmod.h PATH_SUFFIXES suitesparse)
 find_library(ArborSuiteSparse_CHOLMOD_LIBRARY cholmod)
@@ -18,9 +18,9 @@ mark_as_advanced(ArborSuiteSparse_INCLUDE_DIR ArborSuiteSparse_CHOLMOD_LIBRARY
 if(ArborSuiteSparse_FOUND)
   set(ArborSuiteSparse_LIBRARIES ${ArborSuiteSparse_CHOLMOD_LIBRARY}
       ${ArborSuiteSparse_CCOLAMD_LIBRARY} ${ArborSuiteSparse_CONFIG_LIBRARY})
-  if(NOT TARGET Arbor::SuiteSparse)
-    add_library(Arbor::SuiteSparse INTERFACE IMPORTED)
-    set_target_properties(Arbor::SuiteSparse PROPERTIES
+  if(NOT TARGET ArborSLAM::SuiteSparse)
+    add_library(ArborSLAM::SuiteSparse INTERFACE IMPORTED)
+    set_target_properties(ArborSLAM::SuiteSparse PROPERTIES
       INTERFACE_INCLUDE_DIRECTORIES "${ArborSuiteSparse_INCLUDE_DIR}"
       INTERFACE_LINK_LIBRARIES "${ArborSuiteSparse_LIBRARIES}")
   endif()

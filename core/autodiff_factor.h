@@ -30,7 +30,7 @@
 #include <Eigen/Core>
 #include <unsupported/Eigen/AutoDiff>
 
-#include "arbor/core/factor_model.h"
+#include "arbor_slam/core/factor_model.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "arbor/core/batch_solver.h"
+#include "arbor_slam/core/batch_solver.h"
 
 #include <algorithm>
 #include <chrono>
@@ -8,7 +8,7 @@
 #include <memory>
 #include <stdexcept>
 
-#include "arbor/core/normal_equations.h"
+#include "arbor_slam/core/normal_equations.h"
 
 namespace arbor {
 namespace {

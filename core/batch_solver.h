@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/cancellation.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/cancellation.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor {
 

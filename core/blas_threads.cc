@@ -1,4 +1,4 @@
-#include "arbor/core/blas_threads.h"
+#include "arbor_slam/core/blas_threads.h"
 
 #include <dlfcn.h>
 

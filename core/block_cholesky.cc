@@ -1,4 +1,4 @@
-#include "arbor/core/block_cholesky.h"
+#include "arbor_slam/core/block_cholesky.h"
 
 #include <algorithm>
 #include <cmath>

@@ -14,8 +14,8 @@
 #include <Eigen/SVD>
 #include <Eigen/SparseCore>
 
-#include "arbor/core/initialization.h"
-#include "arbor/core/initialization_internal.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/core/initialization_internal.h"
 
 namespace arbor {
 namespace {

@@ -17,8 +17,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/core/factor_model.h"
-#include "arbor/core/information.h"
+#include "arbor_slam/core/factor_model.h"
+#include "arbor_slam/core/information.h"
 
 namespace arbor {
 

@@ -7,10 +7,10 @@
 
 #include <Eigen/Core>
 
-#include "arbor/core/autodiff_factor.h"
-#include "arbor/core/factor_model.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/autodiff_factor.h"
+#include "arbor_slam/core/factor_model.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor::examples {
 

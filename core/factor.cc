@@ -1,8 +1,8 @@
-#include "arbor/core/factor.h"
+#include "arbor_slam/core/factor.h"
 
 #include <cmath>
 
-#include "arbor/core/finite_pose.h"
+#include "arbor_slam/core/finite_pose.h"
 
 namespace arbor {
 

@@ -25,11 +25,11 @@
 
 #include <Eigen/Core>
 
-#include "arbor/core/custom_factor.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/prior_factors.h"
-#include "arbor/core/relative_pose_factor.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/relative_pose_factor.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor {
 

@@ -4,8 +4,8 @@
 
 #include <cmath>
 
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor {
 

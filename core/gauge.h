@@ -24,9 +24,9 @@
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
 
-#include "arbor/core/custom_factor.h"
-#include "arbor/core/prior_factors.h"
-#include "arbor/core/relative_pose_factor.h"
+#include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/relative_pose_factor.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "arbor/core/gnc_solver.h"
+#include "arbor_slam/core/gnc_solver.h"
 
 #include <algorithm>
 #include <array>

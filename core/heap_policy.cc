@@ -1,4 +1,4 @@
-#include "arbor/core/heap_policy.h"
+#include "arbor_slam/core/heap_policy.h"
 
 #include <cstdlib>
 #include <cstring>

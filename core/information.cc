@@ -1,4 +1,4 @@
-#include "arbor/core/information.h"
+#include "arbor_slam/core/information.h"
 
 #include <cmath>
 #include <sstream>

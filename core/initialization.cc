@@ -1,10 +1,10 @@
 // Odometry-chain and breadth-first spanning-tree initialisation, and the dispatch.
-#include "arbor/core/initialization.h"
+#include "arbor_slam/core/initialization.h"
 
 #include <algorithm>
 #include <stdexcept>
 
-#include "arbor/core/initialization_internal.h"
+#include "arbor_slam/core/initialization_internal.h"
 
 namespace arbor {
 namespace {

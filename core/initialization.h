@@ -26,7 +26,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor {
 

@@ -13,9 +13,9 @@
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 
-#include "arbor/core/gauge.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/rigid_alignment.h"
+#include "arbor_slam/core/gauge.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/rigid_alignment.h"
 
 namespace arbor::init_detail {
 

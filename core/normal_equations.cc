@@ -1,4 +1,4 @@
-#include "arbor/core/normal_equations.h"
+#include "arbor_slam/core/normal_equations.h"
 
 #include <algorithm>
 #include <cmath>

@@ -15,9 +15,9 @@
 
 #include <Eigen/Core>
 
-#include "arbor/core/block_cholesky.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/sparse_cholesky.h"
+#include "arbor_slam/core/block_cholesky.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/sparse_cholesky.h"
 
 namespace arbor {
 

@@ -9,10 +9,10 @@
 #include <unordered_map>
 #include <vector>
 
-#include "arbor/core/custom_factor.h"
-#include "arbor/core/gauge.h"
-#include "arbor/core/prior_factors.h"
-#include "arbor/core/relative_pose_factor.h"
+#include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/gauge.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/relative_pose_factor.h"
 
 namespace arbor {
 

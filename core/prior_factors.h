@@ -18,8 +18,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/core/information.h"
-#include "arbor/core/relative_pose_factor.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/core/relative_pose_factor.h"
 
 namespace arbor {
 

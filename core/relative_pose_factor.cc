@@ -1,6 +1,6 @@
-#include "arbor/core/relative_pose_factor.h"
+#include "arbor_slam/core/relative_pose_factor.h"
 
-#include "arbor/core/so3.h"
+#include "arbor_slam/core/so3.h"
 
 namespace arbor {
 

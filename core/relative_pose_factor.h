@@ -10,9 +10,9 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/core/information.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor {
 

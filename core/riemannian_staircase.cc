@@ -1,4 +1,4 @@
-#include "arbor/core/riemannian_staircase.h"
+#include "arbor_slam/core/riemannian_staircase.h"
 
 #include <algorithm>
 #include <chrono>
@@ -10,10 +10,10 @@
 #include <Spectra/SymEigsSolver.h>
 #include <Eigen/Eigenvalues>
 
-#include "arbor/core/elapsed.h"
-#include "arbor/core/initialization.h"
-#include "arbor/core/serial_openmp.h"
-#include "arbor/core/stiefel_product.h"
+#include "arbor_slam/core/elapsed.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/core/serial_openmp.h"
+#include "arbor_slam/core/stiefel_product.h"
 
 namespace arbor {
 

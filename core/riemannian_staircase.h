@@ -11,9 +11,9 @@
 
 #include <Eigen/Core>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/sesync_problem.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/sesync_problem.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 #include <algorithm>
 #include <cmath>

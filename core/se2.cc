@@ -1,4 +1,4 @@
-#include "arbor/core/se2.h"
+#include "arbor_slam/core/se2.h"
 
 #include <cmath>
 

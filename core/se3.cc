@@ -1,10 +1,10 @@
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/se3.h"
 
 #include <cmath>
 
 #include <Eigen/LU>
 
-#include "arbor/core/so3.h"
+#include "arbor_slam/core/so3.h"
 
 namespace arbor {
 namespace {

@@ -1,4 +1,4 @@
-#include "arbor/core/sesync_problem.h"
+#include "arbor_slam/core/sesync_problem.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +9,7 @@
 #include <Spectra/SymEigsSolver.h>
 #include <Eigen/CholmodSupport>
 
-#include "arbor/core/information.h"
+#include "arbor_slam/core/information.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "arbor/core/so3.h"
+#include "arbor_slam/core/so3.h"
 
 #include <cmath>
 

@@ -1,4 +1,4 @@
-#include "arbor/core/sparse_cholesky.h"
+#include "arbor_slam/core/sparse_cholesky.h"
 
 #include <cholmod.h>
 
@@ -7,8 +7,8 @@
 #include <stdexcept>
 #include <utility>
 
-#include "arbor/core/blas_threads.h"
-#include "arbor/core/serial_openmp.h"
+#include "arbor_slam/core/blas_threads.h"
+#include "arbor_slam/core/serial_openmp.h"
 
 namespace arbor {
 namespace {

@@ -1,4 +1,4 @@
-#include "arbor/core/stiefel_product.h"
+#include "arbor_slam/core/stiefel_product.h"
 
 #include <cmath>
 #include <stdexcept>

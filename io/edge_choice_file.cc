@@ -1,4 +1,4 @@
-#include "arbor/io/edge_choice_file.h"
+#include "arbor_slam/io/edge_choice_file.h"
 
 #include <cstdlib>
 
@@ -9,7 +9,7 @@
 #include <istream>
 #include <set>
 
-#include "arbor/io/line_fields.h"
+#include "arbor_slam/io/line_fields.h"
 
 namespace arbor {
 namespace {

@@ -12,11 +12,11 @@
 #include <string>
 #include <utility>
 
-#include "arbor/core/edge_trust.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/core/edge_trust.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 

@@ -33,8 +33,8 @@
 
 #include <Eigen/Cholesky>
 
-#include "arbor/io/line_fields.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/line_fields.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

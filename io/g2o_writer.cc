@@ -11,8 +11,8 @@
 #include <ostream>
 #include <type_traits>
 
-#include "arbor/core/finite_pose.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/core/finite_pose.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

@@ -1,4 +1,4 @@
-#include "arbor/io/labels_file.h"
+#include "arbor_slam/io/labels_file.h"
 
 #include <cerrno>
 #include <cstring>
@@ -6,7 +6,7 @@
 #include <istream>
 #include <ostream>
 
-#include "arbor/io/line_fields.h"
+#include "arbor_slam/io/line_fields.h"
 
 namespace arbor {
 

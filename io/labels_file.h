@@ -9,8 +9,8 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 

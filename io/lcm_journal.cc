@@ -1,4 +1,4 @@
-#include "arbor/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_journal.h"
 
 #include <algorithm>
 #include <cerrno>

@@ -1,4 +1,4 @@
-#include "arbor/io/lcm_messages.h"
+#include "arbor_slam/io/lcm_messages.h"
 
 #include <charconv>
 #include <cmath>
@@ -7,7 +7,7 @@
 
 #include <lcm/lcm_coretypes.h>
 
-#include "arbor/core/information.h"
+#include "arbor_slam/core/information.h"
 
 namespace arbor {
 namespace {

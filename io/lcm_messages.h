@@ -13,20 +13,20 @@
 #include <Eigen/Core>
 
 #include "arbor/command_t.hpp"
-#include "arbor/core/edge_trust.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
 #include "arbor/covariance_t.hpp"
 #include "arbor/edge_command_t.hpp"
 #include "arbor/edge_t.hpp"
 #include "arbor/edge_v1_t.hpp"
 #include "arbor/estimate_t.hpp"
-#include "arbor/io/stream_measurements.h"
 #include "arbor/journal_mark_t.hpp"
 #include "arbor/prior_t.hpp"
 #include "arbor/status_t.hpp"
+#include "arbor_slam/core/edge_trust.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
+#include "arbor_slam/io/stream_measurements.h"
 
 namespace arbor {
 

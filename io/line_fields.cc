@@ -1,4 +1,4 @@
-#include "arbor/io/line_fields.h"
+#include "arbor_slam/io/line_fields.h"
 
 #include <charconv>
 #include <cmath>

@@ -8,7 +8,7 @@
 #include <string_view>
 #include <vector>
 
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor::io_detail {
 

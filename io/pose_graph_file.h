@@ -13,8 +13,8 @@
 #include <variant>
 #include <vector>
 
-#include "arbor/core/information.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor {
 

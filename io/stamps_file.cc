@@ -1,12 +1,12 @@
-#include "arbor/io/stamps_file.h"
+#include "arbor_slam/io/stamps_file.h"
 
 #include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <istream>
 
-#include "arbor/io/line_fields.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/line_fields.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 

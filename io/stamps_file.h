@@ -9,7 +9,7 @@
 #include <string>
 #include <unordered_map>
 
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor {
 

@@ -11,11 +11,11 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "arbor/core/edge_trust.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/edge_trust.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor {
 

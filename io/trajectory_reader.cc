@@ -1,4 +1,4 @@
-#include "arbor/io/trajectory_reader.h"
+#include "arbor_slam/io/trajectory_reader.h"
 
 #include <algorithm>
 #include <cctype>
@@ -12,8 +12,8 @@
 
 #include <Eigen/Geometry>
 
-#include "arbor/io/line_fields.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/line_fields.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

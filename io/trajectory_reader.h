@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor {
 

@@ -1,4 +1,4 @@
-#include "arbor/io/trajectory_writer.h"
+#include "arbor_slam/io/trajectory_writer.h"
 
 #include <algorithm>
 #include <cctype>
@@ -13,7 +13,7 @@
 
 #include <Eigen/Geometry>
 
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor {
 namespace {

@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/stamps_file.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/stamps_file.h"
 
 namespace arbor {
 

@@ -1,19 +1,19 @@
-// The Python module `arbor` (docs/python.md): pose-graph files, batch solvers and the online
+// The Python module `arbor_slam` (docs/python.md): pose-graph files, batch solvers and the online
 // smoother with its covariances. C++ exceptions become Python exceptions with the same message:
 // std::invalid_argument and std::out_of_range (an unknown id) ValueError, arbor::FileError
-// arbor.FileError (a RuntimeError), anything else RuntimeError.
+// arbor_slam.FileError (a RuntimeError), anything else RuntimeError.
 #include <stdexcept>
 
 #include <pybind11/pybind11.h>
 
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
 #include "bindings.h"
 
 #ifndef ARBOR_VERSION
 #define ARBOR_VERSION "unknown"
 #endif
 
-PYBIND11_MODULE(arbor, m) {
+PYBIND11_MODULE(arbor_slam, m) {
   namespace py = pybind11;
   m.doc() = "Arbor: an incremental pose-graph smoother (iSAM2 style) and batch solvers";
   m.attr("__version__") = ARBOR_VERSION;

@@ -1,4 +1,4 @@
-// The parts of the module `arbor` (docs/python.md), each defined in its own file and called by
+// The parts of the module `arbor_slam` (docs/python.md), each defined in its own file and called by
 // arbor_module.cc in this order (later parts use the classes of earlier ones).
 #pragma once
 
@@ -6,8 +6,8 @@
 
 #include <pybind11/pybind11.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor::python {
 

@@ -15,9 +15,9 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor::python {
 

@@ -1,4 +1,4 @@
-// arbor.CustomFactor2 / CustomFactor3: factors of your own in Python (custom_factor_object.h,
+// arbor_slam.CustomFactor2 / CustomFactor3: factors of your own in Python (custom_factor_object.h,
 // docs/python.md "Factors of your own").
 #include <cmath>
 #include <stdexcept>
@@ -216,7 +216,7 @@ void defineCustomFactorOf(py::module_& m, const char* name) {
       .def("__repr__", [name](const Object& o) {
         std::string keys;
         for (Key id : o.keys) keys += (keys.empty() ? "" : ", ") + std::to_string(id);
-        return std::string("<arbor.") + name + " '" + o.model->name() + "' on " + keys + ": " +
+        return std::string("<arbor_slam.") + name + " '" + o.model->name() + "' on " + keys + ": " +
                std::to_string(o.model->rows()) + " rows>";
       });
 }

@@ -1,5 +1,5 @@
-// arbor.CustomFactor2 / CustomFactor3 (docs/python.md, "Factors of your own"): a factor of your
-// own whose error, and optionally its Jacobians, are Python functions. PyFactorModel is the
+// arbor_slam.CustomFactor2 / CustomFactor3 (docs/python.md, "Factors of your own"): a factor of
+// your own whose error, and optionally its Jacobians, are Python functions. PyFactorModel is the
 // FactorModel<G> (core/factor_model.h) that calls them; CustomFactorObject is what the Python
 // object holds (the keys as pose ids, the model, Ω), handed to Graph.add_factor and
 // OnlineSmoother.add_factor.
@@ -12,9 +12,9 @@
 #include <pybind11/pybind11.h>
 #include <Eigen/Core>
 
-#include "arbor/core/custom_factor.h"
-#include "arbor/core/factor_model.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/factor_model.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor::python {
 

@@ -1,11 +1,11 @@
-// arbor.read and the graph classes Graph2 / Graph3: a pose graph read from a g2o or TORO file,
+// arbor_slam.read and the graph classes Graph2 / Graph3: a pose graph read from a g2o or TORO file,
 // its poses, edges and priors as numpy arrays, and F at any poses.
 #include <string>
 #include <variant>
 
 #include <pybind11/stl.h>
 
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "graph_building.h"
@@ -28,7 +28,7 @@ void defineGraph(py::module_& m, const char* name) {
   constexpr int k = G::kDoF;
   py::class_<Graph> c(m, name,
                       (std::string("A ") + (G::kDim == 2 ? "2D" : "3D") +
-                       " pose graph read from a file (arbor.read) or built in memory.")
+                       " pose graph read from a file (arbor_slam.read) or built in memory.")
                           .c_str());
   c.def_property_readonly(
        "dimension", [](const Graph&) { return G::kDim; }, "2 or 3")
@@ -106,7 +106,7 @@ void defineGraph(py::module_& m, const char* name) {
           },
           py::arg("poses"), "F = Σ eᵀΩe over the edges and priors at `poses` (rows as `ids`)")
       .def("__repr__", [name](const Graph& g) {
-        return std::string("<arbor.") + name +
+        return std::string("<arbor_slam.") + name +
                (g.path.empty() ? std::string(" (in memory)") : " '" + g.path + "'") + ": " +
                std::to_string(g.graph.numPoses()) + " poses, " +
                std::to_string(g.graph.numEdges()) + " edges, " +
@@ -137,7 +137,7 @@ void defineGraphs(py::module_& m) {
       py::arg("path"), py::arg("information") = "refuse",
       "Reads a g2o or TORO file (2D or 3D) into a Graph2 or Graph3. information: refuse | "
       "repair | isotropic (information matrices that are not positive definite). Raises "
-      "arbor.FileError naming path:line on a malformed file.");
+      "arbor_slam.FileError naming path:line on a malformed file.");
 }
 
 }  // namespace arbor::python

@@ -14,8 +14,8 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/trajectory_writer.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/trajectory_writer.h"
 #include "conversions.h"
 #include "custom_factor_object.h"
 
@@ -217,7 +217,7 @@ void defineGraphBuilding(py::class_<GraphObject<G>>& c) {
             g.graph.custom_factors.push_back(made(what, [&] { return f.make(i, j); }));
           },
           py::arg("factor"),
-          "Adds a factor of your own (an arbor.CustomFactor2/CustomFactor3) on poses added "
+          "Adds a factor of your own (an arbor_slam.CustomFactor2/CustomFactor3) on poses added "
           "before; ValueError for an unknown id. The batch solvers and the online smoother "
           "(add_graph) take it; write() as g2o and pickle refuse a graph holding one (ValueError).")
       .def_property_readonly(
@@ -250,7 +250,7 @@ void defineGraphBuilding(py::class_<GraphObject<G>>& c) {
           "Writes the graph with `poses` (rows as `ids`, e.g. a SolveResult's estimate; default "
           "the graph's own) as g2o (the edges and priors too), TUM or KITTI (the poses only). "
           "format: g2o | tum | kitti, default from the extension (.g2o, .tum, .kitti; others "
-          "g2o, .txt refused); a format the extension contradicts is refused. arbor.FileError "
+          "g2o, .txt refused); a format the extension contradicts is refused. arbor_slam.FileError "
           "when the file cannot be written.")
       .def(py::pickle([](const Graph& g) { return pickleState(g); },
                       [](const py::tuple& t) { return fromPickleState<G>(t); }));

@@ -4,8 +4,8 @@
 
 #include <string>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor::python {
 

@@ -8,7 +8,7 @@
 
 #include <pybind11/pybind11.h>
 
-#include "arbor/tools/cli/option_table.h"
+#include "arbor_slam/tools/cli/option_table.h"
 
 namespace arbor::python {
 

@@ -1,5 +1,5 @@
-// arbor.SE2 and arbor.SE3: the pose types of core/se2.h and core/se3.h with numpy in and out:
-// composition, inverse, between, Log/Exp (tangent [translation; rotation], the C++ order),
+// arbor_slam.SE2 and arbor_slam.SE3: the pose types of core/se2.h and core/se3.h with numpy in and
+// out: composition, inverse, between, Log/Exp (tangent [translation; rotation], the C++ order),
 // homogeneous matrices, a tolerance comparison and pickling.
 #include <cmath>
 #include <string>

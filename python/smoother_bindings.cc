@@ -1,4 +1,4 @@
-// arbor.OnlineSmoother2 / OnlineSmoother3: the online smoother (bayestree/online_smoother.h)
+// arbor_slam.OnlineSmoother2 / OnlineSmoother3: the online smoother (bayestree/online_smoother.h)
 // with poses named by ids, edges and priors in any order, updates, the estimate and statistics
 // as numpy arrays and dicts, and marginal and joint covariances from the Bayes tree.
 #include <algorithm>
@@ -8,9 +8,9 @@
 
 #include <pybind11/stl.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/tools/cli/smoother_table.h"
-#include "arbor/tools/refine/batch_refiner.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tools/cli/smoother_table.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "custom_factor_object.h"
@@ -91,7 +91,8 @@ OnlineSmootherOptions<G> optionsOf(const std::optional<RobustSettings>& robust,
 // The constructor's docstring, its keywords from the smoother table.
 const std::string& smootherDoc() {
   static const std::string doc =
-      "robust: an arbor.RobustOptions (online GNC per loop closure, as `arbor replay --robust`); "
+      "robust: an arbor_slam.RobustOptions (online GNC per loop closure, as `arbor replay "
+      "--robust`); "
       "by keyword, `arbor replay`'s smoother flags of the same names ('_' for '-'; "
       "wildfire_threshold is --wildfire): " +
       keywordsDoc(cli::smootherOptionTable()) +
@@ -189,7 +190,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "initial_guesses (and a graph with "
           "poses) each new pose starts at the graph's value. `fixed` poses are not held (the "
           "smoother's gauge is its first pose or the priors). Call update() after. Returns "
-          "an arbor.AddGraphResult (accepted, duplicate); ValueError naming the first rejected "
+          "an arbor_slam.AddGraphResult (accepted, duplicate); ValueError naming the first "
+          "rejected "
           "one.")
       .def(
           "add_factor",
@@ -209,7 +211,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
             return statusOrThrow(s.addFactor(factor, f.keys[0], id2));
           },
           py::arg("factor"),
-          "Adds a factor of your own (an arbor.CustomFactor2/CustomFactor3) on poses an edge or a "
+          "Adds a factor of your own (an arbor_slam.CustomFactor2/CustomFactor3) on poses an edge "
+          "or a "
           "prior created already (a binary one's in one component); returns 'accepted', raises "
           "ValueError with the reason if rejected. Its functions run during update() and "
           "finalize(), under the GIL, from the smoother's threads; an exception they raise is "
@@ -236,7 +239,7 @@ void defineSmootherOf(py::module_& m, const char* name) {
             return st;
           },
           "One incremental update over the edges and priors added since the last; returns its "
-          "statistics (an arbor.UpdateStats).")
+          "statistics (an arbor_slam.UpdateStats).")
       .def(
           "finalize",
           [](Smoother& s) {
@@ -248,7 +251,7 @@ void defineSmootherOf(py::module_& m, const char* name) {
             return st;
           },
           "Relinearises everything and iterates to convergence (the end of a replay); returns "
-          "its statistics (an arbor.UpdateStats).")
+          "its statistics (an arbor_slam.UpdateStats).")
       .def(
           "refine",
           [](Smoother& s, const std::string& solver, bool reseed) {
@@ -280,7 +283,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "smoother's classification (what it does not hold as settled inliers held out, taken "
           "back within its end's bound), for rtr certifying the inlier problem. reseed: the "
           "winner's estimate becomes the linearisation point when it lowers the cost. Returns "
-          "an arbor.RefineResult: the run's figures (F_* are Σρ when robust), ids and the batch "
+          "an arbor_slam.RefineResult: the run's figures (F_* are Σρ when robust), ids and the "
+          "batch "
           "estimate.")
       .def(
           "solve_deferred",
@@ -322,7 +326,7 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "(ids ascending, poses one row each: n×3 [x y θ] or n×7 [x y z qx qy qz qw])")
       .def(
           "stats", [](const Smoother& s) { return s.stats(); },
-          "The online layer's counts and the last update's statistics (an arbor.OnlineStats).")
+          "The online layer's counts and the last update's statistics (an arbor_slam.OnlineStats).")
       .def(
           "marginal_covariance",
           [](const Smoother& s, Key id) {
@@ -360,8 +364,8 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "With robust options: every loop closure's weight and status (inlier, outlier, "
           "trusted, excluded).")
       .def("__repr__", [name](const Smoother& s) {
-        return std::string("<arbor.") + name + ": " + std::to_string(s.stats().poses) + " poses, " +
-               std::to_string(s.stats().updates) + " updates>";
+        return std::string("<arbor_slam.") + name + ": " + std::to_string(s.stats().poses) +
+               " poses, " + std::to_string(s.stats().updates) + " updates>";
       });
 }
 

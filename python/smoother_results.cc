@@ -2,7 +2,7 @@
 // finalize(), solve_deferred()), OnlineStats (stats()), AddGraphResult (add_graph()), Closure
 // (closures()) and RefineResult (refine()), each a record (record.h).
 #include "smoother_results.h"
-#include "arbor/bayestree/online_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
 #include "bindings.h"
 #include "record.h"
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/pose_graph.h"
 #include "conversions.h"
 
 namespace arbor::python {

@@ -1,6 +1,6 @@
-// arbor.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
+// arbor_slam.solve: a batch solve of a Graph2 / Graph3 with any row of the solver table
 // (tools/refine/batch_solvers.h: lm, gn, dogleg, rtr) from any initialisation, optionally
-// robust (GNC, as `arbor batch --robust`), and arbor.RobustOptions.
+// robust (GNC, as `arbor batch --robust`), and arbor_slam.RobustOptions.
 #include <algorithm>
 #include <optional>
 #include <string>
@@ -9,10 +9,10 @@
 
 #include <pybind11/stl.h>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/tools/cli/online_robust_table.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/tools/cli/online_robust_table.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 #include "bindings.h"
 #include "conversions.h"
 #include "graph_object.h"
@@ -26,7 +26,7 @@ using cli::onlineRobustOptionTable;
 using cli::OptionSpec;
 using refine::BatchSolver;
 
-/// What solve() returns (arbor.SolveResult).
+/// What solve() returns (arbor_slam.SolveResult).
 struct SolveOutcome {
   std::string solver, init, termination, message;
   double F_initial = 0, F_final = 0, time_s = 0;
@@ -65,7 +65,7 @@ void fillRtr(const RtrSummary& s, SolveOutcome* out) {
   out->message = s.message;
 }
 
-// arbor.RobustOptions' docstring, its online keywords from the table.
+// arbor_slam.RobustOptions' docstring, its online keywords from the table.
 const std::string& robustOptionsDoc() {
   static const std::string doc = [] {
     std::string text =
@@ -283,8 +283,8 @@ void defineSolveOf(py::module_& m) {
       py::arg("robust") = py::none(), py::arg("verbose") = false,
       "Solves the graph in batch. solver: lm | gn | dogleg | rtr (rtr: the certifiable solver, "
       "from its own chordal relaxation); init: odometry | spanning-tree | chordal | file "
-      "(default: file when the file has poses, else odometry); robust: an arbor.RobustOptions "
-      "(GNC as `arbor batch --robust`). Returns an arbor.SolveResult.");
+      "(default: file when the file has poses, else odometry); robust: an arbor_slam.RobustOptions "
+      "(GNC as `arbor batch --robust`). Returns an arbor_slam.SolveResult.");
 }
 
 }  // namespace
@@ -318,11 +318,12 @@ void defineSolve(py::module_& m) {
   // The online options, read-only, by the table: a str, an int or a float each.
   for (const OptionSpec<RobustOptions>& row : onlineRobustOptionTable()) {
     options.def_property_readonly(
-        row.keyword.c_str(),
-        [row](const RobustSettings& s) { return keywordValue(row, s.online); }, kOnlineDoc);
+        row.keyword.c_str(), [row](const RobustSettings& s) { return keywordValue(row, s.online); },
+        kOnlineDoc);
   }
 
-  Record<SolveOutcome>(m, "SolveResult", "What arbor.solve returns (docs/python.md, \"Results\").")
+  Record<SolveOutcome>(m, "SolveResult",
+                       "What arbor_slam.solve returns (docs/python.md, \"Results\").")
       .field("solver", &SolveOutcome::solver, "lm | gn | dogleg | rtr")
       .field("init", &SolveOutcome::init, "the initialisation: odometry | spanning-tree | ...")
       .field("F_initial", &SolveOutcome::F_initial, "F = Σ eᵀΩe at the start")

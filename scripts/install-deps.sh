@@ -12,7 +12,7 @@ packages=(
   libceres-dev nlohmann-json3-dev libsodium-dev
   libopenblas0-pthread libopenblas-pthread-dev
   python3-matplotlib python3-numpy python3-pytest python3-dev python3-pybind11 pybind11-dev
-  python3-mypy
+  python3-mypy python3-build python3-pip python3-venv patchelf
 )
 
 missing=()

@@ -8,9 +8,9 @@
 #include <random>
 #include <vector>
 
-#include "arbor/bayestree/async_relinearization.h"
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/tests/random_walks.h"
+#include "arbor_slam/bayestree/async_relinearization.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/tests/random_walks.h"
 
 #include <gtest/gtest.h>
 

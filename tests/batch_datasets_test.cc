@@ -3,10 +3,10 @@
 // M3500b/c, sphere_bignoise, cubicle) it still converges downhill and never below F*.
 #include <gtest/gtest.h>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/shared_data.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/shared_data.h"
 
 namespace arbor {
 namespace {

@@ -12,7 +12,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/tools/refine/batch_refiner.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
 
 namespace arbor::refine {
 namespace {

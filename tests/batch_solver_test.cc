@@ -9,13 +9,13 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/block_cholesky.h"
-#include "arbor/core/normal_equations.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/prior_factors.h"
-#include "arbor/core/sparse_cholesky.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/block_cholesky.h"
+#include "arbor_slam/core/normal_equations.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/sparse_cholesky.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

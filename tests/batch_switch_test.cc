@@ -8,10 +8,10 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/tests/random_walks.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tests/random_walks.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 #include <gtest/gtest.h>
 

@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
 
 namespace arbor {
 namespace {

@@ -8,9 +8,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/se2.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/se2.h"
 
 namespace arbor {
 namespace {

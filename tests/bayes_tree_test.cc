@@ -11,11 +11,11 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/shared_data.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/shared_data.h"
 
 #include <gtest/gtest.h>
 

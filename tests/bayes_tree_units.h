@@ -9,12 +9,12 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/bayes_tree.h"
-#include "arbor/bayestree/linear_factors.h"
-#include "arbor/bayestree/top_elimination.h"
-#include "arbor/bayestree/update_threads.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/se2.h"
+#include "arbor_slam/bayestree/bayes_tree.h"
+#include "arbor_slam/bayestree/linear_factors.h"
+#include "arbor_slam/bayestree/top_elimination.h"
+#include "arbor_slam/bayestree/update_threads.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/se2.h"
 #include "random_graphs.h"
 
 namespace arbor::testing {

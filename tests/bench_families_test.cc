@@ -10,12 +10,12 @@
 #include <set>
 #include <stdexcept>
 
-#include "arbor/io/labels_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/bench/ablation.h"
-#include "arbor/tools/bench/family_bench.h"
-#include "arbor/tools/bench/shared_data.h"
-#include "arbor/tools/bench/world_families.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/bench/ablation.h"
+#include "arbor_slam/tools/bench/family_bench.h"
+#include "arbor_slam/tools/bench/shared_data.h"
+#include "arbor_slam/tools/bench/world_families.h"
 
 namespace arbor {
 namespace {

@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <stdexcept>
 
-#include "arbor/tools/bench/growth.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/bench/growth.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

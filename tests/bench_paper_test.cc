@@ -13,9 +13,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/initialization.h"
-#include "arbor/tools/bench/paper_runner.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/tools/bench/paper_runner.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -11,13 +11,13 @@
 #include <random>
 #include <stdexcept>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/bench/robust_bench.h"
-#include "arbor/tools/bench/robust_metrics.h"
-#include "arbor/tools/bench/robust_replay_hooks.h"
-#include "arbor/tools/cli/online_threshold.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/bench/robust_bench.h"
+#include "arbor_slam/tools/bench/robust_metrics.h"
+#include "arbor_slam/tools/bench/robust_replay_hooks.h"
+#include "arbor_slam/tools/cli/online_threshold.h"
+#include "arbor_slam/tools/generator/false_closures.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -1,14 +1,14 @@
 // Library users get OpenBLAS at one thread per call without doing anything
-// (arbor/core/blas_threads.h): constructing a smoother is enough.
+// (arbor_slam/core/blas_threads.h): constructing a smoother is enough.
 #include <dlfcn.h>
 
 #include <cstdlib>
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/blas_threads.h"
-#include "arbor/core/se2.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/blas_threads.h"
+#include "arbor_slam/core/se2.h"
 
 namespace arbor {
 namespace {

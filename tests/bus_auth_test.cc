@@ -15,8 +15,8 @@
 
 #include "process_temp_dir.h"
 
-#include "arbor/tools/serve/bus_auth.h"
-#include "arbor/tools/serve/bus_key.h"
+#include "arbor_slam/tools/serve/bus_auth.h"
+#include "arbor_slam/tools/serve/bus_key.h"
 
 namespace arbor::serve {
 namespace {

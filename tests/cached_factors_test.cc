@@ -9,10 +9,10 @@
 #include <stdexcept>
 #include <vector>
 
-#include "arbor/bayestree/elimination_plan.h"
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/tree_shape.h"
-#include "arbor/tests/random_walks.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/tree_shape.h"
+#include "arbor_slam/tests/random_walks.h"
 
 #include <gtest/gtest.h>
 

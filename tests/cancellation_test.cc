@@ -10,14 +10,14 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/cancellation.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/core/riemannian_staircase.h"
-#include "arbor/tools/generator/graph_generator.h"
-#include "arbor/tools/refine/batch_refiner.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/cancellation.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/core/riemannian_staircase.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
 
 namespace arbor {
 namespace {

@@ -15,10 +15,10 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/replay_command.h"
-#include "arbor/tools/cli/serve_command.h"
-#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/replay_command.h"
+#include "arbor_slam/tools/cli/serve_command.h"
+#include "arbor_slam/tools/cli/smoother_flags.h"
 
 namespace arbor::cli {
 namespace {

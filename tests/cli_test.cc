@@ -18,10 +18,10 @@
 
 #include "process_temp_dir.h"
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/io/labels_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 
 namespace {
 

@@ -9,13 +9,13 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/replay_command.h"
-#include "arbor/tools/cli/serve_command.h"
-#include "arbor/tools/cli/smoother_flags.h"
-#include "arbor/tools/generator/graph_generator.h"
-#include "arbor/tools/refine/batch_solvers.h"
-#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/replay_command.h"
+#include "arbor_slam/tools/cli/serve_command.h"
+#include "arbor_slam/tools/cli/smoother_flags.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
 
 namespace arbor::cli {
 namespace {

@@ -15,11 +15,11 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 #include "shared_data.h"
 
 namespace arbor {

@@ -10,14 +10,14 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/custom_factor.h"
-#include "arbor/core/example_factors.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/normal_equations.h"
-#include "arbor/tests/custom_factor_support.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/example_factors.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/normal_equations.h"
+#include "arbor_slam/tests/custom_factor_support.h"
 
 namespace arbor {
 namespace {

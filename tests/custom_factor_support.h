@@ -10,9 +10,9 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/core/example_factors.h"
-#include "arbor/core/factor.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/core/example_factors.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor::testing {
 

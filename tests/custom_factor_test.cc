@@ -14,14 +14,14 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/custom_factor.h"
-#include "arbor/core/example_factors.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/normal_equations.h"
-#include "arbor/core/sesync_problem.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/custom_factor_support.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/example_factors.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/normal_equations.h"
+#include "arbor_slam/core/sesync_problem.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/custom_factor_support.h"
 
 namespace arbor {
 namespace {

@@ -15,7 +15,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
 
 namespace arbor::bayestree {
 namespace {

@@ -9,11 +9,11 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/io/edge_choice_file.h"
-#include "arbor/tools/cli/replay_runner.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/io/edge_choice_file.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -6,8 +6,8 @@
 #include <numeric>
 #include <vector>
 
-#include "arbor/bayestree/elimination_plan.h"
-#include "arbor/bayestree/tree_shape.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
+#include "arbor_slam/bayestree/tree_shape.h"
 
 #include <gtest/gtest.h>
 

@@ -7,10 +7,10 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
-#include "arbor/core/factor.h"
-#include "arbor/core/prior_factors.h"
-#include "arbor/core/relative_pose_factor.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/relative_pose_factor.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

@@ -12,10 +12,10 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/io/labels_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/generator/false_closures.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 #include "shared_data.h"
 
 namespace arbor {

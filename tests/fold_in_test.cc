@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/fold_in.h"
-#include "arbor/bayestree/partial_solve.h"
+#include "arbor_slam/bayestree/fold_in.h"
+#include "arbor_slam/bayestree/partial_solve.h"
 #include "bayes_tree_units.h"
 
 namespace arbor {

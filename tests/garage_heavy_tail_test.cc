@@ -10,12 +10,12 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/labels_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/online_threshold.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/online_threshold.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 #include "robust_replay_outcome.h"
 #include "shared_data.h"
 

@@ -6,9 +6,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor {
 namespace {

@@ -9,11 +9,11 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/core/se2.h"
-#include "arbor/tools/refine/gnc_from_online.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/tools/refine/gnc_from_online.h"
 
 namespace arbor::refine {
 namespace {

@@ -10,11 +10,11 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/normal_equations.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/normal_equations.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/heap_policy.h"
+#include "arbor_slam/core/heap_policy.h"
 
 namespace arbor {
 namespace {

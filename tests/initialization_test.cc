@@ -1,4 +1,4 @@
-#include "arbor/core/initialization.h"
+#include "arbor_slam/core/initialization.h"
 
 #include <cmath>
 #include <random>

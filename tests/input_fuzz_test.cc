@@ -12,10 +12,10 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/random_graphs.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/random_graphs.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

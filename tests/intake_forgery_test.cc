@@ -7,9 +7,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/serve/edge_intake.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/serve/edge_intake.h"
 
 namespace arbor::serve {
 namespace {

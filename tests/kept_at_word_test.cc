@@ -12,9 +12,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/information.h"
-#include "arbor/tools/bench/world_families.h"
-#include "arbor/tools/generator/false_closures.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/tools/bench/world_families.h"
+#include "arbor_slam/tools/generator/false_closures.h"
 #include "robust_replay_outcome.h"
 
 namespace arbor {

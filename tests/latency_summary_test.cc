@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/latency_summary.h"
+#include "arbor_slam/core/latency_summary.h"
 
 namespace arbor {
 namespace {

@@ -13,11 +13,11 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/io/lcm_journal.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

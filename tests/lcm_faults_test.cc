@@ -24,9 +24,9 @@
 #include <atomic>
 #include <mutex>
 
-#include "arbor/io/lcm_journal.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
 #include "process_support.h"
 
 namespace arbor {

@@ -17,7 +17,7 @@
 
 #include <lcm/eventlog.h>
 
-#include "arbor/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_journal.h"
 #include "process_temp_dir.h"
 
 namespace arbor {

@@ -14,8 +14,8 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "arbor/io/lcm_journal.h"
-#include "arbor/io/lcm_messages.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_messages.h"
 
 namespace arbor {
 namespace {

@@ -39,10 +39,10 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "arbor/io/lcm_journal.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/lcm_test_support.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/lcm_test_support.h"
 #include "private_network.h"
 #include "process_support.h"
 #include "shared_data.h"

@@ -15,13 +15,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/replay_order.h"
-#include "arbor/tools/generator/graph_generator.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/replay_order.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

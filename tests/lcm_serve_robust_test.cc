@@ -16,18 +16,18 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/io/labels_file.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/cli/batch_refinement.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/replay_order.h"
-#include "arbor/tools/cli/replay_runner.h"
-#include "arbor/tools/cli/serve_command.h"
-#include "arbor/tools/serve/closure_report.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/cli/batch_refinement.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/replay_order.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/cli/serve_command.h"
+#include "arbor_slam/tools/serve/closure_report.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

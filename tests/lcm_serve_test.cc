@@ -21,15 +21,15 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/io/lcm_journal.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/cli/replay_order.h"
-#include "arbor/tools/generator/graph_generator.h"
-#include "arbor/tools/serve/lcm_mapping.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/cli/replay_order.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/serve/lcm_mapping.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

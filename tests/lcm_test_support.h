@@ -21,12 +21,12 @@
 
 #include "process_temp_dir.h"
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/cli/publish_stream.h"
-#include "arbor/tools/cli/replay_order.h"
-#include "arbor/tools/generator/graph_generator.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/cli/publish_stream.h"
+#include "arbor_slam/tools/cli/replay_order.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::serve::testing {
 

@@ -4,11 +4,11 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/finite_pose.h"
-#include "arbor/core/relative_pose_factor.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
-#include "arbor/core/so3.h"
+#include "arbor_slam/core/finite_pose.h"
+#include "arbor_slam/core/relative_pose_factor.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
+#include "arbor_slam/core/so3.h"
 
 namespace arbor {
 namespace {

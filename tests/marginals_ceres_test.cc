@@ -11,11 +11,11 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/shared_data.h"
-#include "arbor/tools/bench/ceres_pose_graph.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/shared_data.h"
+#include "arbor_slam/tools/bench/ceres_pose_graph.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

@@ -12,12 +12,12 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/marginals.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/bayestree/top_elimination.h"
-#include "arbor/core/factor.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/marginals.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/bayestree/top_elimination.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/robust_kernel.h"
 #include "bayes_tree_units.h"
 #include "random_graphs.h"
 

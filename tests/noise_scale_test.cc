@@ -12,8 +12,8 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/noise_scale.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/bayestree/noise_scale.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor {
 namespace {

@@ -15,10 +15,10 @@
 #include <Eigen/Dense>
 #include <boost/math/distributions/chi_squared.hpp>
 
-#include "arbor/bayestree/closure_innovation.h"
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/bayestree/closure_innovation.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

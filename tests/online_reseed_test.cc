@@ -10,8 +10,8 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/batch_solver.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
 
 namespace arbor {
 namespace {

@@ -15,13 +15,13 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/io/labels_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/random_graphs.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/random_graphs.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/ordering_decay.h"
+#include "arbor_slam/bayestree/ordering_decay.h"
 #include "bayes_tree_units.h"
 
 namespace arbor {

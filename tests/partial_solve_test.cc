@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/partial_solve.h"
+#include "arbor_slam/bayestree/partial_solve.h"
 #include "bayes_tree_units.h"
 
 namespace arbor {

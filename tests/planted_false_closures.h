@@ -8,10 +8,10 @@
 #include <set>
 #include <utility>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/se2.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/tools/generator/false_closures.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor::testing {
 

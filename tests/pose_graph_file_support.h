@@ -10,7 +10,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor::testing {
 

@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/information.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/pose_graph_file_support.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/pose_graph_file_support.h"
 
 namespace arbor {
 namespace {

@@ -4,7 +4,7 @@
 #include <random>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor::testing {
 

@@ -5,9 +5,9 @@
 #include <random>
 #include <vector>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor::testing {
 

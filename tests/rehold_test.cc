@@ -12,10 +12,10 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/generator/false_closures.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 

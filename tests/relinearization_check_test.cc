@@ -6,9 +6,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/relinearization_check.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/bayestree/relinearization_check.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor {
 namespace {

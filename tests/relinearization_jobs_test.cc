@@ -8,9 +8,9 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/relinearization_jobs.h"
-#include "arbor/core/relative_pose_factor.h"
-#include "arbor/core/se2.h"
+#include "arbor_slam/bayestree/relinearization_jobs.h"
+#include "arbor_slam/core/relative_pose_factor.h"
+#include "arbor_slam/core/se2.h"
 
 namespace arbor {
 namespace {

@@ -4,9 +4,9 @@
 // an abort (GTSAM's iSAM2 throws IndeterminantLinearSystemException on M3500b/c).
 #include <gtest/gtest.h>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/shared_data.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/shared_data.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

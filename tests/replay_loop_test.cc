@@ -10,12 +10,12 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/shared_data.h"
-#include "arbor/tools/cli/batch_refinement.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/shared_data.h"
+#include "arbor_slam/tools/cli/batch_refinement.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor::cli {
 namespace {

@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor {
 namespace {

@@ -7,9 +7,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/generator/road_world.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/generator/road_world.h"
 
 namespace arbor {
 namespace {

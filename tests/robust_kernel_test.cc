@@ -7,8 +7,8 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/core/factor.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/core/robust_kernel.h"
 
 namespace arbor {
 namespace {

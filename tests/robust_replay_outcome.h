@@ -7,9 +7,9 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor::testing {
 

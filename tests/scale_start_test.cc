@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 

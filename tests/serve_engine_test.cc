@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tests/random_graphs.h"
-#include "arbor/tools/serve/serve_engine.h"
+#include "arbor_slam/tests/random_graphs.h"
+#include "arbor_slam/tools/serve/serve_engine.h"
 
 #include <gtest/gtest.h>
 

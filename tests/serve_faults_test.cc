@@ -21,14 +21,14 @@
 #include <gtest/gtest.h>
 #include <lcm/lcm-cpp.hpp>
 
-#include "arbor/io/lcm_journal.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/serve/link_watch.h"
-#include "arbor/tools/serve/log_limiter.h"
-#include "arbor/tools/serve/serve_service.h"
-#include "arbor/tools/serve/snapshot_dir.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/serve/link_watch.h"
+#include "arbor_slam/tools/serve/log_limiter.h"
+#include "arbor_slam/tools/serve/serve_service.h"
+#include "arbor_slam/tools/serve/snapshot_dir.h"
 
 namespace arbor::serve {
 namespace {

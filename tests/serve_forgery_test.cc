@@ -11,9 +11,9 @@
 #include <gtest/gtest.h>
 #include <lcm/lcm-cpp.hpp>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::serve {
 namespace {

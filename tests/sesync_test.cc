@@ -10,13 +10,13 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/core/prior_factors.h"
-#include "arbor/core/riemannian_staircase.h"
-#include "arbor/core/sesync_problem.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/riemannian_staircase.h"
+#include "arbor_slam/core/sesync_problem.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tests/random_graphs.h"
 #include "shared_data.h"
 
 namespace arbor {

@@ -13,12 +13,12 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/replay_order.h"
-#include "arbor/tools/generator/false_closures.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/replay_order.h"
+#include "arbor_slam/tools/generator/false_closures.h"
 #include "planted_false_closures.h"
 #include "robust_replay_outcome.h"
 #include "shared_data.h"

@@ -11,10 +11,10 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor {
 namespace {

@@ -9,9 +9,9 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/factor.h"
-#include "arbor/tests/random_graphs.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/factor.h"
+#include "arbor_slam/tests/random_graphs.h"
 
 namespace arbor {
 namespace {

@@ -11,10 +11,10 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
-#include "arbor/tests/random_walks.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
+#include "arbor_slam/tests/random_walks.h"
 
 namespace arbor {
 namespace {

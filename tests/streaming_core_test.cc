@@ -22,12 +22,12 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/io/lcm_journal.h"
-#include "arbor/tests/lcm_test_support.h"
-#include "arbor/tools/serve/journal_sink.h"
-#include "arbor/tools/serve/lcm_event_journal.h"
-#include "arbor/tools/serve/serve_service.h"
-#include "arbor/tools/serve/streaming_core.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tools/serve/journal_sink.h"
+#include "arbor_slam/tools/serve/lcm_event_journal.h"
+#include "arbor_slam/tools/serve/serve_service.h"
+#include "arbor_slam/tools/serve/streaming_core.h"
 
 namespace arbor::serve {
 namespace {

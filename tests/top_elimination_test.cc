@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/top_elimination.h"
+#include "arbor_slam/bayestree/top_elimination.h"
 #include "bayes_tree_units.h"
 
 namespace arbor {

@@ -8,10 +8,10 @@
 #include <gtest/gtest.h>
 #include <Eigen/Geometry>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/trajectory_reader.h"
-#include "arbor/io/trajectory_writer.h"
-#include "arbor/tools/cli/trajectory_errors.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/trajectory_reader.h"
+#include "arbor_slam/io/trajectory_writer.h"
+#include "arbor_slam/tools/cli/trajectory_errors.h"
 #include "random_graphs.h"
 
 namespace arbor::cli {

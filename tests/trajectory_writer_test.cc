@@ -13,8 +13,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/trajectory_writer.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/trajectory_writer.h"
 #include "random_graphs.h"
 
 namespace arbor {

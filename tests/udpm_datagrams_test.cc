@@ -26,10 +26,10 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/serve/lcm_datagram.h"
-#include "arbor/tools/serve/udpm_receiver.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/serve/lcm_datagram.h"
+#include "arbor_slam/tools/serve/udpm_receiver.h"
 #include "lcm_datagrams.h"
 #include "private_network.h"
 #include "process_support.h"

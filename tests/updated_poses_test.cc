@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 
-#include "arbor/bayestree/updated_poses.h"
+#include "arbor_slam/bayestree/updated_poses.h"
 
 namespace arbor {
 namespace {

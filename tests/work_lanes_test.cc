@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "arbor/bayestree/work_lanes.h"
+#include "arbor_slam/bayestree/work_lanes.h"
 
 #include <gtest/gtest.h>
 

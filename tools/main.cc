@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/blas_threads.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
+#include "arbor_slam/core/blas_threads.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
 
 namespace {
 

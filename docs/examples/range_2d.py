@@ -4,20 +4,20 @@ import pickle
 import matplotlib.pyplot as plt
 import numpy as np
 
-import arbor
+import arbor_slam
 
 plt.switch_backend("Agg")  # no display needed: write a PNG
 beacon = np.array([2.0, 3.0])  # a beacon at a known position; pose 2 measures 3 m to it
-graph = arbor.Graph2()
+graph = arbor_slam.Graph2()
 for i in range(5):
-    graph.add_pose(i, arbor.SE2(1.1 * i, 0.3, 0.1))  # initial guesses off the truth
+    graph.add_pose(i, arbor_slam.SE2(1.1 * i, 0.3, 0.1))  # initial guesses off the truth
     if i > 0:
-        graph.add_edge(i - 1, i, arbor.SE2(1.0, 0.0, 0.0), 100 * np.eye(3))  # odometry
-graph.add_pose_prior(0, arbor.SE2(), 1e4 * np.eye(3))
-graph.add_factor(arbor.CustomFactor2(2, lambda x: np.linalg.norm(x.translation() - beacon) - 3,
+        graph.add_edge(i - 1, i, arbor_slam.SE2(1.0, 0.0, 0.0), 100 * np.eye(3))  # odometry
+graph.add_pose_prior(0, arbor_slam.SE2(), 1e4 * np.eye(3))
+graph.add_factor(arbor_slam.CustomFactor2(2, lambda x: np.linalg.norm(x.translation() - beacon) - 3,
                                      [[25.0]], name="range"))  # e = ‖t(x) − beacon‖ − 3 m
-batch = arbor.solve(graph, solver="gn")
-smoother = arbor.OnlineSmoother2()
+batch = arbor_slam.solve(graph, solver="gn")
+smoother = arbor_slam.OnlineSmoother2()
 smoother.add_graph(graph)  # the edges, the prior, then the range factor
 smoother.update()
 smoother.finalize()

@@ -18,12 +18,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Ellipse  # noqa: E402
 
-import arbor  # noqa: E402
+import arbor_slam  # noqa: E402
 
 
 def replay(graph):
-    smoother: arbor.OnlineSmoother2 | arbor.OnlineSmoother3 = (
-        arbor.OnlineSmoother2() if graph.dimension == 2 else arbor.OnlineSmoother3())
+    smoother: arbor_slam.OnlineSmoother2 | arbor_slam.OnlineSmoother3 = (
+        arbor_slam.OnlineSmoother2() if graph.dimension == 2 else arbor_slam.OnlineSmoother3())
     index = {int(i): k for k, i in enumerate(graph.ids)}
     edges, z, omega = graph.edges, graph.measurements, graph.information
     order = sorted(range(len(edges)),
@@ -36,7 +36,7 @@ def replay(graph):
 
 
 def main(path, png):
-    graph = arbor.read(path)
+    graph = arbor_slam.read(path)
     smoother = replay(graph)
     ids, poses = smoother.estimates()
     fig, ax = plt.subplots(figsize=(7, 7))

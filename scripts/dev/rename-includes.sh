@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Rewrites our own #include lines to the installed layout (docs/library.md):
-#   "core/x.h" -> "arbor/core/x.h", and likewise bayestree/, io/, tools/, tests/;
+#   "core/x.h" -> "arbor_slam/core/x.h", and likewise bayestree/, io/, tools/, tests/;
 #   lcm-gen's "io/lcm/arbor/x.hpp" -> "arbor/x.hpp" (the LCM convention: package/type.hpp).
+# (An include of the older "arbor/core/x.h" form is scripts/dev/rename-package.sh's.)
 # Only quoted includes at the start of a line are touched; a file already rewritten matches
 # nothing, so running it twice changes nothing. The files it changes are then re-formatted
 # with clang-format (include order within a block). Re-run it on files merged in later:
@@ -21,7 +22,7 @@ for f in "${files[@]}"; do
   grep -Eq "$old" "$f" || continue
   sed -E -i \
     -e 's@^([[:space:]]*#[[:space:]]*include[[:space:]]*")io/lcm/arbor/@\1arbor/@' \
-    -e 's@^([[:space:]]*#[[:space:]]*include[[:space:]]*")(core|bayestree|io|tools|tests)/@\1arbor/\2/@' \
+    -e 's@^([[:space:]]*#[[:space:]]*include[[:space:]]*")(core|bayestree|io|tools|tests)/@\1arbor_slam/\2/@' \
     "$f"
   changed+=("$f")
 done

@@ -3,7 +3,7 @@
 // indices, then file order; tools/cli/replay_order.h), runs the final relinearise-all pass and
 // prints F, the objective at the final estimate, as `arbor replay` reports it ("F final"; its
 // --json "F_final"). It also prints how many threads OpenBLAS runs per call, which the library
-// sets to 1 by itself (arbor/core/blas_threads.h), or "none" when the BLAS is not OpenBLAS.
+// sets to 1 by itself (arbor_slam/core/blas_threads.h), or "none" when the BLAS is not OpenBLAS.
 //
 //   arbor_consumer FILE [EXPECTED_F]
 // With EXPECTED_F it exits 1 unless |F - EXPECTED_F| <= 1e-9 |EXPECTED_F|. Priors in the file
@@ -26,14 +26,14 @@
 #include <variant>
 #include <vector>
 
-#include <arbor/bayestree/incremental_smoother.h>
-#include <arbor/bayestree/online_smoother.h>
-#include <arbor/core/autodiff_factor.h>
-#include <arbor/core/batch_solver.h>
-#include <arbor/core/custom_factor.h>
-#include <arbor/core/factor.h>
-#include <arbor/core/pose_graph.h>
-#include <arbor/io/pose_graph_file.h>
+#include <arbor_slam/bayestree/incremental_smoother.h>
+#include <arbor_slam/bayestree/online_smoother.h>
+#include <arbor_slam/core/autodiff_factor.h>
+#include <arbor_slam/core/batch_solver.h>
+#include <arbor_slam/core/custom_factor.h>
+#include <arbor_slam/core/factor.h>
+#include <arbor_slam/core/pose_graph.h>
+#include <arbor_slam/io/pose_graph_file.h>
 
 namespace {
 

@@ -1,13 +1,13 @@
-// Compiled with nothing but `pkg-config --cflags --libs arbor` against an installed prefix
+// Compiled with nothing but `pkg-config --cflags --libs arbor-slam` against an installed prefix
 // (tests/consumer/run_consumer_test.cmake): reads a pose-graph file (arbor_io), evaluates F at
 // its estimate (arbor_core) and encodes an LCM estimate message (arbor_lcm and lcm-gen's
 // installed "arbor/estimate_t.hpp"). Prints "poses N edges M F x bytes B".
 #include <iostream>
 #include <variant>
 
-#include <arbor/core/pose_graph.h>
-#include <arbor/io/lcm_messages.h>
-#include <arbor/io/pose_graph_file.h>
+#include <arbor_slam/core/pose_graph.h>
+#include <arbor_slam/io/lcm_messages.h>
+#include <arbor_slam/io/pose_graph_file.h>
 
 int main(int argc, char** argv) {
   if (argc != 2) return 2;

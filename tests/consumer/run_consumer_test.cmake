@@ -1,14 +1,14 @@
 # ctest install_consumer (tests/CMakeLists.txt), run with cmake -P: installs the build tree into
 # a fresh prefix, then, as a user would,
-#   1. configures and builds tests/consumer (find_package(Arbor), Arbor::arbor) against it (its
-#      CMakeLists checks ARBOR_INCLUDE_DIR and ARBOR_LCM_TYPES_JAR point into the prefix) and
+#   1. configures and builds tests/consumer (find_package(ArborSLAM), ArborSLAM::arbor) against it
+#      (its CMakeLists checks ARBOR_INCLUDE_DIR and ARBOR_LCM_TYPES_JAR point into the prefix) and
 #      replays each DATA file with it; its F must equal the installed `arbor replay`'s F_final
 #      (within 1e-9 relative), and OpenBLAS must run one thread per call without the program
 #      asking (unless the BLAS is not OpenBLAS); it also solves a graph with a factor of its own
-#      (an autodiff functor in main.cc, through the installed arbor/core/autodiff_factor.h);
-#   2. compiles pkg_config_check.cc with `pkg-config --cflags --libs arbor` alone
+#      (an autodiff functor in main.cc, through the installed arbor_slam/core/autodiff_factor.h);
+#   2. compiles pkg_config_check.cc with `pkg-config --cflags --libs arbor-slam` alone
 #      (PKG_CONFIG_PATH into the prefix) and runs it.
-#   3. with PYTHON (ARBOR_PYTHON on): imports the installed module `arbor` (PYTHONPATH into
+#   3. with PYTHON (ARBOR_PYTHON on): imports the installed module `arbor_slam` (PYTHONPATH into
 #      the prefix's PYTHON_DIR) and replays each DATA file with it to the same F
 #      (python_consumer.py).
 # Variables: BUILD_DIR, SOURCE_DIR, WORK_DIR, LIBDIR (CMAKE_INSTALL_LIBDIR), DATA (files
@@ -29,17 +29,19 @@ endfunction()
 set(prefix ${WORK_DIR}/prefix)
 file(REMOVE_RECURSE ${WORK_DIR})
 run(${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix})
-foreach(installed bin/arbor include/arbor/core/se2.h include/arbor/bayestree/online_smoother.h
-        include/arbor/io/pose_graph_file.h include/arbor/io/lcm_messages.h
-        include/arbor/edge_t.hpp ${LIBDIR}/cmake/Arbor/ArborConfig.cmake
-        ${LIBDIR}/cmake/Arbor/ArborConfigVersion.cmake
-        ${LIBDIR}/cmake/Arbor/FindArborSuiteSparse.cmake ${LIBDIR}/pkgconfig/arbor.pc)
+foreach(installed bin/arbor include/arbor_slam/core/se2.h
+        include/arbor_slam/bayestree/online_smoother.h include/arbor_slam/io/pose_graph_file.h
+        include/arbor_slam/io/lcm_messages.h include/arbor_slam/lcm/arbor/edge_t.hpp
+        ${LIBDIR}/cmake/ArborSLAM/ArborSLAMConfig.cmake
+        ${LIBDIR}/cmake/ArborSLAM/ArborSLAMConfigVersion.cmake
+        ${LIBDIR}/cmake/ArborSLAM/FindArborSuiteSparse.cmake ${LIBDIR}/pkgconfig/arbor-slam.pc)
   if(NOT EXISTS ${prefix}/${installed})
     message(FATAL_ERROR "not installed: ${prefix}/${installed}")
   endif()
 endforeach()
-foreach(internal include/arbor/tools include/arbor/core/serial_openmp.h
-        include/arbor/core/initialization_internal.h)
+# Nothing under arbor-sim's include/arbor/ or lib/cmake/Arbor/ (docs/library.md, "Names").
+foreach(internal include/arbor_slam/tools include/arbor_slam/core/serial_openmp.h
+        include/arbor_slam/core/initialization_internal.h include/arbor ${LIBDIR}/cmake/Arbor)
   if(EXISTS ${prefix}/${internal})
     message(FATAL_ERROR "installed but internal: ${prefix}/${internal}")
   endif()
@@ -76,13 +78,13 @@ endforeach()
 
 # 2. pkg-config.
 execute_process(COMMAND ${CMAKE_COMMAND} -E env PKG_CONFIG_PATH=${prefix}/${LIBDIR}/pkgconfig
-                ${PKG_CONFIG} --cflags --libs arbor
+                ${PKG_CONFIG} --cflags --libs arbor-slam
                 RESULT_VARIABLE rc OUTPUT_VARIABLE flags ERROR_VARIABLE err
                 OUTPUT_STRIP_TRAILING_WHITESPACE)
 if(NOT rc EQUAL 0)
-  message(FATAL_ERROR "pkg-config --cflags --libs arbor failed:\n${err}")
+  message(FATAL_ERROR "pkg-config --cflags --libs arbor-slam failed:\n${err}")
 endif()
-message(STATUS "pkg-config --cflags --libs arbor: ${flags}")
+message(STATUS "pkg-config --cflags --libs arbor-slam: ${flags}")
 separate_arguments(flags UNIX_COMMAND "${flags}")
 run(${CXX} -std=c++17 ${SOURCE_DIR}/tests/consumer/pkg_config_check.cc ${flags}
     -o ${WORK_DIR}/pkg_config_check)

@@ -3,13 +3,13 @@ edges in order of max(i, j) of their dense indices, then file order; the final
 relinearise-all pass), for graphs without priors."""
 import numpy as np
 
-import arbor
+import arbor_slam
 
 
 def replay(graph, **smoother_options):
     """Returns (smoother, F) with F over the graph at the final estimate (as `arbor replay`'s
     F_final)."""
-    smoother = (arbor.OnlineSmoother2 if graph.dimension == 2 else arbor.OnlineSmoother3)(
+    smoother = (arbor_slam.OnlineSmoother2 if graph.dimension == 2 else arbor_slam.OnlineSmoother3)(
         **smoother_options)
     index = {int(i): k for k, i in enumerate(graph.ids)}
     edges = graph.edges

@@ -9,7 +9,7 @@
 import numpy as np
 import pytest
 
-import arbor
+import arbor_slam
 
 S = np.array([[0.0, -1.0], [1.0, 0.0]])
 
@@ -61,7 +61,7 @@ def test_covariances_match_a_dense_inverse(seed):
     rng = np.random.default_rng(seed)
     n = 8
     edges = random_graph(rng, n)
-    smoother = arbor.OnlineSmoother2()
+    smoother = arbor_slam.OnlineSmoother2()
     for i, j, z, omega in sorted(edges, key=lambda e: max(e[0], e[1])):
         smoother.add_edge(i, j, z, omega)
         smoother.update()
@@ -97,7 +97,7 @@ def test_covariances_match_a_dense_inverse(seed):
 
 
 def test_covariance_before_update_raises():
-    s = arbor.OnlineSmoother2()
+    s = arbor_slam.OnlineSmoother2()
     s.add_edge(0, 1, [1, 0, 0], np.eye(3))
     with pytest.raises(RuntimeError):
         s.marginal_covariance(1)

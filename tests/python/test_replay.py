@@ -1,17 +1,17 @@
-# A data/ file replayed through arbor.OnlineSmoother2/3 reaches the F `arbor replay` prints.
+# A data/ file replayed through arbor_slam.OnlineSmoother2/3 reaches the F `arbor replay` prints.
 import os
 
 import numpy as np
 import pytest
 
-import arbor
+import arbor_slam
 from replay import replay
 
 
 @pytest.mark.parametrize("name", ["manhattan_2d.g2o", "sphere_3d.g2o"])
 def test_replay_matches_the_cli(name, data_dir, arbor_cli):
     path = os.path.join(data_dir, name)
-    graph = arbor.read(path)
+    graph = arbor_slam.read(path)
     smoother, F = replay(graph)
     expected = arbor_cli("replay", path)
     assert F == pytest.approx(expected["F_final"], rel=1e-9)
@@ -23,7 +23,7 @@ def test_replay_matches_the_cli(name, data_dir, arbor_cli):
 
 
 def test_estimate_rows(data_dir):
-    graph = arbor.read(os.path.join(data_dir, "sphere_3d.g2o"))
+    graph = arbor_slam.read(os.path.join(data_dir, "sphere_3d.g2o"))
     smoother, _ = replay(graph)
     ids, poses = smoother.estimates()
     assert poses.shape == (graph.num_poses, 7)
@@ -35,8 +35,8 @@ def test_estimate_rows(data_dir):
 
 
 def test_robust_replay_rejects_false_closures(data_dir):
-    graph = arbor.read(os.path.join(data_dir, "manhattan_2d_group_0.1.g2o"))
-    smoother, _ = replay(graph, robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    graph = arbor_slam.read(os.path.join(data_dir, "manhattan_2d_group_0.1.g2o"))
+    smoother, _ = replay(graph, robust=arbor_slam.RobustOptions(kernel="tls", threshold=2.0))
     closures = smoother.closures()
     assert closures
     statuses = {c.status for c in closures}
@@ -47,7 +47,7 @@ def test_robust_replay_rejects_false_closures(data_dir):
 def test_robust_stats_match_the_cli(data_dir, arbor_cli):
     """The robust counters of stats() are those `arbor replay --robust --json` reports."""
     path = os.path.join(data_dir, "manhattan_2d_group_0.1.g2o")
-    smoother, _ = replay(arbor.read(path), robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    smoother, _ = replay(arbor_slam.read(path), robust=arbor_slam.RobustOptions(kernel="tls", threshold=2.0))
     expected = arbor_cli("replay", path, "--robust", "--inlier-threshold", "2")["robust"]
     stats = smoother.stats()
     for key in ["closures_inlier", "closures_outlier", "closures_unconfirmed",
@@ -66,13 +66,13 @@ def test_online_robust_options_match_the_cli(data_dir, arbor_cli):
     """RobustOptions' online keywords reach the smoother as `arbor replay`'s flags of the same
     names do: Ω at its word (noise_scale="given"), no corroboration, two rules off."""
     path = os.path.join(data_dir, "manhattan_2d_group_0.1.g2o")
-    options = arbor.RobustOptions(noise_scale="given", corroboration_window=0,
+    options = arbor_slam.RobustOptions(noise_scale="given", corroboration_window=0,
                                   rules_off="final-confirm,scale-start")
     assert (options.noise_scale, options.corroboration_window) == ("given", 0)
     assert options.rules_off == "scale-start,final-confirm"
-    assert arbor.RobustOptions().rules_off == ""
-    assert arbor.RobustOptions().noise_scale == "estimated"
-    smoother, F = replay(arbor.read(path), robust=options)
+    assert arbor_slam.RobustOptions().rules_off == ""
+    assert arbor_slam.RobustOptions().noise_scale == "estimated"
+    smoother, F = replay(arbor_slam.read(path), robust=options)
     expected = arbor_cli("replay", path, "--robust", "--noise-scale", "given",
                          "--corroboration-window", "0", "--rules-off", "final-confirm,scale-start")
     assert F == pytest.approx(expected["F_final"], rel=1e-9)
@@ -81,7 +81,7 @@ def test_online_robust_options_match_the_cli(data_dir, arbor_cli):
         assert getattr(stats, key) == expected["robust"][key], key
     # Ω at its word: no scale is estimated, where the default estimates one.
     assert not stats.noise_scale_estimated and stats.noise_scale == 1.0
-    default, _ = replay(arbor.read(path), robust=arbor.RobustOptions())
+    default, _ = replay(arbor_slam.read(path), robust=arbor_slam.RobustOptions())
     assert default.stats().noise_scale_estimated
 
 
@@ -94,7 +94,7 @@ def test_replay_covariances_and_tum_output(name, data_dir, arbor_cli, tmp_path):
                        "--format", "tum")
     assert report["covariances"] == str(covariances)
     assert report["output"] == {"path": str(tum), "format": "tum"}
-    graph = arbor.read(path)
+    graph = arbor_slam.read(path)
     smoother, _ = replay(graph)
     k = 3 if graph.dimension == 2 else 6
     upper = np.triu_indices(k)
@@ -122,9 +122,9 @@ def test_replay_covariances_and_tum_output(name, data_dir, arbor_cli, tmp_path):
 def test_solve_budget_defers_and_solve_deferred_catches_up(data_dir):
     """solve_budget_mb bounds each update's back-substitution; solve_deferred() solves the
     backlog, and the final pass ends where the unbounded replay does."""
-    graph = arbor.read(os.path.join(data_dir, "manhattan_2d.g2o"))
+    graph = arbor_slam.read(os.path.join(data_dir, "manhattan_2d.g2o"))
     _, F = replay(graph)
-    smoother = arbor.OnlineSmoother2(solve_budget_mb=0.0002)
+    smoother = arbor_slam.OnlineSmoother2(solve_budget_mb=0.0002)
     index = {int(i): k for k, i in enumerate(graph.ids)}
     edges = graph.edges
     order = sorted(range(len(edges)),
@@ -147,11 +147,11 @@ def test_solve_budget_defers_and_solve_deferred_catches_up(data_dir):
 
 def test_solve_budget_refuses_what_needs_every_delta():
     with pytest.raises(ValueError, match="solve_budget_mb"):
-        arbor.OnlineSmoother2(solve_budget_mb=-1)
+        arbor_slam.OnlineSmoother2(solve_budget_mb=-1)
     with pytest.raises(ValueError, match="solve_budget_mb"):
-        arbor.OnlineSmoother2(solve_budget_mb=1, dogleg=True)
+        arbor_slam.OnlineSmoother2(solve_budget_mb=1, dogleg=True)
     with pytest.raises(ValueError, match="solve_budget_mb"):
-        arbor.OnlineSmoother3(solve_budget_mb=1, robust=arbor.RobustOptions(kernel="tls"))
+        arbor_slam.OnlineSmoother3(solve_budget_mb=1, robust=arbor_slam.RobustOptions(kernel="tls"))
 
 
 @pytest.mark.parametrize("solver", ["lm", "rtr"])
@@ -159,8 +159,8 @@ def test_refine_on_request_matches_the_replays_final_batch(solver, data_dir, arb
     """refine() after a robust replay is `arbor replay --robust --batch SOLVER`'s final run: GNC
     from the smoother's classification (its rejected closures held out), for rtr certified."""
     path = os.path.join(data_dir, "manhattan_2d_group_0.1.g2o")
-    graph = arbor.read(path)
-    smoother, _ = replay(graph, robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    graph = arbor_slam.read(path)
+    smoother, _ = replay(graph, robust=arbor_slam.RobustOptions(kernel="tls", threshold=2.0))
     run = smoother.refine(solver=solver)
     expected = arbor_cli("replay", path, "--robust", "--inlier-threshold", "2",
                          "--batch", solver)["batches"][-1]
@@ -181,8 +181,8 @@ def test_refine_on_request_matches_the_replays_final_batch(solver, data_dir, arb
 
 
 def test_refine_reseeds_only_when_the_cost_falls(data_dir):
-    graph = arbor.read(os.path.join(data_dir, "manhattan_2d.g2o"))
-    smoother = arbor.OnlineSmoother2()
+    graph = arbor_slam.read(os.path.join(data_dir, "manhattan_2d.g2o"))
+    smoother = arbor_slam.OnlineSmoother2()
     index = {int(i): k for k, i in enumerate(graph.ids)}
     # Half the file, no finalize: the incremental estimate is not the optimum yet.
     order = sorted(range(graph.num_edges),
@@ -202,7 +202,7 @@ def test_refine_reseeds_only_when_the_cost_falls(data_dir):
 
 
 def test_refine_refuses_what_it_cannot_run():
-    smoother = arbor.OnlineSmoother2()
+    smoother = arbor_slam.OnlineSmoother2()
     with pytest.raises(ValueError, match="nothing to solve"):
         smoother.refine()
     smoother.add_edge(0, 1, [1, 0, 0], np.eye(3))
@@ -214,8 +214,8 @@ def test_refine_refuses_what_it_cannot_run():
 def test_refine_starts_from_the_classification_only_once_finalized(data_dir):
     """Before finalize() the robust batch is a correction at the c² in use; after it, GNC runs at
     the bound the smoother keeps a settled inlier within (recheck_margin, 2, times that c²)."""
-    graph = arbor.read(os.path.join(data_dir, "manhattan_2d_group_0.1.g2o"))
-    smoother = arbor.OnlineSmoother2(robust=arbor.RobustOptions(kernel="tls", threshold=2.0))
+    graph = arbor_slam.read(os.path.join(data_dir, "manhattan_2d_group_0.1.g2o"))
+    smoother = arbor_slam.OnlineSmoother2(robust=arbor_slam.RobustOptions(kernel="tls", threshold=2.0))
     index = {int(i): k for k, i in enumerate(graph.ids)}
     order = sorted(range(graph.num_edges),
                    key=lambda e: max(index[int(graph.edges[e, 0])], index[int(graph.edges[e, 1])]))

@@ -1,4 +1,4 @@
-# The type stub (python/arbor.pyi, found beside the module) cannot drift from the module: the
+# The type stub (python/arbor_slam.pyi, found beside the module) cannot drift from the module: the
 # same public names, classes with the same public members, functions and methods with the same
 # parameters as pybind11's signatures; every public name has a docstring; and mypy passes on the
 # stub (--strict) and on the documented examples (docs/examples, the pages' python blocks).
@@ -10,10 +10,10 @@ import sys
 
 import pytest
 
-import arbor
+import arbor_slam
 from test_docs_snippets import PAGES, ROOT, snippets
 
-STUB = os.path.join(os.path.dirname(arbor.__file__), arbor.__name__ + ".pyi")
+STUB = os.path.join(os.path.dirname(arbor_slam.__file__), arbor_slam.__name__ + ".pyi")
 EXAMPLES = os.path.join(ROOT, "docs", "examples")
 SIGNATURE = re.compile(r"^(?:\d+\. )?(\w+)\((.*)\)(?: -> .*)?$")
 
@@ -88,7 +88,7 @@ def documented(doc):
 
 def test_the_stub_is_beside_the_module():
     assert os.path.isfile(STUB), STUB
-    with open(STUB) as f, open(os.path.join(ROOT, "python", "arbor.pyi")) as source:
+    with open(STUB) as f, open(os.path.join(ROOT, "python", "arbor_slam.pyi")) as source:
         assert f.read() == source.read()
 
 
@@ -154,7 +154,7 @@ def mypy_dir(tmp_path_factory):
 
 
 def test_mypy_passes_on_the_stub(mypy_dir):
-    run_mypy(mypy_dir, "--strict", "-m", arbor.__name__)
+    run_mypy(mypy_dir, "--strict", "-m", arbor_slam.__name__)
 
 
 def test_mypy_passes_on_the_examples(mypy_dir):

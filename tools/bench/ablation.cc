@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/ablation.h"
+#include "arbor_slam/tools/bench/ablation.h"
 
 #include <stdexcept>
 

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/online_gnc.h"
+#include "arbor_slam/bayestree/online_gnc.h"
 
 namespace arbor::bench {
 

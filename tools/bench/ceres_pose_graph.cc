@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/ceres_pose_graph.h"
+#include "arbor_slam/tools/bench/ceres_pose_graph.h"
 
 #include <algorithm>
 #include <array>

@@ -11,7 +11,7 @@
 
 #include <Eigen/Core>
 
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor::bench {
 

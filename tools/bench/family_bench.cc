@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/family_bench.h"
+#include "arbor_slam/tools/bench/family_bench.h"
 
 #include <cmath>
 #include <filesystem>
@@ -8,9 +8,9 @@
 #include <stdexcept>
 #include <tuple>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/bench/format.h"
-#include "arbor/tools/bench/world_families.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/bench/format.h"
+#include "arbor_slam/tools/bench/world_families.h"
 
 namespace arbor::bench {
 namespace {

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tools/bench/robust_bench.h"
-#include "arbor/tools/generator/false_closures.h"
+#include "arbor_slam/tools/bench/robust_bench.h"
+#include "arbor_slam/tools/generator/false_closures.h"
 
 namespace arbor::bench {
 

@@ -1,13 +1,13 @@
-#include "arbor/tools/bench/growth.h"
+#include "arbor_slam/tools/bench/growth.h"
 
 #include <algorithm>
 #include <stdexcept>
 
-#include "arbor/core/latency_summary.h"
-#include "arbor/core/normal_equations.h"
-#include "arbor/tools/bench/format.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/replay_order.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/core/normal_equations.h"
+#include "arbor_slam/tools/bench/format.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/replay_order.h"
 
 namespace arbor::bench {
 namespace {

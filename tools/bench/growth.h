@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor::bench {
 

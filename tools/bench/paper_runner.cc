@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/paper_runner.h"
+#include "arbor_slam/tools/bench/paper_runner.h"
 
 #include <cmath>
 #include <cstdio>
@@ -11,9 +11,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/initialization.h"
-#include "arbor/tools/bench/format.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/tools/bench/format.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 
 namespace arbor::bench {
 namespace {

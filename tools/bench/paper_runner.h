@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/latency_summary.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor::bench {
 

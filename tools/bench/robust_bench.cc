@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/robust_bench.h"
+#include "arbor_slam/tools/bench/robust_bench.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,12 +14,12 @@
 #include <tuple>
 #include <variant>
 
-#include "arbor/core/initialization.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/bench/format.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/online_threshold.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/bench/format.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/online_threshold.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 
 namespace arbor::bench {
 namespace {

@@ -37,13 +37,13 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/latency_summary.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/labels_file.h"
-#include "arbor/tools/bench/robust_metrics.h"
-#include "arbor/tools/bench/shared_data.h"
-#include "arbor/tools/generator/false_closures.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/tools/bench/robust_metrics.h"
+#include "arbor_slam/tools/bench/shared_data.h"
+#include "arbor_slam/tools/generator/false_closures.h"
 
 namespace arbor::bench {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/robust_metrics.h"
+#include "arbor_slam/tools/bench/robust_metrics.h"
 
 #include <algorithm>
 #include <set>

@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/rigid_alignment.h"
-#include "arbor/io/labels_file.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/rigid_alignment.h"
+#include "arbor_slam/io/labels_file.h"
 
 namespace arbor::bench {
 

@@ -1,10 +1,10 @@
-#include "arbor/tools/bench/robust_replay_hooks.h"
+#include "arbor_slam/tools/bench/robust_replay_hooks.h"
 
 #include <stdexcept>
 #include <string>
 #include <utility>
 
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor::bench {
 namespace {

@@ -6,9 +6,9 @@
 // each the fastest of a few runs where the bench asks for more than one (--repeat).
 #pragma once
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/tools/bench/robust_bench.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/tools/bench/robust_bench.h"
 
 namespace arbor::bench {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/bench/shared_data.h"
+#include "arbor_slam/tools/bench/shared_data.h"
 
 #include <algorithm>
 #include <cstdlib>

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor::bench {
 

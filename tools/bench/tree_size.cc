@@ -1,13 +1,13 @@
-#include "arbor/tools/bench/tree_size.h"
+#include "arbor_slam/tools/bench/tree_size.h"
 
 #include <chrono>
 #include <cstdlib>
 #include <utility>
 
-#include "arbor/bayestree/elimination_plan.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
-#include "arbor/tools/bench/format.h"
+#include "arbor_slam/bayestree/elimination_plan.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
+#include "arbor_slam/tools/bench/format.h"
 
 namespace arbor::bench {
 

@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/tree_shape.h"
-#include "arbor/core/latency_summary.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/bayestree/tree_shape.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor::bench {
 

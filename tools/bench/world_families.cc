@@ -1,11 +1,11 @@
-#include "arbor/tools/bench/world_families.h"
+#include "arbor_slam/tools/bench/world_families.h"
 
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
 
-#include "arbor/tools/generator/random.h"
+#include "arbor_slam/tools/generator/random.h"
 
 namespace arbor::bench {
 

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tools/generator/road_world.h"
+#include "arbor_slam/tools/generator/road_world.h"
 
 namespace arbor::bench {
 

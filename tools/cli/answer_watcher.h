@@ -15,9 +15,9 @@
 
 #include <lcm/lcm-cpp.hpp>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/cli/bus_key_flag.h"
-#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/cli/bus_key_flag.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
 
 namespace arbor::cli {
 

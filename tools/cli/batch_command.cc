@@ -8,19 +8,19 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/io/edge_choice_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/trajectory_writer.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/covariance_output.h"
-#include "arbor/tools/cli/flag_set.h"
-#include "arbor/tools/cli/online_threshold.h"
-#include "arbor/tools/cli/output_files.h"
-#include "arbor/tools/cli/robust_flags.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/io/edge_choice_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/trajectory_writer.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/covariance_output.h"
+#include "arbor_slam/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/online_threshold.h"
+#include "arbor_slam/tools/cli/output_files.h"
+#include "arbor_slam/tools/cli/robust_flags.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 namespace {

@@ -1,11 +1,11 @@
-#include "arbor/tools/cli/batch_refinement.h"
+#include "arbor_slam/tools/cli/batch_refinement.h"
 
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

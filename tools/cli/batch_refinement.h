@@ -9,8 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arbor/tools/cli/replay_runner.h"
-#include "arbor/tools/refine/batch_refiner.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
 
 namespace arbor::cli {
 

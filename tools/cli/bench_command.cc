@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include "arbor/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/commands.h"
 
 namespace arbor::cli {
 

@@ -1,9 +1,9 @@
-#include "arbor/tools/cli/bus_key_flag.h"
+#include "arbor_slam/tools/cli/bus_key_flag.h"
 
 #include <iostream>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
 
 namespace arbor::cli {
 

@@ -11,7 +11,7 @@
 #include <boost/program_options.hpp>
 #include <lcm/lcm-cpp.hpp>
 
-#include "arbor/tools/serve/bus_auth.h"
+#include "arbor_slam/tools/serve/bus_auth.h"
 
 namespace arbor::cli {
 

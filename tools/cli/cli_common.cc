@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 #include <algorithm>
 #include <fstream>

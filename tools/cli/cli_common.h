@@ -9,9 +9,9 @@
 #include <boost/program_options.hpp>
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/information.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/pose_graph_file.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/pose_graph_file.h"
 
 namespace arbor::cli {
 

@@ -1,10 +1,10 @@
-#include "arbor/tools/cli/config_file.h"
+#include "arbor_slam/tools/cli/config_file.h"
 
 #include <cctype>
 #include <fstream>
 #include <set>
 
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

@@ -11,13 +11,13 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/cli/answer_watcher.h"
-#include "arbor/tools/cli/bus_key_flag.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/serve/lcm_tuning.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/cli/answer_watcher.h"
+#include "arbor_slam/tools/cli/bus_key_flag.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 namespace po = boost::program_options;

@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/covariance_output.h"
+#include "arbor_slam/tools/cli/covariance_output.h"
 
 #include <algorithm>
 #include <charconv>
@@ -7,8 +7,8 @@
 #include <ostream>
 #include <stdexcept>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor::cli {
 namespace {

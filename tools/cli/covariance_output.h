@@ -11,8 +11,8 @@
 
 #include <Eigen/Core>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor::cli {
 

@@ -1,11 +1,11 @@
-#include "arbor/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/flag_set.h"
 
 #include <algorithm>
 #include <iostream>
 #include <set>
 #include <sstream>
 
-#include "arbor/tools/cli/config_file.h"
+#include "arbor_slam/tools/cli/config_file.h"
 
 namespace arbor::cli {
 

@@ -13,8 +13,8 @@
 
 #include <boost/program_options.hpp>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/option_table.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/option_table.h"
 
 namespace arbor::cli {
 

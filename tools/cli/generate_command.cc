@@ -8,14 +8,14 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "arbor/core/initialization.h"
-#include "arbor/io/labels_file.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/generator/false_closures.h"
-#include "arbor/tools/generator/graph_generator.h"
-#include "arbor/tools/generator/road_world.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/io/labels_file.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/generator/false_closures.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/generator/road_world.h"
 
 namespace arbor::cli {
 namespace {

@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/online_robust_table.h"
+#include "arbor_slam/tools/cli/online_robust_table.h"
 
 namespace arbor::cli {
 

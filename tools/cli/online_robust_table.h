@@ -3,8 +3,8 @@
 // with '_' for '-') read them. Nothing here depends on a command-line library.
 #pragma once
 
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/tools/cli/option_table.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/tools/cli/option_table.h"
 
 namespace arbor::cli {
 

@@ -1,10 +1,10 @@
-#include "arbor/tools/cli/online_threshold.h"
+#include "arbor_slam/tools/cli/online_threshold.h"
 
 #include <algorithm>
 #include <chrono>
 #include <utility>
 
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 namespace arbor::cli {
 

@@ -13,11 +13,11 @@
 
 #include <vector>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/io/edge_choice_file.h"
-#include "arbor/tools/refine/gnc_from_online.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/io/edge_choice_file.h"
+#include "arbor_slam/tools/refine/gnc_from_online.h"
 
 namespace arbor::cli {
 

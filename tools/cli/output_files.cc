@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/output_files.h"
+#include "arbor_slam/tools/cli/output_files.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -11,7 +11,7 @@
 #include <variant>
 #include <vector>
 
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 namespace arbor::cli {
 

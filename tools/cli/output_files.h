@@ -5,9 +5,9 @@
 
 #include <string>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/stamps_file.h"
-#include "arbor/io/trajectory_writer.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/stamps_file.h"
+#include "arbor_slam/io/trajectory_writer.h"
 
 namespace arbor::cli {
 

@@ -15,11 +15,11 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arbor/io/trajectory_reader.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/output_files.h"
-#include "arbor/tools/cli/trajectory_errors.h"
+#include "arbor_slam/io/trajectory_reader.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/output_files.h"
+#include "arbor_slam/tools/cli/trajectory_errors.h"
 
 namespace arbor::cli {
 namespace {

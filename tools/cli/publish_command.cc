@@ -14,16 +14,16 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/latency_summary.h"
-#include "arbor/io/edge_choice_file.h"
-#include "arbor/io/lcm_messages.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/bus_key_flag.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/publish_stream.h"
-#include "arbor/tools/serve/lcm_tuning.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/io/edge_choice_file.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/bus_key_flag.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/publish_stream.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 namespace {

@@ -13,8 +13,8 @@
 #include <variant>
 #include <vector>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/cli/replay_order.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/cli/replay_order.h"
 
 namespace arbor::cli {
 

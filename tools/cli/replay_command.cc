@@ -1,7 +1,7 @@
 // arbor replay FILE: feed a file's edges one at a time (in order of max(i, j), then file order)
 // to the incremental smoother, print per-update latency, final F, and F of batch LM started
 // from the incremental estimate.
-#include "arbor/tools/cli/replay_command.h"
+#include "arbor_slam/tools/cli/replay_command.h"
 
 #include <algorithm>
 #include <cctype>
@@ -12,17 +12,17 @@
 
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/heap_policy.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/tools/cli/batch_refinement.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/covariance_output.h"
-#include "arbor/tools/cli/flag_set.h"
-#include "arbor/tools/cli/output_files.h"
-#include "arbor/tools/cli/replay_runner.h"
-#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/heap_policy.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/batch_refinement.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/covariance_output.h"
+#include "arbor_slam/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/output_files.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/cli/smoother_flags.h"
 
 namespace arbor::cli {
 namespace {

@@ -5,13 +5,13 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/trajectory_writer.h"
-#include "arbor/tools/cli/flag_set.h"
-#include "arbor/tools/cli/robust_flags.h"
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/trajectory_writer.h"
+#include "arbor_slam/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/robust_flags.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 
 namespace arbor::cli {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/replay_runner.h"
+#include "arbor_slam/tools/cli/replay_runner.h"
 
 #include <fstream>
 #include <iomanip>
@@ -6,11 +6,11 @@
 #include <set>
 #include <stdexcept>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/peak_rss.h"
-#include "arbor/tools/cli/replay_order.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/peak_rss.h"
+#include "arbor_slam/tools/cli/replay_order.h"
 
 namespace arbor::cli {
 

@@ -8,12 +8,12 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/latency_summary.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/io/edge_choice_file.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/io/edge_choice_file.h"
 
 namespace arbor::cli {
 

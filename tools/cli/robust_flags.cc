@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/robust_flags.h"
+#include "arbor_slam/tools/cli/robust_flags.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/flag_set.h"
 
 namespace arbor::cli {
 

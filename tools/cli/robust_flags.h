@@ -7,11 +7,11 @@
 
 #include <boost/program_options.hpp>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/bayestree/online_gnc.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/robust_kernel.h"
-#include "arbor/tools/cli/online_robust_table.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/bayestree/online_gnc.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/robust_kernel.h"
+#include "arbor_slam/tools/cli/online_robust_table.h"
 
 namespace arbor::cli {
 

@@ -1,6 +1,6 @@
 // arbor serve: ingest edges, priors and edge commands published over LCM into the incremental
 // smoother and publish the estimate (tools/serve/serve_service.h). SIGINT/SIGTERM end it cleanly.
-#include "arbor/tools/cli/serve_command.h"
+#include "arbor_slam/tools/cli/serve_command.h"
 
 #include <algorithm>
 #include <atomic>
@@ -19,18 +19,18 @@
 #include <lcm/lcm-cpp.hpp>
 #include <nlohmann/json.hpp>
 
-#include "arbor/core/heap_policy.h"
-#include "arbor/tools/cli/batch_refinement.h"
-#include "arbor/tools/cli/bus_key_flag.h"
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
-#include "arbor/tools/cli/flag_set.h"
-#include "arbor/tools/cli/output_files.h"
-#include "arbor/tools/cli/robust_flags.h"
-#include "arbor/tools/cli/smoother_flags.h"
-#include "arbor/tools/serve/closure_report.h"
-#include "arbor/tools/serve/lcm_tuning.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/core/heap_policy.h"
+#include "arbor_slam/tools/cli/batch_refinement.h"
+#include "arbor_slam/tools/cli/bus_key_flag.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/output_files.h"
+#include "arbor_slam/tools/cli/robust_flags.h"
+#include "arbor_slam/tools/cli/smoother_flags.h"
+#include "arbor_slam/tools/serve/closure_report.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 namespace {

@@ -8,10 +8,10 @@
 #include <string>
 #include <vector>
 
-#include "arbor/io/trajectory_writer.h"
-#include "arbor/tools/cli/flag_set.h"
-#include "arbor/tools/cli/robust_flags.h"
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/io/trajectory_writer.h"
+#include "arbor_slam/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/robust_flags.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 namespace arbor::cli {
 

@@ -1,10 +1,10 @@
-#include "arbor/tools/cli/smoother_flags.h"
+#include "arbor_slam/tools/cli/smoother_flags.h"
 
 #include <cmath>
 #include <sstream>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/flag_set.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/flag_set.h"
 
 namespace arbor::cli {
 

@@ -7,8 +7,8 @@
 
 #include <boost/program_options.hpp>
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/tools/cli/smoother_table.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/tools/cli/smoother_table.h"
 
 namespace arbor::cli {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/smoother_table.h"
+#include "arbor_slam/tools/cli/smoother_table.h"
 
 #include <cmath>
 

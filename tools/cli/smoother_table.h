@@ -4,8 +4,8 @@
 // it; nothing here depends on a command-line library.
 #pragma once
 
-#include "arbor/bayestree/incremental_smoother.h"
-#include "arbor/tools/cli/option_table.h"
+#include "arbor_slam/bayestree/incremental_smoother.h"
+#include "arbor_slam/tools/cli/option_table.h"
 
 namespace arbor::cli {
 

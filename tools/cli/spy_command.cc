@@ -11,8 +11,8 @@
 #include <iostream>
 #include <stdexcept>
 
-#include "arbor/tools/cli/cli_common.h"
-#include "arbor/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/commands.h"
 
 namespace arbor::cli {
 namespace {

@@ -1,4 +1,4 @@
-#include "arbor/tools/cli/trajectory_errors.h"
+#include "arbor_slam/tools/cli/trajectory_errors.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "arbor/core/rigid_alignment.h"
+#include "arbor_slam/core/rigid_alignment.h"
 
 namespace arbor::cli {
 

@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/io/trajectory_reader.h"
+#include "arbor_slam/io/trajectory_reader.h"
 
 namespace arbor::cli {
 

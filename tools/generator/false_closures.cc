@@ -1,4 +1,4 @@
-#include "arbor/tools/generator/false_closures.h"
+#include "arbor_slam/tools/generator/false_closures.h"
 
 #include <algorithm>
 #include <climits>

@@ -39,8 +39,8 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/generator/random.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/generator/random.h"
 
 namespace arbor::sim {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "arbor/tools/generator/random.h"
+#include "arbor_slam/tools/generator/random.h"
 
 namespace arbor::sim {
 namespace {

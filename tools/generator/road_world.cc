@@ -1,4 +1,4 @@
-#include "arbor/tools/generator/road_world.h"
+#include "arbor_slam/tools/generator/road_world.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/tools/generator/random.h"
+#include "arbor_slam/tools/generator/random.h"
 
 namespace arbor::sim {
 namespace {

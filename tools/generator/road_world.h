@@ -35,7 +35,7 @@
 
 #include <cstdint>
 
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor::sim {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/refine/batch_refiner.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
 
 #include <algorithm>
 #include <atomic>
@@ -8,9 +8,9 @@
 #include <stdexcept>
 #include <thread>
 
-#include "arbor/core/elapsed.h"
-#include "arbor/core/serial_openmp.h"
-#include "arbor/core/thread_priority.h"
+#include "arbor_slam/core/elapsed.h"
+#include "arbor_slam/core/serial_openmp.h"
+#include "arbor_slam/core/thread_priority.h"
 
 namespace arbor::refine {
 

@@ -42,11 +42,11 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/tools/refine/batch_solvers.h"
-#include "arbor/tools/refine/gnc_from_online.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
+#include "arbor_slam/tools/refine/gnc_from_online.h"
 
 namespace arbor::refine {
 

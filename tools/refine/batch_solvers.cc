@@ -1,4 +1,4 @@
-#include "arbor/tools/refine/batch_solvers.h"
+#include "arbor_slam/tools/refine/batch_solvers.h"
 
 #include <stdexcept>
 

@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/pose_graph.h"
-#include "arbor/core/riemannian_staircase.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/pose_graph.h"
+#include "arbor_slam/core/riemannian_staircase.h"
 
 namespace arbor::refine {
 

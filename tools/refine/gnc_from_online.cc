@@ -1,4 +1,4 @@
-#include "arbor/tools/refine/gnc_from_online.h"
+#include "arbor_slam/tools/refine/gnc_from_online.h"
 
 #include <algorithm>
 #include <stdexcept>

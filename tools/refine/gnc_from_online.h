@@ -16,8 +16,8 @@
 
 #include <vector>
 
-#include "arbor/core/gnc_solver.h"
-#include "arbor/core/pose_graph.h"
+#include "arbor_slam/core/gnc_solver.h"
+#include "arbor_slam/core/pose_graph.h"
 
 namespace arbor::refine {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/bus_auth.h"
+#include "arbor_slam/tools/serve/bus_auth.h"
 
 #include <algorithm>
 #include <array>

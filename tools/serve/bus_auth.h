@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tools/serve/bus_key.h"
+#include "arbor_slam/tools/serve/bus_key.h"
 
 namespace arbor::serve {
 

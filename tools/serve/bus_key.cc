@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/bus_key.h"
+#include "arbor_slam/tools/serve/bus_key.h"
 
 #include <cerrno>
 #include <cstdio>

@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/closure_report.h"
+#include "arbor_slam/tools/serve/closure_report.h"
 
 #include <fstream>
 #include <iomanip>

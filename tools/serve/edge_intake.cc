@@ -1,10 +1,10 @@
-#include "arbor/tools/serve/edge_intake.h"
+#include "arbor_slam/tools/serve/edge_intake.h"
 
 #include <algorithm>
 #include <limits>
 #include <stdexcept>
 
-#include "arbor/io/lcm_messages.h"
+#include "arbor_slam/io/lcm_messages.h"
 
 namespace arbor::serve {
 namespace {

@@ -37,8 +37,8 @@
 #include <utility>
 #include <vector>
 
-#include "arbor/io/stream_measurements.h"
-#include "arbor/tools/serve/stream_types.h"
+#include "arbor_slam/io/stream_measurements.h"
+#include "arbor_slam/tools/serve/stream_types.h"
 
 namespace arbor::serve {
 

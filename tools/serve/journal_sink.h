@@ -12,7 +12,7 @@
 #include <functional>
 #include <string>
 
-#include "arbor/tools/serve/stream_types.h"
+#include "arbor_slam/tools/serve/stream_types.h"
 
 namespace arbor::serve {
 

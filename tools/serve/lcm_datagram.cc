@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/lcm_datagram.h"
+#include "arbor_slam/tools/serve/lcm_datagram.h"
 
 #include <algorithm>
 #include <cstdio>

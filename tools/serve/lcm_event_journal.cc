@@ -1,11 +1,11 @@
-#include "arbor/tools/serve/lcm_event_journal.h"
+#include "arbor_slam/tools/serve/lcm_event_journal.h"
 
 #include <stdexcept>
 #include <utility>
 #include <vector>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/serve/lcm_mapping.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/serve/lcm_mapping.h"
 
 namespace arbor::serve {
 namespace {

@@ -10,9 +10,9 @@
 #include <memory>
 #include <string>
 
-#include "arbor/io/lcm_journal.h"
-#include "arbor/tools/serve/journal_sink.h"
-#include "arbor/tools/serve/lcm_channels.h"
+#include "arbor_slam/io/lcm_journal.h"
+#include "arbor_slam/tools/serve/journal_sink.h"
+#include "arbor_slam/tools/serve/lcm_channels.h"
 
 namespace arbor::serve {
 

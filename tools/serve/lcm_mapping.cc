@@ -1,9 +1,9 @@
-#include "arbor/tools/serve/lcm_mapping.h"
+#include "arbor_slam/tools/serve/lcm_mapping.h"
 
 #include <algorithm>
 #include <string>
 
-#include "arbor/tools/serve/edge_intake.h"
+#include "arbor_slam/tools/serve/edge_intake.h"
 
 namespace arbor::serve {
 

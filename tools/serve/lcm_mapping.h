@@ -7,9 +7,9 @@
 
 #include <cstdint>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/serve/stream_types.h"
-#include "arbor/tools/serve/streaming_core.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/serve/stream_types.h"
+#include "arbor_slam/tools/serve/streaming_core.h"
 
 namespace arbor::serve {
 

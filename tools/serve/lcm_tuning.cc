@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
 
 #include <dirent.h>
 #include <netinet/in.h>

@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/link_watch.h"
+#include "arbor_slam/tools/serve/link_watch.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -9,9 +9,9 @@
 #include <poll.h>
 #include <unistd.h>
 
-#include "arbor/core/elapsed.h"
-#include "arbor/tools/serve/lcm_tuning.h"
-#include "arbor/tools/serve/tcpq_handshake.h"
+#include "arbor_slam/core/elapsed.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/serve/tcpq_handshake.h"
 
 namespace arbor::serve {
 namespace {

@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/serve_engine.h"
+#include "arbor_slam/tools/serve/serve_engine.h"
 
 #include <algorithm>
 #include <array>
@@ -8,8 +8,8 @@
 #include <stdexcept>
 #include <vector>
 
-#include "arbor/io/pose_graph_file.h"
-#include "arbor/io/trajectory_writer.h"
+#include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/io/trajectory_writer.h"
 
 namespace arbor::serve {
 namespace {

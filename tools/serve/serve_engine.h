@@ -11,11 +11,11 @@
 #include <string>
 #include <vector>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/io/stream_measurements.h"
-#include "arbor/io/trajectory_writer.h"
-#include "arbor/tools/refine/batch_refiner.h"
-#include "arbor/tools/serve/stream_types.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/io/stream_measurements.h"
+#include "arbor_slam/io/trajectory_writer.h"
+#include "arbor_slam/tools/refine/batch_refiner.h"
+#include "arbor_slam/tools/serve/stream_types.h"
 
 namespace arbor::serve {
 

@@ -1,11 +1,11 @@
-#include "arbor/tools/serve/serve_service.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 
 #include <algorithm>
 #include <stdexcept>
 
-#include "arbor/tools/serve/lcm_event_journal.h"
-#include "arbor/tools/serve/lcm_mapping.h"
-#include "arbor/tools/serve/lcm_tuning.h"
+#include "arbor_slam/tools/serve/lcm_event_journal.h"
+#include "arbor_slam/tools/serve/lcm_mapping.h"
+#include "arbor_slam/tools/serve/lcm_tuning.h"
 
 namespace arbor::serve {
 

@@ -22,13 +22,13 @@
 
 #include <lcm/lcm-cpp.hpp>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/serve/bus_auth.h"
-#include "arbor/tools/serve/lcm_channels.h"
-#include "arbor/tools/serve/link_watch.h"
-#include "arbor/tools/serve/log_limiter.h"
-#include "arbor/tools/serve/streaming_core.h"
-#include "arbor/tools/serve/udpm_receiver.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/serve/bus_auth.h"
+#include "arbor_slam/tools/serve/lcm_channels.h"
+#include "arbor_slam/tools/serve/link_watch.h"
+#include "arbor_slam/tools/serve/log_limiter.h"
+#include "arbor_slam/tools/serve/streaming_core.h"
+#include "arbor_slam/tools/serve/udpm_receiver.h"
 
 namespace arbor::serve {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/snapshot_dir.h"
+#include "arbor_slam/tools/serve/snapshot_dir.h"
 
 #include <cerrno>
 #include <cstring>

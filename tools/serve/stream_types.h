@@ -11,7 +11,7 @@
 
 #include <Eigen/Core>
 
-#include "arbor/io/stream_measurements.h"
+#include "arbor_slam/io/stream_measurements.h"
 
 namespace arbor::serve {
 

@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/streaming_core.h"
+#include "arbor_slam/tools/serve/streaming_core.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "arbor/tools/serve/closure_report.h"
+#include "arbor_slam/tools/serve/closure_report.h"
 
 namespace arbor::serve {
 namespace {

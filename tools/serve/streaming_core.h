@@ -32,13 +32,13 @@
 #include <thread>
 #include <vector>
 
-#include "arbor/core/latency_summary.h"
-#include "arbor/tools/serve/edge_intake.h"
-#include "arbor/tools/serve/journal_sink.h"
-#include "arbor/tools/serve/log_limiter.h"
-#include "arbor/tools/serve/serve_engine.h"
-#include "arbor/tools/serve/snapshot_dir.h"
-#include "arbor/tools/serve/stream_types.h"
+#include "arbor_slam/core/latency_summary.h"
+#include "arbor_slam/tools/serve/edge_intake.h"
+#include "arbor_slam/tools/serve/journal_sink.h"
+#include "arbor_slam/tools/serve/log_limiter.h"
+#include "arbor_slam/tools/serve/serve_engine.h"
+#include "arbor_slam/tools/serve/snapshot_dir.h"
+#include "arbor_slam/tools/serve/stream_types.h"
 
 namespace arbor::serve {
 

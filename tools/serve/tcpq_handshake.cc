@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/tcpq_handshake.h"
+#include "arbor_slam/tools/serve/tcpq_handshake.h"
 
 #include <arpa/inet.h>
 #include <fcntl.h>

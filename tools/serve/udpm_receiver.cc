@@ -1,4 +1,4 @@
-#include "arbor/tools/serve/udpm_receiver.h"
+#include "arbor_slam/tools/serve/udpm_receiver.h"
 
 #include <arpa/inet.h>
 #include <poll.h>

@@ -20,8 +20,8 @@
 #include <string>
 #include <vector>
 
-#include "arbor/tools/serve/lcm_datagram.h"
-#include "arbor/tools/serve/log_limiter.h"
+#include "arbor_slam/tools/serve/lcm_datagram.h"
+#include "arbor_slam/tools/serve/log_limiter.h"
 
 namespace arbor::serve {
 

@@ -2,9 +2,9 @@
 // Levenberg–Marquardt solve from a spanning-tree start, and the initialisations.
 #include <benchmark/benchmark.h>
 
-#include "arbor/core/batch_solver.h"
-#include "arbor/core/initialization.h"
-#include "arbor/tools/bench/micro/bench_graphs.h"
+#include "arbor_slam/core/batch_solver.h"
+#include "arbor_slam/core/initialization.h"
+#include "arbor_slam/tools/bench/micro/bench_graphs.h"
 
 namespace arbor {
 namespace {

@@ -10,7 +10,7 @@
 #include <malloc.h>
 #endif
 
-#include "arbor/tools/generator/graph_generator.h"
+#include "arbor_slam/tools/generator/graph_generator.h"
 
 namespace arbor::micro {
 

@@ -10,8 +10,8 @@
 
 #include <benchmark/benchmark.h>
 
-#include "arbor/io/lcm_messages.h"
-#include "arbor/tools/serve/bus_auth.h"
+#include "arbor_slam/io/lcm_messages.h"
+#include "arbor_slam/tools/serve/bus_auth.h"
 
 namespace arbor {
 namespace {

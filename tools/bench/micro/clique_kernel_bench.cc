@@ -7,7 +7,7 @@
 #include <benchmark/benchmark.h>
 #include <Eigen/Core>
 
-#include "arbor/bayestree/dense_kernels.h"
+#include "arbor_slam/bayestree/dense_kernels.h"
 
 namespace arbor {
 namespace {

@@ -6,8 +6,8 @@
 
 #include <benchmark/benchmark.h>
 
-#include "arbor/core/example_factors.h"
-#include "arbor/core/factor.h"
+#include "arbor_slam/core/example_factors.h"
+#include "arbor_slam/core/factor.h"
 
 namespace arbor {
 namespace {

@@ -1,9 +1,9 @@
 // Microbenchmarks of the Lie-group operations and the relative-pose factor (core/).
 #include <benchmark/benchmark.h>
 
-#include "arbor/core/relative_pose_factor.h"
-#include "arbor/core/se2.h"
-#include "arbor/core/se3.h"
+#include "arbor_slam/core/relative_pose_factor.h"
+#include "arbor_slam/core/se2.h"
+#include "arbor_slam/core/se3.h"
 
 namespace arbor {
 namespace {

@@ -9,9 +9,9 @@
 
 #include <benchmark/benchmark.h>
 
-#include "arbor/core/blas_threads.h"
-#include "arbor/tools/bench/micro/bench_graphs.h"
-#include "arbor/tools/cli/cli_common.h"
+#include "arbor_slam/core/blas_threads.h"
+#include "arbor_slam/tools/bench/micro/bench_graphs.h"
+#include "arbor_slam/tools/cli/cli_common.h"
 
 namespace {
 

@@ -10,9 +10,9 @@
 
 #include <benchmark/benchmark.h>
 
-#include "arbor/bayestree/online_smoother.h"
-#include "arbor/tools/bench/micro/bench_graphs.h"
-#include "arbor/tools/cli/replay_order.h"
+#include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tools/bench/micro/bench_graphs.h"
+#include "arbor_slam/tools/cli/replay_order.h"
 
 namespace arbor {
 namespace {
