@@ -2,7 +2,8 @@
 //
 // Twelve options (RobustOptions) and eight rules (RobustRule, plus the two the options
 // `scale` and `corroboration_window` switch). Every other number the layer uses is a constant
-// below, each with the reason for its value. docs/design.md, "Robust smoothing", has the table.
+// below, each with the reason for its value. docs/design.md, "Online robust smoothing", has
+// the tables.
 #pragma once
 
 #include <string>
