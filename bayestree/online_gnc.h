@@ -1,251 +1,76 @@
 // Online robust smoothing in the Bayes tree: graduated non-convexity per loop closure, in the
 // manner of riSAM (McGann, Rogers, Kaess, "Robust Incremental Smoothing and Mapping", ICRA 2023),
-// over IncrementalSmoother's weight seam (setFactorWeight). The online layer (OnlineSmoother)
-// owns one OnlineGnc and calls it around each smoother update; nothing here changes the Bayes
-// tree except through setFactorWeight, so every weight change is a relinearisation of that one
-// factor and only its keys' cliques (with their ancestors) are re-eliminated. A closure at
-// weight 0 (rejected, or entering rejected) is out of the elimination altogether: no fill, no
-// clique holds it; taken back it enters as a new factor (a fold-in of its two keys).
+// with the surrogate kernels of GNC (Yang, Antonante, Tzoumas, Carlone, RA-L 2020), over
+// IncrementalSmoother's weight seam (setFactorWeight). OnlineSmoother owns one OnlineGnc and calls
+// it around each smoother update; a weight change is a relinearisation of that one factor, so only
+// its keys' cliques and their ancestors are re-eliminated. A closure at weight 0 is out of the
+// elimination (no clique holds it); taken back, it enters as a new factor would.
 //
-// Which edges are weighted. Odometry (consecutive ids, |from − to| = 1), edges the caller marks
-// trusted, an edge that creates one of its poses (its only constraint: e = 0 by construction)
-// and an edge that joins two components (the smaller moves rigidly onto it, e = 0 again; with
-// nothing else between the two it cannot be judged) keep weight 1 for good and are reported
-// "trusted". Priors are never weighted. Every other edge is a loop closure and is judged.
+// Which edges are weighted. Odometry (|from − to| = 1), edges the caller marks trusted, an edge
+// that creates one of its poses and an edge that joins two components keep weight 1 ("trusted");
+// priors are never weighted; every other edge is a loop closure and is judged.
 //
-// One closure's life (the kernel ρ_μ on s = eᵀΩe, core/robust_kernel.h; c² the threshold):
-//   first check   the innovation m at the estimate before the closure enters (what the graph
-//                 without it says; RobustOptions::entry). With r the closure's whitened residual
-//                 there, A its whitened Jacobian on its two poses and Σ their joint covariance
-//                 in the Bayes tree,
-//                   m = rᵀ (I + A Σ Aᵀ)⁻¹ r                                             (E)
-//                 is what adding it at weight 1 raises the linearised objective by (the least
-//                 squares update's own cost); TLS gives it weight 1 iff that is below the c²
-//                 weight 0 costs. So m ≤ c²: weight 1, settled inlier, no graduation — on clean
-//                 data where every closure passes, the factors and hence the estimate are the
-//                 plain smoother's, bit for bit (w = 1 changes nothing in
-//                 Factor::linearizeWeighted). TLS, GM with m > entry_band·c²: weight 0, settled
-//                 outlier (it pulls nothing, so its cliques are not re-eliminated again). A · Σ ·
-//                 Aᵀ is one forward substitution along the two poses' paths to the root
-//                 (IncrementalSmoother::predictionCovariance). EntryTest::kResidual judges s₀
-//                 instead (m = s₀: Σ = 0), and so does a closure to a pose not in the tree yet.
-//   entry         m in (c², entry_band·c²] (any m > c² for Huber, Cauchy): the closure enters
-//                 with the convex surrogate: μ₀ = initialMu(s₀)
-//                 (TLS: c²/(2s₀ − c²); GM: 2s₀/c²) and w₀ = ρ′_μ₀(s₀), as GNC starts from the
-//                 largest residual (Yang et al., RA-L 2020, Alg. 1) — here the closure's own.
+// The tests (bayestree/closure_innovation.h). With r a closure's whitened residual, A its whitened
+// Jacobian on its two poses and Σ their joint covariance in the Bayes tree:
+//   m  = rᵀ (I + A Σ Aᵀ)⁻¹ r   (E)  innovation, at the estimate without the closure: what adding
+//                                   it at weight 1 raises the linearised objective by;
+//   m₋ = rᵀ (I − A Σ Aᵀ)⁻¹ r   (L)  leave-one-out: (E) of the graph without it, read with it;
+//   (P) two closures with ends within K poses agree when the estimate's short chains carry one
+//       onto a second measurement of the other within c² times the pairs' own scale.
+// TLS keeps a closure exactly when its cost at weight 1 is below the c² that weight 0 costs.
 //
-// The threshold on an estimated noise scale (RobustOptions::scale). Files' Ω are often wrong by
-// a constant factor; with the model right, the innovations of the true closures are χ²_d
-// (d = kDoF), with Ω too confident by a factor σ², σ²χ²_d. NoiseScale::kEstimated estimates σ̂²
-// from the innovations of every judged closure so far (estimateNoiseScale: a median, truncated
-// at tail_factor·c² to leave the false closures out and corrected for that truncation, then the
-// same from the `confidence` quantile for heavy tails, within max_tail_scale of the median's,
-// once tail_min_samples are kept) once scale_min_samples of them are in; before that, and with
-// NoiseScale::kGiven, σ̂² = 1 and c² is the given one. After it the threshold in use is the
-// estimator's own truncation, tail_factor · c² · σ̂²: what it counts as a false closure is what is
-// rejected (on correctly modelled data σ̂² ≈ 1; on the shared 2D files about 0.02, on the garage
-// 2·10⁻⁴, Ω being too weak there). With fewer than 3 innovations within the truncation, or a σ̂²
-// above 1 that fewer than a quarter of them support at Ω's word while there are fewer than
-// loosen_min_samples, there is no estimate and Ω is taken at its word (the given c², not
-// tail_factor times it).
-//   corroboration with RobustOptions::corroboration_window K > 0 (default 10; 0: off), σ̂² is
-//                 estimated from the innovations of corroborated closures: two closures a→b
-//                 (z₁, Ω₁) and c→d (z₂, Ω₂) with |a − c| ≤ K and |b − d| ≤ K (or reversed)
-//                 corroborate each other when the estimate's short chains x_a⁻¹x_c and
-//                 x_d⁻¹x_b carry z₂ onto a second measurement of a→b that agrees with z₁:
-//                   ẑ = (x_a⁻¹ x_c) z₂ (x_d⁻¹ x_b),  e = e(z₁⁻¹ ẑ),  eᵀ(Ω₁⁻¹ + Ω₂⁻¹)⁻¹e ≤ c²    (P)
-//                 (c² the given one times the pairs' own scale: estimateNoiseScale of every
-//                 neighbouring pair's s so far, from their median, true pairs being most of
-//                 them over a run, and past 1 only under its loosening rule; Ω₂ taken in b's
-//                 frame, the two ends being at most K poses apart).
-//                 σ̂²'s fixed points then start from the corroborated innovations' untruncated
-//                 median, not from 1: on sphere_bignoise (Ω ~200× too confident) no true
-//                 closure is within the truncation at σ² = 1. True closures come in runs along a
-//                 revisit and agree with their neighbours; a false one agrees with nothing (random,
-//                 local) or only with its own group. Where the first closures are mostly false
-//                 (intel with 90%: the first 21 are), their innovations on the odometry chain are
-//                 1.7–2800 at Ω's word while the true ones', later, are 0.002: a median of
-//                 them took σ̂² to 66 and accepted them all. Until scale_min_samples closures are
-//                 corroborated the warm-up goes on; with loosen_min_samples judged and still
-//                 too few corroborated (isolated closures) σ̂² is estimated from every
-//                 innovation, as with K = 0.
-//   the start     (RobustOptions::scale_start) each later estimate from the corroborated
-//                 innovations starts at their untruncated median or at the last σ̂², whichever
-//                 is lower: false groups agree with each other (P) and may come to outnumber the
-//                 true runs in the corroborated set, and a fixed point started at their median
-//                 stays among them (a generated Manhattan world, 1000 poses, 50% group false
-//                 closures, seed 3: σ̂² 1.25 → 2683 at the 200th, every closure accepted). From
-//                 the last σ̂² the fixed point reads what lies within the truncation there: it
-//                 still grows step by step, and comes down from a false start as before. The
-//                 first estimate, and the first after one is lost, start from the median.
-//   warm-up       a closure that arrives before the first estimate cannot be judged on the scale
-//                 yet: RobustOptions::warm_up kHold (default) keeps it at weight 0 (out of the
-//                 tree, its innovation recorded) and judges it by its innovation as on entry
-//                 once the estimate is there (or in finalize()); kGiven judges it at once, Ω at
-//                 its word. On the garage, whose Ω is ~10⁴ too weak, the 4th closure is false
-//                 and passes Ω's χ² test; accepted, it wrecks the Gauss–Newton smoother.
-//                 The update that lets the held closures in relinearises everything once
-//                 (OnlineSmoother::update): on 3D laps with Ω nine times too confident, the one
-//                 Gauss–Newton step from the odometry chain left the next closures'
-//                 innovations 20–65 times χ²'s median and σ̂² at 18.9 for 9.
-//                 The warm-up ends when σ̂² has a source, estimated or not: where the loosening
-//                 rule refuses an estimate, closures are judged at Ω's word until one comes, and
-//                 the round robin of re-checks takes them back one at a time, on an estimate
-//                 that has none of them, once it does. A generated sphere (10 rings of 30,
-//                 rotation noise 0.1 rad with Ω 100 times too confident, 10% random false
-//                 closures, seed 1) had every closure rejected at Ω's word until the 486th
-//                 update, then σ̂² 206 (c² × 618), and the re-checks let 23 in, false ones among
-//                 them: F 10¹² two updates later. With rehold_growth X (4 by default) a first
-//                 estimate that raises c² at least X times holds those closures again, and the
-//                 next update judges them as the warm-up's end does: that sphere (seeds 1–3) ends
-//                 at F* with exactly the false closures rejected, and so does intel with 90%
-//                 group false closures (seed 1), which diverges without it. On the other robust
-//                 files and the clean ones it changes no rejected set (sphere_bignoise, where it
-//                 fires, ends at the plain replay's F instead of 12.5% below it).
-//   a shrinking c²  when an estimate of σ̂² takes c² below 1/recheck_margin of the c² every
-//                 settled inlier was last checked against (raised with c² as it grows; not when
-//                 the estimate is lost and Ω's word stands in), the next step checks them all
-//                 at once, not in the round robin's turn: each whose s is past
-//                 recheck_margin·c² graduates again from μ₀ at s (sweepInliers; residuals only,
-//                 no Σ). Where the first closures are mostly false, the first σ̂² lets groups of
-//                 them in; when the true closures take σ̂² down (intel, 90% group false closures:
-//                 c² 1933 → 0.62), the round robin graduated one false closure of 30, the
-//                 estimate moved, and its next turn found 16 true closures bent past 2c² (s 3–47)
-//                 with 29 false ones still at weight 1; it graduated the true ones down and the
-//                 replay diverged. Checked together, 17 false ones (s 1.3–240) graduate at once
-//                 and leave within the update; the rest follow in the round robin.
-//   graduation    before each of the following smoother updates: s at the current estimate,
-//                 μ ← μ·step (TLS) or μ/step (GM), w = ρ′_μ(s), setFactorWeight(w). At most
-//                 RobustOptions::steps_per_update steps per OnlineSmoother::update (the first
-//                 rides on the update itself, the others each run one more smoother update),
-//                 so no update hangs, however many closures graduate.
-//   settled       TLS: w binary (s outside the band [μ/(μ+1) c², (μ+1)/μ c²], where the kernel
-//                 and its surrogate agree) or μ ≥ RobustOptions::max_mu; GM: μ at 1; Huber,
-//                 Cauchy (no graduation, IRLS): w moved by less than weight_tolerance. Or after
-//                 max_steps_per_closure steps, with the kernel's own weight at s.
-//   confirmed     (RobustOptions::confirm, off by default) TLS with EntryTest::kInnovation and
-//                 an estimated σ̂²: graduation compares s, the residual at an estimate the
-//                 closure itself pulls towards, with c². Where little else sees its poses a
-//                 false closure can pull them to within c² and settle at weight 1 (smallGrid3D
-//                 with 90% local false closures, seed 1: (1, 27) at s 61.6 against c² 192.8).
-//                 With `confirm`, a closure graduation settles at 1 is judged once more, at the
-//                 step after the update that eliminated it so, by what keeping it costs the
-//                 whole linearised objective against the c² that dropping it costs (TLS's own
-//                 choice for one closure, the others held): its leave-one-out innovation, from
-//                 its whitened residual r at the estimate with it and Σ with it,
-//                   m₋ = rᵀ (I − A Σ Aᵀ)⁻¹ r      (L, bayestree/closure_innovation.h)
-//                 ((E) of the graph without it; (1, 27): 423). m₋ > c²: weight 0, settled
-//                 outlier — unless a settled inlier agrees with it (P). Why it is off: the
-//                 first true closures of sphere_bignoise with 10% random false closures,
-//                 (0, 50) and (2, 51), reach m₋ 6.1·10⁴ and 2.6·10⁴ against c² 3831 (Ω ~200×
-//                 too confident, a ring of odometry between them) before any inlier can agree
-//                 with them; dropped, the replay loses the ring and diverges. On the garage and
-//                 intel true closures sit up to 1.6 times c² by (L), and intel's isolated
-//                 (99, 1371) and (346, 1375) at 1.13 and 1.16 times where smallGrid3D's false
-//                 (58, 100) is at 1.41: no bound on (L) alone keeps the true and drops the
-//                 false; with the agreeing runs exempt, the end's margin does (below).
-//   confirmed at the end (RobustOptions::final_confirm_margin, 1.25 by default; 0: off) the
-//                 same judgement in finalize(), for every settled TLS inlier no inlier agrees
-//                 with, each round, at the estimate of the whole replay: m₋ > margin·c² drops it,
-//                 at most one closure per pose a round, the largest m₋ first (the other is judged
-//                 again next round, at the estimate without the first).
-//                 A partner recorded on arrival agreed through the estimate of that moment,
-//                 which false closures may have bent; with end_partners_agree (default) it backs
-//                 the closure only while the two still agree (P) at the end's estimate
-//                 (sphere_bignoise with 10% random false closures: 619 → 627 of 645 rejected,
-//                 1.034 → 1.015 F*; no other shared or generated robust file changes), read in
-//                 both closures' frames (pairSBothWays) and within the c² in use, not the
-//                 pairs' scale (smallGrid3D with 50% local false closures, seed 2: the false
-//                 (1, 33) was backed by the true (11, 38) at 62.5 in its own frame, 1005 in the
-//                 other's, and ended at 1.145 F*; now 1.018).
-//                 By then sphere_bignoise's closures agree with their runs (none of its
-//                 inliers is unbacked above 0.4·c²), and the margin sits between the largest
-//                 unbacked true closure's m₋ measured on the shared and generated robust files
-//                 (intel's (346, 1375), 1.16–1.17·c²; smallGrid3D's (7, 2) 1.13) and the false
-//                 ones graduation keeps (smallGrid3D's (58, 100) 1.28–1.80, (1, 27) 4.2; torus3D's
-//                 (163, 188) 4.3), chosen on the seed-1 files and checked on seeds 2 and 3.
-//                 Agreement (P) backs a closure only between closures whose ends are more
-//                 than 2K poses apart: a shorter closure's neighbour can lie on the chain
-//                 between its own ends, and (P) then reads it against the estimate, which the
-//                 group it belongs to has bent (smallGrid3D's false (29, 35), 6 poses long,
-//                 "agreed" with the true (20, 29)). A false closure a long true run agrees with
-//                 is not reached, and agreement cannot be ignored: true closures in runs sit up
-//                 to 2.7·c² by (L).
-//   the end's scale (RobustOptions::end_scale_samples, 512 by default; 0: off) c² in use comes
-//                 from innovations at arrival, which carry the estimate's error of that moment
-//                 and, where false closures got in, their bending. At the end each of finalize()'s
-//                 (L) passes re-estimates it from (L) at the estimate of the whole graph: σ²_med of
-//                 the settled inliers' m₋ (a minority of false ones sits in its tail), times the
-//                 tail's reach past the median in the trusted edges' m₋ (σ̂²/σ²_med of
-//                 estimateNoiseScale; no false edge among them, but their own noise: on intel
-//                 the closures are 1.6 times noisier than the odometry, so their scale is not
-//                 taken), each from at most end_scale_samples evenly spaced, and c²_end =
-//                 tail_factor·c²·σ̂²_end. It replaces c² for the pass's drops and for taking
-//                 closures back only when at least end_scale_gap (2) times smaller: the tail of
-//                 a few hundred samples moves by tens of percent. sphere_bignoise with 10%
-//                 random false closures: c² 22386 from the innovations, c²_end 6700 in the
-//                 first pass and about 5000 later, where its true closures' m₋ reach 4760; on
-//                 the other shared robust files c²_end is within 0.6–1.3 of c². Where it
-//                 replaces c², the pass drops past end_confirm_margin·c²_end (1), not
-//                 final_confirm_margin·c² (1.25): read at the whole graph's estimate, it needs
-//                 less room than c² from arrivals (that sphere_bignoise file: 1.0113 → 1.0090
-//                 F*, 631 → 635 rejected, no true one; smallGrid3D with 10% local false
-//                 closures, seed 3: 1.676 → 1, the false (4, 23) dropped and the true (4, 45)
-//                 taken back; no other robust or clean file changes).
-//   the end's scale on the way (RobustOptions::end_scale_growth, 1.05, and end_scale_work, 16;
-//                 growth 0: off) the same reading after an update, once the poses have grown
-//                 by that factor and the updates re-eliminated that many times the tree's
-//                 factorisation flops since the last one: where c²_end is at least
-//                 end_scale_gap below c², the settled inliers no inlier agrees with are
-//                 dropped past final_confirm_margin·c²_end, as finalize()'s pass drops them,
-//                 and a closure so dropped is taken back only within c²_end. Once a reading
-//                 has dropped closures, the end's scale stands in finalize() wherever it is
-//                 below c² (the drops change σ̂²'s samples, and c² could end within the gap).
-//                 On sphere_bignoise with 10% random false closures the false closures come
-//                 out during the replay, where each held the tops it touched open until
-//                 finalize(): updates 128 → 28 s, p99 246 → 43 ms, 1.0139 → 1.0113 F*.
-//   kept at Ω's word (RobustOptions::end_word, on by default) finalize()'s last stage, after
-//                 its rounds: every rejected TLS or GM closure whose residual s = eᵀΩe at the
-//                 final estimate is within the given c² (Ω at its word: the χ² quantile, or
-//                 RobustOptions::threshold) is taken back at weight 1; the estimate is
-//                 relinearised with them, and again while one came back (at most
-//                 finalize_rounds). Property: no loop closure ends rejected that the final
-//                 estimate explains within its own noise model's χ² bound, the poses taken as
-//                 exact. Why it is needed: σ̂² is a median's scale, and where Ω is cautious (σ̂²
-//                 ≪ 1) the c² in use is tail_factor·c²·σ̂², far below Ω's bound; true closures
-//                 with a heavy tail (a car's few closures, each with much of its loop's share)
-//                 sit past it and stay out (the small-loop family, Ω 20–100 times cautious,
-//                 seeds 1–3: 3–4 true closures of each world rejected, F 1.10–1.20 F*; their
-//                 s at the end 0.2–0.6 of Ω's c²). Why s and not (E): m = s/(1 + AΣAᵀ) in one
-//                 dimension, and a long false closure's AΣAᵀ is large: on M3500 with 50% random
-//                 false closures the false ones' m at the end reach down to 0.27 of Ω's c², their
-//                 s at least 55 times it; the true ones' s stay below 0.02 of it. Why only back,
-//                 not out: dropping inliers by s, an estimate they pull, adds nothing to (L) on the
-//                 shared and generated files (the same cases solved), and is not needed for
-//                 the property.
-//   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut), so
-//                 at the kernel iff s ≤ c²: for TLS w ≥ ½ (GNC's convention, as GTSAM's
-//                 GncOptimizer and the reference figures count), for GM at μ = 1 w ≥ ¼.
+// One closure's life (the kernel ρ_μ on s = eᵀΩe, core/robust_kernel.h; c² the threshold in use):
+//   first check   (E) before it enters (RobustOptions::entry; kResidual: s₀, Σ taken as 0).
+//                 m ≤ c²: weight 1, settled inlier (clean data is the plain smoother bit for
+//                 bit); m > kEntryBand·c²: weight 0, settled outlier.
+//   entry         otherwise the convex surrogate: μ₀ = initialMu(s₀), w₀ = ρ′_μ₀(s₀), as GNC
+//                 starts from the largest residual.
+//   graduation    before each later update: s at the current estimate, μ one step on (mu_step),
+//                 w = ρ′_μ(s); at most steps_per_update steps an update, so no update hangs.
+//   settled       when the surrogate's weight is the kernel's, or after max_steps_per_closure.
+//   status        inlier iff w ≥ the kernel's weight at s = c² (RobustKernel::inlierCut).
+//
+// The rules, each by the property it guarantees (RobustRule; docs/design.md has the table):
+//   the noise scale  the threshold is put on σ̂², the factor by which Ω is wrong, estimated from
+//                 the closures' innovations (bayestree/noise_scale.h); the c² in use is the
+//                 estimator's truncation, tail_factor·c²·σ̂². Without an estimate, Ω's word.
+//   corroboration σ̂² is read from closures another closure agrees with (P): false closures
+//                 agree with nothing, or only with their own group.
+//   the start     a re-estimate of σ̂² starts at most at the last one: false groups that come
+//                 to outnumber the true runs cannot move σ̂² by their median.
+//   warm-up       no closure is judged on a scale not estimated yet: early closures are held at
+//                 weight 0 and judged once σ̂² is there (the update that lets them in
+//                 relinearises everything once).
+//   rehold        a first σ̂² that raises c² kReholdGrowth times holds the closures rejected at
+//                 Ω's word before it again, to be judged as at the warm-up's end.
+//   a shrinking c²  when σ̂² takes c² below 1/kRecheckMargin of the c² the inliers were last
+//                 checked against, every inlier is re-checked at once (sweepInliers).
+//   confirmed at the end  in finalize(), an inlier no partner backs is dropped when its (L) is
+//                 past kFinalConfirmMargin·c², one per pose a round, the largest first. A
+//                 partner spans more than 2K poses, as the closure it backs does, and still
+//                 agrees (P) at the end, read in both frames.
+//   the end's scale  finalize() re-reads the scale from (L) at the whole graph's estimate
+//                 (endThreshold) and judges by it where it is kEndScaleGap times tighter.
+//   the end's scale on the way  the same reading after updates, at growing intervals bounded in
+//                 work (kEndScaleGrowth, kEndScaleWork), so false closures leave before the end.
+//   kept at Ω's word  finalize()'s last stage: a rejected closure whose s at the final estimate
+//                 is within Ω's own χ² bound comes back (a heavy tail of true closures that a
+//                 median's scale puts past c²).
 //
 // Which closures are re-weighted on an update. riSAM resets μ of every graduated factor in the
-// "update-involved" top of the tree whenever new graduated factors arrive and iterates to
-// convergence within the update (RISAM2::relinearizeFactor, iterateToConvergence), which is
-// what makes it slow on large graphs (shared/reference/robust-anchors.tsv: M3500 186 s).
-// Here the closures graduating now are stepped, and the settled ones are re-checked at the
-// kernel in a bounded round robin (RobustOptions::rechecks_per_update per update, all of them
-// in finalize()): a settled outlier at weight 0 whose innovation (E) is within the c² in use,
-// re-judged once c² has grown by a tenth since its last judgement and in finalize() (with the
-// residual test, on every re-check: whose s is within recheck_margin·c²) is taken back (weight 1),
-// a settled inlier whose residual grew beyond recheck_margin·c² graduates again from μ₀ at that
-// residual. These are the "affected" closures of riSAM, found by looking rather
-// than through the tree; the margin keeps a true closure in the χ² tail from flapping.
+// update-involved top of the tree and iterates to convergence, which is its cost on large graphs.
+// Here the graduating closures take one step each, and the settled ones are re-checked in a
+// bounded round robin (rechecks_per_update; all of them in finalize()): an outlier whose (E) is
+// within the c² in use comes back, an inlier whose s passes kRecheckMargin·c² graduates again.
+// These are riSAM's "affected" closures, found by their residuals rather than through the tree;
+// the margin keeps a true closure in the χ² tail from flapping.
 //
-// Excluding a closure (exclude/include, by smoother factor index): the GNC stops weighting it
-// and leaves its weight to the caller (a front end that takes an edge back sets it to 0);
-// include() re-admits it through the first check and sets its weight itself.
+// Excluding a closure (exclude/include): the GNC leaves its weight to the caller; include()
+// re-admits it through the first check. Reseeding keeps every weight (they live on the factors);
+// remap() finds the factors' new indices.
 //
-// Reseeding (OnlineSmoother::reseed) keeps every weight (they live on the factors, which the
-// rebuild re-adds) and this state; remap() finds the factors' new indices.
+// Options, rules and constants: bayestree/robust_options.h. Measurements, the end pass and where
+// the layer still fails: docs/design.md, "Online robust smoothing".
 #pragma once
 
 #include <functional>
