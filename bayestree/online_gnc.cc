@@ -124,7 +124,7 @@ void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, doubl
   const double c2_before = c2_;
   c2_ = estimate_.estimated ? scale_options_.tail_factor * c2_given_ * scale_ : c2_given_;
   // The first estimate, many times Ω's word: what was rejected at Ω's word is held again, to be
-  // judged as the warm-up's closures are (RobustOptions::rehold_growth; header, "warm-up").
+  // judged as the warm-up's closures are (RobustRule::kRehold; header, "warm-up").
   const double growth = options_.on(RobustRule::kRehold) ? robust_constants::kReholdGrowth : 0.0;
   if (growth > 0 && !had_estimate && estimate_.estimated && c2_ >= growth * c2_before &&
       options_.on(RobustRule::kWarmUp)) {

@@ -104,7 +104,7 @@ inline NoiseScaleEstimate estimateNoiseScale(std::vector<double> m, int dof, dou
 enum class StepScope {
   kRoundRobin,  ///< RobustOptions::rechecks_per_update of them (an ordinary update)
   kAll,         ///< every one (the update after a reseed)
-  kFinalize,    ///< every one, and (L) at final_confirm_margin (a round of finalize())
+  kFinalize,    ///< every one, and (L) at kFinalConfirmMargin (a round of finalize())
 };
 
 enum class ClosureStatus {
@@ -139,7 +139,7 @@ struct ClosureCounts {
   int regraduated = 0;  ///< re-checks that changed a settled closure's weight
   int unconfirmed = 0;  ///< inliers set to weight 0 by (L), online or in finalize()
   /// rejected closures taken back at the end by their residual within Ω's χ² bound
-  /// (RobustOptions::end_word)
+  /// (RobustRule::kEndWord)
   int kept_at_word = 0;
 };
 
@@ -162,9 +162,9 @@ class OnlineGnc {
   /// robin of re-checks (StepScope). Returns the weights changed.
   int step(IncrementalSmoother<G>& smoother, StepScope scope = StepScope::kRoundRobin);
   /// After a smoother update, during the replay: the end's scale read again once the poses
-  /// have grown by end_scale_growth since the last reading (header comment, "the end's scale
+  /// have grown by kEndScaleGrowth since the last reading (header comment, "the end's scale
   /// on the way"); where it is at least end_scale_gap times below the c² in use, the settled
-  /// inliers no inlier agrees with are dropped past final_confirm_margin times it. Returns the
+  /// inliers no inlier agrees with are dropped past kFinalConfirmMargin times it. Returns the
   /// weights changed (the next smoother update takes them in).
   int readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double update_flops);
   /// Before the rounds of a finalize(): within them a closure is taken back from weight 0 at
@@ -203,12 +203,12 @@ class OnlineGnc {
   bool graduating() const { return !graduating_.empty(); }
   /// Closures held in the warm-up (RobustRule::kWarmUp), not judged yet.
   size_t held() const { return held_.size(); }
-  /// Every settled inlier whose residual is past recheck_margin·c² graduates again from μ₀ at
+  /// Every settled inlier whose residual is past kRecheckMargin·c² graduates again from μ₀ at
   /// it, all in this step (header comment, "a shrinking c²"); returns the weights set.
   int sweepInliers(IncrementalSmoother<G>& smoother);
   /// Every rejected TLS or GM closure whose residual s at the smoother's estimate is within the
   /// given c² (Ω at its word) back at weight 1 (header comment, "kept at Ω's word"; finalize()'s
-  /// last stage, with RobustOptions::end_word); returns how many.
+  /// last stage, with RobustRule::kEndWord); returns how many.
   int takeBackAtWord(IncrementalSmoother<G>& smoother);
   /// A re-checked closure's new state taken in (step's round robin, sweepInliers): listed as
   /// graduating, or its weight set in the smoother; returns the weights set (0 or 1).
@@ -224,7 +224,7 @@ class OnlineGnc {
   /// The c² finalize()'s last (L) pass judged by (header comment, "the end's scale"; 0 before
   /// one).
   double thresholdAtEnd() const { return c2_end_; }
-  /// σ̂² (1 until scale_min_samples innovations, without an estimate, and with
+  /// σ̂² (1 until kScaleMinSamples innovations, without an estimate, and with
   /// NoiseScale::kGiven).
   double noiseScale() const { return scale_; }
   /// The last estimate (estimateNoiseScale; `estimated` false before the first).
@@ -263,7 +263,7 @@ class OnlineGnc {
   /// Its status: weight ≥ its kernel's RobustKernel::inlierCut (TLS ½, GM ¼, Cauchy ½, Huber 1).
   bool isInlier(const Closure& c) const;
   /// The first check at s with innovation m (m = s: the residual test): settles at weight 1,
-  /// at weight 0 (m > entry_band·c², TLS and GM, with `may_reject`) or starts graduation from
+  /// at weight 0 (m > kEntryBand·c², TLS and GM, with `may_reject`) or starts graduation from
   /// μ₀(s).
   void enter(Closure* c, double s, double m, bool may_reject);
   /// (E) for the edge at the smoother's estimate; s when Σ is not there (EntryTest::kResidual,
@@ -309,7 +309,7 @@ class OnlineGnc {
   double endBound() const;
   /// finalize()'s c² (header comment, "the end's scale"): at most the c² in use.
   double endThreshold(const IncrementalSmoother<G>& smoother) const;
-  /// finalize()'s (L) over every settled inlier at final_confirm_margin·c²_end (endThreshold),
+  /// finalize()'s (L) over every settled inlier at kFinalConfirmMargin·c²_end (endThreshold),
   /// the largest m₋ first and at most one drop per pose in a round: (L) reads one closure with
   /// the others held, so of two past the bound that share a pose the second is judged again
   /// next round, at the estimate without the first. Marks the closures it drops in `dropped`
@@ -341,7 +341,7 @@ class OnlineGnc {
   const std::vector<double>* scaleSource() const;
   /// σ̂² estimated, or given (NoiseScale::kGiven): new closures are judged at once.
   bool scaleKnown() const;
-  /// Whether (L) judges every inlier in finalize() (RobustOptions::final_confirm_margin).
+  /// Whether (L) judges every inlier in finalize() (RobustRule::kFinalConfirm).
   bool confirmsAtTheEnd() const;
   /// Whether (P)'s partners are recorded (read by backed()).
   bool recordsPartners() const;
@@ -385,7 +385,7 @@ class OnlineGnc {
   std::vector<int> by_factor_;   ///< factor index → closure id (−1: none)
   size_t cursor_ = 0;            ///< round robin of re-checks over closures_
   /// The c² every settled inlier was last checked against at once (sweepInliers), raised with
-  /// c² as it grows; c² below it by recheck_margin sets sweep_due_.
+  /// c² as it grows; c² below it by kRecheckMargin sets sweep_due_.
   double c2_swept_ = 0;
   bool sweep_due_ = false;
   int resolved_factors_ = 0;  ///< factors seen by resolve()

@@ -413,7 +413,7 @@ UpdateStats OnlineSmoother<G>::update() {
     excludeDisabled(first);
     ++stats_.graduation_updates;
   }
-  // The end's scale on the way (RobustOptions::end_scale_growth): its drops in an update of
+  // The end's scale on the way (robust_constants::kEndScaleGrowth): its drops in an update of
   // their own, as finalize()'s are taken in by its next relinearisation.
   if (gnc_->readEndScaleOnTheWay(smoother_, total.reelimination_flops) > 0) {
     first = smoother_.numFactors();

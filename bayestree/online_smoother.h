@@ -138,7 +138,7 @@ struct OnlineStats {
   /// Inliers dropped by their leave-one-out innovation (ClosureCounts::unconfirmed).
   int closures_unconfirmed = 0;
   /// Rejected closures taken back at the end by their residual within Ω's χ² bound
-  /// (ClosureCounts::kept_at_word; RobustOptions::end_word).
+  /// (ClosureCounts::kept_at_word; RobustRule::kEndWord).
   int closures_kept_at_word = 0;
   /// Re-checks of rejected closures that (E)'s lower bound settled without a path solve
   /// (ClosureCounts::rechecks_bounded).

@@ -468,13 +468,7 @@ class OnlineSmoother2:
     def __init__(
         self,
         robust: RobustOptions | None = None,
-        threads: int = 0,
-        relinearize_threshold_translation: float = 0.1,
-        relinearize_threshold_rotation: float = 0.1,
-        relinearize_skip: int = 10,
-        wildfire_threshold: float = 0.001,
-        dogleg: bool = False,
-        solve_budget_mb: float = 0.0,
+        **smoother: float | int | bool,
     ) -> None: ...
     def add_edge(
         self,
@@ -513,13 +507,7 @@ class OnlineSmoother3:
     def __init__(
         self,
         robust: RobustOptions | None = None,
-        threads: int = 0,
-        relinearize_threshold_translation: float = 0.1,
-        relinearize_threshold_rotation: float = 0.1,
-        relinearize_skip: int = 10,
-        wildfire_threshold: float = 0.001,
-        dogleg: bool = False,
-        solve_budget_mb: float = 0.0,
+        **smoother: float | int | bool,
     ) -> None: ...
     def add_edge(
         self,

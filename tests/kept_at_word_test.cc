@@ -1,4 +1,4 @@
-// Kept at Ω's word (RobustOptions::end_word, bayestree/online_gnc.h): after a robust replay no
+// Kept at Ω's word (RobustRule::kEndWord, bayestree/online_gnc.h): after a robust replay no
 // loop closure ends rejected whose residual s = eᵀΩe at the final estimate is within Ω's own χ²
 // bound. Judged on the small-loop family of issue 52's protocol (1,000 poses, about 100
 // closures with a heavy tail, Ω 20–100× cautious) on its tuning seeds, 2D and 3D, with false

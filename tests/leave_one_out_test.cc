@@ -1,10 +1,8 @@
 // The leave-one-out innovation (bayestree/closure_innovation.h) and what the online GNC does
-// with it (bayestree/online_gnc.h, "confirmed"): (L) on the graph with a closure equals (E) on
-// the graph without it, where (E) read on the tree that holds the closure is far lower; a pose
-// without Σ has no (L); and on smallGrid3D with 90% local false closures (shared data)
-// RobustOptions::confirm (off by default) drops a false closure graduation keeps, and no true
-// one; finalize()'s (L) at RobustOptions::final_confirm_margin drops smallGrid3D's isolated
-// false closure and keeps intel's isolated true ones; σ̂²'s tail, read too early, lets one in.
+// with it (bayestree/online_gnc.h, "confirmed at the end"): (L) on the graph with a closure
+// equals (E) on the graph without it, where (E) read on the tree that holds the closure is far
+// lower; a pose without Σ has no (L); and finalize()'s (L) at kFinalConfirmMargin·c²
+// (RobustRule::kFinalConfirm) drops smallGrid3D's isolated false closure.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

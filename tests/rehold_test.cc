@@ -1,5 +1,5 @@
 // Closures rejected at Ω's word before σ̂² is first estimated are held again when that estimate
-// raises c² many times (RobustOptions::rehold_growth, opt-in; bayestree/online_gnc.h,
+// raises c² many times (RobustRule::kRehold; bayestree/online_gnc.h,
 // "warm-up"). A
 // generated sphere with Ω 100 times too confident in rotation and 10% random false closures:
 // without it the round robin of re-checks takes rejected closures back one at a time on an

@@ -1,4 +1,4 @@
-// Where σ̂²'s fixed point starts once there is an estimate (RobustOptions::scale_start;
+// Where σ̂²'s fixed point starts once there is an estimate (RobustRule::kScaleStart;
 // bayestree/online_gnc.h, "the noise scale"). Groups of false closures agree with each other
 // (P), so their innovations join the corroborated set as true runs do; where they become most
 // of it, the set's untruncated median lies among them, and a fixed point started there stays

@@ -4,7 +4,7 @@
 // first σ̂² (56.8, from their corroborated innovations) lets three groups of them in, and when
 // the true closures take σ̂² to 0.018 the round robin reached true closures, bent by the false
 // ones, before the false ones, and the replay diverged. With the sweep, and the re-hold of
-// what Ω's word rejected (RobustOptions::rehold_growth), it ends at F* with exactly the false
+// what Ω's word rejected (RobustRule::kRehold), it ends at F* with exactly the false
 // closures rejected.
 #include <algorithm>
 #include <cstdint>

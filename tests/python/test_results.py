@@ -106,7 +106,7 @@ def test_robust_options_pickle_compare_and_repr():
     assert pickle.loads(pickle.dumps(options)) == options
     assert repr(options) == ("RobustOptions(kernel='cauchy', threshold=3.0, confidence=0.99, "
                              "estimate_scale=False, noise_scale='given', corroboration_window=0)")
-    assert eval("arbor." + repr(options)) == options
+    assert eval("arbor_slam." + repr(options)) == options
     assert arbor_slam.RobustOptions(**options.to_dict()) == options
     assert options != arbor_slam.RobustOptions() and arbor_slam.RobustOptions() == arbor_slam.RobustOptions()
     assert options.to_dict()["rules_off"] == arbor_slam.RobustOptions().rules_off == ""

@@ -93,21 +93,21 @@ def test_the_stub_is_beside_the_module():
 
 
 def test_the_stub_has_the_modules_public_names():
-    module = {n for n in dir(arbor) if public(n)}
+    module = {n for n in dir(arbor_slam) if public(n)}
     assert stub_names(stub_tree().body) == module
 
 
 def test_the_stubs_classes_have_the_modules_members():
     for node in stub_tree().body:
         if isinstance(node, ast.ClassDef):
-            runtime = {n for n in vars(getattr(arbor, node.name)) if public(n)}
+            runtime = {n for n in vars(getattr(arbor_slam, node.name)) if public(n)}
             assert stub_names(node.body) == runtime, node.name
 
 
 def test_the_stubs_parameters_are_the_modules():
     checked = 0
-    scopes = [(arbor, stub_tree().body)] + [
-        (getattr(arbor, c.name), c.body) for c in stub_tree().body if isinstance(c, ast.ClassDef)]
+    scopes = [(arbor_slam, stub_tree().body)] + [
+        (getattr(arbor_slam, c.name), c.body) for c in stub_tree().body if isinstance(c, ast.ClassDef)]
     for owner, body in scopes:
         defined = {}
         for node in body:
@@ -127,8 +127,8 @@ def test_the_stubs_parameters_are_the_modules():
 
 def test_every_public_name_has_a_docstring():
     missing = []
-    for name in (n for n in dir(arbor) if public(n) and n != "__version__"):
-        obj = getattr(arbor, name)
+    for name in (n for n in dir(arbor_slam) if public(n) and n != "__version__"):
+        obj = getattr(arbor_slam, name)
         if not documented(obj.__doc__):
             missing.append(name)
         if isinstance(obj, type):

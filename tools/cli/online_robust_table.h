@@ -12,10 +12,9 @@ namespace arbor::cli {
 extern const char* const kRobustSection;
 
 /// The table of the online smoother's own robust flags (`arbor replay`, `arbor serve`; every
-/// row needs --robust): --entry innovation|residual, --noise-scale estimated|given, --warm-up
-/// hold|given, --scale-start at-most-last|median, --first-recheck replay|relinearized, and the
-/// numbers of RobustOptions each flag names (--corroboration-window K, --final-confirm-margin X,
-/// ...; bayestree/online_gnc.h). Each flag is its field's name with '-' for '_'.
+/// row needs --robust): --entry innovation|residual, --noise-scale estimated|given,
+/// --corroboration-window K, --finalize-rounds N and --rules-off RULE,... (bayestree/
+/// robust_options.h). Each flag is its field's name with '-' for '_'.
 const OptionTable<RobustOptions>& onlineRobustOptionTable();
 
 }  // namespace arbor::cli

@@ -25,7 +25,7 @@ struct OnlineThreshold {
   double c2 = 0;         ///< GNC's: recheck_margin · c2_in_use
   double c2_in_use = 0;  ///< the online smoother's c² in use at the end of the replay
   /// What its finalize() took a rejected closure back within: the end's scale where it stood
-  /// (RobustOptions::end_scale_samples, OnlineStats::closure_threshold_at_end), else c2_in_use
+  /// (RobustRule::kEndScale, OnlineStats::closure_threshold_at_end), else c2_in_use
   double c2_take_back = 0;
   double noise_scale = 1;  ///< its σ̂²
   bool estimated = false;  ///< σ̂² is an estimate (false: Ω at its word)

@@ -4,7 +4,7 @@
 // (batch_refiner.h, the classification of a snapshot): GNC (core/gnc_solver.h) with the closures
 // the online smoother rejects held out as known outliers (GNC's graduation from a nearly convex
 // start would let them back in), at the bound up to which the smoother keeps a settled inlier
-// (RobustOptions::recheck_margin × its c² in use; GNC-TLS has no hysteresis: at the c² in use
+// (robust_constants::kRecheckMargin × its c² in use; GNC-TLS has no hysteresis: at the c² in use
 // it rejected true closures the smoother keeps, intel_random_0.1 2 of 785), the closures the
 // smoother keeps beyond that bound held at weight 1 (its end backed them; its judgement, not
 // GNC's to undo); then readmitFitting takes back each held-out closure the refined estimate fits
