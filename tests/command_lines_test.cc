@@ -305,8 +305,10 @@ TEST(OnlineRobustFlags, ReachReplayAndServeAlikeAndNeedRobust) {
   EXPECT_TRUE(plain->options.robust->rules_off.empty());
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--rules-off", "end-word"}), UsageError);
   EXPECT_THROW(parseReplayCommandLine({"graph.g2o", "--finalize-rounds", "2"}), UsageError);
-  for (const auto& [flag, bad] : std::vector<std::pair<std::string, std::string>>{
-           {"--finalize-rounds", "0"}, {"--rules-off", "end-words"}, {"--rules-off", "warm-up,x"}}) {
+  for (const auto& [flag, bad] :
+       std::vector<std::pair<std::string, std::string>>{{"--finalize-rounds", "0"},
+                                                        {"--rules-off", "end-words"},
+                                                        {"--rules-off", "warm-up,x"}}) {
     try {
       parseReplayCommandLine({"graph.g2o", "--robust", flag, bad});
       ADD_FAILURE() << flag << " " << bad << " accepted";
