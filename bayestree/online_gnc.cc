@@ -272,25 +272,17 @@ bool OnlineGnc<G>::spansLoop(const Closure& c) const {
 }
 
 template <class G>
-bool OnlineGnc<G>::agreedBy(const Closure& c, const IncrementalSmoother<G>* now, double pair_bound,
-                            int needed) const {
-  int agreeing = 0;
-  for (int id : c.partners) {
-    const Closure& p = closures_[static_cast<size_t>(id)];
-    if (p.state == State::kSettled && !p.held && isInlier(p) &&
-        (now == nullptr || pairSBothWays(*now, c, p) <= pair_bound) && ++agreeing >= needed)
-      return true;
-  }
-  return false;
-}
-
-template <class G>
 bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) const {
   // At an estimate (finalize()), never above the closures' own c²: where false pairs are many
   // the pairs' scale runs far past it (smallGrid3D with 90% false closures: c²·σ̂²_pairs 5571
   // against c² 52 for groups, seed 1; 4480 against 79 for local ones, seed 2).
-  const double pair_bound = c2_given_ * pair_scale_;
-  return agreedBy(c, now, now == nullptr ? pair_bound : std::min(pair_bound, c2_), 1);
+  const double pair_bound =
+      now == nullptr ? c2_given_ * pair_scale_ : std::min(c2_given_ * pair_scale_, c2_);
+  return std::any_of(c.partners.begin(), c.partners.end(), [&](int id) {
+    const Closure& p = closures_[static_cast<size_t>(id)];
+    return p.state == State::kSettled && !p.held && isInlier(p) &&
+           (now == nullptr || pairSBothWays(*now, c, p) <= pair_bound);
+  });
 }
 
 template <class G>

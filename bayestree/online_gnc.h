@@ -276,12 +276,8 @@ class OnlineGnc {
   double innovationLowerBound(const IncrementalSmoother<G>& smoother, const Edge& edge,
                               double s) const;
   /// Whether a closure that agreed with c (P) is a settled inlier now; with `now`, one that
-  /// still agrees with it at that smoother's estimate.
+  /// still agrees with it at that smoother's estimate, within the pairs' bound and the c² in use.
   bool backed(const Closure& c, const IncrementalSmoother<G>* now = nullptr) const;
-  /// Whether at least `needed` of c's partners are settled inliers and, with `now`, agree with
-  /// it (P) at that smoother's estimate within `pair_bound` (backed).
-  bool agreedBy(const Closure& c, const IncrementalSmoother<G>* now, double pair_bound,
-                int needed) const;
   /// (P)'s s of closures a and b at the smoother's estimate (+∞ when their ends are not within
   /// corroboration_window of each other's).
   double pairS(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b) const;
