@@ -1,6 +1,6 @@
 // The floor of one LCM hop on this machine, for the streaming benchmarks' transport share
-// (docs/benchmarks.md, "udpm"): `arbor-lcm-pingpong echo URL` republishes every PING as PONG;
-// `arbor-lcm-pingpong ping URL N GAP_MS` sends N pings of 200 bytes, GAP_MS apart (so the
+// (docs/streaming-benchmarks.md, "udpm"): `arbor-lcm-pingpong echo URL` republishes every PING
+// as PONG; `arbor-lcm-pingpong ping URL N GAP_MS` sends N pings of 200 bytes, GAP_MS apart (so the
 // receivers sleep between them, as `arbor serve` does between edges at 10 or 100 Hz), and prints
 // the one-way latency, round trip / 2, p50, p99 and max. A ping of one byte stops the echo.
 // Raw LCM only: no Arbor code on the path, so what it prints is the transport's own cost.
