@@ -8,7 +8,7 @@
 // decodes edge_t, prior_t, edge_command_t and command_t (size limits first, then
 // io/lcm_messages.h's checked decoders) and hands them to the core, the publishing of estimate_t,
 // status_t and covariance_t, and the journal as an LCM event log (tools/serve/lcm_event_journal.h).
-// docs/lcm.md is the user's view; docs/design.md, "Adding a transport", the structure.
+// docs/lcm.md is the user's view; docs/service-internals.md, "Adding a transport", the structure.
 #pragma once
 
 #include <atomic>
