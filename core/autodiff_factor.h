@@ -20,7 +20,7 @@
 //
 // so the Jacobians are the right-perturbation ones of the built-in factors (tangent order
 // [v; ω]). Why Eigen's AutoDiffScalar and not Ceres' Jet: Eigen is already the library's one
-// dependency; Ceres is not linked by it (docs/design.md, "Factors of your own", for the cost).
+// dependency; Ceres is not linked by it (docs/factors.md, for the cost).
 #pragma once
 
 #include <memory>
