@@ -140,6 +140,8 @@ class EdgeIntake {
   /// Per sender of `kind` with gaps: (sender, seq numbers not received), in sender order; the
   /// counts sum to the stream's IntakeCounts::gaps. At most max_senders() entries.
   std::vector<std::pair<std::int64_t, std::int64_t>> gapsBySender(Kind kind) const;
+  /// Per sender of `kind`: (sender, its highest seq), in sender order.
+  std::vector<std::pair<std::int64_t, std::int64_t>> highestBySender(Kind kind) const;
   /// Sender tables held per stream (each <= max_senders()).
   std::size_t senders(Kind kind) const;
   std::size_t maxSenders() const { return max_senders_; }
