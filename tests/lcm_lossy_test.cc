@@ -170,6 +170,35 @@ TEST_F(LossyLink, FivePercentLossAndATenSecondOutageLoseNothing) {
             << j.at("duplicates") << ", loss_recovery " << j.at("loss_recovery").dump() << "\n";
 }
 
+// With a deployment key the requests, the answers and every resend are sealed and verified: the
+// publisher's resends (sealed afresh around the same bytes) are applied once, nothing is
+// refused, F = `arbor replay`'s.
+TEST_F(LossyLink, WithAKeyTheRequestsAndResendsAreSealedAndNothingIsLost) {
+  const std::string file = std::string(ARBOR_SOURCE_DIR) + "/data/manhattan_2d.g2o";
+  const int edges = edgesOf(file);
+  const std::string key = path("bus.key");
+  const RunResult made = testing::run({ARBOR_EXE, "keygen", key}, path("keygen"));
+  ASSERT_EQ(made.status, 0) << made.err;
+  startServe({"--key", key});
+  startRelay(0.05, -1, 0);
+  const RunResult pub = testing::run(
+      {ARBOR_EXE, "publish", file, "--lcm-url", url(0), "--rate", "500", "--key", key,
+       "--resend-window", "100000", "--wait-ready", "--timeout", "60", "--json"},
+      path("publish"), kGuard);
+  ASSERT_EQ(pub.status, 0) << pub.err << pub.out << serve_->err();
+  const nlohmann::json p = parseJson(pub.out, "publish");
+  const nlohmann::json relay = stop(relay_, "lossy_relay");
+  const nlohmann::json j = stop(serve_, "serve");
+  EXPECT_GT(relay.at("forward_dropped").get<int>(), 0) << relay.dump();
+  EXPECT_GT(p.at("resend").at("resent").get<int>(), 0) << p.dump();
+  EXPECT_EQ(j.at("applied").get<int>(), edges) << j.dump();
+  EXPECT_EQ(j.at("rejected").get<int>(), 0) << j.dump();
+  EXPECT_EQ(j.at("loss_recovery").at("given_up").get<int>(), 0) << j.dump();
+  EXPECT_TRUE(j.at("faults").at("auth_refused").empty()) << j.dump();
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+}
+
 // The same link without a resending publisher: edges are lost (counted as gaps, given up), so
 // the test above is not vacuous.
 TEST_F(LossyLink, WithoutResendTheSameLinkLosesEdges) {
