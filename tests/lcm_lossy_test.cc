@@ -7,9 +7,11 @@
 // vacuous). Every process a test starts is stopped, pass or fail.
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -42,6 +44,32 @@ bool waitUntil(const std::function<bool()>& done, double seconds = kGuard) {
 
 int edgesOf(const std::string& file) {
   return std::visit([](const auto& g) { return g.numEdges(); }, readPoseGraphFile(file));
+}
+
+// `in`'s g2o lines with every pose id moved by `offset` (a robot of its own), appended to `out`
+// and to `merged`.
+void shiftIds(const std::string& in, std::int64_t offset, const std::string& out,
+              const std::string& merged) {
+  std::ifstream src(in);
+  std::ofstream dst(out), all(merged, std::ios::app);
+  std::string line;
+  while (std::getline(src, line)) {
+    std::istringstream words(line);
+    std::string tag;
+    words >> tag;
+    const int ids = tag == "VERTEX_SE2" ? 1 : tag == "EDGE_SE2" ? 2 : 0;
+    std::ostringstream shifted;
+    shifted << tag;
+    for (int k = 0; k < ids; ++k) {
+      std::int64_t id = 0;
+      words >> id;
+      shifted << ' ' << id + offset;
+    }
+    std::string rest;
+    std::getline(words, rest);
+    dst << shifted.str() << rest << '\n';
+    all << shifted.str() << rest << '\n';
+  }
 }
 
 nlohmann::json parseJson(const std::string& text, const std::string& who) {
@@ -170,6 +198,60 @@ TEST_F(LossyLink, FivePercentLossAndATenSecondOutageLoseNothing) {
             << j.at("duplicates") << ", loss_recovery " << j.at("loss_recovery").dump() << "\n";
 }
 
+// Issue 56's goal with three robots: robot 1 on the lossy link (5% both ways, a 10-s outage
+// mid-stream), robots 2 and 3 on serve's hub directly, all at 100 edges/s at once. Every edge of
+// every robot applied exactly once, and F equal to `arbor replay` of the merged file.
+TEST_F(LossyLink, ThreeRobotsOneOnALossyLinkEveryEdgeOnceFAsTheMergedReplay) {
+  const std::string merged = path("merged.g2o");
+  std::vector<std::string> files;
+  int edges = 0;
+  for (int robot = 1; robot <= 3; ++robot) {
+    const std::string generated = path("generated" + std::to_string(robot) + ".g2o");
+    const RunResult r =
+        testing::run({ARBOR_EXE, "generate", "manhattan", "--poses", robot == 1 ? "1500" : "700",
+                      "--seed", std::to_string(robot), "-o", generated},
+                     path("generate" + std::to_string(robot)));
+    ASSERT_EQ(r.status, 0) << r.err;
+    files.push_back(path("robot" + std::to_string(robot) + ".g2o"));
+    shiftIds(generated, 100000 * robot, files.back(), merged);
+    edges += edgesOf(files.back());
+  }
+  startServe({});
+  startRelay(0.05, 300, 10);
+  std::vector<std::unique_ptr<Process>> robots;
+  for (int robot = 1; robot <= 3; ++robot) {
+    robots.push_back(std::make_unique<Process>(
+        std::vector<std::string>{ARBOR_EXE, "publish", files[static_cast<size_t>(robot - 1)],
+                                 "--lcm-url", url(robot == 1 ? 0 : 1), "--sender",
+                                 std::to_string(robot), "--rate", "100", "--resend-window",
+                                 "100000", "--wait-ready", "--timeout", "60", "--json"},
+        path("publish" + std::to_string(robot) + ".out"),
+        path("publish" + std::to_string(robot) + ".err")));
+  }
+  std::vector<nlohmann::json> published;
+  for (auto& p : robots) {
+    ASSERT_EQ(p->wait(kGuard), 0) << p->err() << p->out() << serve_->err();
+    published.push_back(parseJson(p->out(), "publish"));
+  }
+  const nlohmann::json relay = stop(relay_, "lossy_relay");
+  const nlohmann::json j = stop(serve_, "serve");
+  EXPECT_GT(relay.at("forward_outage_dropped").get<int>(), 500) << relay.dump();
+  EXPECT_GT(published[0].at("resend").at("resent").get<int>(), 500) << published[0].dump();
+  for (const nlohmann::json& p : published)
+    EXPECT_TRUE(p.at("resend").at("acknowledged").get<bool>()) << p.dump();
+  EXPECT_EQ(j.at("accepted").get<int>(), edges) << j.dump();
+  EXPECT_EQ(j.at("applied").get<int>(), edges) << j.dump();
+  EXPECT_EQ(j.at("rejected").get<int>(), 0) << j.dump();
+  EXPECT_EQ(j.at("gaps").get<int>(), 0) << j.dump();
+  EXPECT_EQ(j.at("loss_recovery").at("given_up").get<int>(), 0) << j.dump();
+  EXPECT_EQ(j.at("components").get<int>(), 3) << j.dump();
+  const double F = replayF(merged);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+  std::cout << "three robots, " << edges << " edges; robot 1's link " << relay.dump() << ", resent "
+            << published[0].at("resend").dump() << "; F " << j.at("F_final") << " vs replay " << F
+            << "\n";
+}
+
 // With a deployment key the requests, the answers and every resend are sealed and verified: the
 // publisher's resends (sealed afresh around the same bytes) are applied once, nothing is
 // refused, F = `arbor replay`'s.
@@ -181,10 +263,10 @@ TEST_F(LossyLink, WithAKeyTheRequestsAndResendsAreSealedAndNothingIsLost) {
   ASSERT_EQ(made.status, 0) << made.err;
   startServe({"--key", key});
   startRelay(0.05, -1, 0);
-  const RunResult pub = testing::run(
-      {ARBOR_EXE, "publish", file, "--lcm-url", url(0), "--rate", "500", "--key", key,
-       "--resend-window", "100000", "--wait-ready", "--timeout", "60", "--json"},
-      path("publish"), kGuard);
+  const RunResult pub =
+      testing::run({ARBOR_EXE, "publish", file, "--lcm-url", url(0), "--rate", "500", "--key", key,
+                    "--resend-window", "100000", "--wait-ready", "--timeout", "60", "--json"},
+                   path("publish"), kGuard);
   ASSERT_EQ(pub.status, 0) << pub.err << pub.out << serve_->err();
   const nlohmann::json p = parseJson(pub.out, "publish");
   const nlohmann::json relay = stop(relay_, "lossy_relay");
