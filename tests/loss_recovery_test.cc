@@ -17,6 +17,7 @@
 #include "arbor_slam/tests/lcm_test_support.h"
 #include "arbor_slam/tools/cli/resend_window.h"
 #include "arbor_slam/tools/serve/gap_tracker.h"
+#include "arbor_slam/tools/serve/serve_service.h"
 #include "arbor_slam/tools/serve/streaming_core.h"
 
 namespace arbor::serve {
@@ -435,6 +436,99 @@ TEST(LossRecoveryCore, EdgesAfterAGapWaitForItsResendAndAreAppliedInSeqOrderOnce
     EXPECT_EQ(r.settled, n + 1);
   }
   EXPECT_EQ(again.summary().loss.held, 0);
+}
+
+// ---- the LCM service (memq://) ----
+
+// Serve's requests as they appear on ARBOR_RESEND (dispatched by the service's receive thread,
+// which handles the shared memq:// instance).
+class RequestWatcher {
+ public:
+  RequestWatcher(lcm::LCM& lcm, const Channels& ch) : lcm_(lcm) {
+    sub_ = lcm.subscribe(ch.resend, &RequestWatcher::onResend, this);
+    sub_->setQueueCapacity(0);
+  }
+  ~RequestWatcher() { lcm_.unsubscribe(sub_); }
+  bool waitMissing(std::int64_t first, std::int64_t last) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::seconds(60), [&] {
+      for (const ResendMessage& m : seen_) {
+        for (const auto& r : m.missing)
+          if (r.first == first && r.second == last) return true;
+      }
+      return false;
+    });
+  }
+
+ private:
+  void onResend(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    const ResendDecoding d = decodeResend(rbuf->data, static_cast<int>(rbuf->data_size));
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (d.ok() && d.message.request) seen_.push_back(d.message);
+    cv_.notify_all();
+  }
+  lcm::LCM& lcm_;
+  lcm::Subscription* sub_ = nullptr;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<ResendMessage> seen_;
+};
+
+TEST(LossRecoveryService, RequestsGoOutOnArborResendAndAWindowAnswerGivesTheGapUp) {
+  const PoseGraph2 g = testing::manhattanGraph(40, 4, -1, 3);
+  const std::vector<int> order = testing::replayOrder(g);
+  lcm::LCM lcm("memq://");
+  ASSERT_TRUE(lcm.good());
+  ServeOptions options;
+  options.gap_hold = std::chrono::milliseconds(60000);
+  options.resend_period = std::chrono::milliseconds(20);
+  options.refine_on_exit = false;
+  Service service(lcm, options);
+  RequestWatcher watcher(lcm, service.channels());
+  service.start();
+  const auto send = [&](const std::string& channel, const std::vector<std::uint8_t>& b) {
+    lcm.publish(channel, b.data(), static_cast<unsigned>(b.size()));
+  };
+  for (std::int64_t seq : {1, 2, 4, 5})
+    send(service.channels().edges, testing::edgeBytes(g, order[static_cast<size_t>(seq - 1)], seq));
+  ASSERT_TRUE(watcher.waitMissing(3, 3));
+  const auto deadline = Clock::now() + std::chrono::seconds(60);
+  while (service.status().loss_held != 2 && Clock::now() < deadline)
+    std::this_thread::sleep_for(milliseconds(10));
+  EXPECT_EQ(service.status().loss_held, 2);
+  // Bad answers are refused by reason (a REQUEST where answers go, a range in a WINDOW).
+  ResendMessage bad;
+  bad.sender = 1;
+  bad.settled = 3;
+  bad.highest = 5;
+  send(service.channels().resend_window, encodeMessage(makeResendMessage(bad)));
+  resend_t ranged = makeResendMessage(bad);
+  ranged.kind = resend_t::WINDOW;
+  ranged.num_ranges = 1;
+  ranged.first = {4};
+  ranged.last = {4};
+  send(service.channels().resend_window, encodeMessage(ranged));
+  // The sender no longer holds seq 3: given up, 4 and 5 released in order.
+  ResendMessage window;
+  window.request = false;
+  window.sender = 1;
+  window.settled = 3;
+  window.highest = 5;
+  send(service.channels().resend_window, encodeMessage(makeResendMessage(window)));
+  while (service.status().applied != 4 && Clock::now() < deadline)
+    std::this_thread::sleep_for(milliseconds(10));
+  const status_t st = service.status();
+  EXPECT_EQ(st.applied, 4);
+  EXPECT_EQ(st.loss_held, 0);
+  EXPECT_EQ(st.loss_given_up, 1);
+  EXPECT_EQ(st.loss_reordered, 2);
+  EXPECT_GE(st.resend_requests, 1);
+  EXPECT_EQ(st.control_refused, 2);
+  service.stop();
+  const ServeSummary& sum = service.summary();
+  EXPECT_EQ(sum.control_refused.count("resend kind"), 1u);
+  EXPECT_EQ(sum.control_refused.count("resend malformed"), 1u);
+  EXPECT_EQ(sum.intake.gaps, 1);  // still counted: never received
 }
 
 }  // namespace
