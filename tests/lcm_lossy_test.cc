@@ -252,6 +252,37 @@ TEST_F(LossyLink, ThreeRobotsOneOnALossyLinkEveryEdgeOnceFAsTheMergedReplay) {
             << "\n";
 }
 
+// Loss from 1% to 10% (no outage) at 500 edges/s: every edge applied once, F = replay's.
+TEST_F(LossyLink, OneToTenPercentLossLosesNothing) {
+  const std::string file = path("graph.g2o");
+  const RunResult made = testing::run(
+      {ARBOR_EXE, "generate", "manhattan", "--poses", "800", "--seed", "4", "-o", file},
+      path("generate"));
+  ASSERT_EQ(made.status, 0) << made.err;
+  const int edges = edgesOf(file);
+  const double F = replayF(file);
+  for (const double loss : {0.01, 0.10}) {
+    SCOPED_TRACE("loss " + std::to_string(loss));
+    startServe({});
+    startRelay(loss, -1, 0);
+    const RunResult pub =
+        testing::run({ARBOR_EXE, "publish", file, "--lcm-url", url(0), "--rate", "500",
+                      "--resend-window", "100000", "--wait-ready", "--timeout", "60", "--json"},
+                     path("publish"), kGuard);
+    ASSERT_EQ(pub.status, 0) << pub.err << pub.out << serve_->err();
+    const nlohmann::json p = parseJson(pub.out, "publish");
+    const nlohmann::json relay = stop(relay_, "lossy_relay");
+    const nlohmann::json j = stop(serve_, "serve");
+    EXPECT_GT(relay.at("forward_dropped").get<int>(), 0) << relay.dump();
+    EXPECT_EQ(j.at("applied").get<int>(), edges) << j.dump();
+    EXPECT_EQ(j.at("accepted").get<int>(), edges) << j.dump();
+    EXPECT_EQ(j.at("loss_recovery").at("given_up").get<int>(), 0) << j.dump();
+    EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+    std::cout << "loss " << loss << ": " << edges << " edges, relay " << relay.dump() << ", resent "
+              << p.at("resend").at("resent") << "\n";
+  }
+}
+
 // With a deployment key the requests, the answers and every resend are sealed and verified: the
 // publisher's resends (sealed afresh around the same bytes) are applied once, nothing is
 // refused, F = `arbor replay`'s.
