@@ -29,6 +29,7 @@
 // Not thread-safe: one thread (the receive thread, or the journal replay before it starts).
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <map>
@@ -67,6 +68,9 @@ struct IntakeResult {
   std::vector<unsigned char> wire;  ///< a released message's bytes as received
   std::int64_t dropped = 0;         ///< held messages this arrival dropped ("unconfirmed jump")
   std::int64_t evicted = 0;         ///< the sender whose table this arrival's sender took (0: none)
+  /// When it arrived, if the caller holds it before applying it (the streaming core's loss
+  /// recovery: its latency counts from here); default: unset.
+  std::chrono::steady_clock::time_point arrived{};
 };
 
 struct IntakeCounts {

@@ -232,7 +232,7 @@ StreamingCore::Queued StreamingCore::queued(IntakeResult accepted,
   const std::int64_t sent = q.is_command ? accepted.command.utime
                             : q.is_prior ? std::visit(utime, accepted.prior)
                                          : std::visit(utime, accepted.edge);
-  q.transport_ms = (nowMicros() - sent) / 1e3;
+  q.transport_ms = (nowMicros() - sent) / 1e3 - msSince(received);  // send → arrival
   q.edge = std::move(accepted.edge);
   q.prior = std::move(accepted.prior);
   q.command = accepted.command;
@@ -290,6 +290,7 @@ void StreamingCore::receive(const Arrival& arrival) {
     const auto* bytes = static_cast<const unsigned char*>(arrival.wire);
     r.wire.assign(bytes, bytes + arrival.wire_size);  // journaled as received, even if held
   }
+  r.arrived = received;
   accepted.push_back(std::move(r));
   if (command || !gaps_.on()) {
     commit(std::move(accepted), received);
@@ -350,7 +351,10 @@ void StreamingCore::commit(std::vector<IntakeResult> accepted,
     for (IntakeResult& r : accepted) {
       r.wire.clear();
       r.wire.shrink_to_fit();
-      queue_.push_back(queued(std::move(r), received));
+      // Latency from its arrival, also when it waited for a gap.
+      const auto arrived =
+          r.arrived == std::chrono::steady_clock::time_point{} ? received : r.arrived;
+      queue_.push_back(queued(std::move(r), arrived));
     }
   }
   queue_cv_.notify_one();
