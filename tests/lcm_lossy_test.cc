@@ -252,6 +252,44 @@ TEST_F(LossyLink, ThreeRobotsOneOnALossyLinkEveryEdgeOnceFAsTheMergedReplay) {
             << "\n";
 }
 
+// Serve killed (-9) during the outage and restarted on its journal: what it had applied is
+// replayed and never asked for again, what it held or never got is asked for and resent; every
+// edge applied once in all, F = `arbor replay`'s.
+TEST_F(LossyLink, KillNineDuringTheOutageAndRestartOnTheJournalLosesNothing) {
+  const std::string file = std::string(ARBOR_SOURCE_DIR) + "/data/manhattan_2d.g2o";
+  const int edges = edgesOf(file);
+  const std::string journal = path("journal");
+  startServe({"--journal", journal});
+  startRelay(0.05, edges / 5, 10);
+  Process pub({ARBOR_EXE, "publish", file, "--lcm-url", url(0), "--rate", "100", "--resend-window",
+               "100000", "--wait-ready", "--timeout", "60", "--json"},
+              path("publish.out"), path("publish.err"));
+  ASSERT_TRUE(waitUntil([&] { return relay_->err().find("outage") != std::string::npos; }))
+      << relay_->err();
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  serve_->signal(SIGKILL);
+  EXPECT_EQ(serve_->wait(kGuard), -SIGKILL);
+  serve_.reset();
+  startServe({"--journal", journal});
+  EXPECT_NE(serve_->err().find("journal"), std::string::npos) << serve_->err();
+  ASSERT_EQ(pub.wait(kGuard), 0) << pub.err() << pub.out() << serve_->err();
+  const nlohmann::json p = parseJson(pub.out(), "publish");
+  const nlohmann::json relay = stop(relay_, "lossy_relay");
+  const nlohmann::json j = stop(serve_, "serve");
+  EXPECT_TRUE(p.at("resend").at("acknowledged").get<bool>()) << p.dump();
+  // The restart's counts: what the journal gave back plus what arrived since, once each.
+  const int replayed = j.at("journal_edges").get<int>();
+  EXPECT_GT(replayed, 0) << j.dump();
+  EXPECT_EQ(j.at("applied").get<int>(), edges) << j.dump();
+  EXPECT_EQ(j.at("accepted").get<int>(), edges) << j.dump();
+  EXPECT_EQ(j.at("gaps").get<int>(), 0) << j.dump();
+  EXPECT_EQ(j.at("loss_recovery").at("given_up").get<int>(), 0) << j.dump();
+  const double F = replayF(file);
+  EXPECT_NEAR(j.at("F_final").get<double>(), F, 1e-9 * F);
+  std::cout << "kill -9 in the outage: " << replayed << " edges replayed from the journal, relay "
+            << relay.dump() << ", publisher " << p.at("resend").dump() << "\n";
+}
+
 // Loss from 1% to 10% (no outage) at 500 edges/s: every edge applied once, F = replay's.
 TEST_F(LossyLink, OneToTenPercentLossLosesNothing) {
   const std::string file = path("graph.g2o");
