@@ -133,6 +133,24 @@ MessageProblem precheck<status_t>(const void* data, int size, std::string* detai
   return MessageProblem::kNone;
 }
 
+template <>
+MessageProblem precheck<resend_t>(const void* data, int size, std::string* detail) {
+  constexpr int kNumRangesOffset = 8 + 8 + 1 + 1 + 3 * 8;  // 42
+  std::int16_t n = 0;
+  if (kNumRangesOffset + 2 > size ||
+      __int16_t_decode_array(data, kNumRangesOffset, size - kNumRangesOffset, &n, 1) != 2) {
+    setDetail(detail, std::to_string(size) + " bytes, a resend_t needs at least " +
+                          std::to_string(kNumRangesOffset + 2));
+    return MessageProblem::kTruncated;
+  }
+  if (n < 0 || n > kMaxResendRanges) {
+    setDetail(detail, "num_ranges " + std::to_string(n) + " is not in 0.." +
+                          std::to_string(kMaxResendRanges));
+    return MessageProblem::kMalformed;
+  }
+  return precheckCount(2 * n, 8, size, kNumRangesOffset + 2, "2 × num_ranges", detail);
+}
+
 bool allFinite(const double* v, int n) {
   for (int k = 0; k < n; ++k) {
     if (!std::isfinite(v[k])) return false;
@@ -413,6 +431,75 @@ bool edgeKernelFromField(std::int8_t field, KernelKind* kernel, std::string* det
   return false;
 }
 
+ResendDecoding decodeResend(const void* data, int size) {
+  ResendDecoding out;
+  resend_t m;
+  out.problem = decodeMessage(data, size, &m, &out.detail);
+  if (!out.ok()) return out;
+  const auto fail = [&](MessageProblem p, const std::string& detail) {
+    out.problem = p;
+    out.detail = detail;
+    return out;
+  };
+  if (m.kind != resend_t::REQUEST && m.kind != resend_t::WINDOW) {
+    return fail(MessageProblem::kKind,
+                "kind " + std::to_string(m.kind) + " is not REQUEST (1) or WINDOW (2)");
+  }
+  if (m.stream != resend_t::EDGES && m.stream != resend_t::PRIORS) {
+    return fail(MessageProblem::kKind,
+                "stream " + std::to_string(m.stream) + " is not EDGES (1) or PRIORS (2)");
+  }
+  if (m.settled < 0 || m.highest < m.settled) {
+    return fail(MessageProblem::kSeq, "settled " + std::to_string(m.settled) + " and highest " +
+                                          std::to_string(m.highest) +
+                                          " are not 0 <= settled <= highest");
+  }
+  if (m.kind == resend_t::WINDOW && m.num_ranges != 0) {
+    return fail(MessageProblem::kMalformed,
+                "a WINDOW answer carries no ranges, not " + std::to_string(m.num_ranges));
+  }
+  std::int64_t floor = m.settled;  // each range starts above the previous one's end
+  for (int k = 0; k < m.num_ranges; ++k) {
+    const std::int64_t first = m.first[static_cast<size_t>(k)];
+    const std::int64_t last = m.last[static_cast<size_t>(k)];
+    if (first <= floor || last < first || last >= m.highest) {
+      return fail(MessageProblem::kSeq,
+                  "range " + std::to_string(k) + " (" + std::to_string(first) + ".." +
+                      std::to_string(last) + ") is not ascending inside " +
+                      std::to_string(floor + 1) + ".." + std::to_string(m.highest - 1));
+    }
+    floor = last;
+    out.message.missing.emplace_back(first, last);
+  }
+  out.message.request = m.kind == resend_t::REQUEST;
+  out.message.priors = m.stream == resend_t::PRIORS;
+  out.message.utime = m.utime;
+  out.message.sender = m.sender;
+  out.message.settled = m.settled;
+  out.message.highest = m.highest;
+  return out;
+}
+
+resend_t makeResendMessage(const ResendMessage& r) {
+  if (r.missing.size() > static_cast<size_t>(kMaxResendRanges)) {
+    throw std::invalid_argument("makeResendMessage: " + std::to_string(r.missing.size()) +
+                                " ranges, more than " + std::to_string(kMaxResendRanges));
+  }
+  resend_t m;
+  m.utime = r.utime;
+  m.kind = r.request ? resend_t::REQUEST : resend_t::WINDOW;
+  m.stream = r.priors ? resend_t::PRIORS : resend_t::EDGES;
+  m.sender = r.sender;
+  m.settled = r.settled;
+  m.highest = r.highest;
+  m.num_ranges = static_cast<std::int16_t>(r.missing.size());
+  for (const auto& [first, last] : r.missing) {
+    m.first.push_back(first);
+    m.last.push_back(last);
+  }
+  return m;
+}
+
 std::vector<Key> covarianceIds(const std::string& path) {
   std::istringstream in(path);
   std::vector<Key> ids;
@@ -672,5 +759,6 @@ template MessageProblem decodeMessage(const void*, int, edge_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_v1_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, prior_t*, std::string*);
 template MessageProblem decodeMessage(const void*, int, edge_command_t*, std::string*);
+template MessageProblem decodeMessage(const void*, int, resend_t*, std::string*);
 
 }  // namespace arbor

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -20,6 +21,7 @@
 #include "arbor/estimate_t.hpp"
 #include "arbor/journal_mark_t.hpp"
 #include "arbor/prior_t.hpp"
+#include "arbor/resend_t.hpp"
 #include "arbor/status_t.hpp"
 #include "arbor_slam/core/edge_trust.h"
 #include "arbor_slam/core/pose_graph.h"
@@ -102,6 +104,38 @@ EdgeCommandDecoding decodeEdgeCommand(const void* data, int size);
 /// The edge_command_t of a command.
 edge_command_t makeEdgeCommandMessage(const StreamEdgeCommand& command);
 
+/// A validated resend_t (docs/lcm.md, "Loss recovery"): serve's request for one sender's
+/// missing seq numbers (`request`), or a publisher's answer that it holds nothing at or below
+/// `settled` (WINDOW).
+struct ResendMessage {
+  bool request = true;  ///< REQUEST (else WINDOW)
+  bool priors = false;  ///< stream PRIORS (else EDGES)
+  std::int64_t utime = 0, sender = 0;
+  std::int64_t settled = 0;  ///< REQUEST: applied or given up up to here; WINDOW: gone up to here
+  std::int64_t highest = 0;  ///< REQUEST: highest received; WINDOW: highest sent
+  /// REQUEST: missing seq ranges [first, last], ascending, disjoint, inside settled+1..highest−1.
+  std::vector<std::pair<std::int64_t, std::int64_t>> missing;
+};
+
+/// Ranges one resend_t carries at most.
+inline constexpr int kMaxResendRanges = 64;
+
+struct ResendDecoding {
+  MessageProblem problem = MessageProblem::kNone;
+  std::string detail;  ///< the field and its value
+  ResendMessage message;
+  bool ok() const { return problem == MessageProblem::kNone; }
+};
+
+/// Decodes and validates the bytes of a resend_t: kind REQUEST or WINDOW and stream EDGES or
+/// PRIORS (kind), num_ranges 0..64 (malformed, checked before anything is allocated; a WINDOW
+/// carries none), 0 <= settled <= highest and ranges ascending, disjoint, with settled < first
+/// <= last < highest (seq). Never throws.
+ResendDecoding decodeResend(const void* data, int size);
+
+/// The resend_t of a request or window answer (its `missing` must hold <= kMaxResendRanges).
+resend_t makeResendMessage(const ResendMessage& message);
+
 /// The edge_t of a measurement (2D: rotation[0] = angle; 3D: quaternion w x y z).
 template <class G>
 edge_t makeEdgeMessage(const StreamEdge<G>& edge);
@@ -146,5 +180,6 @@ extern template MessageProblem decodeMessage(const void*, int, edge_t*, std::str
 extern template MessageProblem decodeMessage(const void*, int, edge_v1_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, prior_t*, std::string*);
 extern template MessageProblem decodeMessage(const void*, int, edge_command_t*, std::string*);
+extern template MessageProblem decodeMessage(const void*, int, resend_t*, std::string*);
 
 }  // namespace arbor

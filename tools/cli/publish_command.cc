@@ -22,6 +22,7 @@
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/commands.h"
 #include "arbor_slam/tools/cli/publish_stream.h"
+#include "arbor_slam/tools/cli/resend_window.h"
 #include "arbor_slam/tools/serve/lcm_tuning.h"
 #include "arbor_slam/tools/serve/serve_service.h"
 
@@ -41,6 +42,7 @@ struct PublishRun {
   ReadOptions read;
   std::string edge_choices;  // --edge-choices FILE (io/edge_choice_file.h)
   std::string key_file;      // --key FILE (tools/cli/bus_key_flag.h)
+  long resend_window = 0;    // --resend-window N (0: off)
   serve::BusKeyring keys;    // its keys (none without --key)
 };
 
@@ -141,6 +143,108 @@ class Listener {
   std::thread thread_;
 };
 
+// Publishes on one instance from two threads (the stream, and the resends), one at a time.
+class BusPublisher {
+ public:
+  BusPublisher(lcm::LCM& lcm, serve::BusAuth* auth) : lcm_(lcm), auth_(auth) {}
+  int publish(const std::string& channel, const std::vector<std::uint8_t>& bytes) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return publishOnBus(lcm_, auth_, channel, bytes);
+  }
+
+ private:
+  lcm::LCM& lcm_;
+  serve::BusAuth* auth_;
+  std::mutex mutex_;
+};
+
+// --resend-window: listens on ARBOR_RESEND (an instance of its own) and answers serve's resend
+// requests for our sender from the window of what was sent (tools/cli/resend_window.h).
+class Resender {
+ public:
+  Resender(const std::string& url, const serve::Channels& channels, std::int64_t sender,
+           std::size_t capacity, serve::BusAuth* auth, BusPublisher& out)
+      : lcm_(url), channels_(channels), auth_(auth), out_(out), window_(capacity, sender) {
+    if (!lcm_.good()) throw std::runtime_error("cannot open LCM at '" + url + "'");
+    serve::tuneLcmTransport(lcm_, url);
+    sub_ = lcm_.subscribe(channels.resend, &Resender::onRequest, this);
+    sub_->setQueueCapacity(0);
+    thread_ = std::thread([this] {
+      while (!stop_) {
+        serve::armQuickAck(lcm_);
+        lcm_.handleTimeout(20);
+      }
+    });
+  }
+  ~Resender() {
+    stop_ = true;
+    thread_.join();
+    lcm_.unsubscribe(sub_);
+  }
+  void sent(bool prior, std::int64_t seq, const std::string& channel,
+            const std::vector<std::uint8_t>& bytes) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    window_.sent(prior, seq, channel, bytes, Clock::now());
+  }
+  // After the stream: answers requests until serve settled both streams up to their last seq
+  // (probing the tail meanwhile), or the timeout.
+  bool waitAcknowledged(std::int64_t last_edge, std::int64_t last_prior, double timeout_s) {
+    const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      window_.finished();
+    }
+    for (;;) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (window_.acknowledged(false, last_edge) && window_.acknowledged(true, last_prior))
+          return true;
+        for (const ResendWindow::Entry* e : window_.tailProbes(Clock::now()))
+          out_.publish(e->channel, e->bytes);
+      }
+      if (Clock::now() > end) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  }
+  ResendWindow::Counts counts() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return window_.counts();
+  }
+
+ private:
+  void onRequest(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+    const std::uint8_t* data = nullptr;
+    int size = 0;
+    if (!openFromBus(auth_, channel, rbuf, &data, &size)) return;
+    const ResendDecoding d = decodeResend(data, size);
+    if (!d.ok()) {
+      if (bad_++ == 0)
+        std::cerr << "arbor publish: refused a resend_t on " << channel << ": "
+                  << toString(d.problem) << ": " << d.detail << "\n";
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    const ResendWindow::Answer a = window_.request(d.message, Clock::now());
+    for (const ResendWindow::Entry* e : a.resend) out_.publish(e->channel, e->bytes);
+    if (a.window) {
+      ResendMessage w = *a.window;
+      w.utime = serve::nowMicros();
+      out_.publish(channels_.resend_window, encodeMessage(makeResendMessage(w)));
+    }
+  }
+
+  lcm::LCM lcm_;
+  serve::Channels channels_;
+  serve::BusAuth* auth_;
+  BusPublisher& out_;
+  std::mutex mutex_;
+  ResendWindow window_;
+  lcm::Subscription* sub_ = nullptr;
+  std::int64_t bad_ = 0;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
 template <class G>
 int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   const long total = static_cast<long>(graph.edges.size());
@@ -180,6 +284,13 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     listener =
         std::make_unique<Listener>(*listen_lcm, channels, run.sender, n, run.skip + 1, auth.get());
   }
+  BusPublisher bus(lcm, auth.get());
+  std::unique_ptr<Resender> resender;
+  if (run.resend_window > 0) {
+    resender =
+        std::make_unique<Resender>(run.url, channels, run.sender,
+                                   static_cast<std::size_t>(run.resend_window), auth.get(), bus);
+  }
   if (run.wait_ready && !listener->waitStatus(run.timeout_s)) {
     std::cerr << "arbor publish: no status from a server on " << channels.status << " within "
               << run.timeout_s << " s\n";
@@ -188,7 +299,8 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
 
   // --rate paces the edges; a prior goes out right after the edge it follows.
   const auto start = Clock::now();
-  size_t k = 0;  // edges sent
+  size_t k = 0;                 // edges sent
+  std::int64_t last_prior = 0;  // the last prior's seq
   for (const StreamMessage<G>& m : messages) {
     if (!m.is_prior && run.rate > 0)
       std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(
@@ -196,9 +308,11 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
     const auto bytes = encodeStreamMessage(m, serve::nowMicros());
     if (!m.is_prior && listener) listener->sent(k);
     const std::string& channel = m.is_prior ? channels.priors : channels.edges;
-    if (publishOnBus(lcm, auth.get(), channel, bytes) != 0) {
-      const std::int64_t seq =
-          m.is_prior ? std::visit([](const auto& p) { return p.seq; }, m.prior) : m.edge.seq;
+    const std::int64_t seq =
+        m.is_prior ? std::visit([](const auto& p) { return p.seq; }, m.prior) : m.edge.seq;
+    if (m.is_prior) last_prior = seq;
+    if (resender) resender->sent(m.is_prior, seq, channel, bytes);
+    if (bus.publish(channel, bytes) != 0) {
       throw std::runtime_error(std::string("LCM publish failed at ") +
                                (m.is_prior ? "prior" : "edge") + " seq " + std::to_string(seq));
     }
@@ -206,6 +320,9 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   }
   const double publish_s = std::chrono::duration<double>(Clock::now() - start).count();
   bool complete = true;
+  bool acknowledged = true;
+  if (resender)
+    acknowledged = resender->waitAcknowledged(n > 0 ? end : 0, last_prior, run.timeout_s);
   if (run.wait && n > 0) complete = listener->waitCovered(end, run.timeout_s);
   const double total_s = std::chrono::duration<double>(Clock::now() - start).count();
   std::vector<double> latencies = listener ? listener->latencies() : std::vector<double>();
@@ -220,6 +337,12 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
                         {"publish_s", publish_s},
                         {"total_s", total_s},
                         {"edges_per_s", publish_s > 0 ? n / publish_s : 0.0}};
+    if (resender) {
+      const ResendWindow::Counts c = resender->counts();
+      j["resend"] = {{"window", run.resend_window},  {"requests", c.requests},
+                     {"resent", c.resent},           {"window_answers", c.window_answers},
+                     {"unavailable", c.unavailable}, {"acknowledged", acknowledged}};
+    }
     if (run.wait) {
       j["acknowledged"] = latencies.size();
       j["complete"] = complete;
@@ -237,6 +360,16 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
                 << "latency ms    p50 " << lat.p50 << "  p99 " << lat.p99 << "  max " << lat.max
                 << " (publish -> estimate received)\n";
     }
+  }
+  if (resender && !run.json) {
+    const ResendWindow::Counts c = resender->counts();
+    std::cout << "resent        " << c.resent << " messages for " << c.requests << " requests; "
+              << c.unavailable << " asked for and no longer held\n";
+  }
+  if (!acknowledged) {
+    std::cerr << "arbor publish: the server did not acknowledge every message within "
+              << run.timeout_s << " s (--resend-window)\n";
+    return 1;
   }
   if (!complete) {
     std::cerr << "arbor publish: no estimate covering seq " << end << " within " << run.timeout_s
@@ -272,7 +405,10 @@ int publishCommand(const std::vector<std::string>& args) {
       "json", po::bool_switch(&run.json), "print one JSON object")(
       "edge-choices", po::value(&run.edge_choices),
       "per-edge trust and kernel into edge_t, 'FROM TO default|trusted|robust [KERNEL]' a line "
-      "(docs/files.md)");
+      "(docs/files.md)")(
+      "resend-window", po::value(&run.resend_window)->default_value(0),
+      "keep the last N messages per stream and send again what the server reports missing "
+      "(ARBOR_RESEND); then wait until it acknowledges every message (--timeout). 0: off");
   addBusKeyFlag(desc, &run.key_file);
   po::positional_options_description positional;
   positional.add("file", 1);
@@ -283,6 +419,9 @@ int publishCommand(const std::vector<std::string>& args) {
   if (run.skip < 0) throw UsageError("--skip must be >= 0");
   if (run.count < -1) throw UsageError("--count must be >= 0 (or -1: all)");
   if (!(run.timeout_s > 0)) throw UsageError("--timeout must be > 0");
+  if (run.resend_window < 0 || run.resend_window > (1L << 24))
+    throw UsageError("--resend-window must be in 0..16777216, not '" +
+                     std::to_string(run.resend_window) + "'");
   run.read.information = parseInformationPolicy(information);
   run.keys = readBusKeyFlag(run.key_file);  // before anything is read or opened
   const AnyPoseGraph any = readGraphFile(run.file, run.read);

@@ -104,6 +104,8 @@ struct ServeFlagValues {
   bool no_refine = false;
   std::string exit_budget = "1";
   long long max_senders = static_cast<long long>(line.options.max_senders);
+  double gap_hold_s = 2;  // --gap-hold (the library's default is off)
+  long long reorder_limit = static_cast<long long>(line.options.reorder_limit);
 };
 
 const char* const kService = "Service";
@@ -138,6 +140,13 @@ FlagSet serveFlagSet(ServeFlagValues& v) {
       "max-senders", po::value(&v.max_senders)->default_value(v.max_senders),
       "sender tables per stream (edges, priors, edge commands); a new sender takes the place of "
       "the least recently heard one (counted as senders_evicted)")(
+      "gap-hold", po::value(&v.gap_hold_s)->default_value(v.gap_hold_s)->value_name("S"),
+      "loss recovery: an edge or prior after a gap in its sender's seqs waits up to S seconds "
+      "for the gap to be resent (serve asks on ARBOR_RESEND), so the stream is applied in seq "
+      "order; then the gap is given up (0: off, applied as received; docs/lcm.md)")(
+      "reorder-limit", po::value(&v.reorder_limit)->default_value(v.reorder_limit)->value_name("N"),
+      "loss recovery: messages held per sender and stream while a gap waits; beyond, the oldest "
+      "gap is given up")(
       "snapshot-dir", po::value(&options.snapshot_dir),
       "directory command SNAPSHOT writes into (a plain file name from the message; never over a "
       "file this service did not create); unset: SNAPSHOT refused")(
@@ -226,6 +235,17 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
     throw UsageError("--max-senders must be >= 1, not '" + std::to_string(max_senders) + "'");
   }
   options.max_senders = static_cast<std::size_t>(max_senders);
+  if (!(v.gap_hold_s >= 0 && v.gap_hold_s <= 3600)) {
+    std::ostringstream value;
+    value << v.gap_hold_s;
+    throw UsageError("--gap-hold must be seconds in 0..3600, not '" + value.str() + "'");
+  }
+  options.gap_hold = std::chrono::milliseconds(std::llround(v.gap_hold_s * 1e3));
+  if (v.reorder_limit < 1 || v.reorder_limit > (1LL << 24)) {
+    throw UsageError("--reorder-limit must be in 1..16777216, not '" +
+                     std::to_string(v.reorder_limit) + "'");
+  }
+  options.reorder_limit = static_cast<std::size_t>(v.reorder_limit);
   if (options.journal_max_bytes < 0 ||
       (options.journal_max_bytes > 0 &&
        options.journal_max_bytes <= 2 * options.journal_reserve_bytes)) {
@@ -397,6 +417,13 @@ int serveCommand(const std::vector<std::string>& args) {
         {"jumps_held", s.intake.held},
         {"jumps_confirmed", s.intake.jumps_confirmed},
         {"senders_evicted", s.intake.senders_evicted},
+        {"loss_recovery",
+         {{"held", s.loss.held},
+          {"reordered", s.loss.reordered},
+          {"given_up", s.loss.given_up},
+          {"gaps_given_up", s.loss.gaps_given_up},
+          {"late", s.loss.late},
+          {"requests", s.loss.requests}}},
         {"updates", s.updates},
         {"poses", s.poses},
         {"pending", s.pending},

@@ -67,6 +67,14 @@ std::vector<std::pair<std::int64_t, std::int64_t>> EdgeIntake::gapsBySender(Kind
   return out;
 }
 
+std::vector<std::pair<std::int64_t, std::int64_t>> EdgeIntake::highestBySender(Kind kind) const {
+  const Stream& s = kind == Kind::kCommand ? commands_ : kind == Kind::kPrior ? priors_ : edges_;
+  std::vector<std::pair<std::int64_t, std::int64_t>> out;
+  for (const auto& [sender, table] : s.senders) out.emplace_back(sender, table.highest);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
 std::size_t EdgeIntake::trackedSeqs(std::int64_t sender) const {
   const auto it = edges_.senders.find(sender);
   return it == edges_.senders.end() ? 0 : it->second.ring.size();

@@ -29,6 +29,7 @@
 // Not thread-safe: one thread (the receive thread, or the journal replay before it starts).
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <map>
@@ -67,6 +68,9 @@ struct IntakeResult {
   std::vector<unsigned char> wire;  ///< a released message's bytes as received
   std::int64_t dropped = 0;         ///< held messages this arrival dropped ("unconfirmed jump")
   std::int64_t evicted = 0;         ///< the sender whose table this arrival's sender took (0: none)
+  /// When it arrived, if the caller holds it before applying it (the streaming core's loss
+  /// recovery: its latency counts from here); default: unset.
+  std::chrono::steady_clock::time_point arrived{};
 };
 
 struct IntakeCounts {
@@ -140,6 +144,8 @@ class EdgeIntake {
   /// Per sender of `kind` with gaps: (sender, seq numbers not received), in sender order; the
   /// counts sum to the stream's IntakeCounts::gaps. At most max_senders() entries.
   std::vector<std::pair<std::int64_t, std::int64_t>> gapsBySender(Kind kind) const;
+  /// Per sender of `kind`: (sender, its highest seq), in sender order.
+  std::vector<std::pair<std::int64_t, std::int64_t>> highestBySender(Kind kind) const;
   /// Sender tables held per stream (each <= max_senders()).
   std::size_t senders(Kind kind) const;
   std::size_t maxSenders() const { return max_senders_; }

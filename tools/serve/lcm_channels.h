@@ -7,14 +7,19 @@ namespace arbor::serve {
 
 struct Channels {
   std::string edges, estimate, status, command, priors, edge_commands;
-  std::string link_probe;  ///< the receive link's own probe (LinkWatch)
-  std::string covariance;  ///< answers to command COVARIANCE
+  std::string link_probe;     ///< the receive link's own probe (LinkWatch)
+  std::string covariance;     ///< answers to command COVARIANCE
+  std::string resend;         ///< serve's resend requests (resend_t REQUEST)
+  std::string resend_window;  ///< publishers' answers: what they no longer hold (resend_t WINDOW)
   /// ARBOR_EDGES, ARBOR_ESTIMATE, ARBOR_STATUS, ARBOR_COMMAND, ARBOR_PRIORS,
-  /// ARBOR_EDGE_COMMANDS, ARBOR_LINK_PROBE, ARBOR_COVARIANCE, each after `prefix`.
+  /// ARBOR_EDGE_COMMANDS, ARBOR_LINK_PROBE, ARBOR_COVARIANCE, ARBOR_RESEND,
+  /// ARBOR_RESEND_WINDOW, each after `prefix`.
   static Channels withPrefix(const std::string& prefix) {
-    return {prefix + "ARBOR_EDGES",      prefix + "ARBOR_ESTIMATE",  prefix + "ARBOR_STATUS",
-            prefix + "ARBOR_COMMAND",    prefix + "ARBOR_PRIORS",    prefix + "ARBOR_EDGE_COMMANDS",
-            prefix + "ARBOR_LINK_PROBE", prefix + "ARBOR_COVARIANCE"};
+    return {prefix + "ARBOR_EDGES",      prefix + "ARBOR_ESTIMATE",
+            prefix + "ARBOR_STATUS",     prefix + "ARBOR_COMMAND",
+            prefix + "ARBOR_PRIORS",     prefix + "ARBOR_EDGE_COMMANDS",
+            prefix + "ARBOR_LINK_PROBE", prefix + "ARBOR_COVARIANCE",
+            prefix + "ARBOR_RESEND",     prefix + "ARBOR_RESEND_WINDOW"};
   }
 };
 

@@ -276,6 +276,11 @@ status_t toMessage(const CoreStatus& k) {
   std::stable_sort(gaps.begin(), gaps.end(),
                    [](const auto& a, const auto& b) { return a.second > b.second; });
   constexpr int kListed = static_cast<int>(sizeof(s.gap_sender) / sizeof(s.gap_sender[0]));
+  s.loss_held = k.loss.held;
+  s.loss_reordered = k.loss.reordered;
+  s.loss_given_up = k.loss.given_up;
+  s.loss_late = k.loss.late;
+  s.resend_requests = k.loss.requests;
   s.gap_senders = static_cast<std::int32_t>(std::min<size_t>(gaps.size(), kListed));
   for (int k2 = 0; k2 < kListed; ++k2) {
     const bool listed = k2 < s.gap_senders;

@@ -76,6 +76,10 @@ void LcmService::start() {
                         onCommand(rbuf, channel);
                       });
   receive_->subscribe(channels_.edge_commands, on(MeasurementKind::kCommand, limits.edge_command));
+  receive_->subscribe(channels_.resend_window,
+                      [this](const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+                        onResendWindow(rbuf, channel);
+                      });
   if (options_.udpm_port > 0) {  // the socket exists from the first subscribe on
     const std::int64_t bytes = udpReceiveBufferBytes(options_.udpm_port);
     recv_buf_at_start_ = bytes;
@@ -176,6 +180,35 @@ void LcmService::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& ch
   }
 }
 
+void LcmService::onResendWindow(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  try {
+    const std::uint8_t* data = static_cast<const std::uint8_t*>(rbuf->data);
+    int size = static_cast<int>(rbuf->data_size);
+    const int limit =
+        options_.message_limits.resend_window + (auth_ ? static_cast<int>(kEnvelopeOverhead) : 0);
+    if (size > limit) {
+      core_->refuseControl("resend oversize", "a message of " + std::to_string(size) +
+                                                  " bytes on " + channel + ": over its limit of " +
+                                                  std::to_string(limit) + " bytes (not decoded)");
+      return;
+    }
+    if (!openReceived(channel, &data, &size)) return;
+    const ResendDecoding d = decodeResend(data, size);
+    if (!d.ok() || d.message.request) {
+      const std::string reason = d.ok() ? "kind" : toString(d.problem);
+      core_->refuseControl(
+          "resend " + reason,
+          "resend_t on " + channel + ": " +
+              (d.ok() ? std::string("a REQUEST where only WINDOW answers go") : d.detail));
+      return;
+    }
+    core_->windowAnswer(d.message.priors ? MeasurementKind::kPrior : MeasurementKind::kEdge,
+                        d.message.sender, d.message.settled);
+  } catch (const std::exception& e) {
+    core_->logLine(std::string("error while receiving a resend answer: ") + e.what());
+  }
+}
+
 void LcmService::setBusKeys(const BusKeyring& keys) {
   if (!auth_) {
     core_->logLine("keys: this service was started without --key; a key takes a restart");
@@ -228,6 +261,18 @@ void LcmService::publishStatus(const CoreStatus& status) {
 
 void LcmService::publishCovariance(const CovarianceAnswer& answer) {
   publishBytes(channels_.covariance, encodeMessage(toMessage(answer)));
+}
+
+void LcmService::publishResend(const ResendRequest& request) {
+  ResendMessage m;
+  m.request = true;
+  m.priors = request.kind == MeasurementKind::kPrior;
+  m.utime = nowMicros();
+  m.sender = request.sender;
+  m.settled = request.settled;
+  m.highest = request.highest;
+  m.missing = request.missing;
+  publishBytes(channels_.resend, encodeMessage(makeResendMessage(m)));
 }
 
 bool LcmService::takeRecovered() { return publish_->takeRecovered(); }

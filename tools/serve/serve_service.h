@@ -39,7 +39,8 @@ struct MessageLimits {
   int edge = 4096;
   int prior = 4096;
   int edge_command = 1024;
-  int command = 4096;  ///< command_t (its path is a file name)
+  int command = 4096;       ///< command_t (its path is a file name)
+  int resend_window = 256;  ///< resend_t WINDOW (no ranges: 50 bytes)
 };
 
 /// The core's options and the LCM adapter's own.
@@ -109,6 +110,7 @@ class LcmService final : public Publisher {
   void publishEstimate(const Estimate& estimate) override;
   void publishStatus(const CoreStatus& status) override;
   void publishCovariance(const CovarianceAnswer& answer) override;
+  void publishResend(const ResendRequest& request) override;
   bool takeRecovered() override;
   TransportState transportState() const override;
 
@@ -117,6 +119,8 @@ class LcmService final : public Publisher {
   void onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
                      MeasurementKind kind, int limit);
   void onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  /// A publisher's resend_t WINDOW answer (any other kind or a bad message: counted, logged).
+  void onResendWindow(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void receiveLoop();
   void publishBytes(const std::string& channel, const std::vector<std::uint8_t>& bytes);
   /// With a key: opens the envelope of a message received on `channel` (true, `*data` and

@@ -38,7 +38,9 @@ StreamingCore::StreamingCore(Publisher& publisher, std::unique_ptr<JournalSink> 
       options_(std::move(options)),
       snapshots_(options_.snapshot_dir),
       limiter_(options_.log_period),
-      intake_(options_.dim, options_.intake_window, options_.max_senders) {
+      intake_(options_.dim, options_.intake_window, options_.max_senders),
+      gaps_(options_.gap_hold, std::max<std::size_t>(1, options_.reorder_limit),
+            std::max<std::int64_t>(1, options_.intake_window)) {
   options_.batch.cancel = CancellationToken();  // the core's own: stop() cancels it
   if (options_.dim != 0 && options_.dim != 2 && options_.dim != 3) {
     throw std::invalid_argument("serve: dim " + std::to_string(options_.dim) + " is not 2 or 3");
@@ -73,6 +75,12 @@ void StreamingCore::logLimited(const std::string& key, const std::string& line) 
 void StreamingCore::start() {
   if (running_) throw std::logic_error("serve: start() twice");
   if (journal_) replayJournal();
+  // What the journal holds is settled: a restart never asks for it again.
+  for (const MeasurementKind kind : {MeasurementKind::kEdge, MeasurementKind::kPrior}) {
+    for (const auto& [sender, highest] : intake_.highestBySender(kind))
+      gaps_.restore(kind, sender, highest);
+  }
+  last_requests_ = std::chrono::steady_clock::now();
   if (intake_.dim() == 0) {
     logLine(
         "no --dim and no journaled edge: the first edge or prior received fixes the stream's "
@@ -99,6 +107,18 @@ void StreamingCore::stop() {
   // update may still start stop at their first. The cancelled run is collected below, without a
   // reseed.
   cancelBatches();
+  {
+    // Held for a gap that will not be filled now: journaled and applied in seq order.
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    std::int64_t given_up = 0;
+    std::vector<IntakeResult> released = gaps_.releaseAll(&given_up);
+    if (!released.empty()) {
+      logLine("stopping: " + std::to_string(released.size()) +
+              " measurements held for a gap released, " + std::to_string(given_up) +
+              " seq numbers given up");
+    }
+    commit(std::move(released), std::chrono::steady_clock::now());
+  }
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     smoother_stop_ = true;
@@ -132,6 +152,7 @@ void StreamingCore::stop() {
     summary_.command_intake = intake_.commandCounts();
     summary_.journal_refused = journal_refused_;
     summary_.control_refused = control_refused_;
+    summary_.loss = gaps_.counts();
   }
   const TransportState transport = publisher_.transportState();
   summary_.link_outages = transport.link_outages;
@@ -211,7 +232,7 @@ StreamingCore::Queued StreamingCore::queued(IntakeResult accepted,
   const std::int64_t sent = q.is_command ? accepted.command.utime
                             : q.is_prior ? std::visit(utime, accepted.prior)
                                          : std::visit(utime, accepted.edge);
-  q.transport_ms = (nowMicros() - sent) / 1e3;
+  q.transport_ms = (nowMicros() - sent) / 1e3 - msSince(received);  // send → arrival
   q.edge = std::move(accepted.edge);
   q.prior = std::move(accepted.prior);
   q.command = accepted.command;
@@ -238,71 +259,144 @@ void StreamingCore::receive(const Arrival& arrival) {
   const bool prior = arrival.kind == MeasurementKind::kPrior;
   const bool command = arrival.kind == MeasurementKind::kCommand;
   const char* what = nameOf(arrival.kind);
-  std::vector<IntakeResult> accepted;
-  {
-    std::lock_guard<std::mutex> lock(intake_mutex_);
-    IntakeResult r = intake_.admit(arrival);
-    logIntakeNotes(r, what);
-    if (r.verdict == Intake::kRejected || r.verdict == Intake::kHeld) {
-      const std::string key = command ? "command " + r.reason
-                              : prior ? "prior " + r.reason
-                                      : r.reason;
-      std::ostringstream os;
-      os << (r.verdict == Intake::kHeld ? "held " : "rejected ") << what;
-      if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
-      os << ": " << r.reason << ": " << r.detail;
-      logLimited(key, os.str());
-      return;
-    }
-    if (r.verdict == Intake::kDuplicate) return;
-    if (r.skipped > 0) {
-      logLimited(std::string("gap ") + what, std::string("gap: sender ") +
-                                                 std::to_string(r.sender) + " skipped " +
-                                                 std::to_string(r.skipped) + " " + what +
-                                                 " seq numbers before " + std::to_string(r.seq));
-    }
-    // A confirmed jump: the held messages first, in the order received, then this one.
-    accepted = std::move(r.released);
-    r.released.clear();
-    accepted.push_back(std::move(r));
-    // Journal before it can be applied: an accepted edge, prior or edge command is never lost.
-    // All go into the one journal in the order received, which is the order they are queued in.
-    for (auto it = accepted.begin(); journal_ && it != accepted.end();) {
-      Arrival a;
-      const bool current = std::next(it) == accepted.end();
-      if (current) {
-        a = arrival;
-      } else {
-        a.kind = arrival.kind;
-        a.edge = it->edge;
-        a.prior = it->prior;
-        a.command = it->command;
-        a.fingerprint = it->fingerprint;
-        a.wire = it->wire.empty() ? nullptr : it->wire.data();
-        a.wire_size = static_cast<int>(it->wire.size());
-      }
-      try {
-        journal_->appendMeasurement(a);
-        ++it;
-      } catch (const std::exception& e) {
-        // Write-ahead: what the journal does not hold is never applied. The sender may send it
-        // again under the same seq once there is room.
-        intake_.revoke(*it, "journal");
-        ++journal_refused_;
-        logLimited(std::string("journal ") + what,
-                   std::string(what) + " (sender " + std::to_string(it->sender) + " seq " +
-                       std::to_string(it->seq) +
-                       ") refused, the journal cannot take it: " + e.what());
-        it = accepted.erase(it);
-      }
+  std::lock_guard<std::mutex> lock(intake_mutex_);
+  IntakeResult r = intake_.admit(arrival);
+  logIntakeNotes(r, what);
+  if (r.evicted != 0 && !command) commit(gaps_.forget(arrival.kind, r.evicted), received);
+  if (r.verdict != Intake::kAccepted && r.seq != 0 && !command)
+    gaps_.heard(arrival.kind, r.sender, received);  // a resent duplicate is acknowledged too
+  if (r.verdict == Intake::kRejected || r.verdict == Intake::kHeld) {
+    const std::string key = command ? "command " + r.reason
+                            : prior ? "prior " + r.reason
+                                    : r.reason;
+    std::ostringstream os;
+    os << (r.verdict == Intake::kHeld ? "held " : "rejected ") << what;
+    if (r.seq != 0) os << " (sender " << r.sender << " seq " << r.seq << ")";
+    os << ": " << r.reason << ": " << r.detail;
+    logLimited(key, os.str());
+    return;
+  }
+  if (r.verdict == Intake::kDuplicate) return;
+  if (r.skipped > 0) {
+    logLimited(std::string("gap ") + what,
+               std::string("gap: sender ") + std::to_string(r.sender) + " skipped " +
+                   std::to_string(r.skipped) + " " + what + " seq numbers before " +
+                   std::to_string(r.seq) + (gaps_.on() && !command ? ": asked again" : ""));
+  }
+  // A confirmed jump: the held messages first, in the order received, then this one.
+  std::vector<IntakeResult> accepted = std::move(r.released);
+  r.released.clear();
+  if (r.wire.empty() && arrival.wire != nullptr && arrival.wire_size > 0) {
+    const auto* bytes = static_cast<const unsigned char*>(arrival.wire);
+    r.wire.assign(bytes, bytes + arrival.wire_size);  // journaled as received, even if held
+  }
+  r.arrived = received;
+  accepted.push_back(std::move(r));
+  if (command || !gaps_.on()) {
+    commit(std::move(accepted), received);
+    return;
+  }
+  // Loss recovery: released in seq order, each once; what follows a gap waits for it.
+  std::vector<IntakeResult> released;
+  std::int64_t given_up = 0;
+  for (IntakeResult& a : accepted) {
+    std::vector<IntakeResult> now = gaps_.offer(std::move(a), received, &given_up);
+    released.insert(released.end(), std::make_move_iterator(now.begin()),
+                    std::make_move_iterator(now.end()));
+  }
+  if (given_up > 0) {
+    logGivenUp(given_up, std::string("more than --reorder-limit ") +
+                             std::to_string(options_.reorder_limit) + " " + what +
+                             "s of one sender held, or below the intake window");
+  }
+  commit(std::move(released), received);
+}
+
+void StreamingCore::commit(std::vector<IntakeResult> accepted,
+                           std::chrono::steady_clock::time_point received) {
+  if (accepted.empty()) return;
+  // Journal before it can be applied: an accepted edge, prior or edge command is never lost.
+  // All go into the one journal in the order released, which is the order they are queued in.
+  for (auto it = accepted.begin(); journal_ && it != accepted.end();) {
+    Arrival a;
+    a.kind = it->is_command ? MeasurementKind::kCommand
+             : it->is_prior ? MeasurementKind::kPrior
+                            : MeasurementKind::kEdge;
+    a.edge = it->edge;
+    a.prior = it->prior;
+    a.command = it->command;
+    a.fingerprint = it->fingerprint;
+    a.wire = it->wire.empty() ? nullptr : it->wire.data();
+    a.wire_size = static_cast<int>(it->wire.size());
+    try {
+      journal_->appendMeasurement(a);
+      ++it;
+    } catch (const std::exception& e) {
+      // Write-ahead: what the journal does not hold is never applied. The sender may send it
+      // again under the same seq once there is room.
+      const char* what = nameOf(a.kind);
+      intake_.revoke(*it, "journal");
+      ++journal_refused_;
+      logLimited(std::string("journal ") + what,
+                 std::string(what) + " (sender " + std::to_string(it->sender) + " seq " +
+                     std::to_string(it->seq) +
+                     ") refused, the journal cannot take it: " + e.what());
+      it = accepted.erase(it);
     }
   }
   if (accepted.empty()) return;
   {
+    // Under the intake's lock (taken by the caller): the queue's order is the journal's.
     std::lock_guard<std::mutex> lock(queue_mutex_);
-    for (IntakeResult& r : accepted) queue_.push_back(queued(std::move(r), received));
+    for (IntakeResult& r : accepted) {
+      r.wire.clear();
+      r.wire.shrink_to_fit();
+      // Latency from its arrival, also when it waited for a gap.
+      const auto arrived =
+          r.arrived == std::chrono::steady_clock::time_point{} ? received : r.arrived;
+      queue_.push_back(queued(std::move(r), arrived));
+    }
   }
   queue_cv_.notify_one();
+}
+
+void StreamingCore::logGivenUp(std::int64_t seqs, const std::string& why) {
+  logLimited("gap given up", "gave up " + std::to_string(seqs) + " missing seq number(s) (" + why +
+                                 "); they stay counted in gaps, a late arrival is still applied");
+}
+
+void StreamingCore::windowAnswer(MeasurementKind kind, std::int64_t sender, std::int64_t settled) {
+  if (kind == MeasurementKind::kCommand) return;
+  std::lock_guard<std::mutex> lock(intake_mutex_);
+  std::int64_t given_up = 0;
+  std::vector<IntakeResult> released = gaps_.giveUpTo(kind, sender, settled, &given_up);
+  if (given_up > 0) {
+    logGivenUp(given_up, "sender " + std::to_string(sender) + " holds no " + nameOf(kind) +
+                             " at or below seq " + std::to_string(settled) + " any more");
+  }
+  commit(std::move(released), std::chrono::steady_clock::now());
+}
+
+void StreamingCore::recoverLosses() {
+  if (!gaps_.on()) return;
+  const auto now = std::chrono::steady_clock::now();
+  std::vector<ResendRequest> requests;
+  {
+    std::lock_guard<std::mutex> lock(intake_mutex_);
+    std::int64_t given_up = 0;
+    std::vector<IntakeResult> released = gaps_.expire(now, &given_up);
+    if (given_up > 0) {
+      logGivenUp(given_up, "not resent within --gap-hold " +
+                               std::to_string(options_.gap_hold.count() / 1e3) + " s");
+    }
+    commit(std::move(released), now);
+    if (now - last_requests_ >= options_.resend_period) {
+      requests = gaps_.requests();
+      last_requests_ = now;
+    }
+  }
+  std::lock_guard<std::mutex> lock(publish_mutex_);
+  for (const ResendRequest& q : requests) publisher_.publishResend(q);
 }
 
 void StreamingCore::command(const ControlCommand& c) {
@@ -362,6 +456,7 @@ void StreamingCore::smootherLoop() {
         held_ = 0;
       }
       for (const auto& c : commands) handleCommand(c);
+      recoverLosses();
       solveDeferredWhileIdle();
       pollBatch(false, true);  // a background batch that finished while idle
       if (std::chrono::duration<double>(std::chrono::steady_clock::now() - last_status_).count() >=
@@ -853,6 +948,7 @@ CoreStatus StreamingCore::status() const {
     s.journal_refused = journal_refused_;
     s.edge_senders = static_cast<std::int64_t>(intake_.senders(MeasurementKind::kEdge));
     s.edge_gaps_by_sender = intake_.gapsBySender(MeasurementKind::kEdge);
+    s.loss = gaps_.counts();
   }
   s.held = held_;
   if (journal_) s.journal_bytes = journal_->bytes();

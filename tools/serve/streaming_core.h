@@ -34,6 +34,7 @@
 
 #include "arbor_slam/core/latency_summary.h"
 #include "arbor_slam/tools/serve/edge_intake.h"
+#include "arbor_slam/tools/serve/gap_tracker.h"
 #include "arbor_slam/tools/serve/journal_sink.h"
 #include "arbor_slam/tools/serve/log_limiter.h"
 #include "arbor_slam/tools/serve/serve_engine.h"
@@ -67,6 +68,7 @@ struct CoreStatus {
   std::int64_t edge_senders = 0;  ///< edge sender tables held
   /// (sender, edge seq numbers not received) for every edge sender with gaps, sender order.
   std::vector<std::pair<std::int64_t, std::int64_t>> edge_gaps_by_sender;
+  GapCounts loss;         ///< loss recovery: the reorder buffer and resend requests (edges, priors)
   std::int64_t held = 0;  ///< journaled measurements waiting for their update mark
   std::int64_t applied = 0, updates = 0, poses = 0, pending = 0;
   std::int64_t smoother_rejected = 0, smoother_duplicates = 0;
@@ -100,6 +102,8 @@ class Publisher {
   virtual void publishEstimate(const Estimate& estimate) = 0;
   virtual void publishStatus(const CoreStatus& status) = 0;
   virtual void publishCovariance(const CovarianceAnswer& answer) = 0;
+  /// A resend request to one sender (loss recovery; a transport without it ignores it).
+  virtual void publishResend(const ResendRequest& /*request*/) {}
   /// True once after the transport lost what was published (a link came back): the next
   /// estimate is then full.
   virtual bool takeRecovered() { return false; }
@@ -131,6 +135,14 @@ struct StreamingOptions {
   /// Where command SNAPSHOT writes its file (a plain name inside it); "" = SNAPSHOT refused.
   std::string snapshot_dir;
   std::size_t max_senders = EdgeIntake::kDefaultMaxSenders;  ///< sender tables per stream
+  /// Loss recovery (tools/serve/gap_tracker.h): an edge or prior that arrives after a gap in its
+  /// sender's seqs waits up to this long for the gap to be resent, so the stream is applied in
+  /// seq order; 0 (the library's default): off, applied as received, nothing requested;
+  /// `arbor serve` defaults to 2 s (--gap-hold).
+  std::chrono::milliseconds gap_hold{0};
+  std::size_t reorder_limit = 4096;  ///< messages held per sender and stream (then a gap goes)
+  /// Resend requests (and acknowledgements) go out at most this often per sender and stream.
+  std::chrono::milliseconds resend_period{200};
   std::size_t max_queued_commands = 64;  ///< commands waiting for the smoother; more refused
   std::ostream* log = nullptr;           ///< log lines (rejections, gaps, errors); nullptr: silent
   /// Lines a sender can provoke (refusals, gaps): at most one per reason per this period, with
@@ -176,6 +188,7 @@ struct ServeSummary {
   LatencySummary transport;          ///< edge utime → receipt (meaningful when clocks agree)
   Estimate final_estimate;           ///< full
   std::int64_t journal_refused = 0;  ///< measurements refused: the journal could not take them
+  GapCounts loss;                    ///< loss recovery (edges and priors)
   std::int64_t held_at_stop = 0;     ///< journaled, not applied: their update mark did not fit
   JournalDamage journal_damaged;     ///< what the replay at start found damaged and skipped
   std::int64_t link_outages = 0;     ///< receive and publish links
@@ -223,6 +236,9 @@ class StreamingCore {
   void command(const ControlCommand& command);
   /// An operator's command refused by the transport (counted under `reason`, logged).
   void refuseControl(const std::string& reason, const std::string& detail);
+  /// A sender's answer to a resend request (resend_t WINDOW): it holds nothing of `kind` at or
+  /// below `settled`, so the gaps there are given up (counted, logged).
+  void windowAnswer(MeasurementKind kind, std::int64_t sender, std::int64_t settled);
 
   CoreStatus status() const;
   /// After stop(): the whole run.
@@ -251,6 +267,13 @@ class StreamingCore {
   static Queued queued(IntakeResult accepted, std::chrono::steady_clock::time_point received);
 
   void smootherLoop();
+  /// Journals and queues accepted measurements, in order (caller holds intake_mutex_): a
+  /// measurement the journal cannot take is revoked and refused ("journal").
+  void commit(std::vector<IntakeResult> accepted, std::chrono::steady_clock::time_point received);
+  /// Loss recovery on the smoother thread: gaps that waited --gap-hold given up, and the resend
+  /// requests due published.
+  void recoverLosses();
+  void logGivenUp(std::int64_t seqs, const std::string& why);
   /// Logs (rate-limited) the sender table `r`'s arrival evicted and the held messages it dropped.
   void logIntakeNotes(const IntakeResult& r, const char* what);
   /// --solve-budget-mb: while nothing waits in the queue, solves the cliques the budget deferred,
@@ -300,6 +323,8 @@ class StreamingCore {
   // The receive side (and the journal replay before the smoother starts).
   mutable std::mutex intake_mutex_;
   EdgeIntake intake_;
+  GapTracker gaps_;
+  std::chrono::steady_clock::time_point last_requests_;
   std::int64_t journal_refused_ = 0;
   std::map<std::string, std::int64_t> control_refused_;  ///< by reason
 
