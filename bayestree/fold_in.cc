@@ -4,6 +4,8 @@
 
 #include <Eigen/Core>
 
+#include "arbor_slam/core/factor_error.h"
+
 namespace arbor::bayestree {
 namespace {
 
@@ -95,8 +97,18 @@ int FoldIn<G>::foldInAll(const std::vector<int>& fs, const Context& ctx, BayesTr
     const int start = startClique(f, ctx, *tree);
     if (start < 0 || !withinBudget(f, start, ctx, *tree)) return -1;
   }
+  // Every factor linearised before the first changes the tree: a failing factor of your own
+  // throws (FactorError) with the tree as it was.
+  linearized_.resize(fs.size());
+  for (size_t k = 0; k < fs.size(); ++k) {
+    try {
+      ctx.factors.factors[fs[k]].linearizeWeighted(ctx.theta, &linearized_[k]);
+    } catch (...) {
+      throwFactorError(factorText(ctx.factors.factors[fs[k]], fs[k], ctx.theta), fs[k]);
+    }
+  }
   int updated = 0;
-  for (int f : fs) updated += foldIn(f, ctx, tree);
+  for (size_t k = 0; k < fs.size(); ++k) updated += foldIn(fs[k], linearized_[k], ctx, tree);
   return updated;
 }
 
@@ -109,6 +121,14 @@ int FoldIn<G>::foldInAll(int first, const Context& ctx, BayesTree<D>* tree) {
 
 template <class G>
 int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
+  typename Factor<G>::Linearization A;
+  ctx.factors.factors[f].linearizeWeighted(ctx.theta, &A);
+  return foldIn(f, A, ctx, tree);
+}
+
+template <class G>
+int FoldIn<G>::foldIn(int f, const typename Factor<G>::Linearization& A, const Context& ctx,
+                      BayesTree<D>* tree) {
   auto& cliques = tree->cliques;
   std::vector<int>& slot = ctx.slot;
   const Factor<G>& e = ctx.factors.factors[f];
@@ -122,8 +142,6 @@ int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
     cliques[c].extendSeparator(later, &extend_buf_);
   }
   // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
-  typename Factor<G>::Linearization A;
-  e.linearizeWeighted(ctx.theta, &A);
   using MatMap = Eigen::Map<Eigen::MatrixXd>;
   int rows = cliques[start].F + cliques[start].Sn + 1;
   {
