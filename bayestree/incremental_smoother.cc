@@ -638,6 +638,8 @@ struct IncrementalSmoother<G>::Impl {
     decay.adoptedFresh(tree);
     updated.noteAll();
     marginals = bayestree::TreeMarginals<D>();
+    num_custom = static_cast<int>(std::count_if(factors.factors.begin(), factors.factors.end(),
+                                                [](const Factor<G>& f) { return f.custom(); }));
   }
 
   // The swap of a base (the job's tree, or the caught-up one), everything since its start and
