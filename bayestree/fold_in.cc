@@ -97,6 +97,12 @@ int FoldIn<G>::foldInAll(const std::vector<int>& fs, const Context& ctx, BayesTr
     const int start = startClique(f, ctx, *tree);
     if (start < 0 || !withinBudget(f, start, ctx, *tree)) return -1;
   }
+  int updated = 0;
+  const auto own = [&](int f) { return ctx.factors.factors[f].custom() != nullptr; };
+  if (std::none_of(fs.begin(), fs.end(), own)) {  // built-ins cannot fail: linearised on the way
+    for (int f : fs) updated += foldIn(f, ctx, tree);
+    return updated;
+  }
   // Every factor linearised before the first changes the tree: a failing factor of your own
   // throws (FactorError) with the tree as it was.
   linearized_.resize(fs.size());
@@ -107,8 +113,7 @@ int FoldIn<G>::foldInAll(const std::vector<int>& fs, const Context& ctx, BayesTr
       throwFactorError(factorText(ctx.factors.factors[fs[k]], fs[k], ctx.theta), fs[k]);
     }
   }
-  int updated = 0;
-  for (size_t k = 0; k < fs.size(); ++k) updated += foldIn(fs[k], linearized_[k], ctx, tree);
+  for (size_t k = 0; k < fs.size(); ++k) updated += foldIn(fs[k], &linearized_[k], ctx, tree);
   return updated;
 }
 
@@ -121,14 +126,12 @@ int FoldIn<G>::foldInAll(int first, const Context& ctx, BayesTree<D>* tree) {
 
 template <class G>
 int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
-  typename Factor<G>::Linearization A;
-  ctx.factors.factors[f].linearizeWeighted(ctx.theta, &A);
-  return foldIn(f, A, ctx, tree);
+  return foldIn(f, nullptr, ctx, tree);
 }
 
 template <class G>
-int FoldIn<G>::foldIn(int f, const typename Factor<G>::Linearization& A, const Context& ctx,
-                      BayesTree<D>* tree) {
+int FoldIn<G>::foldIn(int f, const typename Factor<G>::Linearization* linearized,
+                      const Context& ctx, BayesTree<D>* tree) {
   auto& cliques = tree->cliques;
   std::vector<int>& slot = ctx.slot;
   const Factor<G>& e = ctx.factors.factors[f];
@@ -141,7 +144,13 @@ int FoldIn<G>::foldIn(int f, const typename Factor<G>::Linearization& A, const C
     tree->countClique(nf, ns + 1, 1.0, cliques[c].cached);
     cliques[c].extendSeparator(later, &extend_buf_);
   }
-  // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
+  // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ] (a local A: the
+  // compiler keeps it apart from W's buffer).
+  typename Factor<G>::Linearization A;
+  if (linearized != nullptr)
+    A = *linearized;
+  else
+    e.linearizeWeighted(ctx.theta, &A);
   using MatMap = Eigen::Map<Eigen::MatrixXd>;
   int rows = cliques[start].F + cliques[start].Sn + 1;
   {

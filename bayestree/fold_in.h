@@ -70,8 +70,8 @@ class FoldIn {
   bool withinBudget(int f, int start, const Context& ctx, const BayesTree<D>& tree);
   double foldFlops(int start, const BayesTree<D>& tree) const;
   double eliminationFlops(const std::vector<int>& starts, BayesTree<D>* tree);
-  // foldIn with f's linearisation A at ctx.theta.
-  int foldIn(int f, const typename Factor<G>::Linearization& A, const Context& ctx,
+  // foldIn with f's linearisation at ctx.theta given (null: linearised here).
+  int foldIn(int f, const typename Factor<G>::Linearization* linearized, const Context& ctx,
              BayesTree<D>* tree);
 
   DoubleBuffer extend_buf_;

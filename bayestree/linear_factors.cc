@@ -40,6 +40,11 @@ void LinearizedFactors<G>::detach(int f) {
 }
 
 template <class G>
+void LinearizedFactors<G>::linearize(int f, const std::vector<G>& theta) {
+  linearize(f, theta, &lin[f]);
+}
+
+template <class G>
 void LinearizedFactors<G>::linearize(int f, const std::vector<G>& theta, LinearFactor* out) const {
   typename Factor<G>::Linearization A;
   factors[f].linearizeWeighted(theta, &A);

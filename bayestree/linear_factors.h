@@ -81,7 +81,7 @@ class LinearizedFactors {
   void detach(int f);
 
   /// lin[f] from factor f linearised at θ, scaled by its inlier weight (Factor::linearizeWeighted).
-  void linearize(int f, const std::vector<G>& theta) { linearize(f, theta, &lin[f]); }
+  void linearize(int f, const std::vector<G>& theta);
   /// The same into *out.
   void linearize(int f, const std::vector<G>& theta, LinearFactor* out) const;
   /// linearize(f, θ) for every f of `fs` (factors of your own: the ones that can fail), all or
