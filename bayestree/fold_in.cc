@@ -4,6 +4,8 @@
 
 #include <Eigen/Core>
 
+#include "arbor_slam/core/factor_error.h"
+
 namespace arbor::bayestree {
 namespace {
 
@@ -96,7 +98,22 @@ int FoldIn<G>::foldInAll(const std::vector<int>& fs, const Context& ctx, BayesTr
     if (start < 0 || !withinBudget(f, start, ctx, *tree)) return -1;
   }
   int updated = 0;
-  for (int f : fs) updated += foldIn(f, ctx, tree);
+  const auto own = [&](int f) { return ctx.factors.factors[f].custom() != nullptr; };
+  if (std::none_of(fs.begin(), fs.end(), own)) {  // built-ins cannot fail: linearised on the way
+    for (int f : fs) updated += foldIn(f, ctx, tree);
+    return updated;
+  }
+  // Every factor linearised before the first changes the tree: a failing factor of your own
+  // throws (FactorError) with the tree as it was.
+  linearized_.resize(fs.size());
+  for (size_t k = 0; k < fs.size(); ++k) {
+    try {
+      ctx.factors.factors[fs[k]].linearizeWeighted(ctx.theta, &linearized_[k]);
+    } catch (...) {
+      throwFactorError(factorText(ctx.factors.factors[fs[k]], fs[k], ctx.theta), fs[k]);
+    }
+  }
+  for (size_t k = 0; k < fs.size(); ++k) updated += foldIn(fs[k], &linearized_[k], ctx, tree);
   return updated;
 }
 
@@ -109,6 +126,12 @@ int FoldIn<G>::foldInAll(int first, const Context& ctx, BayesTree<D>* tree) {
 
 template <class G>
 int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
+  return foldIn(f, nullptr, ctx, tree);
+}
+
+template <class G>
+int FoldIn<G>::foldIn(int f, const typename Factor<G>::Linearization* linearized,
+                      const Context& ctx, BayesTree<D>* tree) {
   auto& cliques = tree->cliques;
   std::vector<int>& slot = ctx.slot;
   const Factor<G>& e = ctx.factors.factors[f];
@@ -121,9 +144,13 @@ int FoldIn<G>::foldIn(int f, const Context& ctx, BayesTree<D>* tree) {
     tree->countClique(nf, ns + 1, 1.0, cliques[c].cached);
     cliques[c].extendSeparator(later, &extend_buf_);
   }
-  // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ].
+  // W over the start clique's variables and the right-hand side: [Aᵀ; −rᵀ] (a local A: the
+  // compiler keeps it apart from W's buffer).
   typename Factor<G>::Linearization A;
-  e.linearizeWeighted(ctx.theta, &A);
+  if (linearized != nullptr)
+    A = *linearized;
+  else
+    e.linearizeWeighted(ctx.theta, &A);
   using MatMap = Eigen::Map<Eigen::MatrixXd>;
   int rows = cliques[start].F + cliques[start].Sn + 1;
   {

@@ -70,10 +70,14 @@ class FoldIn {
   bool withinBudget(int f, int start, const Context& ctx, const BayesTree<D>& tree);
   double foldFlops(int start, const BayesTree<D>& tree) const;
   double eliminationFlops(const std::vector<int>& starts, BayesTree<D>* tree);
+  // foldIn with f's linearisation at ctx.theta given (null: linearised here).
+  int foldIn(int f, const typename Factor<G>::Linearization* linearized, const Context& ctx,
+             BayesTree<D>* tree);
 
   DoubleBuffer extend_buf_;
   DoubleBuffer w_buf_, w_parent_buf_;  // W of this clique and of its parent
   std::vector<int> path_;              // cliques whose separator a fold-in extends
+  std::vector<typename Factor<G>::Linearization> linearized_;  // foldInAll's factors
   int path_stamp_ = 0;
 };
 

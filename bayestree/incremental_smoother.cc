@@ -40,6 +40,7 @@
 #include "arbor_slam/bayestree/updated_poses.h"
 #include "arbor_slam/core/blas_threads.h"
 #include "arbor_slam/core/elapsed.h"
+#include "arbor_slam/core/factor_error.h"
 #include "arbor_slam/core/finite_pose.h"
 #include "arbor_slam/core/information.h"
 
@@ -257,6 +258,31 @@ struct IncrementalSmoother<G>::Impl {
   // flight, what changed since its snapshot, the buffers kept between jobs.
   bayestree::RelinearizationJobs<G, Impl> async;
   int pass_first_factor = 0;  // the first factor of the current pass (the snapshot's end)
+  // Factors of your own among `factors`: their evaluation can fail, so an update with one in
+  // the graph or the queue is guarded (docs/library.md, "When an update throws"): each pass
+  // linearises them first, all or none (before anything of the tree changes), and a failure
+  // undoes the update from `journal`. Pose-only graphs take none of this.
+  int num_custom = 0;
+  std::vector<typename bayestree::LinearizedFactors<G>::LinearFactor> staged;
+  std::vector<int> custom_to_linearize;
+  // What a guarded update (or relinearizeAll iteration) changed that its undo restores; O(the
+  // queue, the relinearised variables and the last update's poses).
+  struct Relinearized {
+    int v;
+    G theta;
+    Vec delta, delta_newton, delta_seen;
+  };
+  struct Journal {
+    bool active = false;
+    bool tree_changed = false;  // past the point of no undo (a factor's failure cannot get here)
+    bool async_started = false;
+    int first_factor = 0, update_count = 0, num_custom = 0;
+    std::vector<Factor<G>> queued;
+    std::vector<int> new_vars, to_touch, to_relinearize, readmitted;
+    std::vector<Relinearized> relinearized;
+    bayestree::UpdatedPoses::Saved updated;
+    bool updated_saved = false;
+  } journal;
 
   explicit Impl(const SmootherOptions& o)
       : opt(o), threads(threadCount(o.threads)), dogleg_radius(o.dogleg_initial_radius) {
@@ -300,6 +326,16 @@ struct IncrementalSmoother<G>::Impl {
   void addFactor(const Factor<G>& f) {
     checkNewFactor(f, numPoses());
     queued.push_back(f);
+  }
+
+  void discardQueuedFactor(int index) {
+    const int k = index - factors.numFactors();
+    if (k < 0 || k >= static_cast<int>(queued.size()))
+      throw std::invalid_argument("IncrementalSmoother::discardQueuedFactor: no factor " +
+                                  std::to_string(index) + " queued (" +
+                                  std::to_string(queued.size()) + " queued from " +
+                                  std::to_string(factors.numFactors()) + ")");
+    queued.erase(queued.begin() + k);
   }
 
   // Extension (the online layer's components): a released anchor's factors were unary terms on
@@ -403,12 +439,98 @@ struct IncrementalSmoother<G>::Impl {
   // the others are folded in by a second pass; the linear system, hence the step, is that of
   // one update with all of them (runPasses). (3) The paper's pass, Alg. 6 (step).
   UpdateStats update() {
+    if (!mayFail()) return applyUpdate();
+    journal.updated = updated.save();
+    journal.updated_saved = true;
+    journal.update_count = update_count;
+    try {
+      UpdateStats st = applyUpdate();
+      endJournal();
+      return st;
+    } catch (...) {
+      rollBack();
+      throw;
+    }
+  }
+
+  // Whether a factor's evaluation can fail in the next update: a factor of your own in the
+  // graph or queued (O(queue) when none is in the graph).
+  bool mayFail() const {
+    if (num_custom > 0) return true;
+    for (const Factor<G>& f : queued)
+      if (f.custom()) return true;
+    return false;
+  }
+
+  // The journal starts: what the undo of a guarded pass restores, as it is now.
+  void beginJournal() {
+    journal.active = true;
+    journal.tree_changed = false;
+    journal.async_started = false;
+    journal.first_factor = factors.numFactors();
+    journal.num_custom = num_custom;
+    journal.queued = queued;
+    journal.new_vars = new_vars;
+    journal.to_touch = to_touch;
+    journal.to_relinearize = to_relinearize;
+    journal.readmitted = readmitted;
+    journal.relinearized.clear();
+  }
+  void endJournal() {
+    journal.active = false;
+    journal.updated_saved = false;
+    journal.queued.clear();
+    journal.relinearized.clear();
+  }
+
+  // Undoes a guarded update (or relinearizeAll iteration) that threw before its tree changed:
+  // the smoother is as it was before it, its queue included.
+  void rollBack() {
+    if (!journal.active || journal.tree_changed) {  // not a factor's failure: nothing to undo by
+      endJournal();
+      return;
+    }
+    for (int v : touched) mark[v] = 0;
+    if (numPoses() > 0) mark[numPoses() - 1] = 0;
+    for (auto it = journal.relinearized.rbegin(); it != journal.relinearized.rend(); ++it) {
+      theta[it->v] = it->theta;
+      delta[it->v] = it->delta;
+      partial_solve.delta_newton[it->v] = it->delta_newton;
+      partial_solve.delta_seen[it->v] = it->delta_seen;
+    }
+    // A check that ran consumed its candidates; scanning every variable marks the same ones.
+    relinearization_check.scanAll();
+    if (journal.async_started) async.abandon();
+    for (int f : journal.readmitted)
+      if (f < journal.first_factor) factors.detach(f);
+    factors.truncate(journal.first_factor);
+    num_custom = journal.num_custom;
+    queued = std::move(journal.queued);
+    new_vars = std::move(journal.new_vars);
+    to_touch = std::move(journal.to_touch);
+    to_relinearize = std::move(journal.to_relinearize);
+    readmitted = std::move(journal.readmitted);
+    if (journal.updated_saved) {
+      update_count = journal.update_count;
+      updated.restore(std::move(journal.updated));
+    } else {
+      updated.finish(fixed);  // a swapped-in tree, or relinearizeAll: its list stands
+    }
+    endJournal();
+  }
+
+  UpdateStats applyUpdate() {
     updated.begin();
     ++update_count;
     const auto t_swap = Clock::now();
     bool caught_up = false;
     const int swapped = swapLayer(&caught_up);
     const double swap_s = swapped >= 0 || caught_up ? secondsSince(t_swap) : 0.0;
+    // A guarded update's undo starts here: a tree swapped in above stays (a complete change).
+    if (journal.updated_saved) {
+      if (swapped >= 0 || caught_up) journal.updated_saved = false;
+      beginJournal();
+    }
     // While a job or catch-up is in flight, no check runs (its variables wait for the swap).
     StepOptions pass;
     pass.check_relinearization =
@@ -428,8 +550,10 @@ struct IncrementalSmoother<G>::Impl {
 
   UpdateStats runPasses(const StepOptions& pass) {
     const auto weighted = [](const Factor<G>& e) { return e.inlierWeight() > 0; };
+    // A guarded update is one pass, so that its undo is that of one pass.
     if (!opt.rank_updates || opt.dogleg || new_vars.empty() ||
-        std::count_if(queued.begin(), queued.end(), weighted) < 2 || !to_touch.empty())
+        std::count_if(queued.begin(), queued.end(), weighted) < 2 || !to_touch.empty() ||
+        journal.active)
       return step(pass);
     std::vector<Factor<G>> rest =
         bayestree::FoldIn<G>::splitOffIntroducing(&queued, fixed, tree, &threads.lanes[0].slot);
@@ -514,6 +638,8 @@ struct IncrementalSmoother<G>::Impl {
     decay.adoptedFresh(tree);
     updated.noteAll();
     marginals = bayestree::TreeMarginals<D>();
+    num_custom = static_cast<int>(std::count_if(factors.factors.begin(), factors.factors.end(),
+                                                [](const Factor<G>& f) { return f.custom(); }));
   }
 
   // The swap of a base (the job's tree, or the caught-up one), everything since its start and
@@ -615,6 +741,7 @@ struct IncrementalSmoother<G>::Impl {
     // Alg. 4 step 2, "Relinearize all factors required to recreate top" (those of M), and the
     // new factors' first linearisation.
     listFactorsToLinearize(added.ids);
+    journal.tree_changed = journal.active;  // nothing below can fail for a factor of your own
     endPhase(&st.prepare_s);
     // Extension (fold-in, docs/design.md "Loop closures by rank updates"): only factors between
     // variables already in the tree, nothing relinearised — fold them in by rank updates along
@@ -672,6 +799,7 @@ struct IncrementalSmoother<G>::Impl {
     factors.reserveFor(queued.size());
     for (const Factor<G>& e : queued) {
       const int f = factors.add(e);
+      if (e.custom()) ++num_custom;
       if (factors.attached[f]) enter(f);
     }
     st->new_factors = static_cast<int>(queued.size());
@@ -704,7 +832,14 @@ struct IncrementalSmoother<G>::Impl {
     }
     // RelinearizationMode::kAsync: a large M goes to the background job; this pass goes on
     // with the old linearisation point.
-    if (!pass.relinearize_all && startAsyncRelinearization(st)) relin.clear();
+    if (!pass.relinearize_all && startAsyncRelinearization(st)) {
+      relin.clear();
+      journal.async_started = journal.active;
+    }
+    if (journal.active)
+      for (int v : relin)
+        journal.relinearized.push_back(
+            {v, theta[v], delta[v], partial_solve.delta_newton[v], partial_solve.delta_seen[v]});
     for (int v : relin) {
       theta[v] = theta[v].retract(delta[v]);
       theta[v].normalize();
@@ -729,6 +864,19 @@ struct IncrementalSmoother<G>::Impl {
     for (int f : to_relinearize) add(f);
     to_relinearize.clear();
     for (int f : entering) add(f);
+    // Factors of your own first, all or none, before anything of the tree changes: a failure
+    // throws (FactorError) with every linearisation as it was (the guarded update's undo).
+    if (num_custom > 0) {
+      custom_to_linearize.clear();
+      const auto own = [&](int f) { return factors.factors[f].custom() != nullptr; };
+      for (int f : to_linearize)
+        if (own(f)) custom_to_linearize.push_back(f);
+      if (!custom_to_linearize.empty()) {
+        factors.linearizeAllOrNone(custom_to_linearize, theta, &threads, &staged);
+        to_linearize.erase(std::remove_if(to_linearize.begin(), to_linearize.end(), own),
+                           to_linearize.end());
+      }
+    }
     if (relin.empty()) {
       factors.linearizeAll(to_linearize, theta, &threads);
       to_linearize.clear();
@@ -886,16 +1034,34 @@ struct IncrementalSmoother<G>::Impl {
     for (size_t v = 0; v < theta.size(); ++v)
       poses[v] = fixed[v] ? theta[v] : theta[v].retract(x[v]);
     double f = 0;
-    for (const Factor<G>& e : factors.factors)
-      f += weighted ? e.inlierWeight() * e.cost(poses) : e.cost(poses);
+    if (num_custom == 0) {
+      for (const Factor<G>& e : factors.factors)
+        f += weighted ? e.inlierWeight() * e.cost(poses) : e.cost(poses);
+      return f;
+    }
+    for (int k = 0; k < factors.numFactors(); ++k) {  // a factor of your own may fail
+      const Factor<G>& e = factors.factors[k];
+      try {
+        f += weighted ? e.inlierWeight() * e.cost(poses) : e.cost(poses);
+      } catch (...) {
+        throwFactorError(factorText(e, k, poses), k);
+      }
+    }
     return f;
   }
 
   // Powell's dogleg step on the Bayes tree (bayestree/dogleg_step.h) into Δ.
   void doglegStep() {
     delta = bayestree::doglegStep<D>(tree.cliques, partial_solve.delta_newton, &dogleg_radius,
-                                     opt.dogleg_min_radius,
-                                     [&](const std::vector<Vec>& x) { return objectiveAt(x); });
+                                     opt.dogleg_min_radius, [&](const std::vector<Vec>& x) {
+                                       // A point where a factor of your own fails is rejected
+                                       // (the radius shrinks), as Ceres does.
+                                       try {
+                                         return objectiveAt(x);
+                                       } catch (const std::exception&) {
+                                         return std::numeric_limits<double>::infinity();
+                                       }
+                                     });
   }
 
   // Passes of Alg. 6 with every variable relinearised and the whole tree re-eliminated, until F
@@ -911,6 +1077,22 @@ struct IncrementalSmoother<G>::Impl {
     if (!queued.empty() || !new_vars.empty()) accumulate(&total, update());
     updated.begin();
     updated.noteAll();  // every Δ is set (and may be halved) below
+    try {
+      refine(cancel, &total);
+    } catch (...) {  // a factor of your own failed: the last completed iteration stands
+      relinearization_check.scanAll();
+      updated.finish(fixed);
+      throw;
+    }
+    relinearization_check.scanAll();  // the halving set Δ outside the solve
+    updated.finish(fixed);
+    total.time_s = secondsSince(t0);
+    return total;
+  }
+
+  // relinearizeAll's iterations.
+  void refine(const CancellationToken* cancel, UpdateStats* total_out) {
+    UpdateStats& total = *total_out;
     double F_prev = objectiveAt(delta);
     StepOptions everything;
     everything.relinearize_all = true;
@@ -920,7 +1102,19 @@ struct IncrementalSmoother<G>::Impl {
         break;
       }
       ++total.refine_iterations;
-      accumulate(&total, step(everything));
+      // A failing factor of your own undoes this iteration (the estimate is the last one's).
+      if (num_custom > 0) {
+        beginJournal();
+        try {
+          accumulate(&total, step(everything));
+        } catch (...) {
+          rollBack();
+          throw;
+        }
+        endJournal();
+      } else {
+        accumulate(&total, step(everything));
+      }
       double F_new = objectiveAt(delta);
       if (!opt.dogleg && F_new > F_prev) {
         // Gauss–Newton overshoots: halve the step until F decreases (or give it up).
@@ -940,10 +1134,6 @@ struct IncrementalSmoother<G>::Impl {
       F_prev = F_new;
       if (change < opt.finalize_relative_tolerance) break;
     }
-    relinearization_check.scanAll();  // the halving set Δ outside the solve
-    updated.finish(fixed);
-    total.time_s = secondsSince(t0);
-    return total;
   }
 
   void checkInvariants() const {
@@ -997,6 +1187,11 @@ template <class G>
 void IncrementalSmoother<G>::setFactorWeight(int index, double w) {
   impl_->setFactorWeight(index, w);
 }
+template <class G>
+void IncrementalSmoother<G>::discardQueuedFactor(int index) {
+  impl_->discardQueuedFactor(index);
+}
+
 template <class G>
 UpdateStats IncrementalSmoother<G>::update() {
   return impl_->update();

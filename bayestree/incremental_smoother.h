@@ -325,13 +325,33 @@ class IncrementalSmoother {
   /// std::invalid_argument on a bad index or w ∉ [0, 1].
   void setFactorWeight(int index, double w);
 
+  /// Takes the factor queued as index numFactors() + k (addFactor order, as setFactorWeight
+  /// names it; a FactorError names it so) out of the queue: the factors queued after it move
+  /// down by one. Throws std::invalid_argument if no such factor is queued.
+  void discardQueuedFactor(int index);
+
   /// One step of iSAM2 (IJRR 2012 Alg. 6): adds the queued factors and poses, relinearises,
   /// re-eliminates the affected top of the Bayes tree (or folds the new factors in) and updates
   /// Δ. The estimate is current on return.
+  ///
+  /// All or nothing (docs/library.md, "When an update throws"): when a factor's evaluation fails
+  /// (a factor of your own whose error function throws, or returns a non-finite value or a
+  /// wrong shape, at the point the update linearises it), update() throws FactorError
+  /// (core/factor_error.h: the factor's index, name, poses and their values; the cause nested)
+  /// and the smoother is exactly as before the call: the same estimate, tree and factors, and
+  /// the queue (poses, factors, weights, moves) still waiting; discardQueuedFactor takes a
+  /// failing queued factor out. Factors of your own are linearised first, before anything of
+  /// the tree changes; what the undo restores is O(the queue and the relinearised variables),
+  /// and a graph without factors of your own takes none of it. Exceptions: in kAsync mode a
+  /// finished background relinearisation the update swapped in before the failure stays
+  /// swapped in; with dogleg, a trial step at which a factor fails is rejected (the radius
+  /// shrinks) instead of throwing.
   UpdateStats update();
   /// Relinearises every variable, re-eliminates the whole tree and back-substitutes fully,
   /// repeated until F changes by less than finalize_relative_tolerance (relative) or
-  /// finalize_max_iterations. Adds queued factors first. With a token, checks it before each
+  /// finalize_max_iterations. Adds queued factors first (an update(), all or nothing). A factor
+  /// that fails in an iteration throws FactorError with that iteration undone: the estimate is
+  /// the last completed iteration's. With a token, checks it before each
   /// iteration (one cancelled() call each) and stops when it is cancelled: the estimate is then
   /// that of the last iteration completed (UpdateStats::cancelled); an iteration is never cut
   /// in the middle. Returns the summed stats.

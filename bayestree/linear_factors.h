@@ -64,6 +64,17 @@ class LinearizedFactors {
   /// Adds a factor (not yet linearised; attached iff its inlier weight is > 0); returns its
   /// index.
   int add(const Factor<G>& f);
+  /// Removes the factors from index n on (the last ones added), taking them out of the
+  /// structure: undoes add() back to n factors.
+  void truncate(int n) {
+    for (int f = numFactors() - 1; f >= n; --f) {
+      detach(f);
+      factors.pop_back();
+      lin.pop_back();
+      stamp.pop_back();
+      attached.pop_back();
+    }
+  }
   /// Puts factor f into the structure (its keys' var_factors) or takes it out. No-op when it is
   /// there already / not there.
   void attach(int f);
@@ -71,6 +82,15 @@ class LinearizedFactors {
 
   /// lin[f] from factor f linearised at θ, scaled by its inlier weight (Factor::linearizeWeighted).
   void linearize(int f, const std::vector<G>& theta);
+  /// The same into *out.
+  void linearize(int f, const std::vector<G>& theta, LinearFactor* out) const;
+  /// linearize(f, θ) for every f of `fs` (factors of your own: the ones that can fail), all or
+  /// none: each into `staged` first, then copied into lin once every one succeeded. A failure
+  /// (an exception of the factor's model, a non-finite or misshapen result) throws FactorError
+  /// (core/factor_error.h) naming the first failing factor of `fs` and its poses' values, with
+  /// lin untouched.
+  void linearizeAllOrNone(const std::vector<int>& fs, const std::vector<G>& theta,
+                          UpdateThreads* threads, std::vector<LinearFactor>* staged);
   /// linearize(f, θ) for every f of `fs`, in chunks shared among the threads when many, side by
   /// side with `alongside` (if any: a task that does not read the linearised factors).
   void linearizeAll(const std::vector<int>& fs, const std::vector<G>& theta, UpdateThreads* threads,

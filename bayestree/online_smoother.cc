@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "arbor_slam/core/factor_error.h"
 #include "arbor_slam/core/finite_pose.h"
 #include "arbor_slam/core/information.h"
 #include "arbor_slam/core/rigid_alignment.h"
@@ -348,21 +349,27 @@ EdgeResult OnlineSmoother<G>::addFactor(const CustomFactor<G>& factor, Key id,
   f.i = v[0];
   f.j = v[1];
   const Factor<G> wrapped(f);
+  // Its gauge information at the current estimates, keyed 0 (and 1) on a copy of two poses:
+  // the factor's functions run here, before anything changes (an exception leaves it out).
+  CustomFactor<G> local = f;
+  local.i = 0;
+  local.j = f.j < 0 ? -1 : 1;
+  std::vector<G> at{smoother_.estimate(v[0])};
+  if (f.j >= 0) at.push_back(smoother_.estimate(v[1]));
+  GaugeInformation<G> gauge;
+  gauge.addCustom(local, at);
   try {
     smoother_.addFactor(wrapped);  // validates what a hand-assembled factor may lack
   } catch (const std::invalid_argument& e) {
     return reject(e.what());
   }
   queued_.push_back(wrapped);
-  // Its gauge information at the current estimates, keyed 0 (and 1) on a copy of two poses.
-  CustomFactor<G> local = f;
-  local.i = 0;
-  local.j = f.j < 0 ? -1 : 1;
-  std::vector<G> at{smoother_.estimate(v[0])};
-  if (f.j >= 0) at.push_back(smoother_.estimate(v[1]));
   const int c = root(v[0]);
-  components_[c].gauge.addCustom(local, at);
+  components_[c].gauge.add(gauge);
+  const bool anchored = components_[c].anchor >= 0;
   releaseAnchorIfFixed(c);
+  queued_custom_.push_back(
+      {queued_.size() - 1, v[0], gauge, anchored && components_[root(v[0])].anchor < 0});
   ++stats_.custom_accepted;
   return EdgeResult{EdgeStatus::kAccepted, ""};
 }
@@ -384,6 +391,46 @@ std::optional<Key> OnlineSmoother<G>::anchorOf(Key id) const {
 
 template <class G>
 UpdateStats OnlineSmoother<G>::update() {
+  try {
+    return updateOrThrow();
+  } catch (const FactorError& e) {
+    const std::string account = dropFailedFactor(e.factor());
+    throw FactorError(account + ": " + e.what(), e.factor());
+  }
+}
+
+template <class G>
+std::string OnlineSmoother<G>::dropFailedFactor(int factor) {
+  const int added = smoother_.numFactors();
+  const auto idsOf = [&](const Factor<G>& f) {
+    std::string s = "'" + f.name() + "' on pose id" + (f.arity() > 1 ? "s " : " ");
+    for (int k = 0; k < f.arity(); ++k) s += (k ? ", " : "") + std::to_string(ids_[f.key(k)]);
+    return s;
+  };
+  if (factor < added)
+    return "OnlineSmoother::update: nothing applied; " +
+           idsOf(smoother_.factors()[static_cast<size_t>(factor)]) +
+           " is in the graph (it failed relinearised) and stays";
+  const size_t k = static_cast<size_t>(factor - added);
+  if (k >= queued_.size()) return "OnlineSmoother::update: nothing applied";
+  const std::string what = idsOf(queued_[k]);
+  auto it = std::find_if(queued_custom_.begin(), queued_custom_.end(),
+                         [&](const QueuedCustom& q) { return q.position == k; });
+  if (it == queued_custom_.end() || it->released_anchor)
+    return "OnlineSmoother::update: nothing applied; " + what +
+           " stays queued (its gauge information released its component's anchor)";
+  smoother_.discardQueuedFactor(factor);
+  queued_.erase(queued_.begin() + static_cast<std::ptrdiff_t>(k));
+  components_[root(it->pose)].gauge.remove(it->gauge);
+  it = queued_custom_.erase(it);
+  for (; it != queued_custom_.end(); ++it) --it->position;
+  --stats_.custom_accepted;
+  ++stats_.custom_rejected;
+  return "OnlineSmoother::update: nothing applied; " + what + " taken out of the queue";
+}
+
+template <class G>
+UpdateStats OnlineSmoother<G>::updateOrThrow() {
   if (!gnc_) return recordUpdate(smoother_.update());
   // The online GNC (bayestree/online_gnc.*) never reweights a disabled edge: the factors of a
   // pair taken back are excluded from it (disableEdge, and excludeDisabled for those that
@@ -512,6 +559,7 @@ std::vector<ClosureReport> OnlineSmoother<G>::closures() const {
 template <class G>
 UpdateStats OnlineSmoother<G>::recordUpdate(const UpdateStats& s) {
   queued_.clear();
+  queued_custom_.clear();
   if (queued_.capacity() > 4096) std::vector<Factor<G>>().swap(queued_);  // a burst's queue
   poses_at_update_ = static_cast<int>(ids_.size());
   ++stats_.updates;
@@ -656,6 +704,7 @@ ReseedResult OnlineSmoother<G>::rebuild(const std::vector<G>& seed, bool only_if
   if (result.applied) {
     smoother_ = std::move(fresh);
     queued_.clear();
+    queued_custom_.clear();
     poses_at_update_ = static_cast<int>(ids_.size());
     pair_factors_.clear();  // the rebuild numbers the factors anew
     factors_indexed_ = 0;

@@ -229,6 +229,14 @@ class OnlineSmoother {
   /// Runs one incremental update over the edges accepted since the last one. With robust
   /// smoothing, first one graduation step (OnlineGnc::step), then up to steps_per_update − 1
   /// more, each a smoother update of its own (summed into the stats returned).
+  ///
+  /// When a factor of your own fails in it (IncrementalSmoother::update: FactorError), the
+  /// update applies nothing and throws FactorError naming the factor by its pose ids; a queued
+  /// factor that failed is taken out of the queue (rejected: OnlineStats::custom_rejected), so
+  /// the next update() applies the rest, as if it had never been added. Not taken out, and
+  /// said so in the message: a factor in the graph already (it failed relinearised), or one
+  /// whose gauge information released its component's anchor. With robust smoothing the
+  /// graduation step taken before the failure stays (its weights wait for the next update).
   UpdateStats update();
   /// Relinearises everything and iterates to convergence (the end of a replay). With robust
   /// smoothing, first graduates every closure to the end (bounded by max_steps_per_closure
@@ -389,8 +397,21 @@ class OnlineSmoother {
   mutable std::vector<int> component_parent_;
   std::vector<Component> components_;
   std::vector<Factor<G>> queued_;  ///< handed to the smoother since the last update
-  int poses_at_update_ = 0;        ///< poses known at the last update
-  int finalized_update_ = -1;      ///< stats_.updates after the last finalize() (finalized())
+  /// The factors of your own in queued_ (its position), their gauge information and whether
+  /// adding them released their component's anchor: what taking one out undoes.
+  struct QueuedCustom {
+    size_t position;
+    int pose;
+    GaugeInformation<G> gauge;
+    bool released_anchor;
+  };
+  std::vector<QueuedCustom> queued_custom_;
+  UpdateStats updateOrThrow();
+  /// After a FactorError from the smoother: takes a queued factor of your own that failed out
+  /// of the queue when it can; returns the message's account of it (ids, what was done).
+  std::string dropFailedFactor(int factor);
+  int poses_at_update_ = 0;    ///< poses known at the last update
+  int finalized_update_ = -1;  ///< stats_.updates after the last finalize() (finalized())
   std::map<std::pair<Key, Key>, std::vector<Measurement>> seen_;  ///< accepted edges
   OnlineStats stats_;
   std::set<IdPair> disabled_pairs_;                  ///< pairs taken back by disableEdge

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <algorithm>
+#include <utility>
 #include <vector>
 
 namespace arbor::bayestree {
@@ -45,6 +46,19 @@ class UpdatedPoses {
         if (!fixed[v]) list_.push_back(v);
     }
     sorted_ = all_;  // the loop above lists them in order
+  }
+  /// What an update that is then undone (IncrementalSmoother's guarded update) restores: the
+  /// last update's list and the poses moved since (O(their number), not O(poses)).
+  struct Saved {
+    std::vector<int> list, moved;
+    bool all = false, sorted = true;
+  };
+  Saved save() const { return {list_, moved_, all_, sorted_}; }
+  void restore(Saved&& s) {
+    list_ = std::move(s.list);
+    moved_ = std::move(s.moved);
+    all_ = s.all;
+    sorted_ = s.sorted;
   }
   /// The last update's poses, in increasing order (sorted once per update).
   const std::vector<int>& inOrder() const {

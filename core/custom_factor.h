@@ -70,6 +70,14 @@ struct CustomFactor {
     return f;
   }
 
+  /// "(1, nan, 2)": a residual's or a Jacobian's entries (column by column) for messages.
+  template <class M>
+  static std::string valuesText(const M& m) {
+    std::string s = "(";
+    for (Eigen::Index k = 0; k < m.size(); ++k) s += (k ? ", " : "") + std::to_string(m.data()[k]);
+    return s + ")";
+  }
+
   int arity() const { return j < 0 ? 1 : 2; }
   int rows() const { return static_cast<int>(information.rows()); }
   std::string name() const { return model ? model->name() : "custom"; }
@@ -84,6 +92,9 @@ struct CustomFactor {
       throw std::invalid_argument("custom factor '" + name() + "': error of " +
                                   std::to_string(e.size()) + " entries, expected " +
                                   std::to_string(rows()));
+    if (!e.allFinite())
+      throw std::invalid_argument("custom factor '" + name() +
+                                  "': error not finite: " + valuesText(e));
     return e;
   }
   template <class Poses>
@@ -104,6 +115,9 @@ struct CustomFactor {
         throw std::invalid_argument("custom factor '" + name() + "': Jacobian of " +
                                     std::to_string(Jk.rows()) + " rows, expected " +
                                     std::to_string(m));
+      if (!Jk.allFinite())
+        throw std::invalid_argument("custom factor '" + name() + "': Jacobian " +
+                                    std::to_string(k) + " not finite: " + valuesText(Jk));
       A[k]->setZero();
       A[k]->topRows(m).noalias() = sqrt_information_t * Jk;
     }

@@ -76,6 +76,13 @@ class GaugeInformation {
     position_priors_ += other.position_priors_;
     custom_ += other.custom_;
   }
+  /// Takes back what add(other) added (a factor taken out before it was used).
+  void remove(const GaugeInformation& other) {
+    G_ -= other.G_;
+    pose_priors_ -= other.pose_priors_;
+    position_priors_ -= other.position_priors_;
+    custom_ -= other.custom_;
+  }
 
   int priors() const { return pose_priors_ + position_priors_; }
   int customFactors() const { return custom_; }

@@ -124,6 +124,55 @@ void PyFactorModel<G>::evaluate(const std::array<const G*, 2>& x, Residual* e, J
   }
 }
 
+bool raiseCause(const FactorError& error) {
+  // The innermost cause (a FactorError may nest another, the online layer's around the
+  // smoother's).
+  std::exception_ptr cause;
+  try {
+    std::rethrow_if_nested(error);
+  } catch (...) {
+    cause = std::current_exception();
+  }
+  for (bool deeper = cause != nullptr; deeper;) {
+    deeper = false;
+    try {
+      std::rethrow_exception(cause);
+    } catch (const std::nested_exception& n) {
+      if (n.nested_ptr()) {
+        cause = n.nested_ptr();
+        deeper = true;
+      }
+    } catch (...) {
+    }
+  }
+  if (!cause) return false;
+  try {
+    std::rethrow_exception(cause);
+  } catch (py::error_already_set& e) {
+    e.restore();
+  } catch (const py::builtin_exception& e) {
+    e.set_error();
+  } catch (...) {
+    return false;
+  }
+  // PEP 678 (Python 3.11): the note names the factor; older Pythons get the exception alone.
+  PyObject *type = nullptr, *value = nullptr, *trace = nullptr;
+  PyErr_Fetch(&type, &value, &trace);
+  PyErr_NormalizeException(&type, &value, &trace);
+  // The note without pybind11's "\n\nAt:" traceback of the cause (Python shows its own).
+  std::string note = error.what();
+  const size_t at = note.find("\n\nAt:");
+  if (at != std::string::npos) note.resize(at);
+  if (value != nullptr && PyObject_HasAttrString(value, "add_note")) {
+    PyObject* r = PyObject_CallMethod(value, "add_note", "s", note.c_str());
+    if (r == nullptr) PyErr_Clear();
+    Py_XDECREF(r);
+  }
+  if (trace != nullptr && value != nullptr) PyException_SetTraceback(value, trace);
+  PyErr_Restore(type, value, trace);
+  return true;
+}
+
 template class PyFactorModel<SE2>;
 template class PyFactorModel<SE3>;
 

@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 
 #include "arbor_slam/core/custom_factor.h"
+#include "arbor_slam/core/factor_error.h"
 #include "arbor_slam/core/factor_model.h"
 #include "arbor_slam/core/pose_graph.h"
 
@@ -53,6 +54,12 @@ class PyFactorModel final : public FactorModel<G> {
   std::string name_;
   double step_;
 };
+
+/// For the module's exception translator: raises the Python exception at the bottom of a
+/// FactorError (a factor's own function raised it: pybind11::error_already_set, or a
+/// pybind11 builtin exception such as TypeError) with a note (PEP 678) naming the factor, and
+/// returns true; false when the cause is not a Python one.
+bool raiseCause(const FactorError& error);
 
 template <class G>
 struct CustomFactorObject {

@@ -2,13 +2,20 @@
 // with poses named by ids, edges and priors in any order, updates, the estimate and statistics
 // as numpy arrays and dicts, and marginal and joint covariances from the Bayes tree.
 #include <algorithm>
+#include <limits>
+#include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
 #include <pybind11/stl.h>
 
 #include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/core/finite_pose.h"
+#include "arbor_slam/core/information.h"
+#include "arbor_slam/core/prior_factors.h"
+#include "arbor_slam/core/relative_pose_factor.h"
 #include "arbor_slam/tools/cli/smoother_table.h"
 #include "arbor_slam/tools/refine/batch_refiner.h"
 #include "bindings.h"
@@ -100,6 +107,135 @@ const std::string& smootherDoc() {
   return doc;
 }
 
+// " (added before it: N, duplicates: M; they stay, waiting for update())".
+std::string addedSoFar(int accepted, int duplicate) {
+  if (accepted + duplicate == 0) return " (nothing added)";
+  return " (added before it: " + std::to_string(accepted) +
+         ", duplicates: " + std::to_string(duplicate) + "; they stay, waiting for update())";
+}
+
+// Adds a note (PEP 678, Python 3.11) to the Python exception being raised.
+void addNote(const std::string& note) {
+  PyObject *type = nullptr, *value = nullptr, *trace = nullptr;
+  PyErr_Fetch(&type, &value, &trace);
+  PyErr_NormalizeException(&type, &value, &trace);
+  if (value != nullptr && PyObject_HasAttrString(value, "add_note")) {
+    PyObject* r = PyObject_CallMethod(value, "add_note", "s", note.c_str());
+    if (r == nullptr) PyErr_Clear();
+    Py_XDECREF(r);
+  }
+  if (trace != nullptr && value != nullptr) PyException_SetTraceback(value, trace);
+  PyErr_Restore(type, value, trace);
+}
+
+// add_graph's check of the whole graph before anything is added: every refusal the online
+// smoother would make (the values of edges and priors, a custom factor's poses: known or
+// created by the graph's edges and priors, and in one component once its edges are in), and
+// each custom factor's functions once at the graph's poses (or the estimates of known ones).
+// Throws ValueError (or what a function raised) naming the element; changes nothing.
+template <class G>
+void checkGraphFirst(const OnlineSmoother<G>& s, const PoseGraph<G>& graph, bool guesses) {
+  const auto refuse = [](const std::string& what, const std::string& why) {
+    throw std::invalid_argument("add_graph: " + what + ": " + why + " (nothing added)");
+  };
+  // Components as the online smoother will have them: known poses by their component, the
+  // graph's edges joining them.
+  std::map<Key, Key> parent;
+  const auto find = [&](Key k) {
+    for (auto it = parent.find(k); it != parent.end(); it = parent.find(k)) k = it->second;
+    return k;
+  };
+  const auto unite = [&](Key a, Key b) {
+    const Key ra = find(a), rb = find(b);
+    if (ra != rb) parent[ra] = rb;
+  };
+  std::set<Key> created;
+  // A known pose stands for its component through a key of its own (below any id: −1 − c).
+  std::map<int, Key> component_key;
+  const auto node = [&](Key id) -> Key {
+    if (!s.hasPose(id)) return id;
+    const int c = s.componentOf(id);
+    auto it = component_key.find(c);
+    if (it != component_key.end()) {
+      unite(id, it->second);
+      return id;
+    }
+    const Key k = std::numeric_limits<Key>::min() + static_cast<Key>(component_key.size());
+    component_key[c] = k;
+    unite(id, k);
+    return id;
+  };
+  for (const auto& edge : graph.edges) {
+    const Key from = graph.ids[edge.i], to = graph.ids[edge.j];
+    const std::string what = "edge " + std::to_string(from) + " -> " + std::to_string(to);
+    if (!allFinite(edge.measurement) || !edge.information.allFinite())
+      refuse(what, "NaN or infinite value");
+    if (from == to) refuse(what, "self-loop on pose " + std::to_string(from));
+    const std::string problem = informationProblem(edge.information);
+    if (!problem.empty()) refuse(what, "bad information: " + problem);
+    const std::string far = translationProblem(edge.measurement);
+    if (!far.empty()) refuse(what, "bad measurement: " + far);
+    unite(node(from), node(to));
+    created.insert(from);
+    created.insert(to);
+  }
+  for (const auto& p : graph.pose_priors) {
+    const std::string what = "pose prior on " + std::to_string(graph.ids[p.i]);
+    if (!allFinite(p.measurement) || !allFinite(p.offset) || !p.information.allFinite())
+      refuse(what, "NaN or infinite value");
+    try {
+      PosePriorFactor<G>::make(0, p.measurement, p.information, p.offset);
+    } catch (const std::invalid_argument& e) {
+      refuse(what, e.what());
+    }
+    node(graph.ids[p.i]);
+    created.insert(graph.ids[p.i]);
+  }
+  for (const auto& p : graph.position_priors) {
+    const std::string what = "position prior on " + std::to_string(graph.ids[p.i]);
+    if (!p.position.allFinite() || !p.information.allFinite())
+      refuse(what, "NaN or infinite value");
+    try {
+      PositionPriorFactor<G>::make(0, p.position, p.information);
+    } catch (const std::invalid_argument& e) {
+      refuse(what, e.what());
+    }
+    node(graph.ids[p.i]);
+    created.insert(graph.ids[p.i]);
+  }
+  for (const auto& c : graph.custom_factors) {
+    const Key id = graph.ids[c.i];
+    const std::string what = "custom factor '" + c.name() + "' on " + std::to_string(id);
+    std::vector<G> at;
+    for (int k = 0; k < c.arity(); ++k) {
+      const Key key = graph.ids[k == 0 ? c.i : c.j];
+      if (!s.hasPose(key) && created.count(key) == 0)
+        refuse(what, "unknown pose id " + std::to_string(key) +
+                         " (an edge or a prior creates a pose, a custom factor cannot)");
+      if (s.hasPose(key))
+        at.push_back(s.estimate(key));
+      else if (guesses && graph.has_initial_estimate)
+        at.push_back(graph.poses[static_cast<size_t>(k == 0 ? c.i : c.j)]);
+    }
+    if (c.arity() == 2 && find(node(graph.ids[c.i])) != find(node(graph.ids[c.j])))
+      refuse(what, "its poses are in two components; an edge must join them first");
+    CustomFactor<G> local = c;
+    local.i = 0;
+    local.j = c.arity() == 2 ? 1 : -1;
+    if (static_cast<int>(at.size()) < c.arity()) continue;  // no value to evaluate it at
+    try {
+      typename FactorModel<G>::Jacobians J;
+      local.error(at, &J);
+    } catch (const std::invalid_argument& e) {
+      refuse(what, e.what());
+    } catch (py::error_already_set& e) {
+      e.restore();
+      addNote("add_graph: " + what + " raised at the graph's poses (nothing added)");
+      throw py::error_already_set();
+    }
+  }
+}
+
 template <class G>
 void defineSmootherOf(py::module_& m, const char* name) {
   using Smoother = OnlineSmoother<G>;
@@ -149,13 +285,15 @@ void defineSmootherOf(py::module_& m, const char* name) {
           "add_graph",
           [](Smoother& s, const GraphObject<G>& g, bool initial_guesses) {
             const PoseGraph<G>& graph = g.graph;
+            checkGraphFirst(s, graph, initial_guesses);  // every refusal, before any change
             if (initial_guesses && graph.has_initial_estimate)
               for (int i = 0; i < graph.numPoses(); ++i)
                 s.setInitialGuess(graph.ids[i], graph.poses[i]);
             int accepted = 0, duplicate = 0;
             const auto count = [&](const EdgeResult& r, const std::string& what) {
               if (r.status == EdgeStatus::kRejected)
-                throw std::invalid_argument("add_graph: " + what + ": " + r.reason);
+                throw std::invalid_argument("add_graph: " + what + ": " + r.reason +
+                                            addedSoFar(accepted, duplicate));
               ++(r.status == EdgeStatus::kDuplicate ? duplicate : accepted);
             };
             // Edges in order of their later pose (file order among ties), as `arbor replay`.
@@ -179,20 +317,31 @@ void defineSmootherOf(py::module_& m, const char* name) {
             for (const auto& c : graph.custom_factors) {
               const std::optional<Key> id2 =
                   c.j < 0 ? std::nullopt : std::optional<Key>(graph.ids[c.j]);
-              count(s.addFactor(c, graph.ids[c.i], id2),
-                    "custom factor '" + c.name() + "' on " + std::to_string(graph.ids[c.i]));
+              EdgeResult r;
+              try {  // its functions run here (its gauge information at the estimates)
+                r = s.addFactor(c, graph.ids[c.i], id2);
+              } catch (py::error_already_set& e) {
+                e.restore();
+                addNote("add_graph: custom factor '" + c.name() + "' on " +
+                        std::to_string(graph.ids[c.i]) + " raised" +
+                        addedSoFar(accepted, duplicate));
+                throw py::error_already_set();
+              }
+              count(r, "custom factor '" + c.name() + "' on " + std::to_string(graph.ids[c.i]));
             }
             return AddGraphResult{accepted, duplicate};
           },
           py::arg("graph"), py::arg("initial_guesses") = true,
           "Adds every edge and prior of a Graph2/Graph3 (read or built in memory): edges in "
           "order of their later pose, then the priors, then the custom factors; with "
-          "initial_guesses (and a graph with "
-          "poses) each new pose starts at the graph's value. `fixed` poses are not held (the "
-          "smoother's gauge is its first pose or the priors). Call update() after. Returns "
-          "an arbor_slam.AddGraphResult (accepted, duplicate); ValueError naming the first "
-          "rejected "
-          "one.")
+          "initial_guesses (and a graph with poses) each new pose starts at the graph's value. "
+          "`fixed` poses are not held (the smoother's gauge is its first pose or the priors). "
+          "Call update() after. Returns an arbor_slam.AddGraphResult (accepted, duplicate). All "
+          "or nothing for every refusal: the graph is checked whole first, and a ValueError "
+          "names the first refused element with nothing added. A custom factor whose own "
+          "function raises when it is added (its gauge information at the estimates) stops "
+          "add_graph there: that exception, with a note of how much was added (kept, "
+          "consistent, waiting for update()).")
       .def(
           "add_factor",
           [](Smoother& s, const CustomFactorObject<G>& f) {

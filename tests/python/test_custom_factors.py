@@ -200,7 +200,8 @@ def test_an_exception_in_error_is_raised_by_the_solve_and_the_update():
     state["fail"] = True
     with pytest.raises(Boom, match="no range today"):
         smoother.update()
-    # The interrupted update is not redone (docs/python.md): a fresh smoother is the way on.
+    # The update applied nothing and took the factor out (docs/python.md, "When an update
+    # raises"; tests/python/test_update_failure.py); here a fresh smoother goes on.
     state["fail"] = False
     smoother = arbor_slam.OnlineSmoother2()
     smoother.add_pose_prior(0, [2, 0, 0], np.eye(3))
@@ -282,8 +283,8 @@ def test_poses_added_after_a_factor_keep_its_keys():
 
 
 def test_the_smoother_threads_call_python_and_raise_through_update():
-    # 700 factors linearised at once are shared by the update's worker threads (chunks of 128,
-    # bayestree/linear_factors.cc): error() runs on them under the GIL.
+    # 700 factors linearised at once are shared by the update's worker threads (chunks of 8,
+    # LinearizedFactors::linearizeAllOrNone): error() runs on them under the GIL.
     main, seen = threading.get_ident(), set()
     state = {"fail_off_main": False}
     anchor = np.array([3.0, 4.0])
