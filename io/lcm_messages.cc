@@ -31,6 +31,15 @@ void setDetail(std::string* detail, const std::string& text) {
   if (detail) *detail = text;
 }
 
+// kTruncated for bytes that end before the length field at `offset` (what of `type` it is).
+MessageProblem truncatedBefore(int size, int offset, const char* field, const char* type,
+                               std::string* detail) {
+  setDetail(detail, std::to_string(size) + " bytes end before " + field + " (bytes " +
+                        std::to_string(offset) + " to " + std::to_string(offset + 3) + ") of " +
+                        type);
+  return MessageProblem::kTruncated;
+}
+
 // Checks the variable-length fields of M before its generated decoder allocates from them.
 // Returns kNone, kTruncated (a length field lies beyond the end) or kMalformed.
 template <class M>
@@ -73,7 +82,9 @@ MessageProblem precheck<prior_t>(const void* data, int size, std::string* detail
 template <>
 MessageProblem precheck<estimate_t>(const void* data, int size, std::string* detail) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kEstimateNumPosesOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kEstimateNumPosesOffset, &n)) {
+    return truncatedBefore(size, kEstimateNumPosesOffset, "num_poses", "an estimate_t", detail);
+  }
   if (n < 0 ||
       static_cast<std::int64_t>(n) * kEstimateBytesPerPose > size - kEstimateNumPosesOffset - 4) {
     setDetail(detail, "num_poses " + std::to_string(n) + " does not fit " + std::to_string(size) +
@@ -86,7 +97,9 @@ MessageProblem precheck<estimate_t>(const void* data, int size, std::string* det
 template <>
 MessageProblem precheck<command_t>(const void* data, int size, std::string* detail) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kCommandPathLengthOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kCommandPathLengthOffset, &n)) {
+    return truncatedBefore(size, kCommandPathLengthOffset, "path's length", "a command_t", detail);
+  }
   if (n < 1) {
     setDetail(detail, "path length " + std::to_string(n) + " (must count the NUL)");
     return MessageProblem::kMalformed;
@@ -109,11 +122,15 @@ template <>
 MessageProblem precheck<covariance_t>(const void* data, int size, std::string* detail) {
   constexpr int kNumIdsOffset = 8 + 8 + 8;  // hash, utime, request
   std::int32_t n = 0, dim = 0;
-  if (!readInt32(data, size, kNumIdsOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kNumIdsOffset, &n)) {
+    return truncatedBefore(size, kNumIdsOffset, "num_ids", "a covariance_t", detail);
+  }
   MessageProblem p = precheckCount(n, 8, size, kNumIdsOffset + 4, "num_ids", detail);
   if (p != MessageProblem::kNone) return p;
   const int dim_offset = kNumIdsOffset + 4 + 8 * n + 8;  // ids, update
-  if (!readInt32(data, size, dim_offset, &dim)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, dim_offset, &dim)) {
+    return truncatedBefore(size, dim_offset, "dim", "a covariance_t", detail);
+  }
   if (dim < 0 || dim > 1 << 12) {
     setDetail(detail, "dim " + std::to_string(dim) + " is out of range");
     return MessageProblem::kMalformed;
@@ -124,13 +141,48 @@ MessageProblem precheck<covariance_t>(const void* data, int size, std::string* d
 template <>
 MessageProblem precheck<status_t>(const void* data, int size, std::string* detail) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kStatusNumReasonsOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kStatusNumReasonsOffset, &n)) {
+    return truncatedBefore(size, kStatusNumReasonsOffset, "num_reasons", "a status_t", detail);
+  }
   // Each reason takes at least 5 bytes (length + NUL) plus an 8-byte count.
   if (n < 0 || static_cast<std::int64_t>(n) * 13 > size - kStatusNumReasonsOffset - 4) {
     setDetail(detail, "num_reasons " + std::to_string(n) + " is out of range");
     return n < 0 ? MessageProblem::kMalformed : MessageProblem::kTruncated;
   }
   return MessageProblem::kNone;
+}
+
+// The types with string fields. LCM's generated decoder takes a string's last byte for its NUL
+// without looking at it and keeps any NUL before it, so "out.g2o\0-rf" would be read as a string
+// that a C API (and LCM's own encoder, which uses strlen) sees as "out.g2o".
+template <class M>
+constexpr bool kHasStrings = false;
+template <>
+constexpr bool kHasStrings<command_t> = true;
+template <>
+constexpr bool kHasStrings<covariance_t> = true;
+template <>
+constexpr bool kHasStrings<status_t> = true;
+
+// A decoded message with strings must encode back to exactly its bytes: every string ends in its
+// NUL and holds none before it. kMalformed (the first byte that differs, its value) otherwise.
+template <class M>
+MessageProblem checkStrings(const M& message, const void* data, int size, std::string* detail) {
+  if constexpr (!kHasStrings<M>) {
+    return MessageProblem::kNone;
+  } else {
+    std::vector<std::uint8_t> again(static_cast<size_t>(size), 0);
+    const int n = message.encode(again.data(), 0, size);
+    const auto* bytes = static_cast<const std::uint8_t*>(data);
+    int at = 0;
+    while (at < size && at < n && again[static_cast<size_t>(at)] == bytes[at]) ++at;
+    if (n == size && at == size) return MessageProblem::kNone;
+    std::ostringstream os;
+    os << M::getTypeName() << ": a string without its terminating NUL or with a NUL inside it";
+    if (at < size) os << " (byte " << at << " reads 0x" << std::hex << int{bytes[at]} << ")";
+    setDetail(detail, os.str());
+    return MessageProblem::kMalformed;
+  }
 }
 
 bool allFinite(const double* v, int n) {
@@ -364,7 +416,7 @@ MessageProblem decodeMessage(const void* data, int size, M* out, std::string* de
               std::to_string(size - used) + " bytes after the end of a " + M::getTypeName());
     return MessageProblem::kTrailingBytes;
   }
-  return MessageProblem::kNone;
+  return checkStrings(*out, data, size, detail);
 }
 
 bool isEdgeMessage(const void* data, int size) {

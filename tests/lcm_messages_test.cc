@@ -233,6 +233,91 @@ TEST(LcmMessages, LengthFieldsAreCheckedBeforeAllocation) {
   EXPECT_NE(decodeMessage(sb.data(), static_cast<int>(sb.size()), &sback), MessageProblem::kNone);
 }
 
+// Found by tests/fuzz (corpus regression-* files): LCM's generated decoder takes a string's last
+// byte for its NUL unchecked and keeps NULs inside, so a SNAPSHOT path "out.g2o\0-rf" or one
+// without its NUL decoded to a string other than what C code and the encoder see; and a message
+// cut short before a length field was refused without a detail.
+TEST(LcmMessages, AStringWithoutItsNulOrWithANulInsideIsRefusedNamingTheByte) {
+  command_t c{};
+  c.command = command_t::SNAPSHOT;
+  c.path = "out.g2o";
+  std::vector<std::uint8_t> bytes = encodeMessage(c);
+  command_t out;
+  std::string detail;
+  ASSERT_EQ(decodeMessage(bytes.data(), static_cast<int>(bytes.size()), &out, &detail),
+            MessageProblem::kNone);
+  bytes.back() = '!';  // the terminating NUL (byte 28) replaced
+  EXPECT_EQ(decodeMessage(bytes.data(), static_cast<int>(bytes.size()), &out, &detail),
+            MessageProblem::kMalformed);
+  EXPECT_NE(detail.find("command_t"), std::string::npos) << detail;
+  EXPECT_NE(detail.find("byte 28 reads 0x21"), std::string::npos) << detail;
+  bytes.back() = 0;
+  bytes[24] = 0;  // "out.\0g2o": a NUL inside
+  EXPECT_EQ(decodeMessage(bytes.data(), static_cast<int>(bytes.size()), &out, &detail),
+            MessageProblem::kMalformed);
+  EXPECT_NE(detail.find("NUL inside"), std::string::npos) << detail;
+
+  covariance_t cov{};
+  cov.error = "unknown pose id";
+  std::vector<std::uint8_t> cb = encodeMessage(cov);
+  covariance_t cov_out;
+  ASSERT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out), MessageProblem::kNone);
+  cb.back() = 0x80;
+  EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out, &detail),
+            MessageProblem::kMalformed);
+
+  status_t st{};
+  st.num_reasons = 1;
+  st.reason = {"nan"};
+  st.reason_count = {2};
+  std::vector<std::uint8_t> sb = encodeMessage(st);
+  status_t st_out;
+  ASSERT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &st_out), MessageProblem::kNone);
+  sb[96 + 4 + 4 + 3] = 'x';  // reason[0]'s NUL (after num_reasons, its length and "nan")
+  EXPECT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &st_out, &detail),
+            MessageProblem::kMalformed);
+}
+
+TEST(LcmMessages, AMessageCutShortBeforeALengthFieldIsRefusedWithADetail) {
+  command_t c{};
+  c.path = "12 57";
+  estimate_t e{};
+  status_t s{};
+  covariance_t cov{};
+  const std::vector<std::vector<std::uint8_t>> all = {encodeMessage(c), encodeMessage(e),
+                                                      encodeMessage(s), encodeMessage(cov)};
+  for (const auto& full : all) {
+    for (std::size_t n = 8; n < full.size(); ++n) {
+      std::string detail;
+      MessageProblem p = MessageProblem::kNone;
+      switch (&full - all.data()) {
+        case 0: {
+          command_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+        case 1: {
+          estimate_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+        case 2: {
+          status_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+        default: {
+          covariance_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+      }
+      EXPECT_NE(p, MessageProblem::kNone) << n;
+      EXPECT_FALSE(detail.empty()) << "message " << (&full - all.data()) << ", " << n << " bytes";
+    }
+  }
+}
+
 TEST(LcmMessages, EachBadFieldHasItsReason) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
