@@ -21,6 +21,12 @@ constexpr int kEstimateBytesPerPose = 8 + 3 * 8 + 4 * 8;
 constexpr int kCommandPathLengthOffset = 8 + 8 + 1;             // 17
 constexpr int kStatusNumReasonsOffset = 8 + 9 * 8 + 4 + 4 + 8;  // 96
 constexpr int kMaxInformationSize = 64;
+// status_t's fixed fields between reason_count and batch_winner (latency_window … batch_max_
+// rotation_diff), and between batch_winner and last_command_result (batch_margin …
+// last_command_seq); tests/lcm_messages_test.cc checks them against an encoded message.
+constexpr int kStatusBytesBeforeBatchWinner = 4 + 3 * 8 + 4 + 3 * 8 + 3 * 4 + 8 + 4 + 6 * 8;
+constexpr int kStatusBytesBeforeLastCommandResult =
+    8 + 1 + 4 + 8 + 8 + 1 + 6 * 8 + 4 + 6 * 8 + 2 * 4 + 2 * 8;
 
 bool readInt32(const void* data, int size, int offset, std::int32_t* value) {
   if (offset + 4 > size) return false;
@@ -94,17 +100,33 @@ MessageProblem precheck<estimate_t>(const void* data, int size, std::string* det
   return MessageProblem::kNone;
 }
 
-template <>
-MessageProblem precheck<command_t>(const void* data, int size, std::string* detail) {
+// A string's length field at `offset` (LCM counts the NUL): at least 1 and no longer than the
+// bytes left, checked before the generated decoder takes length − 1 (a signed overflow for
+// −2³¹) or allocates from it. `*next` is the offset after the string.
+MessageProblem precheckString(const void* data, int size, int offset, const std::string& field,
+                              const char* type, std::string* detail, int* next = nullptr) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kCommandPathLengthOffset, &n)) {
-    return truncatedBefore(size, kCommandPathLengthOffset, "path's length", "a command_t", detail);
+  if (!readInt32(data, size, offset, &n)) {
+    return truncatedBefore(size, offset, (field + "'s length").c_str(), type, detail);
   }
   if (n < 1) {
-    setDetail(detail, "path length " + std::to_string(n) + " (must count the NUL)");
+    setDetail(detail, field + " length " + std::to_string(n) + " at byte " +
+                          std::to_string(offset) + " (must count the NUL)");
     return MessageProblem::kMalformed;
   }
+  if (n > size - offset - 4) {
+    setDetail(detail, field + " length " + std::to_string(n) + " at byte " +
+                          std::to_string(offset) + " runs past the end of " + std::to_string(size) +
+                          " bytes");
+    return MessageProblem::kTruncated;
+  }
+  if (next) *next = offset + 4 + n;
   return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<command_t>(const void* data, int size, std::string* detail) {
+  return precheckString(data, size, kCommandPathLengthOffset, "path", "a command_t", detail);
 }
 
 // An array of `count` elements of `bytes` each must fit the `size − offset` bytes left.
@@ -135,7 +157,10 @@ MessageProblem precheck<covariance_t>(const void* data, int size, std::string* d
     setDetail(detail, "dim " + std::to_string(dim) + " is out of range");
     return MessageProblem::kMalformed;
   }
-  return precheckCount(dim * dim, 8, size, dim_offset + 4, "dim × dim", detail);
+  p = precheckCount(dim * dim, 8, size, dim_offset + 4, "dim × dim", detail);
+  if (p != MessageProblem::kNone) return p;
+  return precheckString(data, size, dim_offset + 4 + 8 * dim * dim, "error", "a covariance_t",
+                        detail);
 }
 
 template <>
@@ -149,7 +174,18 @@ MessageProblem precheck<status_t>(const void* data, int size, std::string* detai
     setDetail(detail, "num_reasons " + std::to_string(n) + " is out of range");
     return n < 0 ? MessageProblem::kMalformed : MessageProblem::kTruncated;
   }
-  return MessageProblem::kNone;
+  int at = kStatusNumReasonsOffset + 4;
+  for (std::int32_t k = 0; k < n; ++k) {
+    const MessageProblem p = precheckString(data, size, at, "reason[" + std::to_string(k) + "]",
+                                            "a status_t", detail, &at);
+    if (p != MessageProblem::kNone) return p;
+  }
+  // reason_count, then the fixed fields up to batch_winner, and from it to last_command_result.
+  at += 8 * n + kStatusBytesBeforeBatchWinner;
+  MessageProblem p = precheckString(data, size, at, "batch_winner", "a status_t", detail, &at);
+  if (p != MessageProblem::kNone) return p;
+  at += kStatusBytesBeforeLastCommandResult;
+  return precheckString(data, size, at, "last_command_result", "a status_t", detail);
 }
 
 // The types with string fields. LCM's generated decoder takes a string's last byte for its NUL

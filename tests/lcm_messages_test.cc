@@ -278,6 +278,81 @@ TEST(LcmMessages, AStringWithoutItsNulOrWithANulInsideIsRefusedNamingTheByte) {
             MessageProblem::kMalformed);
 }
 
+// Found by tests/fuzz under UBSan: a string length of −2³¹ made LCM's generated decoder compute
+// length − 1 in int (a signed overflow); every string length is now checked first.
+TEST(LcmMessages, AStringLengthOutOfRangeIsRefusedBeforeTheGeneratedDecoder) {
+  covariance_t cov{};
+  cov.error = "unknown pose id";
+  std::vector<std::uint8_t> cb = encodeMessage(cov);
+  const std::size_t error_at = cb.size() - 4 - cov.error.size() - 1;  // its length field
+  covariance_t cov_out;
+  std::string detail;
+  for (std::uint32_t length : {0x80000000u, 0xFFFFFFFFu, 0u}) {
+    for (int k = 0; k < 4; ++k)
+      cb[error_at + k] = static_cast<std::uint8_t>(length >> (24 - 8 * k));
+    EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out, &detail),
+              MessageProblem::kMalformed)
+        << length;
+    EXPECT_NE(detail.find("error length"), std::string::npos) << detail;
+  }
+  cb[error_at] = 0x7F;  // 2³¹ − 1: past the end
+  EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out, &detail),
+            MessageProblem::kTruncated);
+
+  status_t st{};
+  st.num_reasons = 2;
+  st.reason = {"nan", "dim"};
+  st.reason_count = {1, 2};
+  std::vector<std::uint8_t> sb = encodeMessage(st);
+  sb[96 + 4 + 8] = 0x80;  // reason[1]'s length (after num_reasons and "nan" with its length)
+  sb[96 + 4 + 9] = sb[96 + 4 + 10] = sb[96 + 4 + 11] = 0;
+  status_t st_out;
+  EXPECT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &st_out, &detail),
+            MessageProblem::kMalformed);
+  EXPECT_NE(detail.find("reason[1] length -2147483648 at byte 108"), std::string::npos) << detail;
+}
+
+// Every 4-byte window of a message with strings set to −2³¹ (what a string length of that value
+// would be): refused or decoded, never a crash (a string length missed by the prechecks reads
+// 2 GiB past the message).
+template <class M>
+void everyWindowAtIntMin(const M& message) {
+  const std::vector<std::uint8_t> bytes = encodeMessage(message);
+  for (std::size_t at = 8; at + 4 <= bytes.size(); ++at) {
+    std::vector<std::uint8_t> b = bytes;
+    b[at] = 0x80;
+    b[at + 1] = b[at + 2] = b[at + 3] = 0;
+    M out;
+    std::string detail;
+    const MessageProblem p = decodeMessage(b.data(), static_cast<int>(b.size()), &out, &detail);
+    EXPECT_TRUE(p == MessageProblem::kNone || !detail.empty()) << M::getTypeName() << " " << at;
+  }
+}
+
+TEST(LcmMessages, NoStringLengthReachesTheGeneratedDecoderUnchecked) {
+  command_t c{};
+  c.path = "12 57";
+  everyWindowAtIntMin(c);
+  covariance_t cov{};
+  cov.error = "unknown pose id";
+  everyWindowAtIntMin(cov);
+  status_t st{};
+  st.num_reasons = 2;
+  st.reason = {"nan", "dim"};
+  st.reason_count = {1, 2};
+  st.batch_winner = "lm";
+  st.last_command_result = "disabled 1 edge";
+  everyWindowAtIntMin(st);
+  // The layout the prechecks walk: batch_winner's and last_command_result's length fields.
+  const std::vector<std::uint8_t> b = encodeMessage(st);
+  const std::size_t winner = 96 + 4 + (4 + 4) * 2 + 8 * 2 + 128;
+  EXPECT_EQ(b[winner + 3], 3);  // "lm" and its NUL
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(&b[winner + 4])), "lm");
+  const std::size_t result = winner + 4 + 3 + 154;
+  EXPECT_EQ(b[result + 3], st.last_command_result.size() + 1);
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(&b[result + 4])), st.last_command_result);
+}
+
 TEST(LcmMessages, AMessageCutShortBeforeALengthFieldIsRefusedWithADetail) {
   command_t c{};
   c.path = "12 57";
