@@ -21,6 +21,12 @@ constexpr int kEstimateBytesPerPose = 8 + 3 * 8 + 4 * 8;
 constexpr int kCommandPathLengthOffset = 8 + 8 + 1;             // 17
 constexpr int kStatusNumReasonsOffset = 8 + 9 * 8 + 4 + 4 + 8;  // 96
 constexpr int kMaxInformationSize = 64;
+// status_t's fixed fields between reason_count and batch_winner (latency_window … batch_max_
+// rotation_diff), and between batch_winner and last_command_result (batch_margin …
+// last_command_seq); tests/lcm_messages_test.cc checks them against an encoded message.
+constexpr int kStatusBytesBeforeBatchWinner = 4 + 3 * 8 + 4 + 3 * 8 + 3 * 4 + 8 + 4 + 6 * 8;
+constexpr int kStatusBytesBeforeLastCommandResult =
+    8 + 1 + 4 + 8 + 8 + 1 + 6 * 8 + 4 + 6 * 8 + 2 * 4 + 2 * 8;
 
 bool readInt32(const void* data, int size, int offset, std::int32_t* value) {
   if (offset + 4 > size) return false;
@@ -29,6 +35,15 @@ bool readInt32(const void* data, int size, int offset, std::int32_t* value) {
 
 void setDetail(std::string* detail, const std::string& text) {
   if (detail) *detail = text;
+}
+
+// kTruncated for bytes that end before the length field at `offset` (what of `type` it is).
+MessageProblem truncatedBefore(int size, int offset, const char* field, const char* type,
+                               std::string* detail) {
+  setDetail(detail, std::to_string(size) + " bytes end before " + field + " (bytes " +
+                        std::to_string(offset) + " to " + std::to_string(offset + 3) + ") of " +
+                        type);
+  return MessageProblem::kTruncated;
 }
 
 // Checks the variable-length fields of M before its generated decoder allocates from them.
@@ -73,7 +88,9 @@ MessageProblem precheck<prior_t>(const void* data, int size, std::string* detail
 template <>
 MessageProblem precheck<estimate_t>(const void* data, int size, std::string* detail) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kEstimateNumPosesOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kEstimateNumPosesOffset, &n)) {
+    return truncatedBefore(size, kEstimateNumPosesOffset, "num_poses", "an estimate_t", detail);
+  }
   if (n < 0 ||
       static_cast<std::int64_t>(n) * kEstimateBytesPerPose > size - kEstimateNumPosesOffset - 4) {
     setDetail(detail, "num_poses " + std::to_string(n) + " does not fit " + std::to_string(size) +
@@ -83,15 +100,33 @@ MessageProblem precheck<estimate_t>(const void* data, int size, std::string* det
   return MessageProblem::kNone;
 }
 
-template <>
-MessageProblem precheck<command_t>(const void* data, int size, std::string* detail) {
+// A string's length field at `offset` (LCM counts the NUL): at least 1 and no longer than the
+// bytes left, checked before the generated decoder takes length − 1 (a signed overflow for
+// −2³¹) or allocates from it. `*next` is the offset after the string.
+MessageProblem precheckString(const void* data, int size, int offset, const std::string& field,
+                              const char* type, std::string* detail, int* next = nullptr) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kCommandPathLengthOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, offset, &n)) {
+    return truncatedBefore(size, offset, (field + "'s length").c_str(), type, detail);
+  }
   if (n < 1) {
-    setDetail(detail, "path length " + std::to_string(n) + " (must count the NUL)");
+    setDetail(detail, field + " length " + std::to_string(n) + " at byte " +
+                          std::to_string(offset) + " (must count the NUL)");
     return MessageProblem::kMalformed;
   }
+  if (n > size - offset - 4) {
+    setDetail(detail, field + " length " + std::to_string(n) + " at byte " +
+                          std::to_string(offset) + " runs past the end of " + std::to_string(size) +
+                          " bytes");
+    return MessageProblem::kTruncated;
+  }
+  if (next) *next = offset + 4 + n;
   return MessageProblem::kNone;
+}
+
+template <>
+MessageProblem precheck<command_t>(const void* data, int size, std::string* detail) {
+  return precheckString(data, size, kCommandPathLengthOffset, "path", "a command_t", detail);
 }
 
 // An array of `count` elements of `bytes` each must fit the `size − offset` bytes left.
@@ -109,28 +144,81 @@ template <>
 MessageProblem precheck<covariance_t>(const void* data, int size, std::string* detail) {
   constexpr int kNumIdsOffset = 8 + 8 + 8;  // hash, utime, request
   std::int32_t n = 0, dim = 0;
-  if (!readInt32(data, size, kNumIdsOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kNumIdsOffset, &n)) {
+    return truncatedBefore(size, kNumIdsOffset, "num_ids", "a covariance_t", detail);
+  }
   MessageProblem p = precheckCount(n, 8, size, kNumIdsOffset + 4, "num_ids", detail);
   if (p != MessageProblem::kNone) return p;
   const int dim_offset = kNumIdsOffset + 4 + 8 * n + 8;  // ids, update
-  if (!readInt32(data, size, dim_offset, &dim)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, dim_offset, &dim)) {
+    return truncatedBefore(size, dim_offset, "dim", "a covariance_t", detail);
+  }
   if (dim < 0 || dim > 1 << 12) {
     setDetail(detail, "dim " + std::to_string(dim) + " is out of range");
     return MessageProblem::kMalformed;
   }
-  return precheckCount(dim * dim, 8, size, dim_offset + 4, "dim × dim", detail);
+  p = precheckCount(dim * dim, 8, size, dim_offset + 4, "dim × dim", detail);
+  if (p != MessageProblem::kNone) return p;
+  return precheckString(data, size, dim_offset + 4 + 8 * dim * dim, "error", "a covariance_t",
+                        detail);
 }
 
 template <>
 MessageProblem precheck<status_t>(const void* data, int size, std::string* detail) {
   std::int32_t n = 0;
-  if (!readInt32(data, size, kStatusNumReasonsOffset, &n)) return MessageProblem::kTruncated;
+  if (!readInt32(data, size, kStatusNumReasonsOffset, &n)) {
+    return truncatedBefore(size, kStatusNumReasonsOffset, "num_reasons", "a status_t", detail);
+  }
   // Each reason takes at least 5 bytes (length + NUL) plus an 8-byte count.
   if (n < 0 || static_cast<std::int64_t>(n) * 13 > size - kStatusNumReasonsOffset - 4) {
     setDetail(detail, "num_reasons " + std::to_string(n) + " is out of range");
     return n < 0 ? MessageProblem::kMalformed : MessageProblem::kTruncated;
   }
-  return MessageProblem::kNone;
+  int at = kStatusNumReasonsOffset + 4;
+  for (std::int32_t k = 0; k < n; ++k) {
+    const MessageProblem p = precheckString(data, size, at, "reason[" + std::to_string(k) + "]",
+                                            "a status_t", detail, &at);
+    if (p != MessageProblem::kNone) return p;
+  }
+  // reason_count, then the fixed fields up to batch_winner, and from it to last_command_result.
+  at += 8 * n + kStatusBytesBeforeBatchWinner;
+  MessageProblem p = precheckString(data, size, at, "batch_winner", "a status_t", detail, &at);
+  if (p != MessageProblem::kNone) return p;
+  at += kStatusBytesBeforeLastCommandResult;
+  return precheckString(data, size, at, "last_command_result", "a status_t", detail);
+}
+
+// The types with string fields. LCM's generated decoder takes a string's last byte for its NUL
+// without looking at it and keeps any NUL before it, so "out.g2o\0-rf" would be read as a string
+// that a C API (and LCM's own encoder, which uses strlen) sees as "out.g2o".
+template <class M>
+constexpr bool kHasStrings = false;
+template <>
+constexpr bool kHasStrings<command_t> = true;
+template <>
+constexpr bool kHasStrings<covariance_t> = true;
+template <>
+constexpr bool kHasStrings<status_t> = true;
+
+// A decoded message with strings must encode back to exactly its bytes: every string ends in its
+// NUL and holds none before it. kMalformed (the first byte that differs, its value) otherwise.
+template <class M>
+MessageProblem checkStrings(const M& message, const void* data, int size, std::string* detail) {
+  if constexpr (!kHasStrings<M>) {
+    return MessageProblem::kNone;
+  } else {
+    std::vector<std::uint8_t> again(static_cast<size_t>(size), 0);
+    const int n = message.encode(again.data(), 0, size);
+    const auto* bytes = static_cast<const std::uint8_t*>(data);
+    int at = 0;
+    while (at < size && at < n && again[static_cast<size_t>(at)] == bytes[at]) ++at;
+    if (n == size && at == size) return MessageProblem::kNone;
+    std::ostringstream os;
+    os << M::getTypeName() << ": a string without its terminating NUL or with a NUL inside it";
+    if (at < size) os << " (byte " << at << " reads 0x" << std::hex << int{bytes[at]} << ")";
+    setDetail(detail, os.str());
+    return MessageProblem::kMalformed;
+  }
 }
 
 template <>
@@ -382,7 +470,7 @@ MessageProblem decodeMessage(const void* data, int size, M* out, std::string* de
               std::to_string(size - used) + " bytes after the end of a " + M::getTypeName());
     return MessageProblem::kTrailingBytes;
   }
-  return MessageProblem::kNone;
+  return checkStrings(*out, data, size, detail);
 }
 
 bool isEdgeMessage(const void* data, int size) {

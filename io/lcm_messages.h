@@ -38,7 +38,8 @@ enum class MessageProblem {
   kTruncated,      ///< fewer bytes than the type needs
   kTrailingBytes,  ///< more bytes than the type needs
   kTypeHash,       ///< not this type (the 8-byte LCM fingerprint differs)
-  kMalformed,      ///< an array length or string length out of range
+  kMalformed,      ///< an array length or string length out of range, or a string without its
+                   ///< terminating NUL or with a NUL inside it
   kDim,            ///< dim not 2/3, or fields inconsistent with dim (information size, 2D z)
   kNotFinite,      ///< NaN or infinity in a number
   kRotation,       ///< quaternion far from unit norm

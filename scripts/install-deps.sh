@@ -13,6 +13,10 @@ packages=(
   libopenblas0-pthread libopenblas-pthread-dev
   python3-matplotlib python3-numpy python3-pytest python3-dev python3-pybind11 pybind11-dev
   python3-mypy python3-build python3-pip python3-venv patchelf
+  # The fuzz targets' libFuzzer build (tests/fuzz): Debian's default Clang and its runtime
+  # libraries (libclang-rt-dev: libclang_rt.fuzzer and the sanitizers, libclang-rt-14-dev on
+  # Debian 12).
+  clang libclang-rt-dev
 )
 
 missing=()

@@ -233,6 +233,166 @@ TEST(LcmMessages, LengthFieldsAreCheckedBeforeAllocation) {
   EXPECT_NE(decodeMessage(sb.data(), static_cast<int>(sb.size()), &sback), MessageProblem::kNone);
 }
 
+// Found by tests/fuzz (corpus regression-* files): LCM's generated decoder takes a string's last
+// byte for its NUL unchecked and keeps NULs inside, so a SNAPSHOT path "out.g2o\0-rf" or one
+// without its NUL decoded to a string other than what C code and the encoder see; and a message
+// cut short before a length field was refused without a detail.
+TEST(LcmMessages, AStringWithoutItsNulOrWithANulInsideIsRefusedNamingTheByte) {
+  command_t c{};
+  c.command = command_t::SNAPSHOT;
+  c.path = "out.g2o";
+  std::vector<std::uint8_t> bytes = encodeMessage(c);
+  command_t out;
+  std::string detail;
+  ASSERT_EQ(decodeMessage(bytes.data(), static_cast<int>(bytes.size()), &out, &detail),
+            MessageProblem::kNone);
+  bytes.back() = '!';  // the terminating NUL (byte 28) replaced
+  EXPECT_EQ(decodeMessage(bytes.data(), static_cast<int>(bytes.size()), &out, &detail),
+            MessageProblem::kMalformed);
+  EXPECT_NE(detail.find("command_t"), std::string::npos) << detail;
+  EXPECT_NE(detail.find("byte 28 reads 0x21"), std::string::npos) << detail;
+  bytes.back() = 0;
+  bytes[24] = 0;  // "out.\0g2o": a NUL inside
+  EXPECT_EQ(decodeMessage(bytes.data(), static_cast<int>(bytes.size()), &out, &detail),
+            MessageProblem::kMalformed);
+  EXPECT_NE(detail.find("NUL inside"), std::string::npos) << detail;
+
+  covariance_t cov{};
+  cov.error = "unknown pose id";
+  std::vector<std::uint8_t> cb = encodeMessage(cov);
+  covariance_t cov_out;
+  ASSERT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out), MessageProblem::kNone);
+  cb.back() = 0x80;
+  EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out, &detail),
+            MessageProblem::kMalformed);
+
+  status_t st{};
+  st.num_reasons = 1;
+  st.reason = {"nan"};
+  st.reason_count = {2};
+  std::vector<std::uint8_t> sb = encodeMessage(st);
+  status_t st_out;
+  ASSERT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &st_out), MessageProblem::kNone);
+  sb[96 + 4 + 4 + 3] = 'x';  // reason[0]'s NUL (after num_reasons, its length and "nan")
+  EXPECT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &st_out, &detail),
+            MessageProblem::kMalformed);
+}
+
+// Found by tests/fuzz under UBSan: a string length of −2³¹ made LCM's generated decoder compute
+// length − 1 in int (a signed overflow); every string length is now checked first.
+TEST(LcmMessages, AStringLengthOutOfRangeIsRefusedBeforeTheGeneratedDecoder) {
+  covariance_t cov{};
+  cov.error = "unknown pose id";
+  std::vector<std::uint8_t> cb = encodeMessage(cov);
+  const std::size_t error_at = cb.size() - 4 - cov.error.size() - 1;  // its length field
+  covariance_t cov_out;
+  std::string detail;
+  for (std::uint32_t length : {0x80000000u, 0xFFFFFFFFu, 0u}) {
+    for (int k = 0; k < 4; ++k)
+      cb[error_at + k] = static_cast<std::uint8_t>(length >> (24 - 8 * k));
+    EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out, &detail),
+              MessageProblem::kMalformed)
+        << length;
+    EXPECT_NE(detail.find("error length"), std::string::npos) << detail;
+  }
+  cb[error_at] = 0x7F;  // 2³¹ − 1: past the end
+  EXPECT_EQ(decodeMessage(cb.data(), static_cast<int>(cb.size()), &cov_out, &detail),
+            MessageProblem::kTruncated);
+
+  status_t st{};
+  st.num_reasons = 2;
+  st.reason = {"nan", "dim"};
+  st.reason_count = {1, 2};
+  std::vector<std::uint8_t> sb = encodeMessage(st);
+  sb[96 + 4 + 8] = 0x80;  // reason[1]'s length (after num_reasons and "nan" with its length)
+  sb[96 + 4 + 9] = sb[96 + 4 + 10] = sb[96 + 4 + 11] = 0;
+  status_t st_out;
+  EXPECT_EQ(decodeMessage(sb.data(), static_cast<int>(sb.size()), &st_out, &detail),
+            MessageProblem::kMalformed);
+  EXPECT_NE(detail.find("reason[1] length -2147483648 at byte 108"), std::string::npos) << detail;
+}
+
+// Every 4-byte window of a message with strings set to −2³¹ (what a string length of that value
+// would be): refused or decoded, never a crash (a string length missed by the prechecks reads
+// 2 GiB past the message).
+template <class M>
+void everyWindowAtIntMin(const M& message) {
+  const std::vector<std::uint8_t> bytes = encodeMessage(message);
+  for (std::size_t at = 8; at + 4 <= bytes.size(); ++at) {
+    std::vector<std::uint8_t> b = bytes;
+    b[at] = 0x80;
+    b[at + 1] = b[at + 2] = b[at + 3] = 0;
+    M out;
+    std::string detail;
+    const MessageProblem p = decodeMessage(b.data(), static_cast<int>(b.size()), &out, &detail);
+    EXPECT_TRUE(p == MessageProblem::kNone || !detail.empty()) << M::getTypeName() << " " << at;
+  }
+}
+
+TEST(LcmMessages, NoStringLengthReachesTheGeneratedDecoderUnchecked) {
+  command_t c{};
+  c.path = "12 57";
+  everyWindowAtIntMin(c);
+  covariance_t cov{};
+  cov.error = "unknown pose id";
+  everyWindowAtIntMin(cov);
+  status_t st{};
+  st.num_reasons = 2;
+  st.reason = {"nan", "dim"};
+  st.reason_count = {1, 2};
+  st.batch_winner = "lm";
+  st.last_command_result = "disabled 1 edge";
+  everyWindowAtIntMin(st);
+  // The layout the prechecks walk: batch_winner's and last_command_result's length fields.
+  const std::vector<std::uint8_t> b = encodeMessage(st);
+  const std::size_t winner = 96 + 4 + (4 + 4) * 2 + 8 * 2 + 128;
+  EXPECT_EQ(b[winner + 3], 3);  // "lm" and its NUL
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(&b[winner + 4])), "lm");
+  const std::size_t result = winner + 4 + 3 + 154;
+  EXPECT_EQ(b[result + 3], st.last_command_result.size() + 1);
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(&b[result + 4])), st.last_command_result);
+}
+
+TEST(LcmMessages, AMessageCutShortBeforeALengthFieldIsRefusedWithADetail) {
+  command_t c{};
+  c.path = "12 57";
+  estimate_t e{};
+  status_t s{};
+  covariance_t cov{};
+  const std::vector<std::vector<std::uint8_t>> all = {encodeMessage(c), encodeMessage(e),
+                                                      encodeMessage(s), encodeMessage(cov)};
+  for (const auto& full : all) {
+    for (std::size_t n = 8; n < full.size(); ++n) {
+      std::string detail;
+      MessageProblem p = MessageProblem::kNone;
+      switch (&full - all.data()) {
+        case 0: {
+          command_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+        case 1: {
+          estimate_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+        case 2: {
+          status_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+        default: {
+          covariance_t m;
+          p = decodeMessage(full.data(), static_cast<int>(n), &m, &detail);
+          break;
+        }
+      }
+      EXPECT_NE(p, MessageProblem::kNone) << n;
+      EXPECT_FALSE(detail.empty()) << "message " << (&full - all.data()) << ", " << n << " bytes";
+    }
+  }
+}
+
 TEST(LcmMessages, EachBadFieldHasItsReason) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
