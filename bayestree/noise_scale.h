@@ -5,10 +5,10 @@
 //
 // The statistical model. A true closure's innovation at the estimate before it enters is
 //   m = rᵀ (I + AΣAᵀ)⁻¹ r ~ σ² χ²_d,
-// d its dimension, when every Ω in the graph is σ⁻² times the true information (σ² = 1: Ω
-// right; σ² > 1: over-confident; σ² < 1: cautious): AΣAᵀ is scale-free (A ∝ σ⁻¹, Σ ∝ σ²) and
-// r is σ⁻¹ times the whitened error. A false closure's m has no such law and is mostly far
-// larger. The estimator:
+// d its dimension, when every Ω in the graph is σ² times the true information, i.e. the true
+// covariances are σ²·Ω⁻¹ (σ² = 1: Ω right; σ² > 1: over-confident; σ² < 1: cautious): AΣAᵀ is
+// scale-free (A ∝ σ, Σ ∝ σ⁻²) and r is σ times the error whitened by the true covariance. A
+// false closure's m has no such law and is mostly far larger. The estimator:
 //   what     σ̂², the σ² of the true closures' χ²_d law;
 //   from     the innovations m of the closures judged so far (online_gnc.h: the corroborated
 //            ones, which few false closures reach);
