@@ -16,6 +16,8 @@
 #
 # usage: tools/bench/several_hosts.sh [BUILD_DIR]
 # Environment: POSES="1500 700 700" (robots 1..3) RATE=100 LOSS=5 OUTAGE_AT=5 OUTAGE_S=10 RUNS=1
+#   RESEND=100000 (each publisher's --resend-window; 0: none, to see what the link loses)
+#   ARBOR=PATH (the arbor executable; default BUILD_DIR/tools/arbor)
 #   OUT=DIR (keep each run's files in DIR/run<k>: serve.json, publish<r>.json, merged.g2o,
 #   link.json; the test reads them) GUARD=240 (seconds: every process is ended by then)
 set -euo pipefail
@@ -40,7 +42,7 @@ if [ "$(ip -o link show | wc -l)" != 1 ]; then
 fi
 
 build=${1:-build}
-arbor="$(realpath "$build/tools/arbor")"
+arbor="$(realpath "${ARBOR:-$build/tools/arbor}")"
 read -r -a poses <<<"${POSES:-1500 700 700}"
 rate=${RATE:-100}
 loss=${LOSS:-5}
@@ -48,6 +50,9 @@ outage_at=${OUTAGE_AT:-5}
 outage_s=${OUTAGE_S:-10}
 runs=${RUNS:-1}
 guard=${GUARD:-240}
+resend=${RESEND:-100000}
+resend_flags=(--resend-window "$resend")
+[ "$resend" = 0 ] && resend_flags=()
 out=${OUT:-}
 # ttl=1: a datagram crosses the bridge segment and no router; the bridge is the only way out of
 # each namespace, and the parent namespace has no way out at all.
@@ -126,7 +131,7 @@ for run in $(seq "$runs"); do
   robot_pids=()
   for r in 1 2 3; do
     nsenter -t "${ns_pid[robot$r]}" -n -- timeout --foreground -k 5 "$guard" "$arbor" publish "$dir/robot$r.g2o" --lcm-url "$url" \
-      --sender "$r" --rate "$rate" --resend-window 100000 --wait-ready --timeout 60 --json \
+      --sender "$r" --rate "$rate" "${resend_flags[@]}" --wait-ready --timeout 60 --json \
       >"$dir/publish$r.json" 2>"$dir/publish$r.err" &
     robot_pids+=($!)
   done
