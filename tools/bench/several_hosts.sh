@@ -62,14 +62,14 @@ trap 'rm -rf "$tmp"' EXIT
 
 hosts=(serve robot1 robot2 robot3)
 declare -A ns_pid
-# Host k: a namespace held by a `sleep` (ended with this script's pid namespace), a veth pair
-# "port<k>" (on the bridge) / "eth0" (inside), address 10.56.0.<k+1>/24, 224.0.0.0/4 routed to
-# eth0.
+# Host k: a namespace held by a `sleep` (ended with this script's pid namespace: every process
+# in it ends when the script does), a veth pair "port<k>" (on the bridge) / "eth0" (inside),
+# address 10.56.0.<k+1>/24, 224.0.0.0/4 routed to eth0.
 make_network() {
   ip link add br56 type bridge mcast_snooping 0
   ip link set br56 up
   for k in 0 1 2 3; do
-    unshare --net -- sleep "$guard" &
+    unshare --net -- sleep infinity &
     local pid=$!
     while [ "$(readlink /proc/$pid/ns/net)" = "$(readlink /proc/self/ns/net)" ]; do sleep 0.01; done
     ns_pid[${hosts[$k]}]=$pid
@@ -80,8 +80,12 @@ make_network() {
       ip addr add 10.56.0.$((k + 1))/24 dev eth0 && ip link set eth0 up &&
       ip route add 224.0.0.0/4 dev eth0"
   done
-  # Robot 1's radio: LOSS% of the frames it sends and of those sent to it lost on the way
-  # (dropped, counted, by the bridge: the sender does not know), like a lossy radio link.
+}
+# Robot 1's radio: LOSS% of the frames it sends and of those sent to it lost on the way
+# (dropped, counted, by the bridge: the sender does not know), like a lossy radio link. Made
+# afresh for each run, so its counters start at 0.
+make_radio() {
+  nft delete table bridge radio 2>/dev/null || true
   nft -f - <<EOF
 table bridge radio {
   chain forward {
@@ -118,7 +122,7 @@ for run in $(seq "$runs"); do
   [ -n "$out" ] && dir="$out/run$run"
   mkdir -p "$dir"
   make_worlds "$dir"
-  nft reset counters >/dev/null
+  make_radio
   tx_dropped() {  # what robot 1's eth0 dropped for want of a carrier (its link cut)
     nsenter -t "${ns_pid[robot1]}" -n ip -s -j link show eth0 | jq '.[0].stats64.tx.dropped'
   }
