@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake pkg-config git clang-format ccache jq
+  build-essential cmake pkg-config git clang-format ccache jq nftables iproute2 util-linux
   libeigen3-dev libsuitesparse-dev libboost-program-options-dev
   liblcm-dev libglib2.0-dev liblcm-bin liblcm-java default-jre-headless zlib1g-dev
   default-jdk-headless libjchart2d-java
