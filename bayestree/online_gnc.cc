@@ -2,17 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
-#include <initializer_list>
 #include <limits>
 #include <map>
 #include <optional>
-#include <set>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <utility>
 
-#include <boost/math/distributions/chi_squared.hpp>
 
 #include "arbor_slam/bayestree/closure_innovation.h"
 
@@ -33,10 +29,6 @@ bool odometry(Key from, Key to) { return from - to == 1 || to - from == 1; }
 // drops move the estimate (intel with 90% random false closures, seed 2: one true closure; at
 // one take-back it stays out and F is 6% higher); past that it flips until finalize_rounds.
 constexpr int kEndTakeBacks = 2;
-
-// The sample count at which an estimate re-made from n samples is made next: every new one up
-// to 64, then when their number has grown by an eighth (O(k) each, O(k) in all).
-size_t nextEstimateAt(size_t n) { return n < 64 ? n + 1 : n + n / 8; }
 
 }  // namespace
 
@@ -71,168 +63,6 @@ OnlineGnc<G>::OnlineGnc(const RobustOptions& options) : options_(options) {
   cuts_ = NoiseScaleCuts(G::kDoF, c2_given_, scale_options_);
 }
 
-// σ̂² from the innovations so far (scaleSource), once scale_min_samples of them are in;
-// re-estimated at nextEstimateAt's counts.
-template <class G>
-void OnlineGnc<G>::observe(const IncrementalSmoother<G>& smoother, int id, double m) {
-  if (options_.scale != NoiseScale::kEstimated || !std::isfinite(m)) return;
-  Closure& c = closures_[static_cast<size_t>(id)];
-  c.m = m;
-  innovations_.push_back(m);
-  if (const Key K = options_.corroboration_window; K > 0) {
-    // (P) against the judged closures whose low end is within K of this one's: ends paired
-    // within K (either way round) put the low ends within K of each other.
-    const Key low = std::min(c.from, c.to);
-    const G xa = smoother.estimate(c.i), xb = smoother.estimate(c.j);
-    for (auto it = by_low_end_.lower_bound(low - K); it != by_low_end_.end(); ++it) {
-      if (it->first > low + K) break;
-      Closure& other = closures_[static_cast<size_t>(it->second)];
-      if (other.state == State::kExcluded || !agree(smoother, c, other, xa, xb)) continue;
-      if (!other.corroborated) {
-        other.corroborated = true;
-        corroborated_.push_back(other.m);
-      }
-      c.corroborated = true;
-      // Partners (read only by (L)'s backed()) span more than 2K poses each: the ends of a
-      // shorter closure's neighbour can lie on the chain between its own ends, and (P) then
-      // reads it against the estimate's chain (bent to it once it is in), not against the
-      // neighbour's measurement (header comment, "confirmed at the end").
-      if (recordsPartners() && spansLoop(c) && spansLoop(other)) {
-        c.partners.push_back(it->second);
-        other.partners.push_back(id);
-      }
-    }
-    if (c.corroborated) corroborated_.push_back(m);
-    by_low_end_.emplace(low, id);
-  }
-  const std::vector<double>* source = scaleSource();
-  if (!source) return;
-  const size_t n = source->size();
-  if (source == last_source_ && n < next_estimate_) return;
-  last_source_ = source;
-  samples_used_ = static_cast<int>(n);
-  const bool had_estimate = estimate_.estimated;
-  // The fixed point starts from the untruncated median, and with RobustRule::kScaleStart at
-  // most from the last σ̂² (header comment, "the noise scale").
-  const double start_cap = had_estimate && options_.on(RobustRule::kScaleStart)
-                               ? scale_
-                               : std::numeric_limits<double>::infinity();
-  estimate_ = estimateNoiseScale(*source, cuts_, scale_options_,
-                                 /*from_median=*/source == &corroborated_, start_cap);
-  scale_ = estimate_.sigma2;
-  // The estimator's own truncation; Ω at its word without an estimate.
-  const double c2_before = c2_;
-  c2_ = estimate_.estimated ? scale_options_.tail_factor * c2_given_ * scale_ : c2_given_;
-  // The first estimate, many times Ω's word: what was rejected at Ω's word is held again, to be
-  // judged as the warm-up's closures are (RobustRule::kRehold; header, "warm-up").
-  const double growth = options_.on(RobustRule::kRehold) ? robust_constants::kReholdGrowth : 0.0;
-  if (growth > 0 && !had_estimate && estimate_.estimated && c2_ >= growth * c2_before &&
-      options_.on(RobustRule::kWarmUp)) {
-    for (size_t k = 0; k < closures_.size(); ++k) {
-      Closure& o = closures_[k];
-      if (o.state != State::kSettled || o.weight != 0.0 || o.held || !binaryKernel(o) ||
-          growth * o.judged_c2 > c2_)
-        continue;
-      o.held = true;
-      held_.push_back(static_cast<int>(k));
-    }
-  }
-  // An estimate taking c² below 1/recheck_margin of what every inlier was last checked against:
-  // the next step checks them all at once (header comment, "a shrinking c²"). Not on losing the
-  // estimate: Ω's word then stands in for want of one and says nothing of the inliers.
-  if (c2_ > c2_swept_) c2_swept_ = c2_;
-  if (estimate_.estimated && robust_constants::kRecheckMargin * c2_ < c2_swept_) {
-    sweep_due_ = true;
-    c2_swept_ = c2_;
-  }
-  next_estimate_ = nextEstimateAt(n);
-}
-
-template <class G>
-const std::vector<double>* OnlineGnc<G>::scaleSource() const {
-  const size_t enough = static_cast<size_t>(robust_constants::kScaleMinSamples);
-  if (options_.corroboration_window == 0)
-    return innovations_.size() >= enough ? &innovations_ : nullptr;
-  if (corroborated_.size() >= enough) return &corroborated_;
-  if (innovations_.size() >=
-      std::max(enough, static_cast<size_t>(scale_options_.loosen_min_samples)))
-    return &innovations_;
-  return nullptr;
-}
-
-// (P)'s s: closure b turned into a second measurement of a's a→b through the estimate's chains
-// between their ends, against a's own (+∞ when their ends are not within K of each other's).
-template <class G>
-double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure& a,
-                           const Closure& b) const {
-  return pairS(smoother, a, b, smoother.estimate(a.i), smoother.estimate(a.j));
-}
-
-template <class G>
-double OnlineGnc<G>::pairS(const IncrementalSmoother<G>& smoother, const Closure& a,
-                           const Closure& b, const G& xa, const G& xb) const {
-  const Key K = options_.corroboration_window;
-  auto near = [K](Key x, Key y) { return x - y <= K && y - x <= K; };
-  G z2 = b.z;
-  int c = b.i, d = b.j;
-  if (!(near(a.from, b.from) && near(a.to, b.to))) {
-    if (!(near(a.from, b.to) && near(a.to, b.from))) return std::numeric_limits<double>::infinity();
-    z2 = z2.inverse();  // b reversed: d→c read as c→d (Ω₂ kept, the ends being close)
-    std::swap(c, d);
-  }
-  const G z_hat = xa.inverse()
-                      .compose(smoother.estimate(c))
-                      .compose(z2)
-                      .compose(smoother.estimate(d).inverse())
-                      .compose(xb);
-  const typename Edge::Vector e = relativePoseError(a.z, G::Identity(), z_hat);
-  const typename Edge::Matrix cov = a.covariance + b.covariance;
-  const double s = e.dot(cov.ldlt().solve(e));
-  return std::isfinite(s) ? s : std::numeric_limits<double>::infinity();
-}
-
-// (P)'s s read in both closures' frames: the larger. The chains between the ends carry the
-// rotation error of each reading to the other's translation by their lever arm, so one frame
-// alone can let a pair agree that the other frame refuses (smallGrid3D, 50% local false
-// closures, seed 2: the false (1, 33) read against the true (11, 38) is 62.5 in its own frame
-// and 1005 in (11, 38)'s).
-template <class G>
-double OnlineGnc<G>::pairSBothWays(const IncrementalSmoother<G>& smoother, const Closure& a,
-                                   const Closure& b) const {
-  return std::max(pairS(smoother, a, b), pairS(smoother, b, a));
-}
-
-// (P): b agrees with a.
-template <class G>
-bool OnlineGnc<G>::agree(const IncrementalSmoother<G>& smoother, const Closure& a, const Closure& b,
-                         const G& xa, const G& xb) {
-  const double s = pairS(smoother, a, b, xa, xb);
-  if (!std::isfinite(s)) return false;
-  // On the pairs' own scale: estimateNoiseScale of every neighbouring pair's s so far, from
-  // their untruncated median (true pairs, which come in runs, are most of them over a run),
-  // once there are 10. Past 1 only under the estimator's loosening rule: where the first pairs
-  // are all false (intel with 90% local false closures: the first ~150), their median would
-  // let them all agree.
-  pair_s_.push_back(s);
-  if (pair_s_.size() >= 10 && pair_s_.size() >= next_pair_estimate_) {
-    // Sorted up to pair_s_sorted_: the new ones sorted and merged in (the estimate reads only
-    // the sorted values, not their order of arrival).
-    const auto sorted_end = pair_s_.begin() + static_cast<std::ptrdiff_t>(pair_s_sorted_);
-    std::sort(sorted_end, pair_s_.end());
-    std::inplace_merge(pair_s_.begin(), sorted_end, pair_s_.end());
-    pair_s_sorted_ = pair_s_.size();
-    pair_scale_ =
-        estimateNoiseScaleSorted(pair_s_, cuts_, scale_options_, /*from_median=*/true).sigma2;
-    next_pair_estimate_ = nextEstimateAt(pair_s_.size());
-  }
-  return s <= c2_given_ * pair_scale_;
-}
-
-template <class G>
-bool OnlineGnc<G>::scaleKnown() const {
-  return options_.scale != NoiseScale::kEstimated || last_source_ != nullptr;
-}
-
 // (E): m = rᵀ(I + A Σ Aᵀ)⁻¹r, r the whitened residual at the estimate, A the whitened Jacobian
 // at the linearisation point (the tangent Σ is of), Σ the poses' joint covariance in the tree.
 template <class G>
@@ -250,209 +80,6 @@ double OnlineGnc<G>::innovationLowerBound(const IncrementalSmoother<G>& smoother
   if (options_.entry == EntryTest::kResidual) return s;
   const std::optional<double> m = closureInnovationLowerBound(smoother, edge);
   return m ? std::min(*m, s) : 0.0;  // no Σ: nothing known from below
-}
-
-template <class G>
-bool OnlineGnc<G>::confirmsAtTheEnd() const {
-  // Without corroboration (K = 0) no closure is backed, and true closures in runs sit up to
-  // 2.7·c² by (L): the garage lost three more at K = 0 (F_clean 1.0092 → 1.0184).
-  return options_.on(RobustRule::kFinalConfirm) && options_.corroboration_window > 0 &&
-         options_.entry == EntryTest::kInnovation && estimate_.estimated;
-}
-
-template <class G>
-bool OnlineGnc<G>::recordsPartners() const {
-  return options_.on(RobustRule::kFinalConfirm);
-}
-
-template <class G>
-bool OnlineGnc<G>::spansLoop(const Closure& c) const {
-  const Key span = c.from > c.to ? c.from - c.to : c.to - c.from;
-  return span > 2 * options_.corroboration_window;
-}
-
-template <class G>
-bool OnlineGnc<G>::backed(const Closure& c, const IncrementalSmoother<G>* now) const {
-  // At an estimate (finalize()), never above the closures' own c²: where false pairs are many
-  // the pairs' scale runs far past it (smallGrid3D with 90% false closures: c²·σ̂²_pairs 5571
-  // against c² 52 for groups, seed 1; 4480 against 79 for local ones, seed 2).
-  const double pair_bound =
-      now == nullptr ? c2_given_ * pair_scale_ : std::min(c2_given_ * pair_scale_, c2_);
-  return std::any_of(c.partners.begin(), c.partners.end(), [&](int id) {
-    const Closure& p = closures_[static_cast<size_t>(id)];
-    return p.state == State::kSettled && !p.held && isInlier(p) &&
-           (now == nullptr || pairSBothWays(*now, c, p) <= pair_bound);
-  });
-}
-
-template <class G>
-bool OnlineGnc<G>::judgedByL(const IncrementalSmoother<G>& smoother, const Closure& c) const {
-  return c.state == State::kSettled && c.weight == 1.0 && !c.held && c.factor >= 0 &&
-         c.factor < smoother.numFactors() && c.kernel == KernelKind::kTruncatedLeastSquares;
-}
-
-template <class G>
-std::optional<double> OnlineGnc<G>::innovationPast(const IncrementalSmoother<G>& smoother,
-                                                   const Closure& c, double bound,
-                                                   bool at_the_end) const {
-  const Edge& edge = *smoother.factors()[static_cast<size_t>(c.factor)].relativePose();
-  // In the tree at weight 1 (judgedByL): (L); without Σ it is kept.
-  const std::optional<double> m =
-      leaveOneOutInnovation(smoother, edge, at_the_end ? Paths::kKept : Paths::kOnce);
-  if (!m || *m <= bound) return std::nullopt;
-  return m;
-}
-
-template <class G>
-std::optional<double> OnlineGnc<G>::unconfirmedBy(const IncrementalSmoother<G>& smoother,
-                                                  Closure* c, double bound, bool at_the_end) {
-  if (!judgedByL(smoother, *c) || backed(*c, at_the_end ? &smoother : nullptr)) return std::nullopt;
-  c->judged_c2 = c2_;
-  return innovationPast(smoother, *c, bound, at_the_end);
-}
-
-template <class G>
-bool OnlineGnc<G>::unconfirmed(IncrementalSmoother<G>& smoother, Closure* c, double bound,
-                               bool at_the_end) {
-  if (!unconfirmedBy(smoother, c, bound, at_the_end)) return false;
-  dropUnconfirmed(smoother, c);
-  return true;
-}
-
-template <class G>
-void OnlineGnc<G>::dropUnconfirmed(IncrementalSmoother<G>& smoother, Closure* c) {
-  setWeight(smoother, c, 0.0);
-  ++totals_.unconfirmed;
-}
-
-template <class G>
-double OnlineGnc<G>::endBound() const {
-  return c2_end_ > 0 ? std::min(c2_, c2_end_) : c2_;
-}
-
-template <class G>
-int OnlineGnc<G>::confirmAll(IncrementalSmoother<G>& smoother, std::vector<char>* dropped) {
-  int changed = 0;
-  dropped->assign(closures_.size(), 0);
-  keepHeldJoints(smoother);
-  c2_end_ = endThreshold(smoother);
-  const double bound = c2_end_ < c2_ ? robust_constants::kEndConfirmMargin * c2_end_
-                                     : robust_constants::kFinalConfirmMargin * c2_;
-  std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound, unbacked
-  for (size_t id = 0; id < closures_.size(); ++id) {
-    Closure& c = closures_[id];
-    if (!judgedByL(smoother, c) || backed(c, &smoother)) continue;
-    c.judged_c2 = c2_;  // as unconfirmedBy
-    const std::optional<double> m = innovationPast(smoother, c, bound, /*at_the_end=*/true);
-    if (m) over.emplace_back(*m, static_cast<int>(id));
-  }
-  for (int id : dropLargestPerPose(smoother, std::move(over))) {
-    (*dropped)[static_cast<size_t>(id)] = 1;
-    ++changed;
-  }
-  return changed;
-}
-
-// The largest first; one drop per pose (smallGrid3D with 90% local false closures: the false
-// (1, 27) and the true (1, 8) both past the bound, both dropped, and (1, 8) taken back a round
-// later).
-template <class G>
-std::vector<int> OnlineGnc<G>::dropLargestPerPose(IncrementalSmoother<G>& smoother,
-                                                  std::vector<std::pair<double, int>> over) {
-  std::sort(over.begin(), over.end(), [](const auto& a, const auto& b) {
-    return a.first > b.first || (a.first == b.first && a.second < b.second);
-  });
-  std::set<int> poses;  // the ends of these drops
-  std::vector<int> ids;
-  for (const auto& [m, id] : over) {
-    Closure& c = closures_[static_cast<size_t>(id)];
-    if (poses.count(c.i) > 0 || poses.count(c.j) > 0) continue;
-    poses.insert(c.i);
-    poses.insert(c.j);
-    dropUnconfirmed(smoother, &c);
-    ids.push_back(id);
-  }
-  return ids;
-}
-
-// The (L) of finalize() and of the end's scale are of factors the tree holds: their joints
-// from one walk down the tree, not a path solve per pose (sphere_bignoise: the end's samples
-// took 11 of finalize()'s 19 s).
-template <class G>
-void OnlineGnc<G>::keepHeldJoints(const IncrementalSmoother<G>& smoother) const {
-  std::vector<std::pair<int, int>> held;
-  for (const Factor<G>& f : smoother.factors())
-    if (const Edge* e = f.relativePose(); e != nullptr && f.inlierWeight() > 0)
-      held.emplace_back(e->i, e->j);
-  smoother.keepSharedCliqueJoints(held);
-}
-
-template <class G>
-int OnlineGnc<G>::readEndScaleOnTheWay(IncrementalSmoother<G>& smoother, double update_flops) {
-  if (!options_.on(RobustRule::kEndScale) || !confirmsAtTheEnd()) return 0;
-  flops_since_reading_ += update_flops;
-  const int poses = smoother.numPoses();
-  if (poses < next_reading_ ||
-      flops_since_reading_ < robust_constants::kEndScaleWork * smoother.factorizationFlops())
-    return 0;
-  flops_since_reading_ = 0;
-  next_reading_ = static_cast<int>(std::ceil(robust_constants::kEndScaleGrowth * poses));
-  keepHeldJoints(smoother);
-  c2_end_ = endThreshold(smoother);
-  if (c2_end_ >= c2_) return 0;
-  const double bound = robust_constants::kFinalConfirmMargin * c2_end_;
-  std::vector<std::pair<double, int>> over;  // (m₋, id) past the bound
-  for (size_t id = 0; id < closures_.size(); ++id)
-    if (const auto m = unconfirmedBy(smoother, &closures_[id], bound, /*at_the_end=*/true))
-      over.emplace_back(*m, static_cast<int>(id));
-  const std::vector<int> ids = dropLargestPerPose(smoother, std::move(over));
-  for (int id : ids) closures_[static_cast<size_t>(id)].dropped_on_the_way = true;
-  if (!ids.empty()) dropped_on_the_way_ = true;
-  return static_cast<int>(ids.size());
-}
-
-// The end's scale: σ²_med of the settled inliers' (L) (a minority of false closures sits in
-// its tail), times the tail's reach past the median in the trusted edges' (L) (no false edge
-// among them); c² from it as on entry, never above the c² in use.
-template <class G>
-double OnlineGnc<G>::endThreshold(const IncrementalSmoother<G>& smoother) const {
-  if (!options_.on(RobustRule::kEndScale)) return c2_;
-  const size_t cap = static_cast<size_t>(robust_constants::kEndScaleSamples);
-  const auto& factors = smoother.factors();
-  std::vector<int> inliers, trusted;
-  for (const Closure& c : closures_)
-    if (c.state == State::kSettled && c.weight == 1.0 && !c.held && c.factor >= 0 &&
-        c.factor < smoother.numFactors() && c.kernel == KernelKind::kTruncatedLeastSquares)
-      inliers.push_back(c.factor);
-  for (size_t f = 0; f < factors.size(); ++f) {
-    const int id = closureOf(static_cast<int>(f));
-    const bool trusted_closure =
-        id >= 0 && closures_[static_cast<size_t>(id)].state == State::kTrusted;
-    if (factors[f].relativePose() != nullptr && factors[f].inlierWeight() == 1.0 &&
-        (id < 0 || trusted_closure))
-      trusted.push_back(static_cast<int>(f));
-  }
-  // At most `cap` of each, one in every ⌈n/cap⌉.
-  auto sample = [&](const std::vector<int>& fs) {
-    std::vector<double> m;
-    const size_t stride = std::max<size_t>(1, (fs.size() + cap - 1) / cap);
-    for (size_t k = 0; k < fs.size(); k += stride) {
-      const Edge& e = *factors[static_cast<size_t>(fs[k])].relativePose();
-      if (const std::optional<double> l = leaveOneOutInnovation(smoother, e, Paths::kKept))
-        m.push_back(*l);
-    }
-    return m;
-  };
-  std::vector<double> m_in = sample(inliers), m_tr = sample(trusted);
-  const size_t enough = static_cast<size_t>(robust_constants::kScaleMinSamples);
-  if (m_in.size() < enough || m_tr.size() < enough) return c2_;
-  const NoiseScaleEstimate in = estimateNoiseScale(std::move(m_in), cuts_, scale_options_, true);
-  const NoiseScaleEstimate tr = estimateNoiseScale(std::move(m_tr), cuts_, scale_options_, true);
-  if (!in.estimated || !tr.estimated) return c2_;
-  const double sigma2 = in.median_sigma2 * tr.sigma2 / tr.median_sigma2;
-  const double c2 = scale_options_.tail_factor * c2_given_ * sigma2;
-  const double gap = dropped_on_the_way_ ? 1.0 : robust_constants::kEndScaleGap;
-  return c2 * gap < c2_ ? c2 : c2_;
 }
 
 template <class G>
@@ -620,23 +247,6 @@ void OnlineGnc<G>::remap(const IncrementalSmoother<G>& smoother) {
   match(smoother, 0, &all);
   unresolved_ = all;
   resolved_factors_ = smoother.numFactors();
-}
-
-// Kept at Ω's word: s at the final estimate, the closure out of it (weight 0), against the
-// given c². Taken back, it is in the next relinearisation's estimate, which the caller makes.
-template <class G>
-int OnlineGnc<G>::takeBackAtWord(IncrementalSmoother<G>& smoother) {
-  int taken = 0;
-  for (Closure& c : closures_) {
-    if (c.state != State::kSettled || c.factor < 0 || c.held || c.weight != 0.0 || !binaryKernel(c))
-      continue;
-    c.s = residual(smoother, c);
-    if (!(c.s <= c2_given_)) continue;
-    setWeight(smoother, &c, 1.0);
-    ++taken;
-  }
-  totals_.kept_at_word += taken;
-  return taken;
 }
 
 template <class G>
@@ -902,6 +512,7 @@ std::vector<ClosureReport> OnlineGnc<G>::closures() const {
   return out;
 }
 
+// The members defined here; online_gnc_scale.cc and online_gnc_end.cc instantiate theirs.
 template class OnlineGnc<SE2>;
 template class OnlineGnc<SE3>;
 

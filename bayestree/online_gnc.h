@@ -69,8 +69,11 @@
 // re-admits it through the first check. Reseeding keeps every weight (they live on the factors);
 // remap() finds the factors' new indices.
 //
-// Options, rules and constants: bayestree/robust_options.h. Measurements, the end pass and where
-// the layer still fails: docs/design.md, "Online robust smoothing".
+// The class is defined in three files: online_gnc.cc (a closure's life: admit, graduation,
+// re-checks, the warm-up), online_gnc_scale.cc (the noise scale and (P)) and online_gnc_end.cc
+// (the end pass: (L), the end's scale, kept at Ω's word). Options, rules and constants:
+// bayestree/robust_options.h. Measurements, the end pass and where the layer still fails:
+// docs/design.md, "Online robust smoothing".
 #pragma once
 
 #include <functional>
