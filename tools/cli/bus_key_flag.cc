@@ -13,6 +13,24 @@ const char* const kBusKeyHelp =
     "deployment key file (arbor keygen): every message sent is signed, every message received "
     "must verify (docs/lcm.md, \"An authenticated bus\")";
 
+const char* const kBusSection = "Bus";
+
+const OptionTable<BusClientOptions>& busClientOptionTable() {
+  using B = BusClientOptions;
+  static const OptionTable<B> table = {
+      textOption<B>(
+          "lcm-url", Tier::kCommon, kBusSection, "URL", "LCM provider URL (default: LCM's default)",
+          [](auto& o) -> auto& { return o.url; }),
+      textOption<B>(
+          "key", Tier::kCommon, kBusSection, "FILE", kBusKeyHelp,
+          [](auto& o) -> auto& { return o.key_file; }),
+      textOption<B>(
+          "channel-prefix", Tier::kAdvanced, kBusSection, "P", "prefix of the ARBOR_* channels",
+          [](auto& o) -> auto& { return o.prefix; }),
+  };
+  return table;
+}
+
 void addBusKeyFlag(po::options_description& desc, std::string* path) {
   addBusKeyFlag(desc.add_options(), path);
 }

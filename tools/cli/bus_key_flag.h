@@ -11,9 +11,25 @@
 #include <boost/program_options.hpp>
 #include <lcm/lcm-cpp.hpp>
 
+#include "arbor_slam/tools/cli/option_table.h"
 #include "arbor_slam/tools/serve/bus_auth.h"
 
 namespace arbor::cli {
+
+/// The bus as a client program sees it (`arbor publish`, `arbor command`): where, which channels,
+/// which key.
+struct BusClientOptions {
+  std::string url;       ///< --lcm-url (empty: LCM's default)
+  std::string prefix;    ///< --channel-prefix of the ARBOR_* channels
+  std::string key_file;  ///< --key FILE (empty: an open bus)
+};
+
+/// The --help section of the bus flags.
+extern const char* const kBusSection;
+
+/// The client programs' bus flags, listed under kBusSection: --lcm-url and --key (common),
+/// --channel-prefix (advanced).
+const OptionTable<BusClientOptions>& busClientOptionTable();
 
 /// Adds `--key FILE` (the deployment key file) to `desc`, stored in `*path`.
 void addBusKeyFlag(boost::program_options::options_description& desc, std::string* path);
