@@ -17,6 +17,7 @@
 
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/command_command.h"
+#include "arbor_slam/tools/cli/plot_command.h"
 #include "arbor_slam/tools/cli/publish_command.h"
 #include "arbor_slam/tools/cli/replay_command.h"
 #include "arbor_slam/tools/cli/serve_command.h"
@@ -60,7 +61,11 @@ std::vector<Command> commands() {
              args.insert(args.begin(), "1");
              return parseCovarianceCommandLine(args).has_value();
            },
-           /*in_readme=*/false}};
+           /*in_readme=*/false},
+          {"plot", plotFlags, [](std::vector<std::string> args) {
+             args.insert(args.begin(), "estimate.tum");
+             return parsePlotCommandLine(args).has_value();
+           }}};
 }
 
 std::string printed(const std::function<void()>& run) {
@@ -239,7 +244,8 @@ TEST(CliOptions, APrefixOfAFlagIsRefusedByEveryCommand) {
       {"publish", {"--resend", "4"}},   {"publish", {"--lcm", "udpm://"}},
       {"command", {"--tim", "3"}},      {"command", {"--se", "7"}},
       {"command", {"--channel", "A_"}}, {"command covariance", {"--time", "3"}},
-      {"command covariance", {"--js"}},
+      {"command covariance", {"--js"}}, {"plot", {"--max-time", "0.1"}},
+      {"plot", {"--out", "x.png"}},
   };
   for (const auto& [name, args] : cases) {
     for (const Command& c : commands()) {
@@ -269,6 +275,11 @@ TEST(CliOptions, APrefixOfAFlagIsRefusedByEveryCommand) {
   EXPECT_EQ(covariance->ids, (std::vector<Key>{3, 4}));
   EXPECT_TRUE(covariance->json);
   EXPECT_EQ(covariance->bus.key_file, "k");
+  const auto plot = parsePlotCommandLine({"run/estimate.tum", "truth.tum", "--max-time-diff", "0"});
+  ASSERT_TRUE(plot);
+  EXPECT_EQ(plot->output, "run/estimate.png");
+  EXPECT_EQ(plot->max_time_diff, 0);
+  EXPECT_EQ(parsePlotCommandLine({"e.tum", "-o", "p.png"})->output, "p.png");
 }
 
 // The flags named in a text: every `--name`.
