@@ -17,6 +17,7 @@
 
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/command_command.h"
+#include "arbor_slam/tools/cli/generate_command.h"
 #include "arbor_slam/tools/cli/plot_command.h"
 #include "arbor_slam/tools/cli/publish_command.h"
 #include "arbor_slam/tools/cli/replay_command.h"
@@ -34,7 +35,13 @@ struct Command {
   std::function<bool(std::vector<std::string>)> run;
   /// Whether README.md's synopsis has a line of its own for it.
   bool in_readme = true;
+  /// How its lines in README.md and docs/cli.md start; empty: "arbor NAME ".
+  std::string synopsis = "";
 };
+
+std::string synopsisHead(const Command& c) {
+  return c.synopsis.empty() ? std::string("arbor ") + c.name + " " : c.synopsis;
+}
 
 std::vector<Command> commands() {
   return {{"replay", replayFlags,
@@ -55,16 +62,22 @@ std::vector<Command> commands() {
            [](std::vector<std::string> args) {
              args.insert(args.begin(), {"disable", "1", "2"});
              return parseEdgeCommandLine(args).has_value();
-           }},
+           },
+           true, "arbor command disable|enable "},
           {"command covariance", covarianceCommandFlags,
            [](std::vector<std::string> args) {
              args.insert(args.begin(), "1");
              return parseCovarianceCommandLine(args).has_value();
            },
            /*in_readme=*/false},
-          {"plot", plotFlags, [](std::vector<std::string> args) {
+          {"plot", plotFlags,
+           [](std::vector<std::string> args) {
              args.insert(args.begin(), "estimate.tum");
              return parsePlotCommandLine(args).has_value();
+           }},
+          {"generate", generateFlags, [](std::vector<std::string> args) {
+             args.insert(args.begin(), {"manhattan", "-o", "out.g2o"});
+             return parseGenerateCommandLine(args).has_value();
            }}};
 }
 
@@ -240,12 +253,13 @@ TEST(CliOptions, APrefixOfAFlagIsRefused) {
 // naming what was given.
 TEST(CliOptions, APrefixOfAFlagIsRefusedByEveryCommand) {
   const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
-      {"publish", {"--rat", "5"}},      {"publish", {"--wait-read"}},
-      {"publish", {"--resend", "4"}},   {"publish", {"--lcm", "udpm://"}},
-      {"command", {"--tim", "3"}},      {"command", {"--se", "7"}},
-      {"command", {"--channel", "A_"}}, {"command covariance", {"--time", "3"}},
-      {"command covariance", {"--js"}}, {"plot", {"--max-time", "0.1"}},
-      {"plot", {"--out", "x.png"}},
+      {"publish", {"--rat", "5"}},        {"publish", {"--wait-read"}},
+      {"publish", {"--resend", "4"}},     {"publish", {"--lcm", "udpm://"}},
+      {"command", {"--tim", "3"}},        {"command", {"--se", "7"}},
+      {"command", {"--channel", "A_"}},   {"command covariance", {"--time", "3"}},
+      {"command covariance", {"--js"}},   {"plot", {"--max-time", "0.1"}},
+      {"plot", {"--out", "x.png"}},       {"generate", {"--pose", "10"}},
+      {"generate", {"--outlier", "0.1"}}, {"generate", {"--closure-tail", "0.1"}},
   };
   for (const auto& [name, args] : cases) {
     for (const Command& c : commands()) {
@@ -280,6 +294,15 @@ TEST(CliOptions, APrefixOfAFlagIsRefusedByEveryCommand) {
   EXPECT_EQ(plot->output, "run/estimate.png");
   EXPECT_EQ(plot->max_time_diff, 0);
   EXPECT_EQ(parsePlotCommandLine({"e.tum", "-o", "p.png"})->output, "p.png");
+  const auto generate =
+      parseGenerateCommandLine({"vehicle", "-o", "v.g2o", "--poses", "10", "--outliers", "0.2",
+                                "--outlier-policy", "group"});
+  ASSERT_TRUE(generate);
+  EXPECT_EQ(generate->options.poses, 10);
+  EXPECT_EQ(generate->options.fraction, 0.2);
+  EXPECT_EQ(generate->options.policy, sim::OutlierPolicy::kGroup);
+  EXPECT_EQ(generate->options.closure_probability, -1);  // vehicle's preset holds
+  EXPECT_FALSE(generate->given.count("closure-probability"));
 }
 
 // The flags named in a text: every `--name`.
@@ -292,15 +315,17 @@ std::set<std::string> flagsIn(const std::string& text) {
   return out;
 }
 
-// The lines of a fenced block in `path` from the one starting `first` up to the next line that
-// starts with `arbor ` or is blank.
+// The lines of a fenced block in `path` from each one starting `first` up to the next line that
+// starts with `arbor ` or is blank (a command of several lines, `arbor generate`'s, gives all).
 std::string synopsisOf(const std::string& path, const std::string& first) {
   std::istringstream in(readText(path));
   std::string line, out;
   bool inside = false;
   while (std::getline(in, line)) {
-    if (inside && (line.rfind("arbor ", 0) == 0 || line.empty() || line == "```")) break;
-    if (line.rfind(first, 0) == 0) inside = true;
+    if (line.rfind(first, 0) == 0)
+      inside = true;
+    else if (line.rfind("arbor ", 0) == 0 || line.empty() || line == "```")
+      inside = false;
     if (inside) out += line + "\n";
   }
   return out;
@@ -323,7 +348,7 @@ TEST(CliOptions, ReadmeSynopsisAndDocsAgreeWithTheTables) {
       all.insert(f.name);
       if (f.tier == Tier::kCommon) common.insert(f.name);
     }
-    const std::string head = std::string("arbor ") + c.name + " ";
+    const std::string head = synopsisHead(c);
     const std::string readme = c.in_readme ? synopsisOf(root + "/README.md", head) : "";
     ASSERT_EQ(readme.empty(), !c.in_readme) << c.name;
     for (const std::string& f : flagsIn(readme))
