@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include "arbor_slam/tools/cli/bus_key_flag.h"
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/command_command.h"
 #include "arbor_slam/tools/cli/generate_command.h"
@@ -303,6 +304,20 @@ TEST(CliOptions, APrefixOfAFlagIsRefusedByEveryCommand) {
   EXPECT_EQ(generate->options.policy, sim::OutlierPolicy::kGroup);
   EXPECT_EQ(generate->options.closure_probability, -1);  // vehicle's preset holds
   EXPECT_FALSE(generate->given.count("closure-probability"));
+}
+
+// `arbor keygen FILE` has no flags: its help is the usage and two examples; whatever else is
+// given, a prefix of --help included, is refused.
+TEST(CliOptions, KeygenTakesOneFileAndNoFlags) {
+  const std::string help = printed([] { EXPECT_FALSE(parseKeygenCommandLine({"--help"})); });
+  EXPECT_EQ(help.rfind("usage: arbor keygen FILE", 0), 0u) << help;
+  EXPECT_NE(help.find("examples:"), std::string::npos) << help;
+  EXPECT_FALSE(parseKeygenCommandLine({"--help-all"}));
+  EXPECT_EQ(parseKeygenCommandLine({"deploy.key"}), std::optional<std::string>("deploy.key"));
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"k", "--hel"}, {"k", "--force"}, {"k", "other"}, {}}) {
+    EXPECT_THROW(parseKeygenCommandLine(args), UsageError) << (args.empty() ? "" : args.back());
+  }
 }
 
 // The flags named in a text: every `--name`.

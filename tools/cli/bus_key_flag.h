@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,10 @@ serve::BusKeyring readBusKeyFlag(const std::string& path);
 
 /// This program's side of the bus for `--key FILE`; null when `path` is empty.
 std::unique_ptr<serve::BusAuth> busAuthFromFlag(const std::string& path);
+
+/// The key file of `arbor keygen ARGS`; nullopt after printing the help on --help or
+/// --help-all. Throws UsageError on anything else but one FILE (it has no flags).
+std::optional<std::string> parseKeygenCommandLine(const std::vector<std::string>& args);
 
 /// Publishes `bytes` on `channel`, sealed when `auth` is set; lcm.publish's result (0: sent).
 int publishOnBus(lcm::LCM& lcm, serve::BusAuth* auth, const std::string& channel,
