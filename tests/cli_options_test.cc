@@ -123,7 +123,9 @@ TEST(CliOptions, HelpListsTheCommonTierWithinSixtyLinesAndHelpAllTheRest) {
       experimental = experimental || f.tier == Tier::kExperimental;
     }
     EXPECT_LE(common, 16) << c.name;
-    EXPECT_GE(common, 3) << c.name;
+    // replay and serve have many flags, the others few (plot: 3).
+    const bool large = std::string(c.name) == "replay" || std::string(c.name) == "serve";
+    EXPECT_GE(common, large ? 8 : 3) << c.name;
     // Experimental flags are named in --help-all only, marked.
     EXPECT_EQ(all.find("[experimental]") != std::string::npos, experimental) << c.name;
     EXPECT_EQ(help.find("[experimental]"), std::string::npos) << c.name;
