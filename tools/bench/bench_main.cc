@@ -41,6 +41,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <type_traits>
 
@@ -61,6 +62,7 @@
 #include "arbor_slam/tools/bench/tree_size.h"
 #include "arbor_slam/tools/bench/world_families.h"
 #include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/flag_set.h"
 #include "arbor_slam/tools/cli/replay_runner.h"
 #include "arbor_slam/tools/cli/robust_flags.h"
 #include "arbor_slam/tools/cli/smoother_flags.h"
@@ -136,20 +138,26 @@ void benchReplay(const std::string& name, const PoseGraph<G>& graph, const bench
   std::cout << std::endl;
 }
 
-// The options every dataset benchmark takes (--help, --shared, --only), in this order; the
-// caller adds its own after them.
+// The options every dataset benchmark takes (--shared, --only), listed first under "Datasets";
+// the caller adds its own after them (under kBench, and the smoother table's).
 struct DatasetOptions {
   std::string shared, only;
 };
 
-po::options_description datasetOptions(const std::string& caption, DatasetOptions* data,
-                                       const std::string& default_shared) {
-  po::options_description options(caption);
-  options.add_options()("help,h", "show this help")(
-      "shared", po::value(&data->shared)->default_value(bench::sharedDirectory(default_shared)),
-      "the shared folder (datasets/, reference/)")("only", po::value(&data->only),
-                                                   "comma-separated dataset names");
-  return options;
+const char* const kBench = "Benchmark";
+
+// `usage` and two `examples` for --help (tools/cli/flag_set.h).
+cli::FlagSet datasetFlags(const std::string& usage, std::vector<std::string> examples,
+                          DatasetOptions* data, const std::string& default_shared) {
+  cli::FlagSet flags(usage, std::move(examples));
+  flags.add(cli::Tier::kCommon, "Datasets")(
+      "shared",
+      po::value(&data->shared)
+          ->default_value(bench::sharedDirectory(default_shared))
+          ->value_name("DIR"),
+      "the shared folder (datasets/, reference/)")(
+      "only", po::value(&data->only)->value_name("NAMES"), "comma-separated dataset names");
+  return flags;
 }
 
 // One item of a comma-separated list of numbers: the whole item a finite number >= 0, else
@@ -163,14 +171,14 @@ double finiteNonNegative(const std::string& item, const std::string& flag,
   return value;
 }
 
-// Parses `args` into the variables bound to `options` (and into *vm when given); false (after
-// printing the help) on --help. Throws cli::UsageError (exit 2) on a bad command line.
-bool parseOptions(const std::vector<std::string>& args, const po::options_description& options,
+// Parses `args` into the variables bound to `flags` (and into *vm when given); false (after
+// printing the help) on --help or --help-all. Throws cli::UsageError (exit 2) on a bad command
+// line, a prefix of a flag included.
+bool parseOptions(const std::vector<std::string>& args, const cli::FlagSet& flags,
                   po::variables_map* vm = nullptr) {
-  if (cli::helpRequested(args, options)) return false;
-  po::variables_map parsed =
-      cli::parseArguments(args, options, po::positional_options_description());
-  if (vm) *vm = std::move(parsed);
+  std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return false;
+  if (vm) *vm = std::move(*parsed);
   return true;
 }
 
@@ -184,14 +192,16 @@ bool perPose(const std::string& step) {
 int replay(const std::vector<std::string>& args, const std::string& default_shared) {
   DatasetOptions data;
   std::string csv_dir, step;
-  po::options_description options =
-      datasetOptions("arbor bench replay [options]", &data, default_shared);
-  options.add_options()("csv-dir", po::value(&csv_dir),
-                        "write per-update latency CSVs (NAME.csv) here")(
+  cli::FlagSet options = datasetFlags("arbor bench replay [options]",
+                                      {"arbor bench replay --only M3500,sphere2500",
+                                       "arbor bench replay --step pose --csv-dir latency/"},
+                                      &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)("csv-dir", po::value(&csv_dir),
+                                          "write per-update latency CSVs (NAME.csv) here")(
       "step", po::value(&step)->default_value("edge"),
       "edge: an update per edge (against GTSAM's isam2_edge rows); pose: per new pose with its "
       "edges (against isam2_pose)");
-  cli::addSmootherFlags(options);
+  options.add(cli::smootherOptionTable());
   po::variables_map vm;
   if (!parseOptions(args, options, &vm)) return 0;
   cli::ReplaySettings settings;
@@ -231,10 +241,12 @@ int batch(const std::vector<std::string>& args, const std::string& default_share
   DatasetOptions data;
   int repeat = 1;
   bool no_ceres = false;
-  po::options_description options =
-      datasetOptions("arbor bench batch [options]", &data, default_shared);
-  options.add_options()("repeat", po::value(&repeat)->default_value(1),
-                        "runs per solver; the fastest is reported")(
+  cli::FlagSet options =
+      datasetFlags("arbor bench batch [options]",
+                   {"arbor bench batch --only M3500", "arbor bench batch --repeat 3 --no-ceres"},
+                   &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)("repeat", po::value(&repeat)->default_value(1),
+                                          "runs per solver; the fastest is reported")(
       "no-ceres", po::bool_switch(&no_ceres), "skip the Ceres baseline");
   if (!parseOptions(args, options)) return 0;
   const auto files = bench::selectDatasets(data.shared, data.only);
@@ -366,13 +378,15 @@ int covariance(const std::vector<std::string>& args, const std::string& default_
   DatasetOptions data;
   int samples = 20;
   bool no_ceres = false;
-  po::options_description options =
-      datasetOptions("arbor bench covariance [options]", &data, default_shared);
-  options.add_options()(
+  cli::FlagSet options = datasetFlags(
+      "arbor bench covariance [options]",
+      {"arbor bench covariance --only M3500 --samples 10", "arbor bench covariance --no-ceres"},
+      &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)(
       "samples", po::value(&samples)->default_value(20),
       "poses timed (spread over the graph), each on a fresh copy of the smoother")(
       "no-ceres", po::bool_switch(&no_ceres), "skip the comparison with ceres::Covariance");
-  cli::addSmootherFlags(options);
+  options.add(cli::smootherOptionTable());
   po::variables_map vm;
   if (!parseOptions(args, options, &vm)) return 0;
   if (samples < 1) throw cli::UsageError("--samples must be >= 1");
@@ -415,12 +429,14 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
   cli::ReplaySettings settings;
   settings.finalize = false;
   settings.batch = false;
-  po::options_description options =
-      datasetOptions("arbor bench growth [options]", &data, default_shared);
-  options.add_options()("slices", po::value(&slices)->default_value(8),
-                        "slices of equal pose count per dataset")(
+  cli::FlagSet options = datasetFlags(
+      "arbor bench growth [options]",
+      {"arbor bench growth --only M3500 --slices 4", "arbor bench growth --step pose --threads 2"},
+      &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)("slices", po::value(&slices)->default_value(8),
+                                          "slices of equal pose count per dataset")(
       "step", po::value(&step)->default_value("edge"), "edge or pose, as arbor replay --step");
-  cli::addSmootherFlags(options);
+  options.add(cli::smootherOptionTable());
   po::variables_map vm;
   if (!parseOptions(args, options, &vm)) return 0;
   if (slices < 1)
@@ -457,11 +473,13 @@ int growth(const std::vector<std::string>& args, const std::string& default_shar
 int tree(const std::vector<std::string>& args, const std::string& default_shared) {
   DatasetOptions data;
   std::string ratios_text;
-  po::options_description options =
-      datasetOptions("arbor bench tree [options]", &data, default_shared);
-  options.add_options()("ratios", po::value(&ratios_text)->default_value("0,16,4,1"),
-                        "comma-separated CachedFactorOptions::max_ratio values (0: every clique "
-                        "keeps its cached factor)");
+  cli::FlagSet options = datasetFlags(
+      "arbor bench tree [options]",
+      {"arbor bench tree --only M3500", "arbor bench tree --ratios 0,4"}, &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)(
+      "ratios", po::value(&ratios_text)->default_value("0,16,4,1"),
+      "comma-separated CachedFactorOptions::max_ratio values (0: every clique "
+      "keeps its cached factor)");
   if (!parseOptions(args, options)) return 0;
   std::vector<double> ratios;
   std::stringstream list(ratios_text);
@@ -524,12 +542,16 @@ int paper(const std::vector<std::string>& args, const std::string& default_share
   std::string out_dir, markdown, plot_dir;
   bool plots = false, no_ceres = false, no_replay = false;
   bench::PaperSettings settings;
-  po::options_description options =
-      datasetOptions("arbor bench paper [options]", &data, default_shared);
-  options.add_options()("out-dir", po::value(&out_dir)->default_value("bench-paper"),
-                        "write estimates/NAME/SOLVER.csv, latency/NAME.csv, results.tsv and "
-                        "results.json here")("markdown", po::value(&markdown),
-                                             "also write the Markdown tables to this file")(
+  cli::FlagSet options =
+      datasetFlags("arbor bench paper [options]",
+                   {"arbor bench paper --out-dir bench-paper --markdown paper.md",
+                    "arbor bench paper --only M3500 --no-ceres --plots"},
+                   &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)(
+      "out-dir", po::value(&out_dir)->default_value("bench-paper"),
+      "write estimates/NAME/SOLVER.csv, latency/NAME.csv, results.tsv and "
+      "results.json here")("markdown", po::value(&markdown),
+                           "also write the Markdown tables to this file")(
       "plots", po::bool_switch(&plots),
       "draw the PNGs (tools/plots/plot_estimates.py, plot_latency.py; /usr/bin/python3 with "
       "matplotlib)")("plot-dir", po::value(&plot_dir),
@@ -722,10 +744,13 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
                                                   ablate;
   int repeat = 3;
   bench::GenerationPlan plan;
-  po::options_description options =
-      datasetOptions("arbor bench robust [options]", &data, default_shared);
-  options.add_options()("no-generated", po::bool_switch(&no_generated),
-                        "only the shared files of DIR/datasets/robust")(
+  cli::FlagSet options =
+      datasetFlags("arbor bench robust [options]",
+                   {"arbor bench robust --only M3500 --fractions 0.1 --policies random",
+                    "arbor bench robust --family vehicle --seeds 1-3 --dims 2"},
+                   &data, default_shared);
+  options.add(cli::Tier::kCommon, kBench)("no-generated", po::bool_switch(&no_generated),
+                                          "only the shared files of DIR/datasets/robust")(
       "generate-from", po::value(&generate_from)->default_value(kGenerateFrom),
       "shared clean sets (names in DIR/datasets) to plant false closures in")(
       "fractions", po::value(&fractions)->default_value("0.1,0.5,0.9"),
@@ -737,7 +762,8 @@ int robust(const std::vector<std::string>& args, const std::string& default_shar
       "inlier-threshold", po::value(&threshold)->default_value(threshold),
       cli::kInlierThresholdHelp)("solver", po::value(&solver)->default_value("lm"),
                                  "lm: GNC over LM; rtr: then the certifiable solver on GNC's "
-                                 "inlier set (as arbor batch --robust --solver rtr)")(
+                                 "inlier set (as arbor batch --robust --solver rtr)");
+  options.add(cli::Tier::kAdvanced, kBench)(
       "batch-start", po::value(&batch_start)->default_value("online"),
       "online: the robust batch from the robust online replay, its rejected closures held out "
       "and its threshold (arbor batch --robust's defaults); file: from the file's vertices at "
@@ -875,24 +901,16 @@ int main(int argc, char** argv) {
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty() || args[0] == "--help" || args[0] == "help") {
     std::cout
-        << "usage: arbor bench batch [--shared DIR] [--only NAMES] [--repeat N] [--no-ceres]\n"
-           "       arbor bench replay [--shared DIR] [--only NAMES] [--csv-dir DIR] [--step "
-           "edge|pose] [smoother flags]\n"
-           "       arbor bench paper [--shared DIR] [--only NAMES] [--out-dir DIR] "
-           "[--markdown FILE] [--plots]\n"
-           "       arbor bench growth [--shared DIR] [--only NAMES] [--slices K] [--step "
-           "edge|pose] [smoother flags]\n"
-           "  smoother flags: as arbor replay (--relinearize-threshold B, --relinearize-skip K, "
-           "--dogleg, ...; arbor bench replay --help lists them)\n"
-           "       arbor bench covariance [--shared DIR] [--only NAMES] [--samples K] "
-           "[--no-ceres] [smoother flags]\n"
-           "       arbor bench robust [--shared DIR] [--only NAMES] [--no-generated] "
-           "[--generate-from NAMES] [--fractions F,...] [--policies P,...] [--seed S] [--kernel K] "
-           "[--inlier-threshold X] [--solver lm|rtr] [--repeat N] [--keep-generated DIR]\n"
-           "       arbor bench robust --family vehicle|small-loop|over-confident [--seeds A-B] "
-           "[--dims 2,3] [--fractions F,...] [--policies P,...] [...]\n"
-           "       arbor bench tree [--shared DIR] [--only NAMES] [--ratios R,...]\n"
-           "       arbor bench micro [--sizes=N,...] [--benchmark_filter=REGEX ...]\n";
+        << "usage: arbor bench NAME [options]   (arbor bench NAME --help: its flags, grouped; "
+           "--help-all: every one)\n"
+           "  batch       the batch solvers against Ceres on the shared datasets\n"
+           "  replay      the incremental replay against GTSAM's iSAM2 rows\n"
+           "  paper       every solver of the paper's tables (docs/paper.md)\n"
+           "  growth      latency against graph size and factorisation cost\n"
+           "  covariance  marginal covariances against ceres::Covariance\n"
+           "  robust      robust batch and replay on graphs with false loop closures\n"
+           "  tree        the Bayes tree's size on a whole graph\n"
+           "  micro       arbor-microbench (--sizes=N,... --benchmark_filter=REGEX ...)\n";
     return args.empty() ? 2 : 0;
   }
   try {

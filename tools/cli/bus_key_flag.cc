@@ -4,6 +4,7 @@
 
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/flag_set.h"
 
 namespace arbor::cli {
 
@@ -12,6 +13,24 @@ namespace po = boost::program_options;
 const char* const kBusKeyHelp =
     "deployment key file (arbor keygen): every message sent is signed, every message received "
     "must verify (docs/lcm.md, \"An authenticated bus\")";
+
+const char* const kBusSection = "Bus";
+
+const OptionTable<BusClientOptions>& busClientOptionTable() {
+  using B = BusClientOptions;
+  static const OptionTable<B> table = {
+      textOption<B>(
+          "lcm-url", Tier::kCommon, kBusSection, "URL", "LCM provider URL (default: LCM's default)",
+          [](auto& o) -> auto& { return o.url; }),
+      textOption<B>(
+          "key", Tier::kCommon, kBusSection, "FILE", kBusKeyHelp,
+          [](auto& o) -> auto& { return o.key_file; }),
+      textOption<B>(
+          "channel-prefix", Tier::kAdvanced, kBusSection, "P", "prefix of the ARBOR_* channels",
+          [](auto& o) -> auto& { return o.prefix; }),
+  };
+  return table;
+}
 
 void addBusKeyFlag(po::options_description& desc, std::string* path) {
   addBusKeyFlag(desc.add_options(), path);
@@ -51,19 +70,27 @@ bool openFromBus(serve::BusAuth* auth, const std::string& channel, const lcm::Re
   return true;
 }
 
-int keygenCommand(const std::vector<std::string>& args) {
+FlagSet keygenFlagSet(std::string* path) {
+  FlagSet flags(
+      "arbor keygen FILE   (a new deployment key into FILE: 32 random bytes, hex, mode 0600;\n"
+      "       never over an existing file; prints its id)",
+      {"arbor keygen /etc/arbor/deploy.key",
+       "arbor keygen deploy.key && arbor serve --key deploy.key"});
+  flags.positional("file", po::value(path)->required());
+  return flags;
+}
+
+std::optional<std::string> parseKeygenCommandLine(const std::vector<std::string>& args) {
   std::string path;
-  po::options_description desc(
-      "arbor keygen FILE: write a new deployment key (32 random bytes, hex) into FILE, mode 0600, "
-      "never over an existing file; prints its id");
-  desc.add_options()("help,h", "show this help")("file", po::value(&path)->required(),
-                                                 "the key file to create");
-  po::positional_options_description positional;
-  positional.add("file", 1);
-  if (helpRequested(args, desc)) return 0;
-  parseArguments(args, desc, positional);
-  const serve::BusKey key = serve::writeNewBusKeyFile(path);
-  std::cout << "key " << serve::busKeyIdText(key.id) << " written to " << path << "\n";
+  if (!keygenFlagSet(&path).parse(args)) return std::nullopt;
+  return path;
+}
+
+int keygenCommand(const std::vector<std::string>& args) {
+  const std::optional<std::string> path = parseKeygenCommandLine(args);
+  if (!path) return 0;
+  const serve::BusKey key = serve::writeNewBusKeyFile(*path);
+  std::cout << "key " << serve::busKeyIdText(key.id) << " written to " << *path << "\n";
   return 0;
 }
 

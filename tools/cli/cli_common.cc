@@ -59,6 +59,18 @@ InformationPolicy parseInformationPolicy(const std::string& name) {
   throw UsageError("--information must be refuse, repair or isotropic, not '" + name + "'");
 }
 
+const char* toString(InformationPolicy policy) {
+  switch (policy) {
+    case InformationPolicy::kRefuse:
+      return "refuse";
+    case InformationPolicy::kRepair:
+      return "repair";
+    case InformationPolicy::kIsotropic:
+      return "isotropic";
+  }
+  return "refuse";
+}
+
 double peakRssMb() {
   std::ifstream status("/proc/self/status");
   std::string line;

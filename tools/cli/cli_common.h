@@ -12,6 +12,7 @@
 #include "arbor_slam/core/information.h"
 #include "arbor_slam/core/pose_graph.h"
 #include "arbor_slam/io/pose_graph_file.h"
+#include "arbor_slam/tools/cli/option_table.h"
 
 namespace arbor::cli {
 
@@ -34,6 +35,23 @@ bool helpRequested(const std::vector<std::string>& args,
                    const boost::program_options::options_description& options);
 
 InformationPolicy parseInformationPolicy(const std::string& name);
+/// "refuse", "repair" or "isotropic".
+const char* toString(InformationPolicy policy);
+
+/// A table's --information refuse|repair|isotropic at `access(o)`, an InformationPolicy.
+template <class O, class Access>
+OptionSpec<O> informationOption(Tier tier, std::string section, Access access) {
+  return wordOption<O>(
+      "information", tier, std::move(section), "refuse|repair|isotropic",
+      "what to do with information matrices that are not positive definite", access,
+      [](const std::string& text) {
+        if (text == "refuse") return InformationPolicy::kRefuse;
+        if (text == "repair") return InformationPolicy::kRepair;
+        if (text == "isotropic") return InformationPolicy::kIsotropic;
+        throw std::invalid_argument("must be refuse, repair or isotropic, not '" + text + "'");
+      },
+      [](InformationPolicy p) { return toString(p); });
+}
 
 /// readPoseGraphFile (io/pose_graph_file.h), then the reader's warnings (a renormalised
 /// quaternion, say) on stderr, "warning: path:line: …" one a line: the first

@@ -15,6 +15,7 @@
 #include "arbor_slam/tools/cli/answer_watcher.h"
 #include "arbor_slam/tools/cli/bus_key_flag.h"
 #include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/command_command.h"
 #include "arbor_slam/tools/cli/commands.h"
 #include "arbor_slam/tools/serve/lcm_tuning.h"
 #include "arbor_slam/tools/serve/serve_service.h"
@@ -22,29 +23,70 @@
 namespace arbor::cli {
 namespace po = boost::program_options;
 
-int covarianceCommand(const std::vector<std::string>& args) {
-  std::vector<Key> ids;
-  std::string url, prefix, key_file;
-  bool json = false;
-  double timeout_s = 10;
-  po::options_description desc("arbor command covariance ID [ID2] [options]");
-  desc.add_options()("help,h", "show this help")(
-      "id", po::value(&ids)->required()->multitoken(),
-      "pose id (its marginal covariance), or two (their joint covariance)")(
-      "lcm-url", po::value(&url), "LCM provider URL (default: LCM's default)")(
-      "channel-prefix", po::value(&prefix), "prefix of the ARBOR_* channels")(
-      "timeout", po::value(&timeout_s)->default_value(10), "seconds to wait for the answer")(
-      "json", po::bool_switch(&json), "print one JSON object");
-  addBusKeyFlag(desc, &key_file);
-  po::positional_options_description positional;
-  positional.add("id", -1);
-  if (helpRequested(args, desc)) return 0;
-  parseArguments(args, desc, positional);
-  if (ids.size() != 1 && ids.size() != 2)
-    throw UsageError("covariance needs one or two pose ids, not " + std::to_string(ids.size()));
-  if (!(timeout_s > 0)) throw UsageError("--timeout must be > 0");
-  for (Key id : ids)
+namespace {
+
+using C = CovarianceCommandOptions;
+
+OptionTable<C> makeCovarianceTable() {
+  const char* const section = "Command";
+  return {
+      numberOption<C>(
+          "timeout", Tier::kCommon, section, "S", "seconds to wait for the answer",
+          [](auto& o) -> auto& { return o.timeout_s; },
+          Condition{"> 0", [](double x) { return x > 0; }}),
+      switchOption<C>(
+          "json", Tier::kCommon, section, "print one JSON object",
+          [](auto& o) -> auto& { return o.json; }, true),
+  };
+}
+
+FlagSet covarianceFlagSet(C* o) {
+  FlagSet flags(
+      "arbor command covariance ID [ID2] [options]   (one id: its marginal covariance; "
+      "two: their joint covariance)",
+      {"arbor command covariance 120 --lcm-url tcpq://127.0.0.1:7700",
+       "arbor command covariance 120 340 --key deploy.key --json"});
+  flags.positional("id", po::value(&o->ids)->required()->multitoken(), -1);
+  flags.add(busClientOptionTable());
+  flags.add(covarianceCommandOptionTable());
+  return flags;
+}
+
+}  // namespace
+
+const OptionTable<CovarianceCommandOptions>& covarianceCommandOptionTable() {
+  static const OptionTable<CovarianceCommandOptions> table = makeCovarianceTable();
+  return table;
+}
+
+std::vector<FlagInfo> covarianceCommandFlags() {
+  C o;
+  return covarianceFlagSet(&o).flags();
+}
+
+std::optional<CovarianceCommandOptions> parseCovarianceCommandLine(
+    const std::vector<std::string>& args) {
+  C o;
+  const FlagSet flags = covarianceFlagSet(&o);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  readOptions(busClientOptionTable(), *parsed, &o.bus);
+  readOptions(covarianceCommandOptionTable(), *parsed, &o);
+  if (o.ids.size() != 1 && o.ids.size() != 2)
+    throw UsageError("covariance needs one or two pose ids, not " + std::to_string(o.ids.size()));
+  for (Key id : o.ids)
     if (id < 0) throw UsageError("pose ids must be >= 0, not " + std::to_string(id));
+  return o;
+}
+
+int covarianceCommand(const std::vector<std::string>& args) {
+  const std::optional<CovarianceCommandOptions> options = parseCovarianceCommandLine(args);
+  if (!options) return 0;
+  const std::vector<Key>& ids = options->ids;
+  const std::string &url = options->bus.url, &prefix = options->bus.prefix,
+                    &key_file = options->bus.key_file;
+  const bool json = options->json;
+  const double timeout_s = options->timeout_s;
 
   command_t c;
   c.utime = serve::nowMicros();  // the request the answer names

@@ -11,6 +11,7 @@
 #include "arbor_slam/tools/cli/answer_watcher.h"
 #include "arbor_slam/tools/cli/bus_key_flag.h"
 #include "arbor_slam/tools/cli/cli_common.h"
+#include "arbor_slam/tools/cli/command_command.h"
 #include "arbor_slam/tools/cli/commands.h"
 #include "arbor_slam/tools/serve/lcm_tuning.h"
 #include "arbor_slam/tools/serve/serve_service.h"
@@ -18,48 +19,97 @@
 namespace arbor::cli {
 namespace po = boost::program_options;
 
+namespace {
+
+using E = EdgeCommandOptions;
+
+const char* const kCommandSection = "Command";
+
+OptionTable<E> makeEdgeCommandTable() {
+  constexpr Tier kCommon = Tier::kCommon, kAdvanced = Tier::kAdvanced;
+  // --seq: no default of its own (the clock's milliseconds are taken).
+  OptionSpec<E> seq = numberOption<E>(
+      "seq", kAdvanced, kCommandSection, "Q",
+      "this sender's command seq, >= 1 and rising (default: milliseconds since the epoch)",
+      [](auto& o) -> auto& { return o.seq; }, Condition{">= 1", [](double x) { return x >= 1; }});
+  seq.get = [](const E& o) -> std::optional<std::string> {
+    if (o.seq > 0) return std::to_string(o.seq);
+    return std::nullopt;
+  };
+  return {
+      switchOption<E>(
+          "wait", kCommon, kCommandSection,
+          "wait for the service's status naming this command; print its result, exit 1 if refused",
+          [](auto& o) -> auto& { return o.wait; }, true),
+      numberOption<E>(
+          "timeout", kCommon, kCommandSection, "S", "seconds for --wait",
+          [](auto& o) -> auto& { return o.timeout_s; },
+          Condition{"> 0", [](double x) { return x > 0; }}),
+      switchOption<E>(
+          "json", kCommon, kCommandSection, "print one JSON object",
+          [](auto& o) -> auto& { return o.json; }, true),
+      numberOption<E>(
+          "sender", kAdvanced, kCommandSection, "ID", "sender id",
+          [](auto& o) -> auto& { return o.sender; },
+          Condition{"a number", [](double) { return true; }}),
+      seq,
+  };
+}
+
+FlagSet edgeCommandFlagSet(E* o) {
+  FlagSet flags(
+      "arbor command disable|enable FROM TO [options]\n"
+      "       arbor command covariance ID [ID2] [options]   (arbor command covariance --help)",
+      {"arbor command disable 120 340 --lcm-url tcpq://127.0.0.1:7700 --wait",
+       "arbor command enable 120 340 --key deploy.key --wait --json"});
+  flags.positional("kind", po::value(&o->kind)->required());
+  flags.positional("from", po::value(&o->from)->required());
+  flags.positional("to", po::value(&o->to)->required());
+  flags.add(busClientOptionTable());
+  flags.add(edgeCommandOptionTable());
+  return flags;
+}
+
+}  // namespace
+
+const OptionTable<EdgeCommandOptions>& edgeCommandOptionTable() {
+  static const OptionTable<EdgeCommandOptions> table = makeEdgeCommandTable();
+  return table;
+}
+
+std::vector<FlagInfo> edgeCommandFlags() {
+  E o;
+  return edgeCommandFlagSet(&o).flags();
+}
+
+std::optional<EdgeCommandOptions> parseEdgeCommandLine(const std::vector<std::string>& args) {
+  E o;
+  const FlagSet flags = edgeCommandFlagSet(&o);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  readOptions(busClientOptionTable(), *parsed, &o.bus);
+  readOptions(edgeCommandOptionTable(), *parsed, &o);
+  if (o.kind != "disable" && o.kind != "enable")
+    throw UsageError("'" + o.kind + "' is not disable or enable");
+  if (o.from < 0 || o.to < 0) throw UsageError("pose ids must be >= 0");
+  if (o.from == o.to) throw UsageError("FROM and TO are both " + std::to_string(o.from));
+  return o;
+}
+
 int commandCommand(const std::vector<std::string>& args) {
   if (!args.empty() && args[0] == "covariance")
     return covarianceCommand(std::vector<std::string>(args.begin() + 1, args.end()));
-  std::string kind, url, prefix, key_file;
-  Key from = 0, to = 0;
-  std::int64_t sender = 1, seq = 0;
-  bool wait = false, json = false;
-  double timeout_s = 10;
-  po::options_description desc(
-      "arbor command disable|enable FROM TO [options]\n"
-      "arbor command covariance ID [ID2] [options]   (arbor command covariance --help)");
-  desc.add_options()("help,h", "show this help")(
-      "kind", po::value(&kind)->required(),
-      "disable (take back every edge between FROM and TO) or enable (give them back)")(
-      "from", po::value(&from)->required(), "pose id")("to", po::value(&to)->required(), "pose id")(
-      "lcm-url", po::value(&url), "LCM provider URL (default: LCM's default)")(
-      "channel-prefix", po::value(&prefix), "prefix of the ARBOR_* channels")(
-      "sender", po::value(&sender)->default_value(1), "sender id")(
-      "seq", po::value(&seq),
-      "this sender's command seq, >= 1 and rising (default: milliseconds since the epoch)")(
-      "wait", po::bool_switch(&wait),
-      "wait for the service's status naming this command; print its result, exit 1 if refused")(
-      "timeout", po::value(&timeout_s)->default_value(10), "seconds for --wait")(
-      "json", po::bool_switch(&json), "print one JSON object");
-  addBusKeyFlag(desc, &key_file);
-  po::positional_options_description positional;
-  positional.add("kind", 1).add("from", 1).add("to", 1);
-  if (helpRequested(args, desc)) return 0;
-  const auto vm = parseArguments(args, desc, positional);
+  const std::optional<EdgeCommandOptions> options = parseEdgeCommandLine(args);
+  if (!options) return 0;
+  const std::string &kind = options->kind, &url = options->bus.url, &prefix = options->bus.prefix,
+                    &key_file = options->bus.key_file;
+  const Key from = options->from, to = options->to;
+  const std::int64_t sender = options->sender;
+  const std::int64_t seq = options->seq > 0 ? options->seq : serve::nowMicros() / 1000;
+  const bool wait = options->wait, json = options->json;
+  const double timeout_s = options->timeout_s;
   StreamEdgeCommand c;
-  if (kind == "disable") {
-    c.kind = StreamEdgeCommand::Kind::kDisable;
-  } else if (kind == "enable") {
-    c.kind = StreamEdgeCommand::Kind::kEnable;
-  } else {
-    throw UsageError("'" + kind + "' is not disable or enable");
-  }
-  if (from < 0 || to < 0) throw UsageError("pose ids must be >= 0");
-  if (from == to) throw UsageError("FROM and TO are both " + std::to_string(from));
-  if (!vm.count("seq")) seq = serve::nowMicros() / 1000;
-  if (seq < 1) throw UsageError("--seq must be >= 1");
-  if (!(timeout_s > 0)) throw UsageError("--timeout must be > 0");
+  c.kind = kind == "disable" ? StreamEdgeCommand::Kind::kDisable : StreamEdgeCommand::Kind::kEnable;
   c.utime = serve::nowMicros();
   c.sender = sender;
   c.seq = seq;

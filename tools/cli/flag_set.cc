@@ -99,9 +99,9 @@ po::options_description_easy_init FlagSet::add(Tier tier, const std::string& sec
   return groups_.back().options->add_options();
 }
 
-void FlagSet::positional(const std::string& name, const po::value_semantic* value) {
+void FlagSet::positional(const std::string& name, const po::value_semantic* value, int max_count) {
   hidden_->add_options()(name.c_str(), value, "");
-  positional_.add(name.c_str(), 1);
+  positional_.add(name.c_str(), max_count);
 }
 
 void FlagSet::allowConfig() {
@@ -161,7 +161,9 @@ void FlagSet::printHelp(std::ostream& out, bool all) const {
     for (const std::string& e : examples_) out << "  " << e << "\n";
   }
   if (!all && others > 0)
-    out << "\n" << others << " more flags (advanced and experimental): --help-all\n";
+    out << "\n"
+        << others << (others == 1 ? " more flag" : " more flags")
+        << " (advanced and experimental): --help-all\n";
 }
 
 std::optional<po::variables_map> FlagSet::parse(const std::vector<std::string>& args) const {

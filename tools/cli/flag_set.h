@@ -37,8 +37,10 @@ class FlagSet {
   /// Every row of `table`, each showing its value in `defaults`.
   template <class O>
   void add(const OptionTable<O>& table, const O& defaults = {});
-  /// A positional argument; the usage line names it, the help does not list it.
-  void positional(const std::string& name, const boost::program_options::value_semantic* value);
+  /// A positional argument taken up to `max_count` times (-1: any); the usage line names it, the
+  /// help does not list it.
+  void positional(const std::string& name, const boost::program_options::value_semantic* value,
+                  int max_count = 1);
   /// --config FILE and --print-config.
   void allowConfig();
 

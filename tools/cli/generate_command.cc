@@ -13,6 +13,7 @@
 #include "arbor_slam/io/pose_graph_file.h"
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/generate_command.h"
 #include "arbor_slam/tools/generator/false_closures.h"
 #include "arbor_slam/tools/generator/graph_generator.h"
 #include "arbor_slam/tools/generator/road_world.h"
@@ -59,90 +60,189 @@ void printWritten(const std::string& output, const PoseGraph<G>& graph, const st
             << " edges" << tail << "\n";
 }
 
+using G = GenerateOptions;
+
+constexpr Condition kAny{"a number", [](double) { return true; }};
+
+const char* const kGraphSection = "Graph";
+const char* const kNoiseSection = "Noise";
+const char* const kOutliersSection = "False loop closures";
+
+// A number with no default of its own (the kind's preset's holds unless it is given).
+template <class Access>
+OptionSpec<G> presetNumber(std::string name, Tier tier, std::string section, std::string arg,
+                           std::string help, Access access, Condition condition = kAny) {
+  OptionSpec<G> spec = numberOption<G>(std::move(name), tier, std::move(section), std::move(arg),
+                                       std::move(help), access, condition);
+  spec.get = [](const G&) -> std::optional<std::string> { return std::nullopt; };
+  return spec;
+}
+
+OptionTable<G> makeGenerateTable() {
+  constexpr Tier kCommon = Tier::kCommon, kAdvanced = Tier::kAdvanced;
+  constexpr Condition kFinitePositive{"finite and > 0",
+                                      [](double x) { return x > 0 && std::isfinite(x); }};
+  constexpr Condition kUnitInterval{"in [0, 1]", [](double x) { return x >= 0 && x <= 1; }};
+  OptionSpec<G> information = informationOption<G>(
+      kAdvanced, kOutliersSection, [](auto& o) -> auto& { return o.information; });
+  information.help = "outliers: " + information.help + " in the input";
+  return {
+      textOption<G>(
+          "truth", kCommon, kGraphSection, "FILE", "also write the ground truth poses as g2o",
+          [](auto& o) -> auto& { return o.truth; }),
+      numberOption<G>(
+          "seed", kCommon, kGraphSection, "S",
+          "random seed (of the graph and of its false loop closures)",
+          [](auto& o) -> auto& { return o.seed; }, kAny),
+      presetNumber(
+          "poses", kCommon, kGraphSection, "N",
+          "number of poses (manhattan: 3500, grid: 1000, vehicle: 3000, small-loop: 1000)",
+          [](auto& o) -> auto& { return o.poses; }),
+      // 2 or 3, checked with the kind (--dim applies to vehicle and small-loop only).
+      numberOption<G>(
+          "dim", kCommon, kGraphSection, "2|3",
+          "vehicle, small-loop: 2 (SE2) or 3 (SE3, the road over gentle hills: height and pitch "
+          "change)",
+          [](auto& o) -> auto& { return o.dim; }, kAny),
+      presetNumber(
+          "grid", kAdvanced, kGraphSection, "N", "manhattan: world size in cells (10)",
+          [](auto& o) -> auto& { return o.grid; }),
+      presetNumber(
+          "size", kAdvanced, kGraphSection, "N", "grid: lattice size per axis (6)",
+          [](auto& o) -> auto& { return o.size; }),
+      presetNumber(
+          "rings", kAdvanced, kGraphSection, "N", "sphere: number of rings (20)",
+          [](auto& o) -> auto& { return o.rings; }),
+      presetNumber(
+          "per-ring", kAdvanced, kGraphSection, "N", "sphere: poses per ring (50)",
+          [](auto& o) -> auto& { return o.per_ring; }),
+      presetNumber(
+          "closure-probability", kAdvanced, kGraphSection, "P",
+          "manhattan, grid, vehicle, small-loop: chance of a loop closure on a revisit (0.3 / "
+          "0.5 / 0.8 / 0.6)",
+          [](auto& o) -> auto& { return o.closure_probability; }, kUnitInterval),
+      numberOption<G>(
+          "information-scale", kCommon, kNoiseSection, "X",
+          "write Ω = X × the information of the noise drawn, on every edge (odometry and loop "
+          "closures): < 1 a cautious front end (e.g. 0.02: χ² at the truth averages 0.02 × dof), "
+          "> 1 an over-confident one (e.g. 30)",
+          [](auto& o) -> auto& { return o.information_scale; }, kFinitePositive),
+      // > 0, checked with the other sigma ("noise sigmas must be positive").
+      numberOption<G>(
+          "sigma-t", kAdvanced, kNoiseSection, "M",
+          "translation noise (m; vehicle, small-loop: 0.02)",
+          [](auto& o) -> auto& { return o.sigma_t; }, kAny),
+      numberOption<G>(
+          "sigma-r", kAdvanced, kNoiseSection, "RAD",
+          "rotation noise (rad; vehicle, small-loop: 0.002)",
+          [](auto& o) -> auto& { return o.sigma_r; }, kAny),
+      presetNumber(
+          "closure-sigma-factor", kAdvanced, kNoiseSection, "F",
+          "draw the loop closures (|i - j| > 1) with both sigmas times F, their Ω from that noise "
+          "(1; vehicle, small-loop: 10)",
+          [](auto& o) -> auto& { return o.closure_sigma_factor; }, kFinitePositive),
+      presetNumber(
+          "closure-tail-fraction", kAdvanced, kNoiseSection, "P",
+          "draw this share of the loop closures wider (--closure-tail-factor), their Ω as the "
+          "others' (0; vehicle, small-loop: 0.05)",
+          [](auto& o) -> auto& { return o.tail_fraction; }, kUnitInterval),
+      presetNumber(
+          "closure-tail-factor", kAdvanced, kNoiseSection, "F",
+          "how much wider those closures' sigmas are, >= 1 (vehicle, small-loop: 6)",
+          [](auto& o) -> auto& { return o.tail_factor; },
+          Condition{"finite and >= 1", [](double x) { return x >= 1 && std::isfinite(x); }}),
+      presetNumber(
+          "outliers", kCommon, kOutliersSection, "FRACTION",
+          "append round(FRACTION × loop closures) false loop closures (|i − j| > 1; half to "
+          "even), each copying a real closure's information, measuring a random pose "
+          "(translation within 3 × the largest loop-closure translation component, at least 3; "
+          "uniform rotation); also writes their labels ('i j' a line, file ids)",
+          [](auto& o) -> auto& { return o.fraction; },
+          Condition{"a finite fraction >= 0", [](double x) { return x >= 0 && std::isfinite(x); }}),
+      wordOption<G>(
+          "outlier-policy", kCommon, kOutliersSection, "random|local|group",
+          "random: pose pairs drawn at random; local: pairs 10-50 poses apart; group: groups of "
+          "10 consecutive pairs (i+k, j+k) that all measure one false transform, so they agree",
+          [](auto& o) -> auto& { return o.policy; },
+          [](const std::string& text) {
+            const std::optional<sim::OutlierPolicy> policy = sim::parseOutlierPolicy(text);
+            if (!policy)
+              throw std::invalid_argument("must be random, local or group, not '" + text + "'");
+            return *policy;
+          },
+          [](sim::OutlierPolicy p) { return sim::toString(p); }),
+      textOption<G>(
+          "labels", kCommon, kOutliersSection, "OUT.labels",
+          "where the labels go (default: the output with .labels)",
+          [](auto& o) -> auto& { return o.labels; }),
+      textOption<G>(
+          "input", kCommon, kOutliersSection, "FILE",
+          "outliers: the g2o or TORO graph to add false loop closures to",
+          [](auto& o) -> auto& { return o.input; }),
+      information,
+  };
+}
+
+FlagSet generateFlagSet(G* o) {
+  FlagSet flags(
+      "arbor generate manhattan|sphere|grid|vehicle|small-loop -o OUT.g2o [options]\n"
+      "       arbor generate outliers --input FILE -o OUT.g2o --outliers FRACTION [options]",
+      {"arbor generate vehicle --poses 2000 --dim 3 --seed 4 -o road.g2o",
+       "arbor generate outliers --input data/sphere_3d.g2o --outliers 0.1 -o sphere_0.1.g2o"});
+  flags.positional("kind", po::value(&o->kind)->required());
+  flags.add(Tier::kCommon, kGraphSection)(
+      "output,o", po::value(&o->output)->required()->value_name("OUT"), "g2o file to write");
+  flags.add(generateOptionTable());
+  return flags;
+}
+
 }  // namespace
 
+const OptionTable<GenerateOptions>& generateOptionTable() {
+  static const OptionTable<GenerateOptions> table = makeGenerateTable();
+  return table;
+}
+
+std::vector<FlagInfo> generateFlags() {
+  G o;
+  return generateFlagSet(&o).flags();
+}
+
+std::optional<GenerateCommandLine> parseGenerateCommandLine(const std::vector<std::string>& args) {
+  GenerateCommandLine line;
+  const FlagSet flags = generateFlagSet(&line.options);
+  std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  line.given = std::move(*parsed);
+  const po::variables_map& vm = line.given;
+  if (!vm.count("outliers")) {
+    for (const char* flag : {"outlier-policy", "labels"}) {
+      if (!vm[flag].defaulted() && vm.count(flag)) {
+        throw UsageError(std::string("--") + flag + " needs --outliers FRACTION");
+      }
+    }
+  }
+  readOptions(generateOptionTable(), vm, &line.options);
+  const G& o = line.options;
+  if (!(o.sigma_t > 0) || !(o.sigma_r > 0)) throw UsageError("noise sigmas must be positive");
+  return line;
+}
+
 int generateCommand(const std::vector<std::string>& args) {
-  std::string kind, output, truth_output, input, policy = "random", labels, information = "refuse";
-  int poses = 0, rings = 0, per_ring = 0, size = 0, grid = 0, dim = 2;
-  std::uint64_t seed = 1;
-  double sigma_t = 0.05, sigma_r = 0.01, closure_probability = -1, fraction = 0,
-         information_scale = 1, closure_sigma_factor = 1, tail_fraction = 0, tail_factor = 1;
-  po::options_description options(
-      "arbor generate manhattan|sphere|grid|vehicle|small-loop [options]\n"
-      "arbor generate outliers --input FILE -o OUT.g2o --outliers FRACTION [options]");
-  options.add_options()("help,h", "show this help")(
-      "kind", po::value(&kind)->required(),
-      "manhattan | sphere | grid | vehicle | small-loop | outliers")(
-      "output,o", po::value(&output)->required(), "g2o file to write")(
-      "truth", po::value(&truth_output), "also write the ground truth poses as g2o")(
-      "seed", po::value(&seed)->default_value(1),
-      "random seed (of the graph and of its false loop closures)")(
-      "poses", po::value(&poses),
-      "number of poses (manhattan: 3500, grid: 1000, vehicle: 3000, small-loop: 1000)")(
-      "dim", po::value(&dim)->default_value(2),
-      "vehicle, small-loop: 2 (SE2) or 3 (SE3, the road over gentle hills: height and pitch "
-      "change)")("grid", po::value(&grid), "manhattan: world size in cells (10)")(
-      "size", po::value(&size), "grid: lattice size per axis (6)")(
-      "rings", po::value(&rings), "sphere: number of rings (20)")("per-ring", po::value(&per_ring),
-                                                                  "sphere: poses per ring (50)")(
-      "closure-probability", po::value(&closure_probability),
-      "manhattan, grid, vehicle, small-loop: chance of a loop closure on a revisit (0.3 / 0.5 / "
-      "0.8 / 0.6)")("sigma-t", po::value(&sigma_t)->default_value(0.05),
-                    "translation noise (m; vehicle, small-loop: 0.02)")(
-      "sigma-r", po::value(&sigma_r)->default_value(0.01),
-      "rotation noise (rad; vehicle, small-loop: 0.002)")(
-      "closure-sigma-factor", po::value(&closure_sigma_factor),
-      "draw the loop closures (|i - j| > 1) with both sigmas times F, their Ω from that noise "
-      "(1; vehicle, small-loop: 10)")(
-      "closure-tail-fraction", po::value(&tail_fraction),
-      "draw this share of the loop closures wider (--closure-tail-factor), their Ω as the "
-      "others' (0; vehicle, small-loop: 0.05)")(
-      "closure-tail-factor", po::value(&tail_factor),
-      "how much wider those closures' sigmas are, >= 1 (vehicle, small-loop: 6)")(
-      "information-scale", po::value(&information_scale)->default_value(1),
-      "write Ω = X × the information of the noise drawn, on every edge (odometry and loop "
-      "closures): < 1 a cautious front end (e.g. 0.02: χ² at the truth averages 0.02 × dof), "
-      "> 1 an over-confident one (e.g. 30)")(
-      "input", po::value(&input), "outliers: the g2o or TORO graph to add false loop closures to")(
-      "outliers", po::value(&fraction),
-      "append round(FRACTION × loop closures) false loop closures (|i − j| > 1; half to even), "
-      "each copying a real closure's information, measuring a random pose (translation within "
-      "3 × the largest loop-closure translation component, at least 3; uniform rotation); "
-      "also writes their labels ('i j' a line, file ids)")(
-      "outlier-policy", po::value(&policy)->default_value("random"),
-      "random: pose pairs drawn at random; local: pairs 10-50 poses apart; group: groups of 10 "
-      "consecutive pairs (i+k, j+k) that all measure one false transform, so they agree")(
-      "labels", po::value(&labels), "where the labels go (default: the output with .labels)")(
-      "information", po::value(&information)->default_value("refuse"),
-      "outliers: Ω of the input that are not positive definite: refuse | repair | isotropic");
-  po::positional_options_description positional;
-  positional.add("kind", 1);
-  if (helpRequested(args, options)) return 0;
-  const po::variables_map vm = parseArguments(args, options, positional);
-  if (!(sigma_t > 0) || !(sigma_r > 0)) throw UsageError("noise sigmas must be positive");
-  if (!(information_scale > 0) || !std::isfinite(information_scale)) {
-    std::ostringstream os;
-    os << "--information-scale must be finite and > 0, not '" << information_scale << "'";
-    throw UsageError(os.str());
-  }
-  if (closure_probability != -1 && !(closure_probability >= 0 && closure_probability <= 1))
-    throw UsageError("--closure-probability must be in [0, 1]");
-  if (vm.count("closure-sigma-factor") &&
-      (!(closure_sigma_factor > 0) || !std::isfinite(closure_sigma_factor))) {
-    std::ostringstream os;
-    os << "--closure-sigma-factor must be finite and > 0, not '" << closure_sigma_factor << "'";
-    throw UsageError(os.str());
-  }
-  if (vm.count("closure-tail-fraction") && !(tail_fraction >= 0 && tail_fraction <= 1)) {
-    std::ostringstream os;
-    os << "--closure-tail-fraction must be in [0, 1], not '" << tail_fraction << "'";
-    throw UsageError(os.str());
-  }
-  if (vm.count("closure-tail-factor") && !(tail_factor >= 1 && std::isfinite(tail_factor))) {
-    std::ostringstream os;
-    os << "--closure-tail-factor must be finite and >= 1, not '" << tail_factor << "'";
-    throw UsageError(os.str());
-  }
+  const std::optional<GenerateCommandLine> line = parseGenerateCommandLine(args);
+  if (!line) return 0;
+  const po::variables_map& vm = line->given;
+  const G& opts = line->options;
+  const std::string &kind = opts.kind, &output = opts.output, &truth_output = opts.truth,
+                    &input = opts.input, &labels = opts.labels;
+  const int poses = opts.poses, rings = opts.rings, per_ring = opts.per_ring, size = opts.size,
+            grid = opts.grid, dim = opts.dim;
+  const std::uint64_t seed = opts.seed;
+  const double sigma_t = opts.sigma_t, sigma_r = opts.sigma_r,
+               closure_probability = opts.closure_probability, fraction = opts.fraction,
+               information_scale = opts.information_scale,
+               closure_sigma_factor = opts.closure_sigma_factor, tail_fraction = opts.tail_fraction,
+               tail_factor = opts.tail_factor;
   // The noise of a kind: its preset's, with the flags given on top.
   auto noiseOf = [&](sim::NoiseModel preset) {
     if (!vm["sigma-t"].defaulted()) preset.sigma_translation = sigma_t;
@@ -157,23 +257,9 @@ int generateCommand(const std::vector<std::string>& args) {
 
   OutlierRequest request;
   request.on = vm.count("outliers") > 0;
-  if (!request.on) {
-    for (const char* flag : {"outlier-policy", "labels"}) {
-      if (!vm[flag].defaulted() && vm.count(flag)) {
-        throw UsageError(std::string("--") + flag + " needs --outliers FRACTION");
-      }
-    }
-  } else {
-    if (!std::isfinite(fraction) || fraction < 0) {
-      std::ostringstream os;
-      os << "--outliers must be a finite fraction >= 0, not '" << fraction << "'";
-      throw UsageError(os.str());
-    }
-    const auto parsed = sim::parseOutlierPolicy(policy);
-    if (!parsed)
-      throw UsageError("--outlier-policy must be random, local or group, not '" + policy + "'");
+  if (request.on) {
     request.options.fraction = fraction;
-    request.options.policy = *parsed;
+    request.options.policy = opts.policy;
     request.options.seed = seed;
     request.labels = labels.empty()
                          ? std::filesystem::path(output).replace_extension(".labels").string()
@@ -204,7 +290,7 @@ int generateCommand(const std::vector<std::string>& args) {
         throw UsageError(std::string("--") + flag + " does not apply to outliers");
     }
     ReadOptions read;
-    read.information = parseInformationPolicy(information);
+    read.information = opts.information;
     std::visit(
         [&](auto graph) {
           // A file without VERTEX lines gets its odometry chain as the written estimate (what

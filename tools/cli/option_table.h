@@ -168,6 +168,23 @@ OptionSpec<O> wordOption(std::string name, Tier tier, std::string section, std::
   return spec;
 }
 
+/// Text taken as given (a path, a URL, a prefix) at `access(o)`, a std::string; empty: no
+/// value of its own (--help shows no default).
+template <class O, class Access>
+OptionSpec<O> textOption(std::string name, Tier tier, std::string section, std::string arg,
+                         std::string help, Access access, std::string needs = "") {
+  OptionSpec<O> spec =
+      option_detail::spec<O>(std::move(name), OptionType::kWord, tier, std::move(section),
+                             std::move(arg), std::move(help), std::move(needs));
+  spec.get = [access](const O& o) -> std::optional<std::string> {
+    const std::string& value = access(o);
+    if (value.empty()) return std::nullopt;
+    return value;
+  };
+  spec.set = [access](O& o, const std::string& text) { access(o) = text; };
+  return spec;
+}
+
 /// `spec` with a Python keyword: `keyword`, or its name with '_' for '-' when empty.
 template <class O>
 OptionSpec<O> inPython(OptionSpec<O> spec, std::string keyword = "") {

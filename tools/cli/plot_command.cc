@@ -19,6 +19,7 @@
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/commands.h"
 #include "arbor_slam/tools/cli/output_files.h"
+#include "arbor_slam/tools/cli/plot_command.h"
 #include "arbor_slam/tools/cli/trajectory_errors.h"
 
 namespace arbor::cli {
@@ -77,31 +78,68 @@ std::string number(double v) {
   return s.str();
 }
 
+using P = PlotOptions;
+
+const char* const kPlotSection = "Plot";
+
+OptionTable<P> makePlotTable() {
+  return {
+      numberOption<P>(
+          "max-time-diff", Tier::kCommon, kPlotSection, "S",
+          "poses of the two associate when their times (TUM stamps, g2o ids, KITTI line numbers) "
+          "differ by at most this, as evo's t_max_diff",
+          [](auto& o) -> auto& { return o.max_time_diff; },
+          Condition{">= 0", [](double x) { return x >= 0; }}),
+      switchOption<P>(
+          "json", Tier::kCommon, kPlotSection, "print one JSON object",
+          [](auto& o) -> auto& { return o.json; }, true),
+  };
+}
+
+FlagSet plotFlagSet(P* o) {
+  FlagSet flags(
+      "arbor plot ESTIMATE [REFERENCE] [options]   (TUM, KITTI or g2o/TORO files; with "
+      "REFERENCE, the ground truth: ATE and RPE by evo's definitions, docs/files.md)",
+      {"arbor plot estimate.tum", "arbor plot estimate.g2o truth.tum -o compared.png --json"});
+  flags.positional("estimate", po::value(&o->estimate)->required());
+  flags.positional("reference", po::value(&o->reference));
+  flags.add(Tier::kCommon, kPlotSection)("output,o", po::value(&o->output)->value_name("OUT.png"),
+                                         "the PNG (default: ESTIMATE with .png for its extension)");
+  flags.add(plotOptionTable());
+  return flags;
+}
+
 }  // namespace
 
+const OptionTable<PlotOptions>& plotOptionTable() {
+  static const OptionTable<PlotOptions> table = makePlotTable();
+  return table;
+}
+
+std::vector<FlagInfo> plotFlags() {
+  P o;
+  return plotFlagSet(&o).flags();
+}
+
+std::optional<PlotOptions> parsePlotCommandLine(const std::vector<std::string>& args) {
+  P o;
+  const FlagSet flags = plotFlagSet(&o);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  readOptions(plotOptionTable(), *parsed, &o);
+  if (o.output.empty()) o.output = fs::path(o.estimate).replace_extension(".png").string();
+  if (o.output == o.estimate || o.output == o.reference)
+    throw UsageError("-o " + o.output + " would overwrite an input");
+  return o;
+}
+
 int plotCommand(const std::vector<std::string>& args) {
-  std::string estimate_file, reference_file, output;
-  double max_diff = 0.01;
-  bool json = false;
-  po::options_description options("arbor plot ESTIMATE [REFERENCE] [options]");
-  options.add_options()("help,h", "show this help")(
-      "estimate", po::value(&estimate_file)->required(),
-      "TUM, KITTI or g2o/TORO file (its VERTEX lines)")(
-      "reference", po::value(&reference_file),
-      "ground truth, the same formats: ATE and RPE (evo's definitions; docs/files.md)")(
-      "output,o", po::value(&output), "the PNG (default: ESTIMATE with .png for its extension)")(
-      "max-time-diff", po::value(&max_diff)->default_value(0.01, "0.01"),
-      "poses of the two associate when their times (TUM stamps, g2o ids, KITTI line numbers) "
-      "differ by at most this, as evo's t_max_diff")("json", po::bool_switch(&json),
-                                                     "print one JSON object");
-  po::positional_options_description positional;
-  positional.add("estimate", 1).add("reference", 1);
-  if (helpRequested(args, options)) return 0;
-  parseArguments(args, options, positional);
-  if (!(max_diff >= 0)) throw UsageError("--max-time-diff must be >= 0");
-  if (output.empty()) output = fs::path(estimate_file).replace_extension(".png").string();
-  if (output == estimate_file || output == reference_file)
-    throw UsageError("-o " + output + " would overwrite an input");
+  const std::optional<PlotOptions> options = parsePlotCommandLine(args);
+  if (!options) return 0;
+  const std::string &estimate_file = options->estimate, &reference_file = options->reference,
+                    &output = options->output;
+  const double max_diff = options->max_time_diff;
+  const bool json = options->json;
   requireWritable("--output", output);
 
   const Trajectory estimate = readTrajectoryFile(estimate_file);

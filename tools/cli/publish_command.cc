@@ -21,6 +21,7 @@
 #include "arbor_slam/tools/cli/bus_key_flag.h"
 #include "arbor_slam/tools/cli/cli_common.h"
 #include "arbor_slam/tools/cli/commands.h"
+#include "arbor_slam/tools/cli/publish_command.h"
 #include "arbor_slam/tools/cli/publish_stream.h"
 #include "arbor_slam/tools/cli/resend_window.h"
 #include "arbor_slam/tools/serve/lcm_tuning.h"
@@ -32,18 +33,8 @@ namespace {
 namespace po = boost::program_options;
 using Clock = std::chrono::steady_clock;
 
-struct PublishRun {
-  std::string file, url, prefix;
-  double rate = 0;  // 0: burst
-  std::int64_t sender = 1;
-  long skip = 0, count = -1;
-  bool wait = false, wait_ready = false, json = false;
-  double timeout_s = 60;
-  ReadOptions read;
-  std::string edge_choices;  // --edge-choices FILE (io/edge_choice_file.h)
-  std::string key_file;      // --key FILE (tools/cli/bus_key_flag.h)
-  long resend_window = 0;    // --resend-window N (0: off)
-  serve::BusKeyring keys;    // its keys (none without --key)
+struct PublishRun : PublishOptions {
+  serve::BusKeyring keys;  // of --key (none without it)
 };
 
 // Listens on ARBOR_ESTIMATE / ARBOR_STATUS while edges go out: which seq numbers of our sender
@@ -267,10 +258,10 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   const long end = static_cast<long>(selection.last_seq);
   const size_t n = static_cast<size_t>(selection.edges);
 
-  lcm::LCM lcm(run.url);
-  if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + run.url + "'");
-  serve::tuneLcmTransport(lcm, run.url);
-  const serve::Channels channels = serve::Channels::withPrefix(run.prefix);
+  lcm::LCM lcm(run.bus.url);
+  if (!lcm.good()) throw std::runtime_error("cannot open LCM at '" + run.bus.url + "'");
+  serve::tuneLcmTransport(lcm, run.bus.url);
+  const serve::Channels channels = serve::Channels::withPrefix(run.bus.prefix);
   const std::unique_ptr<serve::BusAuth> auth =
       run.keys.empty() ? nullptr : std::make_unique<serve::BusAuth>(run.keys);
   // The listener has its own instance: liblcm 1.3 delays what an instance receives while
@@ -278,9 +269,9 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   std::unique_ptr<lcm::LCM> listen_lcm;
   std::unique_ptr<Listener> listener;
   if (run.wait || run.wait_ready) {
-    listen_lcm = std::make_unique<lcm::LCM>(run.url);
-    if (!listen_lcm->good()) throw std::runtime_error("cannot open LCM at '" + run.url + "'");
-    serve::tuneLcmTransport(*listen_lcm, run.url);
+    listen_lcm = std::make_unique<lcm::LCM>(run.bus.url);
+    if (!listen_lcm->good()) throw std::runtime_error("cannot open LCM at '" + run.bus.url + "'");
+    serve::tuneLcmTransport(*listen_lcm, run.bus.url);
     listener =
         std::make_unique<Listener>(*listen_lcm, channels, run.sender, n, run.skip + 1, auth.get());
   }
@@ -288,7 +279,7 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
   std::unique_ptr<Resender> resender;
   if (run.resend_window > 0) {
     resender =
-        std::make_unique<Resender>(run.url, channels, run.sender,
+        std::make_unique<Resender>(run.bus.url, channels, run.sender,
                                    static_cast<std::size_t>(run.resend_window), auth.get(), bus);
   }
   if (run.wait_ready && !listener->waitStatus(run.timeout_s)) {
@@ -381,49 +372,116 @@ int publish(const PublishRun& run, const PoseGraph<G>& graph) {
 
 }  // namespace
 
+namespace {
+
+using P = PublishOptions;
+
+constexpr Condition kAny{"a number", [](double) { return true; }};
+constexpr Condition kPositive{"> 0", [](double x) { return x > 0; }};
+constexpr Condition kNonNegative{">= 0", [](double x) { return x >= 0; }};
+
+const char* const kStream = "Stream";
+const char* const kWait = "Waiting and output";
+
+// --rate: no default of its own (none is a burst).
+OptionSpec<P> rateOption() {
+  OptionSpec<P> spec = numberOption<P>(
+      "rate", Tier::kCommon, kStream, "HZ",
+      "edges per second (priors go with their edges); default: --burst",
+      [](auto& o) -> auto& { return o.rate; }, kPositive);
+  spec.get = [](const P& o) -> std::optional<std::string> {
+    if (o.rate > 0) return option_detail::text(o.rate);
+    return std::nullopt;
+  };
+  return spec;
+}
+
+OptionTable<P> makePublishTable() {
+  constexpr Tier kCommon = Tier::kCommon, kAdvanced = Tier::kAdvanced;
+  return {
+      rateOption(),
+      switchOption<P>(
+          "burst", kCommon, kStream, "as fast as possible (the default)",
+          [](auto& o) -> auto& { return o.burst; }, true),
+      numberOption<P>(
+          "count", kCommon, kStream, "N", "publish N edges (-1: all)",
+          [](auto& o) -> auto& { return o.count; },
+          Condition{">= 0 (or -1: all)", [](double x) { return x >= -1; }}),
+      numberOption<P>(
+          "skip", kAdvanced, kStream, "K", "start after the first K edges",
+          [](auto& o) -> auto& { return o.skip; }, kNonNegative),
+      numberOption<P>(
+          "sender", kAdvanced, kStream, "ID", "sender id",
+          [](auto& o) -> auto& { return o.sender; }, kAny),
+      textOption<P>(
+          "edge-choices", kAdvanced, kStream, "FILE",
+          "per-edge trust and kernel into edge_t, 'FROM TO default|trusted|robust "
+          "[KERNEL]' a line (docs/files.md)",
+          [](auto& o) -> auto& { return o.edge_choices; }),
+      informationOption<P>(
+          kAdvanced, kStream, [](auto& o) -> auto& { return o.read.information; }),
+      numberOption<P>(
+          "resend-window", kAdvanced, kStream, "N",
+          "keep the last N messages per stream and send again what the server reports missing "
+          "(ARBOR_RESEND); then wait until it acknowledges every message (--timeout). 0: off",
+          [](auto& o) -> auto& { return o.resend_window; },
+          Condition{"in 0..16777216", [](double x) { return x >= 0 && x <= (1L << 24); }}),
+      switchOption<P>(
+          "wait", kCommon, kWait,
+          "wait for the estimate covering the last edge; print publish -> estimate latency",
+          [](auto& o) -> auto& { return o.wait; }, true),
+      switchOption<P>(
+          "wait-ready", kCommon, kWait,
+          "before publishing, wait for a status message from the server",
+          [](auto& o) -> auto& { return o.wait_ready; }, true),
+      numberOption<P>(
+          "timeout", kCommon, kWait, "S", "seconds for --wait, --wait-ready and --resend-window",
+          [](auto& o) -> auto& { return o.timeout_s; }, kPositive),
+      switchOption<P>(
+          "json", kCommon, kWait, "print one JSON object", [](auto& o) -> auto& { return o.json; },
+          true),
+  };
+}
+
+FlagSet publishFlagSet(std::string* file) {
+  FlagSet flags("arbor publish FILE [options]   (FILE: g2o or TORO)",
+                {"arbor publish data/sphere_3d.g2o --lcm-url tcpq://127.0.0.1:7700 --rate 100",
+                 "arbor publish map.g2o --key deploy.key --wait-ready --wait --json"});
+  flags.positional("file", po::value(file)->required());
+  flags.add(busClientOptionTable());
+  flags.add(publishOptionTable());
+  return flags;
+}
+
+}  // namespace
+
+const OptionTable<PublishOptions>& publishOptionTable() {
+  static const OptionTable<PublishOptions> table = makePublishTable();
+  return table;
+}
+
+std::vector<FlagInfo> publishFlags() {
+  std::string file;
+  return publishFlagSet(&file).flags();
+}
+
+std::optional<PublishOptions> parsePublishCommandLine(const std::vector<std::string>& args) {
+  PublishOptions run;
+  const FlagSet flags = publishFlagSet(&run.file);
+  const std::optional<po::variables_map> parsed = flags.parse(args);
+  if (!parsed) return std::nullopt;
+  readOptions(busClientOptionTable(), *parsed, &run.bus);
+  readOptions(publishOptionTable(), *parsed, &run);
+  if (run.burst && run.rate > 0) throw UsageError("--rate and --burst exclude each other");
+  return run;
+}
+
 int publishCommand(const std::vector<std::string>& args) {
+  const std::optional<PublishOptions> options = parsePublishCommandLine(args);
+  if (!options) return 0;
   PublishRun run;
-  bool burst = false;
-  std::string information = "refuse";
-  po::options_description desc("arbor publish FILE [options]");
-  desc.add_options()("help,h", "show this help")("file", po::value(&run.file)->required(),
-                                                 "g2o or TORO file")(
-      "lcm-url", po::value(&run.url), "LCM provider URL (default: LCM's default)")(
-      "channel-prefix", po::value(&run.prefix), "prefix of the ARBOR_* channels")(
-      "rate", po::value(&run.rate), "edges per second (priors go with their edges)")(
-      "burst", po::bool_switch(&burst), "as fast as possible (the default)")(
-      "sender", po::value(&run.sender)->default_value(1), "sender id")(
-      "skip", po::value(&run.skip)->default_value(0), "start after the first K edges")(
-      "count", po::value(&run.count)->default_value(-1), "publish N edges (-1: all)")(
-      "wait", po::bool_switch(&run.wait),
-      "wait for the estimate covering the last edge; print publish -> estimate latency")(
-      "wait-ready", po::bool_switch(&run.wait_ready),
-      "before publishing, wait for a status message from the server")(
-      "timeout", po::value(&run.timeout_s)->default_value(60), "seconds for --wait/--wait-ready")(
-      "information", po::value(&information)->default_value("refuse"),
-      "refuse | repair | isotropic (information matrices that are not positive definite)")(
-      "json", po::bool_switch(&run.json), "print one JSON object")(
-      "edge-choices", po::value(&run.edge_choices),
-      "per-edge trust and kernel into edge_t, 'FROM TO default|trusted|robust [KERNEL]' a line "
-      "(docs/files.md)")(
-      "resend-window", po::value(&run.resend_window)->default_value(0),
-      "keep the last N messages per stream and send again what the server reports missing "
-      "(ARBOR_RESEND); then wait until it acknowledges every message (--timeout). 0: off");
-  addBusKeyFlag(desc, &run.key_file);
-  po::positional_options_description positional;
-  positional.add("file", 1);
-  if (helpRequested(args, desc)) return 0;
-  const auto vm = parseArguments(args, desc, positional);
-  if (burst && vm.count("rate")) throw UsageError("--rate and --burst exclude each other");
-  if (vm.count("rate") && !(run.rate > 0)) throw UsageError("--rate must be > 0");
-  if (run.skip < 0) throw UsageError("--skip must be >= 0");
-  if (run.count < -1) throw UsageError("--count must be >= 0 (or -1: all)");
-  if (!(run.timeout_s > 0)) throw UsageError("--timeout must be > 0");
-  if (run.resend_window < 0 || run.resend_window > (1L << 24))
-    throw UsageError("--resend-window must be in 0..16777216, not '" +
-                     std::to_string(run.resend_window) + "'");
-  run.read.information = parseInformationPolicy(information);
-  run.keys = readBusKeyFlag(run.key_file);  // before anything is read or opened
+  static_cast<PublishOptions&>(run) = *options;
+  run.keys = readBusKeyFlag(run.bus.key_file);  // before anything is read or opened
   const AnyPoseGraph any = readGraphFile(run.file, run.read);
   return std::visit([&](const auto& graph) { return publish(run, graph); }, any);
 }
