@@ -310,6 +310,29 @@ TEST(CliOptions, APrefixOfAFlagIsRefusedByEveryCommand) {
 
 // `arbor keygen FILE` has no flags: its help is the usage and two examples; whatever else is
 // given, a prefix of --help included, is refused.
+// Whole numbers are read exactly: a seed past 2^53 keeps every digit, 2^64 − 1 is the largest
+// seed, and a negative one, 2^64 or a fraction is refused naming the value.
+TEST(CliOptions, AWholeNumberIsReadExactly) {
+  const OptionTable<GenerateOptions>& table = generateOptionTable();
+  const auto seed =
+      std::find_if(table.begin(), table.end(), [](const auto& row) { return row.name == "seed"; });
+  ASSERT_NE(seed, table.end());
+  GenerateOptions o;
+  seed->set(o, "9007199254740993");  // 2^53 + 1: a double would read 2^53
+  EXPECT_EQ(o.seed, 9007199254740993ull);
+  EXPECT_EQ(seed->get(o).value(), "9007199254740993");
+  seed->set(o, "18446744073709551615");
+  EXPECT_EQ(o.seed, 18446744073709551615ull);
+  for (const std::string bad : {"-1", "18446744073709551616", "1.5", "", "7x"}) {
+    try {
+      seed->set(o, bad);
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("'" + bad + "'"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(CliOptions, KeygenTakesOneFileAndNoFlags) {
   const std::string help = printed([] { EXPECT_FALSE(parseKeygenCommandLine({"--help"})); });
   EXPECT_EQ(help.rfind("usage: arbor keygen FILE", 0), 0u) << help;

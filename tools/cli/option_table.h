@@ -76,22 +76,35 @@ std::string text(T value) {
 // `text` as a whole number or a real; throws invalid_argument "must be WHAT, not 'TEXT'".
 template <class T>
 T parseNumber(const std::string& text, const char* what) {
+  const auto bad = [&] {
+    return std::invalid_argument(std::string("must be ") + what + ", not '" + text + "'");
+  };
   std::size_t used = 0;
-  double value = 0;
   try {
     if constexpr (std::is_integral_v<T>) {
-      value = static_cast<double>(std::stoll(text, &used));
+      // Whole numbers are read exactly (a seed past 2^53 keeps every digit), in T's range.
+      if constexpr (std::is_unsigned_v<T>) {
+        if (text.find('-') != std::string::npos) throw bad();
+        const unsigned long long value = std::stoull(text, &used);
+        if (used != text.size() || value > std::numeric_limits<T>::max()) throw bad();
+        return static_cast<T>(value);
+      } else {
+        const long long value = std::stoll(text, &used);
+        if (used != text.size() || value < std::numeric_limits<T>::min() ||
+            value > std::numeric_limits<T>::max())
+          throw bad();
+        return static_cast<T>(value);
+      }
     } else {
-      value = std::stod(text, &used);
+      const double value = std::stod(text, &used);
+      if (used != text.size()) throw bad();
+      return static_cast<T>(value);
     }
-  } catch (const std::exception&) {
-    used = 0;
+  } catch (const std::invalid_argument&) {
+    throw bad();
+  } catch (const std::out_of_range&) {
+    throw bad();
   }
-  const bool fits = !std::is_integral_v<T> || (value >= double(std::numeric_limits<T>::min()) &&
-                                               value <= double(std::numeric_limits<T>::max()));
-  if (used == 0 || used != text.size() || !fits)
-    throw std::invalid_argument(std::string("must be ") + what + ", not '" + text + "'");
-  return static_cast<T>(value);
 }
 
 // A row without its get and set.
