@@ -9,7 +9,6 @@
 #include <string>
 #include <utility>
 
-
 #include "arbor_slam/bayestree/closure_innovation.h"
 
 namespace arbor {
