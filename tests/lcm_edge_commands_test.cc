@@ -4,6 +4,8 @@
 // (disableEdge where the command came), with the counts and the last result in status_t;
 // hostile commands are refused with their reason and nothing accepted is lost; a journal
 // restart replays the commands in their order among the edges.
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <limits>
 #include <map>
@@ -280,6 +282,46 @@ TEST(LcmServe, HostileEdgeCommandsAreRefusedWithTheirReasonAndNothingElseIsLost)
   OnlineSmoother2 reference;
   for (const auto& e : edges) ASSERT_TRUE(testing::feed(reference, e));
   EXPECT_EQ(s.final_estimate.num_poses, static_cast<int>(reference.estimates().size()));
+}
+
+// Issue 56: lines a sender can provoke go through the log limiter, the smoother's refusal of an
+// edge command and an unknown command code as well: thousands of each give one line per reason
+// in the period (the rest counted, never written).
+TEST(LcmServe, AFloodOfRefusedCommandsWritesOneLogLinePerReasonPerPeriod) {
+  lcm::LCM lcm("memq://");
+  std::ostringstream log;
+  ServeOptions options;
+  options.refine_on_exit = false;
+  options.log = &log;
+  options.log_period = std::chrono::seconds(60);  // the whole test is one period
+  Service service(lcm, options);
+  Collector collector(lcm, service.channels());
+  service.start();
+  using Kind = StreamEdgeCommand::Kind;
+  const int n = 3000;
+  command_t unknown;
+  unknown.command = 99;
+  const std::vector<std::uint8_t> unknown_bytes = encodeMessage(unknown);
+  for (int k = 0; k < n; ++k) {
+    lcm.publish(service.channels().command, unknown_bytes.data(),
+                static_cast<unsigned>(unknown_bytes.size()));
+    // Before any pose: well-formed, refused by the smoother (unknown pose).
+    publish(lcm, service, {true, commandBytes(command(k + 1, Kind::kDisable, 0, 1))});
+  }
+  ASSERT_TRUE(collector.waitStatus([&](const status_t& s) { return s.commands_applied == n; }))
+      << log.str().substr(0, 2000);
+  service.stop();
+  EXPECT_EQ(service.summary().commands_refused_by_reason.at("unknown pose"), n);
+  const std::string text = log.str();
+  auto lines = [&](const std::string& what) {
+    int count = 0;
+    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
+      ++count;
+    return count;
+  };
+  EXPECT_EQ(lines("edge command (sender"), 1) << text.substr(0, 2000);
+  EXPECT_EQ(lines("unknown command 99"), 1) << text.substr(0, 2000);
+  EXPECT_LT(std::count(text.begin(), text.end(), '\n'), 40) << text.substr(0, 2000);
 }
 
 TEST(LcmServe, JournalRestartReplaysEdgeCommandsInTheirOrder) {

@@ -150,7 +150,8 @@ void LcmService::onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string
     if (!openReceived(channel, &data, &size)) return;
     core_->receive(arrivalFromBytes(kind, data, size));
   } catch (const std::exception& e) {
-    core_->logLine(std::string("error while receiving ") + what + ": " + e.what());
+    core_->logLimited(std::string("receive error ") + what,
+                      std::string("error while receiving ") + what + ": " + e.what());
   }
 }
 
@@ -176,7 +177,8 @@ void LcmService::onCommand(const lcm::ReceiveBuffer* rbuf, const std::string& ch
     }
     core_->command(controlCommand(c));
   } catch (const std::exception& e) {
-    core_->logLine(std::string("error while receiving a command: ") + e.what());
+    core_->logLimited("receive error command",
+                      std::string("error while receiving a command: ") + e.what());
   }
 }
 
@@ -205,7 +207,8 @@ void LcmService::onResendWindow(const lcm::ReceiveBuffer* rbuf, const std::strin
     core_->windowAnswer(d.message.priors ? MeasurementKind::kPrior : MeasurementKind::kEdge,
                         d.message.sender, d.message.settled);
   } catch (const std::exception& e) {
-    core_->logLine(std::string("error while receiving a resend answer: ") + e.what());
+    core_->logLimited("receive error resend",
+                      std::string("error while receiving a resend answer: ") + e.what());
   }
 }
 

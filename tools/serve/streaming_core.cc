@@ -537,8 +537,10 @@ bool StreamingCore::applyBatch(std::vector<Queued>& batch, bool from_journal) {
     if (r.status == EdgeStatus::kRejected) {
       ++(q.is_prior ? priors_rejected : rejected);
       if (!from_journal) {
-        logLine(std::string("smoother refused ") + (q.is_prior ? "prior" : "edge") + " (sender " +
-                std::to_string(q.sender) + " seq " + std::to_string(q.seq) + "): " + r.reason);
+        const std::string what = q.is_prior ? "prior" : "edge";
+        logLimited("smoother refused " + what, "smoother refused " + what + " (sender " +
+                                                   std::to_string(q.sender) + " seq " +
+                                                   std::to_string(q.seq) + "): " + r.reason);
       }
     } else if (r.status == EdgeStatus::kDuplicate) {
       ++duplicates;
@@ -615,8 +617,10 @@ void StreamingCore::applyEdgeCommand(const Queued& q, bool from_journal) {
                std::to_string(c.to) + ": no pose is known yet";
   }
   if (!from_journal) {
-    logLine("edge command (sender " + std::to_string(q.sender) + " seq " + std::to_string(q.seq) +
-            "): " + (r.applied() ? "" : "refused: ") + r.reason);
+    // A sender provokes these lines at will (commands naming no known pose, toggles): limited.
+    logLimited(std::string("edge command ") + toString(r.status),
+               "edge command (sender " + std::to_string(q.sender) + " seq " +
+                   std::to_string(q.seq) + "): " + (r.applied() ? "" : "refused: ") + r.reason);
   }
   std::lock_guard<std::mutex> lock(state_mutex_);
   ++state_.commands_applied;
@@ -631,7 +635,7 @@ void StreamingCore::applyEdgeCommand(const Queued& q, bool from_journal) {
 
 void StreamingCore::startBatch(bool on_command) {
   if (!engine_) {
-    if (on_command) logLine("batch: no estimate yet");
+    if (on_command) logLimited("batch refused", "batch: no estimate yet");
     return;
   }
   const bool busy = engine_->batchInFlight();
@@ -646,7 +650,9 @@ void StreamingCore::startBatch(bool on_command) {
     state_.batches_skipped = engine_->batchesSkipped();
   }
   if (!started) {
-    if (on_command) logLine(busy ? "batch: one is still running" : "batch: too few poses yet");
+    if (on_command)
+      logLimited("batch refused",
+                 busy ? "batch: one is still running" : "batch: too few poses yet");
     return;
   }
   if (options_.batch.synchronous) pollBatch(true, true);
@@ -812,7 +818,7 @@ void StreamingCore::writeSnapshot(const ControlCommand& c) {
     return;
   }
   if (!engine_) {
-    logLine("snapshot: no estimate yet");
+    logLimited("snapshot refused", "snapshot: no estimate yet");
     return;
   }
   const std::string problem =
@@ -838,11 +844,11 @@ void StreamingCore::writeClosures(const ControlCommand& c) {
     return;
   }
   if (!options_.robust) {
-    logLine("closures: no report without --robust");
+    logLimited("closures refused", "closures: no report without --robust");
     return;
   }
   if (!engine_) {
-    logLine("closures: no estimate yet");
+    logLimited("closures refused", "closures: no estimate yet");
     return;
   }
   const std::vector<ClosureReport> closures = engine_->closures();
@@ -883,7 +889,7 @@ void StreamingCore::handleCommand(const ControlCommand& c) {
       publishCovariance(c);
       break;
     case ControlCommand::Kind::kUnknown:
-      logLine("unknown command " + std::to_string(c.code));
+      logLimited("unknown command", "unknown command " + std::to_string(c.code));
   }
 }
 
