@@ -308,6 +308,89 @@ TEST(StreamingCore, TheLcmEventJournalReplaysInTheMemoryDrivenCore) {
   std::remove(path.c_str());
 }
 
+/// A publisher that holds the smoother thread in its first estimate until opened: the thread
+/// takes nothing from the backlog meanwhile.
+class GatedPublisher final : public Publisher {
+ public:
+  void publishEstimate(const Estimate& e) override {
+    std::unique_lock<std::mutex> lock(mutex_);
+    entered_ = true;
+    cv_.notify_all();
+    cv_.wait(lock, [&] { return open_; });
+    last_seq_ = std::max(last_seq_, e.last_seq);
+    cv_.notify_all();
+  }
+  void publishStatus(const CoreStatus&) override {}
+  void publishCovariance(const CovarianceAnswer&) override {}
+  bool waitEntered() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(kGuardS), [&] { return entered_; });
+  }
+  void open() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    open_ = true;
+    cv_.notify_all();
+  }
+  bool waitCovered(std::int64_t seq) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(kGuardS),
+                        [&] { return last_seq_ >= seq; });
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool entered_ = false, open_ = false;
+  std::int64_t last_seq_ = 0;
+};
+
+// Issue 56: the receive backlog is bounded. While the smoother thread is held, a burst larger
+// than max_backlog leaves max_backlog waiting; the rest is dropped unread and counted, never
+// journaled; everything journaled is applied, and what was dropped, sent again, is applied once.
+TEST(StreamingCore, TheReceiveBacklogIsBoundedAndWhatItDropsIsCountedNeverJournaled) {
+  const PoseGraph2 g = graph();
+  const std::vector<int> order = replayOrder(g);
+  const auto n = static_cast<std::int64_t>(order.size());
+  ASSERT_GT(n, 100);
+  StreamingOptions options;
+  options.refine_on_exit = false;
+  options.max_backlog = 20;
+  auto entries = std::make_shared<std::vector<JournalEntry>>();
+  GatedPublisher out;
+  StreamingCore core(out, std::make_unique<MemoryJournal>(entries), options);
+  core.start();
+  auto edge = [&](std::int64_t seq) {
+    return memoryArrival(streamEdge(g, order[static_cast<size_t>(seq - 1)], seq));
+  };
+  core.receive(edge(1));
+  ASSERT_TRUE(out.waitEntered());  // the smoother thread holds edge 1's update
+  size_t most = 0;
+  for (std::int64_t seq = 2; seq <= n; ++seq) {
+    core.receive(edge(seq));
+    most = std::max(most, core.backlog());
+  }
+  EXPECT_EQ(most, options.max_backlog);
+  const std::int64_t kept = 1 + static_cast<std::int64_t>(options.max_backlog);
+  out.open();
+  ASSERT_TRUE(out.waitCovered(kept));
+  // What was dropped, sent again (as loss recovery asks for it): accepted and applied once.
+  for (std::int64_t seq = kept + 1; seq <= n; ++seq) {
+    core.receive(edge(seq));
+    ASSERT_TRUE(out.waitCovered(seq)) << "edge " << seq;
+  }
+  core.stop();
+  const ServeSummary& s = core.summary();
+  EXPECT_EQ(s.backlog_dropped, n - kept);
+  EXPECT_EQ(s.intake.accepted, n);
+  EXPECT_EQ(s.intake.duplicates, 0);
+  EXPECT_EQ(s.applied, n);
+  EXPECT_EQ(s.held_at_stop, 0);
+  std::int64_t journaled = 0;
+  for (const JournalEntry& e : *entries)
+    if (e.type == JournalEntry::Type::kMeasurement) ++journaled;
+  EXPECT_EQ(journaled, n);
+}
+
 /// Streams the graph through a memory-driven core with a journal and stops it (its exit
 /// refinement as `options` say); the summary, and the journal in `entries`.
 ServeSummary runWithJournal(const StreamingOptions& options,

@@ -484,6 +484,7 @@ int serveCommand(const std::vector<std::string>& args) {
     for (const auto& [reason, count] : s.control_refused) control[reason] = count;
     j["faults"] = {
         {"journal_refused", s.journal_refused},
+        {"backlog_dropped", s.backlog_dropped},
         {"journal_damaged",
          {{"events", s.journal_damaged.events},
           {"tail_bytes", s.journal_damaged.tail_bytes},

@@ -281,6 +281,7 @@ status_t toMessage(const CoreStatus& k) {
   s.loss_given_up = k.loss.given_up;
   s.loss_late = k.loss.late;
   s.resend_requests = k.loss.requests;
+  s.backlog_dropped = k.backlog_dropped;
   s.gap_senders = static_cast<std::int32_t>(std::min<size_t>(gaps.size(), kListed));
   for (int k2 = 0; k2 < kListed; ++k2) {
     const bool listed = k2 < s.gap_senders;

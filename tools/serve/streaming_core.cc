@@ -67,6 +67,11 @@ void StreamingCore::logLine(const std::string& line) {
   *options_.log << "arbor serve: " << line << std::endl;
 }
 
+std::size_t StreamingCore::backlog() {
+  std::lock_guard<std::mutex> lock(queue_mutex_);
+  return queue_.size();
+}
+
 void StreamingCore::logLimited(const std::string& key, const std::string& line) {
   std::int64_t suppressed = 0;
   if (limiter_.allow(key, &suppressed)) logLine(LogLimiter::withSuppressed(line, suppressed));
@@ -151,6 +156,7 @@ void StreamingCore::stop() {
     summary_.prior_intake = intake_.priorCounts();
     summary_.command_intake = intake_.commandCounts();
     summary_.journal_refused = journal_refused_;
+    summary_.backlog_dropped = backlog_dropped_;
     summary_.control_refused = control_refused_;
     summary_.loss = gaps_.counts();
   }
@@ -260,6 +266,19 @@ void StreamingCore::receive(const Arrival& arrival) {
   const bool command = arrival.kind == MeasurementKind::kCommand;
   const char* what = nameOf(arrival.kind);
   std::lock_guard<std::mutex> lock(intake_mutex_);
+  std::size_t waiting = 0;
+  {
+    std::lock_guard<std::mutex> queue_lock(queue_mutex_);
+    waiting = queue_.size();
+  }
+  if (waiting >= options_.max_backlog) {
+    // Dropped unread: nothing of it is journaled or remembered, so its seq is a gap.
+    ++backlog_dropped_;
+    logLimited(std::string("backlog ") + what,
+               std::string("dropped ") + what + ": " + std::to_string(waiting) +
+                   " measurements are waiting for the smoother (the receive backlog's limit)");
+    return;
+  }
   IntakeResult r = intake_.admit(arrival);
   logIntakeNotes(r, what);
   if (r.evicted != 0 && !command) commit(gaps_.forget(arrival.kind, r.evicted), received);
@@ -952,6 +971,7 @@ CoreStatus StreamingCore::status() const {
     s.commands = intake_.commandCounts();
     s.control_refused = control_refused_;
     s.journal_refused = journal_refused_;
+    s.backlog_dropped = backlog_dropped_;
     s.edge_senders = static_cast<std::int64_t>(intake_.senders(MeasurementKind::kEdge));
     s.edge_gaps_by_sender = intake_.gapsBySender(MeasurementKind::kEdge);
     s.loss = gaps_.counts();

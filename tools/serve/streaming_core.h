@@ -64,6 +64,7 @@ struct CoreStatus {
   IntakeCounts edges, priors, commands;
   std::map<std::string, std::int64_t> control_refused;  ///< operator commands, by reason
   std::int64_t journal_refused = 0;                     ///< measurements the journal could not take
+  std::int64_t backlog_dropped = 0;  ///< measurements dropped unread: max_backlog were waiting
   std::int64_t journal_bytes = 0;
   std::int64_t edge_senders = 0;  ///< edge sender tables held
   /// (sender, edge seq numbers not received) for every edge sender with gaps, sender order.
@@ -144,7 +145,13 @@ struct StreamingOptions {
   /// Resend requests (and acknowledgements) go out at most this often per sender and stream.
   std::chrono::milliseconds resend_period{200};
   std::size_t max_queued_commands = 64;  ///< commands waiting for the smoother; more refused
-  std::ostream* log = nullptr;           ///< log lines (rejections, gaps, errors); nullptr: silent
+  /// The receive backlog: edges, priors and edge commands accepted and journaled but not yet
+  /// taken by the smoother thread. While this many wait, a message that arrives is dropped
+  /// before the intake reads it (never journaled, so its sender's seq shows a gap and loss
+  /// recovery can bring it back) and counted in backlog_dropped. What the journal holds is
+  /// always applied.
+  std::size_t max_backlog = 1 << 18;
+  std::ostream* log = nullptr;  ///< log lines (rejections, gaps, errors); nullptr: silent
   /// Lines a sender can provoke (refusals, gaps): at most one per reason per this period, with
   /// the count of those held back; 0: every line.
   std::chrono::milliseconds log_period{1000};
@@ -188,6 +195,7 @@ struct ServeSummary {
   LatencySummary transport;          ///< edge utime → receipt (meaningful when clocks agree)
   Estimate final_estimate;           ///< full
   std::int64_t journal_refused = 0;  ///< measurements refused: the journal could not take them
+  std::int64_t backlog_dropped = 0;  ///< dropped unread: max_backlog measurements were waiting
   GapCounts loss;                    ///< loss recovery (edges and priors)
   std::int64_t held_at_stop = 0;     ///< journaled, not applied: their update mark did not fit
   JournalDamage journal_damaged;     ///< what the replay at start found damaged and skipped
@@ -249,6 +257,9 @@ class StreamingCore {
   bool writeEstimate(const std::string& path, TrajectoryFormat format) const;
 
   void logLine(const std::string& line);
+  /// Measurements waiting for the smoother thread now (at most max_backlog, and the batch of a
+  /// held update put back).
+  std::size_t backlog();
   /// A line that a sender can provoke at will: at most one per `key` a second.
   void logLimited(const std::string& key, const std::string& line);
 
@@ -326,6 +337,7 @@ class StreamingCore {
   GapTracker gaps_;
   std::chrono::steady_clock::time_point last_requests_;
   std::int64_t journal_refused_ = 0;
+  std::int64_t backlog_dropped_ = 0;
   std::map<std::string, std::int64_t> control_refused_;  ///< by reason
 
   // Hand-over between the threads.
