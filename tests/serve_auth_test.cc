@@ -6,6 +6,7 @@
 // next key. Every wait is on a condition, with a generous timeout only as a failure guard.
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -234,6 +235,43 @@ TEST_F(ServeAuth, RotationAcceptsTheCurrentAndTheNextKeyAndRefusesARetiredOne) {
   EXPECT_EQ(service.summary().applied, static_cast<std::int64_t>(n) + 1);
   EXPECT_EQ(service.summary().auth_refused.at("unknown key"), 2);
   EXPECT_EQ(old_client.unverified(), 0);
+}
+
+// Issue 56: with a key the receive link's probe travels sealed as well: every probe on the bus
+// opens with the deployment key, none is plain, and the link comes up on its sealed probe.
+TEST_F(ServeAuth, TheLinksProbeIsSealedAndTheLinkComesUpOnIt) {
+  const BusKeyring keys = {keyOf(5)};
+  lcm::LCM lcm("memq://");
+  ServeOptions options;
+  options.refine_on_exit = false;
+  options.bus_keys = keys;
+  Service service(lcm, options);
+  KeyedCollector collector(lcm, service.channels(), keys);
+  BusAuth observer(keys);
+  std::mutex mutex;
+  int probes = 0, sealed = 0;
+  struct ProbeSpy {
+    std::function<void(const lcm::ReceiveBuffer*, const std::string&)> f;
+    void on(const lcm::ReceiveBuffer* rbuf, const std::string& channel) { f(rbuf, channel); }
+  } spy;
+  spy.f = [&](const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+    const OpenedMessage o =
+        observer.open(channel, static_cast<const std::uint8_t*>(rbuf->data), rbuf->data_size);
+    std::lock_guard<std::mutex> lock(mutex);
+    ++probes;
+    if (o.problem == AuthProblem::kNone && o.size > 0) ++sealed;
+  };
+  lcm::Subscription* sub = lcm.subscribe(service.channels().link_probe, &ProbeSpy::on, &spy);
+  service.start();
+  BusAuth front_end(keys);
+  publishSealed(lcm, front_end, service.channels().edges, edge(0, 1));
+  ASSERT_TRUE(collector.waitStatus([](const status_t& s) { return s.receive_link_up; }));
+  service.stop();
+  lcm.unsubscribe(sub);
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_GE(probes, 1);
+  EXPECT_EQ(sealed, probes);
+  EXPECT_EQ(collector.unverified(), 0);
 }
 
 TEST_F(ServeAuth, WithoutAKeyNothingChanges) {

@@ -127,14 +127,29 @@ void LinkWatch::sendProbe() {
   probe_sent_at_ = Clock::now();
   probe_pending_ = false;
   ++probes_unanswered_;
-  if (lcm->publish(options_.probe_channel, probe_token_.data(),
-                   static_cast<unsigned>(probe_token_.size())) != 0) {
+  int sent = 0;
+  if (probe_seal_) {
+    const std::vector<std::uint8_t> sealed = probe_seal_(options_.probe_channel, probe_token_);
+    sent =
+        lcm->publish(options_.probe_channel, sealed.data(), static_cast<unsigned>(sealed.size()));
+  } else {
+    sent = lcm->publish(options_.probe_channel, probe_token_.data(),
+                        static_cast<unsigned>(probe_token_.size()));
+  }
+  if (sent != 0) {
     markDown("probe could not be sent");
   }
 }
 
-void LinkWatch::onProbe(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-  const std::string token(static_cast<const char*>(rbuf->data), rbuf->data_size);
+void LinkWatch::onProbe(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  std::string token;
+  if (probe_open_) {
+    if (!probe_open_(channel, static_cast<const std::uint8_t*>(rbuf->data), rbuf->data_size,
+                     &token))
+      return;  // not our sealed probe
+  } else {
+    token.assign(static_cast<const char*>(rbuf->data), rbuf->data_size);
+  }
   if (state_ == State::kProbing && token == probe_token_) {
     probes_unanswered_ = 0;
     markUp();

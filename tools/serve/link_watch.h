@@ -90,6 +90,17 @@ class LinkWatch {
   /// Publishes when the link is up (re-creating it first when it is down and the backoff
   /// allows); false when it could not be sent (counted).
   bool publish(const std::string& channel, const void* data, unsigned size);
+  /// With a deployment key: the probe travels sealed (seal: its bytes in the bus's envelope),
+  /// and a probe that comes back counts only when open gives its token back (false: refused).
+  /// Set before the first handle().
+  using ProbeSeal = std::function<std::vector<std::uint8_t>(const std::string& channel,
+                                                            const std::string& token)>;
+  using ProbeOpen = std::function<bool(const std::string& channel, const std::uint8_t* data,
+                                       std::size_t size, std::string* token)>;
+  void sealProbes(ProbeSeal seal, ProbeOpen open) {
+    probe_seal_ = std::move(seal);
+    probe_open_ = std::move(open);
+  }
   /// Up and, with a probe, confirmed.
   bool up() const { return up_; }
   /// True once after each time the link came up again after an outage (a publisher's cue to
@@ -124,6 +135,8 @@ class LinkWatch {
   std::vector<lcm::Subscription*> lcm_subscriptions_;  ///< on the current instance
   lcm::Subscription* probe_subscription_ = nullptr;
   std::string probe_token_;
+  ProbeSeal probe_seal_;
+  ProbeOpen probe_open_;
   std::int64_t probes_sent_ = 0;
   static constexpr int kMaxUnansweredProbes = 3;
   int probes_unanswered_ = 0;  ///< since the last connection

@@ -25,6 +25,7 @@ LcmService::LcmService(lcm::LCM& receive, lcm::LCM& publish, ServeOptions option
   owned_publish_ = std::make_unique<LinkWatch>(publish, p);
   receive_ = owned_receive_.get();
   publish_ = owned_publish_.get();
+  sealProbes();
 }
 
 LcmService::LcmService(LinkWatch& receive, LinkWatch& publish, ServeOptions options,
@@ -48,6 +49,24 @@ LcmService::LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions opti
   core_ = std::make_unique<StreamingCore>(*this, std::move(journal),
                                           static_cast<const StreamingOptions&>(options_));
   if (!options_.bus_keys.empty()) auth_ = std::make_unique<BusAuth>(options_.bus_keys);
+  sealProbes();
+}
+
+void LcmService::sealProbes() {
+  // With a key every message this service sends is sealed, its receive link's probe too.
+  if (!auth_ || receive_ == nullptr) return;
+  receive_->sealProbes(
+      [this](const std::string& channel, const std::string& token) {
+        return auth_->seal(channel, reinterpret_cast<const std::uint8_t*>(token.data()),
+                           token.size());
+      },
+      [this](const std::string& channel, const std::uint8_t* data, std::size_t size,
+             std::string* token) {
+        const OpenedMessage opened = auth_->open(channel, data, size);
+        if (opened.problem != AuthProblem::kNone) return false;
+        token->assign(reinterpret_cast<const char*>(opened.data), opened.size);
+        return true;
+      });
 }
 
 LcmService::~LcmService() {
@@ -57,6 +76,7 @@ LcmService::~LcmService() {
     } catch (...) {
     }
   }
+  if (auth_ && receive_ != nullptr) receive_->sealProbes(nullptr, nullptr);  // they name auth_
 }
 
 void LcmService::start() {

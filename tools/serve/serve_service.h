@@ -115,6 +115,8 @@ class LcmService final : public Publisher {
   TransportState transportState() const override;
 
  private:
+  /// With a key: the receive link's probe sealed and opened as every other message.
+  void sealProbes();
   LcmService(LinkWatch* receive, LinkWatch* publish, ServeOptions options, UdpmReceiver* datagrams);
   void onMeasurement(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
                      MeasurementKind kind, int limit);
