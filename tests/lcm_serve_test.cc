@@ -14,6 +14,7 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -213,6 +214,24 @@ TEST(LcmServe, LockstepStreamEqualsReplayFeeding) {
   reference.finalize();
   EXPECT_NEAR(reference.smoother().objective(), replay.smoother().objective(),
               1e-9 * replay.smoother().objective());
+}
+
+// What a udpm receiver reassembles for serve (Channels::received(), serve_command.cc) is exactly
+// what the service subscribes to: a channel left out is never heard over udpm (the publishers'
+// resend answers were).
+TEST(LcmServe, TheUdpmReceiversChannelsAreTheServicesSubscriptions) {
+  lcm::LCM lcm("memq://");
+  ASSERT_TRUE(lcm.good());
+  ServeOptions options;
+  options.refine_on_exit = false;
+  options.channel_prefix = "R1_";
+  Service service(lcm, options);
+  service.start();
+  const std::vector<std::string> subscribed = service.subscribedChannels();
+  service.stop();
+  const std::set<std::string> received = service.channels().received();
+  EXPECT_EQ(std::set<std::string>(subscribed.begin(), subscribed.end()), received);
+  EXPECT_EQ(received.count("R1_ARBOR_RESEND_WINDOW"), 1u);
 }
 
 TEST(LcmServe, BurstIsFullyAppliedInFewerUpdatesAndMatchesReplay) {

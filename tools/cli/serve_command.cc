@@ -353,14 +353,10 @@ int serveCommand(const std::vector<std::string>& args) {
     // Nothing larger than the largest message a channel accepts is reassembled.
     const serve::MessageLimits& m = options.message_limits;
     serve::DatagramLimits limits;
-    limits.max_message_bytes =
-        static_cast<std::uint32_t>(std::max({m.edge, m.prior, m.edge_command, m.command}));
+    limits.max_message_bytes = static_cast<std::uint32_t>(
+        std::max({m.edge, m.prior, m.edge_command, m.command, m.resend_window}));
     if (!options.bus_keys.empty()) limits.max_message_bytes += serve::kEnvelopeOverhead;
-    datagrams = std::make_unique<serve::UdpmReceiver>(
-        url,
-        std::set<std::string>{channels.edges, channels.priors, channels.edge_commands,
-                              channels.command},
-        log, limits);
+    datagrams = std::make_unique<serve::UdpmReceiver>(url, channels.received(), log, limits);
     memq = std::make_unique<lcm::LCM>("memq://");
     if (!memq->good()) throw std::runtime_error("cannot open LCM at 'memq://'");
     receive = std::make_unique<serve::LinkWatch>(*memq, receive_options);

@@ -1,6 +1,7 @@
 // The LCM channels of `arbor serve` (docs/lcm.md's table), each after the --channel-prefix.
 #pragma once
 
+#include <set>
 #include <string>
 
 namespace arbor::serve {
@@ -20,6 +21,11 @@ struct Channels {
             prefix + "ARBOR_PRIORS",     prefix + "ARBOR_EDGE_COMMANDS",
             prefix + "ARBOR_LINK_PROBE", prefix + "ARBOR_COVARIANCE",
             prefix + "ARBOR_RESEND",     prefix + "ARBOR_RESEND_WINDOW"};
+  }
+  /// The channels serve receives from others (what a udpm receiver reassembles): edges,
+  /// priors, edge commands, commands and the publishers' resend answers.
+  std::set<std::string> received() const {
+    return {edges, priors, edge_commands, command, resend_window};
   }
 };
 

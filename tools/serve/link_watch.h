@@ -84,6 +84,12 @@ class LinkWatch {
   void subscribe(const std::string& channel, Handler handler);
   /// Drops every subscription.
   void unsubscribeAll();
+  /// The channels subscribed by subscribe(), in that order (the probe's own is not among them).
+  std::vector<std::string> channels() const {
+    std::vector<std::string> out;
+    for (const auto& s : subscriptions_) out.push_back(s->channel);
+    return out;
+  }
   /// Waits up to `timeout_ms` for a message and dispatches it. 1: one handled; 0: none arrived;
   /// −1: the link is down (re-created here when the backoff allows; else waits out the timeout).
   int handle(int timeout_ms);

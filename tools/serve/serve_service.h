@@ -105,6 +105,9 @@ class LcmService final : public Publisher {
     return core_->writeEstimate(path, format);
   }
   const Channels& channels() const { return channels_; }
+  /// The channels the service subscribes to on its receive link (Channels::received() is what
+  /// a udpm receiver must reassemble for it).
+  std::vector<std::string> subscribedChannels() const { return receive_->channels(); }
 
   // Publisher: the core's estimates, status and answers onto the publish link.
   void publishEstimate(const Estimate& estimate) override;
