@@ -77,6 +77,17 @@ inline void decodeEdgeCommandBytes(const std::uint8_t* data, int size) {
   require(again.ok(), "edge command", "re-encoded command refused: " + again.detail);
 }
 
+/// resend_t (loss recovery's requests and window answers): validated, and what is accepted
+/// encodes and decodes again.
+inline void decodeResendBytes(const std::uint8_t* data, int size) {
+  const ResendDecoding d = decodeResend(data, size);
+  requireDetail(d.problem, d.detail, "resend_t");
+  if (!d.ok()) return;
+  const std::vector<std::uint8_t> bytes = encodeMessage(makeResendMessage(d.message));
+  const ResendDecoding again = decodeResend(bytes.data(), static_cast<int>(bytes.size()));
+  require(again.ok(), "resend_t", "re-encoded message refused: " + again.detail);
+}
+
 /// command_t, and the ids of its path as a COVARIANCE command reads them.
 inline void decodeCommandBytes(const std::uint8_t* data, int size) {
   command_t command;
@@ -104,6 +115,7 @@ inline void decodeAll(const std::uint8_t* data, std::size_t n) {
   decodeGeneric<status_t>(data, size);
   decodeGeneric<covariance_t>(data, size);
   decodeGeneric<journal_mark_t>(data, size);
+  decodeResendBytes(data, size);
 }
 
 }  // namespace arbor::fuzz

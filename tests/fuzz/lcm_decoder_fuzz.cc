@@ -14,6 +14,7 @@
 #define ARBOR_DECODER_STATUS 6
 #define ARBOR_DECODER_COVARIANCE 7
 #define ARBOR_DECODER_JOURNAL_MARK 8
+#define ARBOR_DECODER_RESEND 9
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size > (1u << 20)) return 0;
@@ -35,6 +36,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   fuzz::decodeGeneric<covariance_t>(data, n);
 #elif ARBOR_FUZZ_DECODER == ARBOR_DECODER_JOURNAL_MARK
   fuzz::decodeGeneric<journal_mark_t>(data, n);
+#elif ARBOR_FUZZ_DECODER == ARBOR_DECODER_RESEND
+  fuzz::decodeResendBytes(data, n);
 #else
 #error "ARBOR_FUZZ_DECODER names no decoder"
 #endif

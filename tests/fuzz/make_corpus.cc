@@ -207,6 +207,22 @@ std::vector<Bytes> marks() {
   return {encodeMessage(u), encodeMessage(r)};
 }
 
+std::vector<Bytes> resends() {
+  ResendMessage request;
+  request.utime = 9;
+  request.sender = 1;
+  request.settled = 10;
+  request.highest = 40;
+  request.missing = {{11, 12}, {20, 20}, {30, 39}};
+  ResendMessage window;
+  window.request = false;
+  window.priors = true;
+  window.sender = 2;
+  window.settled = 100;
+  window.highest = 500;
+  return {encodeMessage(makeResendMessage(request)), encodeMessage(makeResendMessage(window))};
+}
+
 void putAll(const std::string& target, const std::string& stem, const std::vector<Bytes>& all) {
   for (std::size_t k = 0; k < all.size(); ++k) put(target, stem + std::to_string(k), all[k]);
 }
@@ -381,6 +397,7 @@ int main(int argc, char** argv) {
   putAll("lcm_status", "status", statuses());
   putAll("lcm_covariance", "covariance", covariances());
   putAll("lcm_journal_mark", "mark", marks());
+  putAll("lcm_resend", "resend", resends());
   journals(fs::temp_directory_path());
   datagrams();
   envelopes();
