@@ -333,6 +333,22 @@ TEST(CliOptions, AWholeNumberIsReadExactly) {
   }
 }
 
+// serve --max-backlog sets the receive backlog's bound; 0 is refused naming the flag and value.
+TEST(CliOptions, ServeMaxBacklogIsTheBacklogsBound) {
+  const auto line = parseServeCommandLine({"--max-backlog", "1000"});
+  ASSERT_TRUE(line.has_value());
+  EXPECT_EQ(line->options.max_backlog, 1000u);
+  EXPECT_EQ(parseServeCommandLine({})->options.max_backlog, std::size_t{1} << 18);
+  try {
+    parseServeCommandLine({"--max-backlog", "0"});
+    ADD_FAILURE() << "--max-backlog 0 accepted";
+  } catch (const UsageError& e) {
+    EXPECT_NE(std::string(e.what()).find("--max-backlog must be in 1..1073741824, not '0'"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(CliOptions, KeygenTakesOneFileAndNoFlags) {
   const std::string help = printed([] { EXPECT_FALSE(parseKeygenCommandLine({"--help"})); });
   EXPECT_EQ(help.rfind("usage: arbor keygen FILE", 0), 0u) << help;

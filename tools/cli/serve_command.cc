@@ -106,6 +106,7 @@ struct ServeFlagValues {
   long long max_senders = static_cast<long long>(line.options.max_senders);
   double gap_hold_s = 2;  // --gap-hold (the library's default is off)
   long long reorder_limit = static_cast<long long>(line.options.reorder_limit);
+  long long max_backlog = static_cast<long long>(line.options.max_backlog);
 };
 
 const char* const kService = "Service";
@@ -147,6 +148,9 @@ FlagSet serveFlagSet(ServeFlagValues& v) {
       "reorder-limit", po::value(&v.reorder_limit)->default_value(v.reorder_limit)->value_name("N"),
       "loss recovery: messages held per sender and stream while a gap waits; beyond, the oldest "
       "gap is given up")(
+      "max-backlog", po::value(&v.max_backlog)->default_value(v.max_backlog)->value_name("N"),
+      "messages waiting for the smoother at most; past it a message is dropped unread, counted "
+      "(backlog_dropped) and left to loss recovery, never one already journaled")(
       "snapshot-dir", po::value(&options.snapshot_dir),
       "directory command SNAPSHOT writes into (a plain file name from the message; never over a "
       "file this service did not create); unset: SNAPSHOT refused")(
@@ -246,6 +250,11 @@ std::optional<ServeCommandLine> parseServeCommandLine(const std::vector<std::str
                      std::to_string(v.reorder_limit) + "'");
   }
   options.reorder_limit = static_cast<std::size_t>(v.reorder_limit);
+  if (v.max_backlog < 1 || v.max_backlog > (1LL << 30)) {
+    throw UsageError("--max-backlog must be in 1..1073741824, not '" +
+                     std::to_string(v.max_backlog) + "'");
+  }
+  options.max_backlog = static_cast<std::size_t>(v.max_backlog);
   if (options.journal_max_bytes < 0 ||
       (options.journal_max_bytes > 0 &&
        options.journal_max_bytes <= 2 * options.journal_reserve_bytes)) {
