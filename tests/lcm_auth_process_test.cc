@@ -31,14 +31,7 @@ using Clock = std::chrono::steady_clock;
 
 constexpr double kGuard = 60;  // seconds: a failure guard, never a pacing
 
-bool waitUntil(const std::function<bool()>& done) {
-  const auto end = Clock::now() + std::chrono::duration<double>(kGuard);
-  while (!done()) {
-    if (Clock::now() > end) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return true;
-}
+using testing::waitUntil;  // its default guard, 60 s, is kGuard
 
 class LcmAuthProcess : public ::testing::Test {
  protected:

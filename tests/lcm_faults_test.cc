@@ -39,15 +39,7 @@ using Clock = std::chrono::steady_clock;
 
 constexpr double kGuard = 60;  // seconds: a failure guard, never a pacing
 
-// Waits until `done` holds (polled), up to kGuard seconds.
-bool waitUntil(const std::function<bool()>& done) {
-  const auto end = Clock::now() + std::chrono::duration<double>(kGuard);
-  while (!done()) {
-    if (Clock::now() > end) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return true;
-}
+using testing::waitUntil;  // its default guard, 60 s, is kGuard
 
 int countOf(const std::string& text, const std::string& what) {
   int n = 0;

@@ -34,12 +34,7 @@ using Clock = std::chrono::steady_clock;
 constexpr double kGuard = 90;  // seconds: a failure guard, never a pacing
 
 bool waitUntil(const std::function<bool()>& done, double seconds = kGuard) {
-  const auto end = Clock::now() + std::chrono::duration<double>(seconds);
-  while (!done()) {
-    if (Clock::now() > end) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return true;
+  return testing::waitUntil(done, seconds);
 }
 
 int edgesOf(const std::string& file) {

@@ -15,6 +15,7 @@
 
 #include "arbor_slam/io/lcm_messages.h"
 #include "arbor_slam/tests/lcm_test_support.h"
+#include "arbor_slam/tests/memory_journal.h"
 #include "arbor_slam/tools/cli/resend_window.h"
 #include "arbor_slam/tools/serve/gap_tracker.h"
 #include "arbor_slam/tools/serve/serve_service.h"
@@ -317,38 +318,6 @@ class RecordingPublisher final : public Publisher {
   std::vector<ResendRequest> requests_;
 };
 
-class VectorJournal final : public JournalSink {
- public:
-  explicit VectorJournal(std::shared_ptr<std::vector<JournalEntry>> entries)
-      : entries_(std::move(entries)) {}
-  void replay(const std::function<void(JournalEntry&&)>& entry,
-              const std::function<void(const std::string&)>&) override {
-    for (JournalEntry e : *entries_) entry(std::move(e));
-  }
-  void appendMeasurement(const Arrival& arrival) override {
-    JournalEntry e;
-    e.type = JournalEntry::Type::kMeasurement;
-    e.arrival = arrival;
-    e.arrival.wire = nullptr;
-    e.arrival.wire_size = 0;
-    entries_->push_back(std::move(e));
-  }
-  void appendMark(JournalEntry::Type type, int measurements, std::int64_t) override {
-    JournalEntry e;
-    e.type = type;
-    e.measurements = measurements;
-    entries_->push_back(std::move(e));
-  }
-  void appendReseed(const Estimate&) override {}
-  void sync() override {}
-  void syncIfDue() override {}
-  std::int64_t bytes() const override { return static_cast<std::int64_t>(entries_->size()); }
-  std::string name() const override { return "vector"; }
-
- private:
-  std::shared_ptr<std::vector<JournalEntry>> entries_;
-};
-
 Arrival arrivalOf(const StreamEdge<SE2>& e) {
   const std::vector<std::uint8_t> bytes = testing::edgeBytes(e);
   Arrival a;
@@ -381,7 +350,7 @@ TEST(LossRecoveryCore, EdgesAfterAGapWaitForItsResendAndAreAppliedInSeqOrderOnce
   auto entries = std::make_shared<std::vector<JournalEntry>>();
   RecordingPublisher out;
   {
-    StreamingCore core(out, std::make_unique<VectorJournal>(entries), options);
+    StreamingCore core(out, std::make_unique<MemoryJournal>(entries), options);
     core.start();
     // Seqs 10 and 20..24 are lost on the way; the rest arrive.
     for (std::int64_t s = 1; s <= n; ++s) {
@@ -417,7 +386,7 @@ TEST(LossRecoveryCore, EdgesAfterAGapWaitForItsResendAndAreAppliedInSeqOrderOnce
 
   // A restart on the journal asks for nothing it applied: the next edge settles at once.
   RecordingPublisher out2;
-  StreamingCore again(out2, std::make_unique<VectorJournal>(entries), options);
+  StreamingCore again(out2, std::make_unique<MemoryJournal>(entries), options);
   again.start();
   StreamEdge<SE2> next = edge(n);  // to a new pose
   next.seq = n + 1;

@@ -13,6 +13,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -78,6 +79,17 @@ class Process {
   pid_t pid_ = -1;
   std::string out_, err_;
 };
+
+/// Polls `done` every 20 ms until it holds (true) or `seconds` pass (false): a failure guard
+/// for cross-process tests, never a pacing.
+inline bool waitUntil(const std::function<bool()>& done, double seconds = 60) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > end) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
+}
 
 inline int freePort() {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
