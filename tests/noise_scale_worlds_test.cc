@@ -10,7 +10,6 @@
 // truncation at Ω's word, the loosening rule (noise_scale.h, "moves") refuses the estimate.
 // "Near": within a factor 2 (the heavy tail and the truncation leave the core's scale,
 // header comment "bias"). And in every world, at most the wide tail's closures rejected.
-#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -18,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include "arbor_slam/bayestree/online_smoother.h"
+#include "arbor_slam/tools/cli/replay_order.h"
 #include "arbor_slam/tools/generator/road_world.h"
 
 namespace arbor {
@@ -28,21 +28,16 @@ OnlineStats replayWorld(const sim::Simulation<G>& world) {
   OnlineSmootherOptions<G> options;
   options.robust = RobustOptions{};
   OnlineSmoother<G> smoother(options);
-  std::vector<size_t> order(world.graph.edges.size());
-  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    const auto& ea = world.graph.edges[a];
-    const auto& eb = world.graph.edges[b];
-    return std::max(ea.i, ea.j) < std::max(eb.i, eb.j);
-  });
-  for (const size_t k : order) {
-    const auto& e = world.graph.edges[k];
-    const auto result =
-        smoother.addEdge(world.graph.ids[static_cast<size_t>(e.i)],
-                         world.graph.ids[static_cast<size_t>(e.j)], e.measurement, e.information);
-    EXPECT_EQ(result.status, EdgeStatus::kAccepted) << "edge " << k;
-    smoother.update();
-  }
+  // Edge by edge in `arbor replay`'s order (tools/cli/replay_order.h).
+  for (const auto& group : cli::replayGroups(world.graph, /*per_pose=*/false))
+    for (const int k : group) {
+      const auto& e = world.graph.edges[static_cast<size_t>(k)];
+      const auto result =
+          smoother.addEdge(world.graph.ids[static_cast<size_t>(e.i)],
+                           world.graph.ids[static_cast<size_t>(e.j)], e.measurement, e.information);
+      EXPECT_EQ(result.status, EdgeStatus::kAccepted) << "edge " << k;
+      smoother.update();
+    }
   smoother.finalize();
   return smoother.stats();
 }
